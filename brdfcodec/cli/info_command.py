@@ -1,0 +1,148 @@
+"""``bvae info FILE...``: describe MERL tables and dataset files without decoding anything."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from brdfcodec.conventions import MERL_COLOR_SCALE, MERL_SHAPE
+from brdfcodec.errors import FileFormatError
+from brdfcodec.genuine import genuine_merl_name
+from brdfcodec.mask import horizon_mask
+from brdfcodec.merl import MERL_FILE_SIZE, read_merl
+
+__all__ = ["describe_file", "register"]
+
+_HDF5_SIGNATURE = b"\x89HDF\r\n\x1a\n"
+_CHANNELS = ("red", "green", "blue")
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+    """Add the ``info`` sub-command."""
+    parser = subparsers.add_parser(
+        "info",
+        help="describe MERL .binary files and dataset files",
+        description="Describe MERL .binary BRDF tables (dimensions, valid entries, per-channel "
+        "range, whether it is a genuine MERL file) and brdfcodec dataset files.",
+    )
+    parser.add_argument("files", nargs="+", metavar="FILE", type=Path, help="files to describe")
+    parser.add_argument("--json", action="store_true", help="print one JSON object per file")
+    parser.set_defaults(handler=run)
+
+
+def _merl_summary(path: Path) -> dict[str, Any]:
+    brdf = read_merl(path)
+    mask = brdf.mask
+    physical = brdf.values * MERL_COLOR_SCALE[:, None, None, None]
+    above = horizon_mask()
+    channels = {}
+    for c, label in enumerate(_CHANNELS):
+        valid = physical[c][mask[c]]
+        channels[label] = {
+            "min": float(valid.min()) if valid.size else None,
+            "median": float(np.median(valid)) if valid.size else None,
+            "max": float(valid.max()) if valid.size else None,
+        }
+    sha = brdf.sha256
+    return {
+        "file": str(path),
+        "kind": "merl",
+        "dimensions": list(MERL_SHAPE),
+        "bytes": MERL_FILE_SIZE,
+        "sha256": sha,
+        "genuine_merl": genuine_merl_name(sha),
+        "valid_fraction": float(mask.mean()),
+        "above_horizon_fraction": float(above.mean()),
+        "unmeasured_above_horizon": int(np.count_nonzero(~mask & above[None])),
+        "reflectance_per_sr": channels,
+    }
+
+
+def _dataset_summary(path: Path) -> dict[str, Any]:
+    from brdfcodec.dataset import BrdfDataset
+
+    with BrdfDataset(path) as dataset:
+        return {
+            "file": str(path),
+            "kind": "dataset",
+            "source_kind": dataset.source_kind,
+            "description": dataset.description,
+            "materials": len(dataset),
+            "train": len(dataset.indices("train")),
+            "validation": len(dataset.indices("validation")),
+            "validation_names": [dataset.names[i] for i in dataset.indices("validation")],
+            "full_tables": dataset.has_tables,
+            "created": str(dataset.attribute("created")),
+            "bytes": path.stat().st_size,
+        }
+
+
+def describe_file(path: Path) -> dict[str, Any]:
+    """Summary of one file as a JSON-ready dictionary.
+
+    Raises
+    ------
+    FileFormatError
+        The file is neither a MERL table nor a dataset, or is malformed.
+    """
+    if path.is_dir():
+        raise IsADirectoryError(f"{path}: is a directory, expected a file")
+    with open(path, "rb") as stream:
+        head = stream.read(8)
+    if head == _HDF5_SIGNATURE:
+        return _dataset_summary(path)
+    size = os.path.getsize(path)
+    if size < 12:
+        raise FileFormatError(path, f"file is {size} bytes: neither a MERL .binary file nor a dataset")
+    return _merl_summary(path)
+
+
+def _format_text(summary: dict[str, Any]) -> str:
+    lines = [summary["file"]]
+    if summary["kind"] == "dataset":
+        lines += [
+            f"  kind            brdfcodec dataset ({summary['source_kind']})",
+            f"  data            {summary['description']}",
+            f"  materials       {summary['materials']} ({summary['train']} train, "
+            f"{summary['validation']} validation)",
+            f"  validation      {', '.join(summary['validation_names']) or '-'}",
+            f"  full tables     {'yes' if summary['full_tables'] else 'no'}",
+            f"  created         {summary['created']}",
+            f"  size            {summary['bytes']:,} bytes",
+        ]
+        return "\n".join(lines)
+    genuine = summary["genuine_merl"]
+    lines += [
+        "  kind            MERL .binary BRDF table "
+        f"({' x '.join(map(str, summary['dimensions']))} RGB, float64, {summary['bytes']:,} bytes)",
+        f"  sha256          {summary['sha256']}",
+        "  genuine MERL    " + (f"yes: {genuine}" if genuine else "no (checksum not among the 100 published)"),
+        f"  valid entries   {100 * summary['valid_fraction']:.2f} % "
+        f"(above horizon {100 * summary['above_horizon_fraction']:.2f} %, "
+        f"unmeasured above horizon: {summary['unmeasured_above_horizon']})",
+        "  reflectance (1/sr, valid entries)   min          median       max",
+    ]
+    for label, stats in summary["reflectance_per_sr"].items():
+        if stats["min"] is None:
+            lines.append(f"    {label:<33} (no valid entry)")
+        else:
+            lines.append(f"    {label:<33} {stats['min']:<12.5g} {stats['median']:<12.5g} {stats['max']:.5g}")
+    return "\n".join(lines)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Describe each file; stops at the first bad one (its error names it)."""
+    for index, path in enumerate(args.files):
+        summary = describe_file(path)
+        if args.json:
+            print(json.dumps(summary))
+        else:
+            if index:
+                print()
+            print(_format_text(summary))
+    return 0

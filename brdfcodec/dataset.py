@@ -1,0 +1,289 @@
+"""HDF5 datasets of network inputs, masks and full tables (``spec/dataset-format.md``).
+
+A dataset file holds, for N materials: the β-VAE inputs (21 kept φd slices,
+log-mapped, in the 63×90×90 network layout), their validity masks, the full
+tables (float32 copies in stored MERL units, for metrics), the names, where
+each material came from, and a deterministic train/validation split.
+"""
+
+from __future__ import annotations
+
+import datetime
+import os
+from collections.abc import Sequence
+from pathlib import Path
+from types import TracebackType
+from typing import Final
+
+import h5py
+import numpy as np
+import numpy.typing as npt
+from tqdm.auto import tqdm
+
+from brdfcodec.version import __version__
+from brdfcodec.atomic import atomic_output
+from brdfcodec.conventions import (
+    CONVENTIONS_VERSION,
+    EPSILON,
+    KEPT_PHI_D_SLICES,
+    MERL_COLOR_SCALE,
+    NETWORK_INPUT_SHAPE,
+    TABLE_SHAPE,
+    UNMEASURED_VALUE,
+)
+from brdfcodec.errors import DatasetError
+from brdfcodec.merl import MerlBRDF
+from brdfcodec.sources import MaterialSource
+from brdfcodec.split import TRAIN, VALIDATION, split_materials
+from brdfcodec.transforms import map_values, network_input, select_kept_slices
+
+__all__ = ["DATASET_FORMAT", "DATASET_FORMAT_VERSION", "BrdfDataset", "build_dataset", "material_arrays"]
+
+#: Value of the root attribute ``format``.
+DATASET_FORMAT: Final = "brdfcodec-dataset"
+#: Value of the root attribute ``format_version`` written by this code.
+DATASET_FORMAT_VERSION: Final = 1
+
+_STRING = h5py.string_dtype("utf-8")
+_COMPRESSION: Final = {"compression": "gzip", "compression_opts": 1, "shuffle": True}
+
+
+def material_arrays(brdf: MerlBRDF) -> tuple[np.ndarray, np.ndarray]:
+    """Network input and its mask for one table.
+
+    Returns
+    -------
+    inputs : ndarray of float32, shape (63, 90, 90)
+        Log-mapped kept slices; invalid entries are 0.
+    mask : ndarray of bool, shape (63, 90, 90)
+        Valid entries.
+    """
+    kept_mask = select_kept_slices(brdf.mask)
+    kept_values = np.where(kept_mask, select_kept_slices(brdf.values), 0.0)
+    mapped = np.where(kept_mask, map_values(kept_values), 0.0).astype(np.float32)
+    return network_input(mapped), network_input(kept_mask)
+
+
+def build_dataset(
+    output: str | os.PathLike[str],
+    sources: Sequence[MaterialSource],
+    *,
+    source_kind: str,
+    description: str,
+    validation_fraction: float = 0.15,
+    seed: int = 0,
+    include_tables: bool = True,
+    overwrite: bool = False,
+    progress: bool = True,
+) -> Path:
+    """Write a dataset file from material sources, atomically.
+
+    Parameters
+    ----------
+    output : str or os.PathLike
+        The ``.h5`` file to create.
+    sources : sequence of MaterialSource
+        Materials, each loaded once (see :mod:`brdfcodec.sources`).
+    source_kind : str
+        ``"merl"``, ``"nbrdf-proxy"`` or ``"analytic"``; stored so no one
+        mistakes a proxy for measurements.
+    description : str
+        One sentence naming the data, stored as the ``description`` attribute.
+    validation_fraction : float, default 0.15
+        Share held out for validation (see :func:`brdfcodec.split.split_materials`).
+    seed : int, default 0
+        Seed of the split.
+    include_tables : bool, default True
+        Also store full 90×90×180 tables (float32; about 6 MB a material
+        compressed), needed to measure RelAE on the full table.
+    overwrite : bool, default False
+        Replace an existing file.
+    progress : bool, default True
+        Show a progress bar on stderr.
+
+    Returns
+    -------
+    pathlib.Path
+        The written file. On any error nothing is left at ``output``.
+    """
+    if not sources:
+        raise ValueError("no materials to write")
+    names = [source.name for source in sources]
+    split = split_materials(names, validation_fraction=validation_fraction, seed=seed)
+    n = len(sources)
+    with atomic_output(output, overwrite=overwrite) as tmp, h5py.File(tmp, "w") as handle:
+        attrs = handle.attrs
+        attrs["format"] = DATASET_FORMAT
+        attrs["format_version"] = DATASET_FORMAT_VERSION
+        attrs["conventions_version"] = CONVENTIONS_VERSION
+        attrs["source_kind"] = source_kind
+        attrs["description"] = description
+        attrs["brdfcodec_version"] = __version__
+        attrs["created"] = datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds")
+        attrs["validation_fraction"] = validation_fraction
+        attrs["split_seed"] = seed
+        attrs["kept_phi_d_slices"] = np.asarray(KEPT_PHI_D_SLICES, dtype=np.int16)
+        attrs["color_scale"] = MERL_COLOR_SCALE
+        attrs["epsilon"] = EPSILON
+        handle.create_dataset("names", data=names, dtype=_STRING)
+        handle.create_dataset("split", data=split, dtype=_STRING)
+        handle.create_dataset("origins", data=[s.origin for s in sources], dtype=_STRING)
+        digests = handle.create_dataset("source_sha256", shape=(n,), dtype=_STRING)
+        genuine = handle.create_dataset("genuine_merl", shape=(n,), dtype=_STRING)
+        inputs = handle.create_dataset(
+            "inputs", shape=(n, *NETWORK_INPUT_SHAPE), dtype=np.float32,
+            chunks=(1, *NETWORK_INPUT_SHAPE), **_COMPRESSION,
+        )
+        masks = handle.create_dataset(
+            "input_masks", shape=(n, *NETWORK_INPUT_SHAPE), dtype=bool,
+            chunks=(1, *NETWORK_INPUT_SHAPE), **_COMPRESSION,
+        )
+        tables = None
+        if include_tables:
+            tables = handle.create_dataset(
+                "tables", shape=(n, *TABLE_SHAPE), dtype=np.float32,
+                chunks=(1, 1, *TABLE_SHAPE[1:]), **_COMPRESSION,
+            )
+        for index, source in enumerate(tqdm(sources, desc="materials", unit="mat", disable=not progress)):
+            loaded = source.load()
+            inputs[index], masks[index] = material_arrays(loaded.brdf)
+            digests[index] = loaded.source_sha256
+            genuine[index] = loaded.genuine_merl
+            if tables is not None:
+                tables[index] = np.where(loaded.brdf.mask, loaded.brdf.values, UNMEASURED_VALUE)
+    return Path(output)
+
+
+class BrdfDataset:
+    """Read-only view of a dataset file; use as a context manager.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        A file written by :func:`build_dataset`.
+
+    Raises
+    ------
+    DatasetError
+        Not a brdfcodec dataset, an unsupported version, or inconsistent shapes.
+    """
+
+    def __init__(self, path: str | os.PathLike[str]) -> None:
+        self.path = Path(path)
+        if self.path.is_dir():
+            raise IsADirectoryError(f"{self.path}: is a directory, expected a dataset .h5 file")
+        if not self.path.exists():
+            raise FileNotFoundError(f"{self.path}: no such dataset file")
+        try:
+            self._handle = h5py.File(self.path, "r")
+        except OSError as error:
+            raise DatasetError(self.path, f"not an HDF5 file ({error})") from None
+        try:
+            self._validate()
+        except BaseException:
+            self._handle.close()
+            raise
+        self.names: list[str] = [s.decode() if isinstance(s, bytes) else s for s in self._handle["names"][()]]
+        self.split: list[str] = [s.decode() if isinstance(s, bytes) else s for s in self._handle["split"][()]]
+
+    def _validate(self) -> None:
+        attrs = self._handle.attrs
+        if attrs.get("format") != DATASET_FORMAT:
+            raise DatasetError(self.path, f"not a brdfcodec dataset (format attribute {attrs.get('format')!r})")
+        version = int(attrs.get("format_version", -1))
+        if version != DATASET_FORMAT_VERSION:
+            raise DatasetError(
+                self.path,
+                f"dataset format version {version}, this brdfcodec reads {DATASET_FORMAT_VERSION}; "
+                "rebuild it with `bvae dataset build`",
+            )
+        missing = [k for k in ("names", "split", "inputs", "input_masks") if k not in self._handle]
+        if missing:
+            raise DatasetError(self.path, f"dataset lacks {', '.join(missing)}")
+        n = self._handle["names"].shape[0]
+        expected = {"split": (n,), "inputs": (n, *NETWORK_INPUT_SHAPE), "input_masks": (n, *NETWORK_INPUT_SHAPE)}
+        if "tables" in self._handle:
+            expected["tables"] = (n, *TABLE_SHAPE)
+        for key, shape in expected.items():
+            if self._handle[key].shape != shape:
+                raise DatasetError(self.path, f"{key} has shape {self._handle[key].shape}, expected {shape}")
+
+    def __enter__(self) -> BrdfDataset:
+        return self
+
+    def __exit__(
+        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
+    ) -> None:
+        self.close()
+
+    def close(self) -> None:
+        """Close the file."""
+        self._handle.close()
+
+    def __len__(self) -> int:
+        return len(self.names)
+
+    @property
+    def source_kind(self) -> str:
+        """``"merl"``, ``"nbrdf-proxy"`` or ``"analytic"``."""
+        return str(self._handle.attrs["source_kind"])
+
+    @property
+    def description(self) -> str:
+        """One sentence naming the data."""
+        return str(self._handle.attrs["description"])
+
+    @property
+    def has_tables(self) -> bool:
+        """Whether full tables are stored."""
+        return "tables" in self._handle
+
+    def attribute(self, key: str) -> object:
+        """A root attribute of the file (``created``, ``split_seed``, ...)."""
+        return self._handle.attrs[key]
+
+    def indices(self, split: str | None = None) -> list[int]:
+        """Material indices of one split (``"train"`` or ``"validation"``), or all."""
+        if split is None:
+            return list(range(len(self)))
+        if split not in (TRAIN, VALIDATION):
+            raise ValueError(f"split must be {TRAIN!r} or {VALIDATION!r}, got {split!r}")
+        return [i for i, s in enumerate(self.split) if s == split]
+
+    def index_of(self, name: str) -> int:
+        """Index of a material by name."""
+        try:
+            return self.names.index(name)
+        except ValueError:
+            raise KeyError(f"{self.path}: no material named {name!r}") from None
+
+    def inputs(self, indices: Sequence[int] | None = None) -> npt.NDArray[np.float32]:
+        """Network inputs, shape (len(indices), 63, 90, 90); all materials by default."""
+        return self._rows("inputs", indices)
+
+    def input_masks(self, indices: Sequence[int] | None = None) -> npt.NDArray[np.bool_]:
+        """Validity masks of the inputs, shape (len(indices), 63, 90, 90)."""
+        return self._rows("input_masks", indices)
+
+    def table(self, index: int) -> MerlBRDF:
+        """Full table of one material, as float64 stored values.
+
+        Raises
+        ------
+        DatasetError
+            The dataset was built without tables.
+        """
+        if not self.has_tables:
+            raise DatasetError(self.path, "dataset was built without full tables (--no-tables)")
+        values = np.asarray(self._handle["tables"][index], dtype=np.float64)
+        return MerlBRDF(values, name=self.names[index])
+
+    def _rows(self, key: str, indices: Sequence[int] | None) -> np.ndarray:
+        data = self._handle[key]
+        if indices is None:
+            return data[()]
+        order = np.asarray(indices, dtype=np.intp)
+        if order.size == 0:
+            return np.empty((0, *data.shape[1:]), dtype=data.dtype)
+        unique, inverse = np.unique(order, return_inverse=True)  # h5py wants increasing indices
+        return data[unique.tolist()][inverse]

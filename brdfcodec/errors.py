@@ -1,0 +1,58 @@
+"""Typed errors of brdfcodec.
+
+Every error raised for bad *data* derives from :class:`BrdfcodecError`; bad
+*arguments* from a caller raise the built-in :class:`ValueError` or
+:class:`TypeError`. File-system failures (missing file, a directory where a
+file was expected) stay the built-in :class:`OSError` subclasses. Messages
+name the file and say what is wrong and, where it helps, what to do.
+"""
+
+from __future__ import annotations
+
+import os
+
+__all__ = [
+    "BrdfcodecError",
+    "DatasetError",
+    "FileFormatError",
+    "MerlFormatError",
+    "NonFiniteValueError",
+    "SourceFormatError",
+]
+
+
+class BrdfcodecError(Exception):
+    """Base class of every data error raised by brdfcodec."""
+
+
+class FileFormatError(BrdfcodecError, ValueError):
+    """A file's content does not follow the format it is read as.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The offending file.
+    problem : str
+        What is wrong, as a sentence fragment.
+    """
+
+    def __init__(self, path: str | os.PathLike[str], problem: str) -> None:
+        self.path = os.fspath(path)
+        self.problem = problem
+        super().__init__(f"{self.path}: {problem}")
+
+
+class MerlFormatError(FileFormatError):
+    """A file is not a valid MERL ``.binary`` BRDF table."""
+
+
+class NonFiniteValueError(MerlFormatError):
+    """A MERL table holds NaN or infinite values (and masking was not asked for)."""
+
+
+class SourceFormatError(FileFormatError):
+    """A dataset source (an NBRDF fit archive, say) is malformed."""
+
+
+class DatasetError(FileFormatError):
+    """An HDF5 dataset file is missing, malformed or of an unknown version."""

@@ -1,0 +1,182 @@
+"""Error metrics between a reference table and a reconstruction (``spec/conventions.md`` §7).
+
+All metrics take full tables in MERL layout ``(3, 90, 90, 180)`` and MERL
+stored units, and use only the entries valid in the reference (its mask, or
+:func:`brdfcodec.mask.validity_mask` of the reference by default).
+
+RelAE (relative absolute error), for a set E of valid entries::
+
+    RelAE = Σ_E |ρ̃ − ρ| / Σ_E |ρ|
+
+- ``relae_linear``: ρ is physical reflectance (stored × colour scale, 1/sr).
+  Strict; dominated by the brightest (specular, grazing) entries.
+- ``relae_mapped``: ρ is the log-mapped value of the paper's eq. 1. This is
+  the variant of the size of the paper's figures (0.03 – 0.09).
+
+Both are reported overall (E = valid entries of every channel) and per
+channel (E = valid entries of that channel).
+
+Cosine-weighted RMSE::
+
+    RMSE_cos = sqrt( Σ_E (cos θi · (ρ̃ − ρ))² / |E| )
+
+with ρ physical and θi the incoming direction's elevation at the entry's
+representative angles.
+"""
+
+from __future__ import annotations
+
+import functools
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+
+from brdfcodec.conventions import MERL_COLOR_SCALE, TABLE_SHAPE
+from brdfcodec.coords import directions_from_half_diff, grid_angles
+from brdfcodec.mask import validity_mask
+from brdfcodec.transforms import map_values
+
+__all__ = [
+    "ChannelError",
+    "ErrorReport",
+    "cosine_weighted_rmse",
+    "error_report",
+    "relae_linear",
+    "relae_mapped",
+]
+
+_SCALE = MERL_COLOR_SCALE[:, None, None, None]
+
+
+@dataclass(frozen=True)
+class ChannelError:
+    """One metric, overall and per channel.
+
+    Attributes
+    ----------
+    overall : float
+        Over the valid entries of all channels.
+    red, green, blue : float
+        Over the valid entries of one channel.
+    """
+
+    overall: float
+    red: float
+    green: float
+    blue: float
+
+    def as_dict(self) -> dict[str, float]:
+        """The four numbers keyed ``overall``, ``red``, ``green``, ``blue``."""
+        return {"overall": self.overall, "red": self.red, "green": self.green, "blue": self.blue}
+
+
+@dataclass(frozen=True)
+class ErrorReport:
+    """All metrics of one reconstruction."""
+
+    relae_linear: ChannelError
+    relae_mapped: ChannelError
+    cosine_weighted_rmse: ChannelError
+
+    def as_dict(self) -> dict[str, dict[str, float]]:
+        """Nested dictionary, metric name to :meth:`ChannelError.as_dict`."""
+        return {
+            "relae_linear": self.relae_linear.as_dict(),
+            "relae_mapped": self.relae_mapped.as_dict(),
+            "cosine_weighted_rmse": self.cosine_weighted_rmse.as_dict(),
+        }
+
+
+def _prepare(
+    reference: npt.ArrayLike, estimate: npt.ArrayLike, mask: npt.ArrayLike | None
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    ref = np.asarray(reference, dtype=np.float64)
+    est = np.asarray(estimate, dtype=np.float64)
+    for label, array in (("reference", ref), ("estimate", est)):
+        if array.shape != TABLE_SHAPE:
+            raise ValueError(f"{label} must have shape {TABLE_SHAPE}, got {array.shape}")
+    valid = validity_mask(ref) if mask is None else np.asarray(mask, dtype=bool)
+    if valid.shape != TABLE_SHAPE:
+        raise ValueError(f"mask must have shape {TABLE_SHAPE}, got {valid.shape}")
+    if not np.isfinite(est[valid]).all():
+        raise ValueError("estimate holds NaN or infinite values at valid entries")
+    return ref, est, valid
+
+
+def _relative_absolute(ref: np.ndarray, est: np.ndarray, valid: np.ndarray) -> ChannelError:
+    error = np.where(valid, np.abs(est - ref), 0.0).reshape(3, -1).sum(axis=1)
+    magnitude = np.where(valid, np.abs(ref), 0.0).reshape(3, -1).sum(axis=1)
+    per_channel = np.divide(error, magnitude, out=np.full(3, np.nan), where=magnitude > 0)
+    total = magnitude.sum()
+    overall = float(error.sum() / total) if total > 0 else float("nan")
+    return ChannelError(overall, *(float(v) for v in per_channel))
+
+
+def relae_linear(
+    reference: npt.ArrayLike, estimate: npt.ArrayLike, mask: npt.ArrayLike | None = None
+) -> ChannelError:
+    """RelAE of physical reflectance (strict variant).
+
+    Parameters
+    ----------
+    reference, estimate : array_like, shape (3, 90, 90, 180)
+        Stored MERL values.
+    mask : array_like of bool, shape (3, 90, 90, 180), optional
+        Entries to compare; the reference's validity mask by default.
+
+    Returns
+    -------
+    ChannelError
+        Dimensionless, ≥ 0 (0 for a perfect reconstruction); NaN where the
+        reference is zero on every compared entry.
+    """
+    ref, est, valid = _prepare(reference, estimate, mask)
+    return _relative_absolute(ref * _SCALE, est * _SCALE, valid)
+
+
+def relae_mapped(
+    reference: npt.ArrayLike, estimate: npt.ArrayLike, mask: npt.ArrayLike | None = None
+) -> ChannelError:
+    """RelAE of log-mapped values (the paper's variant).
+
+    Parameters and return as :func:`relae_linear`.
+    """
+    ref, est, valid = _prepare(reference, estimate, mask)
+    return _relative_absolute(map_values(ref), map_values(est), valid)
+
+
+@functools.cache
+def _cos_theta_in() -> np.ndarray:
+    wi, _ = directions_from_half_diff(*grid_angles())
+    cos = np.clip(wi[..., 2], 0.0, 1.0)
+    cos.setflags(write=False)
+    return cos
+
+
+def cosine_weighted_rmse(
+    reference: npt.ArrayLike, estimate: npt.ArrayLike, mask: npt.ArrayLike | None = None
+) -> ChannelError:
+    """Root mean square of cos θi-weighted differences of physical reflectance.
+
+    Parameters and return as :func:`relae_linear`; the unit is 1/sr.
+    """
+    ref, est, valid = _prepare(reference, estimate, mask)
+    weighted = (est - ref) * _SCALE * _cos_theta_in()[None]
+    squared = np.where(valid, weighted**2, 0.0).reshape(3, -1)
+    counts = valid.reshape(3, -1).sum(axis=1)
+    per_channel = np.sqrt(np.divide(squared.sum(axis=1), counts, out=np.full(3, np.nan), where=counts > 0))
+    overall = float(np.sqrt(squared.sum() / counts.sum())) if counts.sum() else float("nan")
+    return ChannelError(overall, *(float(v) for v in per_channel))
+
+
+def error_report(
+    reference: npt.ArrayLike, estimate: npt.ArrayLike, mask: npt.ArrayLike | None = None
+) -> ErrorReport:
+    """All metrics at once (the reference mask is computed once)."""
+    ref, est, valid = _prepare(reference, estimate, mask)
+    return ErrorReport(
+        relae_linear=relae_linear(ref, est, valid),
+        relae_mapped=relae_mapped(ref, est, valid),
+        cosine_weighted_rmse=cosine_weighted_rmse(ref, est, valid),
+    )

@@ -1,0 +1,51 @@
+"""Deterministic train/validation split of named materials.
+
+A material's rank is the SHA-256 of ``"{seed}:{name}"``; the
+``round(fraction · n)`` lowest-ranked materials (at least one when
+``fraction > 0`` and there are two or more materials) go to validation. The
+split depends only on names, seed and fraction, never on input order, NumPy
+version or platform, and adding materials moves few of the existing ones.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from collections.abc import Sequence
+
+__all__ = ["TRAIN", "VALIDATION", "split_materials"]
+
+TRAIN = "train"
+VALIDATION = "validation"
+
+
+def _rank(seed: int, name: str) -> bytes:
+    return hashlib.sha256(f"{seed}:{name}".encode("utf-8")).digest()
+
+
+def split_materials(names: Sequence[str], *, validation_fraction: float = 0.15, seed: int = 0) -> list[str]:
+    """Assign each material to ``"train"`` or ``"validation"``.
+
+    Parameters
+    ----------
+    names : sequence of str
+        Distinct material names.
+    validation_fraction : float, default 0.15
+        Share of materials held out, in [0, 1).
+    seed : int, default 0
+        Changes the draw.
+
+    Returns
+    -------
+    list of str
+        ``"train"`` or ``"validation"`` for each name, in the input order.
+    """
+    if not 0.0 <= validation_fraction < 1.0:
+        raise ValueError(f"validation_fraction must be in [0, 1), got {validation_fraction}")
+    if len(set(names)) != len(names):
+        raise ValueError("material names must be distinct")
+    n = len(names)
+    n_validation = round(validation_fraction * n)
+    if validation_fraction > 0 and n >= 2:
+        n_validation = min(max(n_validation, 1), n - 1)
+    held_out = set(sorted(names, key=lambda name: _rank(seed, name))[:n_validation])
+    return [VALIDATION if name in held_out else TRAIN for name in names]

@@ -1,0 +1,47 @@
+"""Shared fixtures: analytic MERL files made on the fly, and the project's shared data when present."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import pytest
+
+from brdfcodec.analytic import ANALYTIC_PRESETS
+from brdfcodec.merl import MerlBRDF, write_merl
+
+REPO_ROOT = Path(__file__).resolve().parents[1]
+
+
+def shared_root() -> Path:
+    """``$BRDFCODEC_SHARED``, else the ``shared`` folder beside the checkout."""
+    return Path(os.environ.get("BRDFCODEC_SHARED", REPO_ROOT.parent / "shared"))
+
+
+@pytest.fixture(scope="session")
+def shared_dir() -> Path:
+    root = shared_root()
+    if not (root / "data").is_dir():
+        pytest.skip(f"shared data not found at {root} (set BRDFCODEC_SHARED to the folder holding data/)")
+    return root
+
+
+@pytest.fixture(scope="session")
+def nbrdf_zip(shared_dir: Path) -> Path:
+    archive = shared_dir / "data" / "merl-nbrdf-90.zip"
+    if not archive.is_file():
+        pytest.skip(f"NBRDF proxy archive not found at {archive}")
+    return archive
+
+
+@pytest.fixture(scope="session")
+def analytic_tables() -> dict[str, MerlBRDF]:
+    """Every analytic preset as a MERL table (computed once per session)."""
+    return {name: preset.to_merl() for name, preset in ANALYTIC_PRESETS.items()}
+
+
+@pytest.fixture(scope="session")
+def red_plastic_file(tmp_path_factory: pytest.TempPathFactory, analytic_tables: dict[str, MerlBRDF]) -> Path:
+    path = tmp_path_factory.mktemp("merl") / "red-plastic.binary"
+    write_merl(path, analytic_tables["red-plastic"])
+    return path
