@@ -20,7 +20,6 @@ import numpy as np
 import numpy.typing as npt
 from tqdm.auto import tqdm
 
-from brdfcodec.version import __version__
 from brdfcodec.atomic import atomic_output
 from brdfcodec.conventions import (
     CONVENTIONS_VERSION,
@@ -36,6 +35,7 @@ from brdfcodec.merl import MerlBRDF
 from brdfcodec.sources import MaterialSource
 from brdfcodec.split import TRAIN, VALIDATION, split_materials
 from brdfcodec.transforms import map_values, network_input, select_kept_slices
+from brdfcodec.version import __version__
 
 __all__ = ["DATASET_FORMAT", "DATASET_FORMAT_VERSION", "BrdfDataset", "build_dataset", "material_arrays"]
 
@@ -119,7 +119,7 @@ def build_dataset(
         attrs["source_kind"] = source_kind
         attrs["description"] = description
         attrs["brdfcodec_version"] = __version__
-        attrs["created"] = datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds")
+        attrs["created"] = datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds")
         attrs["validation_fraction"] = validation_fraction
         attrs["split_seed"] = seed
         attrs["kept_phi_d_slices"] = np.asarray(KEPT_PHI_D_SLICES, dtype=np.int16)

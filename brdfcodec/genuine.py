@@ -11,9 +11,9 @@ from __future__ import annotations
 import functools
 import hashlib
 import os
+from collections.abc import Mapping
 from importlib import resources
 from types import MappingProxyType
-from typing import Mapping
 
 __all__ = ["genuine_merl_checksums", "genuine_merl_name", "sha256_of_file"]
 

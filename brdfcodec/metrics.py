@@ -1,4 +1,4 @@
-"""Error metrics between a reference table and a reconstruction (``spec/conventions.md`` §7).
+"""Error metrics between a reference table and a reconstruction (``spec/conventions.md`` §8).
 
 All metrics take full tables in MERL layout ``(3, 90, 90, 180)`` and MERL
 stored units, and use only the entries valid in the reference (its mask, or

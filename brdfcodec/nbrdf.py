@@ -8,7 +8,7 @@ physical reflectance (1/sr). Tabulated on the MERL grid they stand in for
 measured MERL tables in development and CI. They are **not** MERL: every
 dataset and report built from them says so (``source_kind = "nbrdf-proxy"``).
 
-Conventions of the tabulation (``spec/conventions.md`` §8): angles are the
+Conventions of the tabulation (``spec/conventions.md`` §9): angles are the
 bins' representative angles; entries below the horizon are unmeasured; fit
 outputs below 0 above the horizon (small undershoots of near-black values)
 are clamped to 0 and stay valid.
@@ -67,7 +67,7 @@ class NbrdfFit:
     def evaluate_vectors(self, half: npt.ArrayLike, diff: npt.ArrayLike) -> npt.NDArray[np.float32]:
         """Raw network output (1/sr) for half and difference unit vectors, shape (..., 3)."""
         x = np.concatenate([np.asarray(half, np.float32), np.asarray(diff, np.float32)], axis=-1)
-        for layer, (kernel, bias) in enumerate(zip(self.kernels, self.biases)):
+        for layer, (kernel, bias) in enumerate(zip(self.kernels, self.biases, strict=False)):
             x = x @ kernel + bias
             if layer < 2:
                 np.maximum(x, 0, out=x)
@@ -107,7 +107,7 @@ def _read_weights(content: bytes, name: str, source: str) -> NbrdfFit:
 
 def _weights_from_handle(handle: h5py.File, name: str, source: str, digest: str) -> NbrdfFit:
     kernels, biases = [], []
-    for layer, shape in zip(_LAYERS, _LAYER_SHAPES):
+    for layer, shape in zip(_LAYERS, _LAYER_SHAPES, strict=False):
         try:
             kernel = np.asarray(handle[f"{layer}/{layer}/kernel:0"], dtype=np.float32)
             bias = np.asarray(handle[f"{layer}/{layer}/bias:0"], dtype=np.float32)

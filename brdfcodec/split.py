@@ -19,7 +19,7 @@ VALIDATION = "validation"
 
 
 def _rank(seed: int, name: str) -> bytes:
-    return hashlib.sha256(f"{seed}:{name}".encode("utf-8")).digest()
+    return hashlib.sha256(f"{seed}:{name}".encode()).digest()
 
 
 def split_materials(names: Sequence[str], *, validation_fraction: float = 0.15, seed: int = 0) -> list[str]:

@@ -33,7 +33,7 @@ def test_specular_direction_gives_theta_h_zero() -> None:
     rng = np.random.default_rng(0)
     theta = rng.uniform(0, np.pi / 2 - 1e-3, 500)
     phi = rng.uniform(-np.pi, np.pi, 500)
-    wi = np.stack([unit(t, p) for t, p in zip(theta, phi)])
+    wi = np.stack([unit(t, p) for t, p in zip(theta, phi, strict=False)])
     wo = wi * np.array([-1, -1, 1])  # mirror about the normal
     theta_h, theta_d, _, _ = half_diff_from_directions(wi, wo)
     np.testing.assert_allclose(theta_h, 0.0, atol=1e-7)
@@ -127,8 +127,8 @@ def test_lookup_at_representative_angles_returns_that_bin(indexed_table: np.ndar
 def test_lookup_is_reciprocal(analytic_tables: dict[str, MerlBRDF], mode: str) -> None:
     brdf = analytic_tables["red-plastic"]
     rng = np.random.default_rng(2)
-    wi = np.stack([unit(t, p) for t, p in zip(rng.uniform(0, 1.5, 300), rng.uniform(-3, 3, 300))])
-    wo = np.stack([unit(t, p) for t, p in zip(rng.uniform(0, 1.5, 300), rng.uniform(-3, 3, 300))])
+    wi = np.stack([unit(t, p) for t, p in zip(rng.uniform(0, 1.5, 300), rng.uniform(-3, 3, 300), strict=False)])
+    wo = np.stack([unit(t, p) for t, p in zip(rng.uniform(0, 1.5, 300), rng.uniform(-3, 3, 300), strict=False)])
     a = brdf.eval(wi, wo, mode=mode)  # type: ignore[arg-type]
     b = brdf.eval(wo, wi, mode=mode)  # type: ignore[arg-type]
     np.testing.assert_allclose(a, b, rtol=1e-6, atol=1e-12)
@@ -140,8 +140,8 @@ def test_trilinear_is_close_to_the_analytic_brdf(analytic_tables: dict[str, Merl
 
     material = ANALYTIC_PRESETS["blue-rubber"]
     rng = np.random.default_rng(3)
-    wi = np.stack([unit(t, p) for t, p in zip(rng.uniform(0, 1.3, 500), rng.uniform(-3, 3, 500))])
-    wo = np.stack([unit(t, p) for t, p in zip(rng.uniform(0, 1.3, 500), rng.uniform(-3, 3, 500))])
+    wi = np.stack([unit(t, p) for t, p in zip(rng.uniform(0, 1.3, 500), rng.uniform(-3, 3, 500), strict=False)])
+    wo = np.stack([unit(t, p) for t, p in zip(rng.uniform(0, 1.3, 500), rng.uniform(-3, 3, 500), strict=False)])
     exact = material.evaluate(wi, wo)
     trilinear = analytic_tables["blue-rubber"].eval(wi, wo, mode="trilinear")
     nearest = analytic_tables["blue-rubber"].eval(wi, wo, mode="nearest")

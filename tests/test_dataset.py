@@ -78,12 +78,12 @@ def test_split_is_deterministic_and_order_free() -> None:
     split = split_materials(names, validation_fraction=0.15, seed=0)
     assert split.count("validation") == 14
     shuffled = names[::-1]
-    again = dict(zip(shuffled, split_materials(shuffled, validation_fraction=0.15, seed=0)))
-    assert dict(zip(names, split)) == again
+    again = dict(zip(shuffled, split_materials(shuffled, validation_fraction=0.15, seed=0), strict=False))
+    assert dict(zip(names, split, strict=False)) == again
     assert split != split_materials(names, validation_fraction=0.15, seed=1)
     # Adding a material moves at most one existing material.
-    grown = dict(zip(names + ["new"], split_materials(names + ["new"], validation_fraction=0.15, seed=0)))
-    assert sum(grown[n] != s for n, s in zip(names, split)) <= 1
+    grown = dict(zip(names + ["new"], split_materials(names + ["new"], validation_fraction=0.15, seed=0), strict=False))
+    assert sum(grown[n] != s for n, s in zip(names, split, strict=False)) <= 1
     assert split_materials(["a", "b"], validation_fraction=0.01) .count("validation") == 1
     assert split_materials(["a"], validation_fraction=0.5) == ["train"]
     with pytest.raises(ValueError, match="distinct"):

@@ -1,0 +1,91 @@
+"""Benchmark helpers: inputs made on the fly, and a ratio report against same-run baselines.
+
+Every benchmark sets ``benchmark.group`` and ``benchmark.extra_info["role"]``
+to ``"baseline"`` or ``"candidate"``. After the run, the terminal summary
+prints, per group, the candidate's median time divided by the baseline's
+(the number to compare across machines), and checks it against the group's
+target in ``TARGETS``. Run with ``python -m pytest benchmarks``.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+
+import pytest
+
+from brdfcodec.analytic import ANALYTIC_PRESETS
+from brdfcodec.merl import write_merl
+
+#: Highest acceptable candidate/baseline ratio of median times, per group.
+TARGETS = {
+    "merl-read": 2.0,  # read + validate a 35 MB MERL file vs numpy.fromfile of the same bytes
+    "merl-write": 2.5,  # atomic write (temporary file, finiteness check, rename) vs ndarray.tofile of the same bytes
+    "proxy-build": 3.0,  # full dataset build of 2 proxy materials vs tabulating their fits only
+}
+
+
+def shared_root() -> Path:
+    return Path(os.environ.get("BRDFCODEC_SHARED", Path(__file__).resolve().parents[2] / "shared"))
+
+
+@pytest.fixture(scope="session")
+def merl_file(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    path = tmp_path_factory.mktemp("bench") / "gold.binary"
+    write_merl(path, ANALYTIC_PRESETS["gold"].to_merl())
+    return path
+
+
+@pytest.fixture(scope="session")
+def nbrdf_zip() -> Path:
+    archive = shared_root() / "data" / "merl-nbrdf-90.zip"
+    if not archive.is_file():
+        pytest.skip(f"NBRDF proxy archive not found at {archive}")
+    return archive
+
+
+def _ratios(config: pytest.Config) -> dict[str, dict[str, float]]:
+    session = getattr(config, "_benchmarksession", None)
+    if session is None or getattr(session, "disabled", True):
+        return {}
+    by_group: dict[str, dict[str, float]] = {}
+    for bench in session.benchmarks:
+        role = bench.extra_info.get("role")
+        if role in ("baseline", "candidate") and bench.stats.rounds:
+            by_group.setdefault(bench.group, {})[role] = bench.stats.median
+    report = {}
+    for group, times in sorted(by_group.items()):
+        if {"baseline", "candidate"} <= times.keys():
+            ratio = times["candidate"] / times["baseline"]
+            report[group] = {
+                "baseline_s": times["baseline"], "candidate_s": times["candidate"],
+                "ratio": ratio, "target": TARGETS.get(group, float("nan")),
+            }
+    return report
+
+
+def pytest_terminal_summary(terminalreporter: pytest.TerminalReporter, config: pytest.Config) -> None:
+    report = _ratios(config)
+    if not report:
+        return
+    terminalreporter.section("brdfcodec ratios (candidate median / baseline median, same run)")
+    failed = []
+    for group, row in report.items():
+        ok = not row["ratio"] > row["target"]
+        failed += [] if ok else [group]
+        terminalreporter.write_line(
+            f"{group:<14} {row['candidate_s'] * 1e3:9.1f} ms / {row['baseline_s'] * 1e3:9.1f} ms = "
+            f"{row['ratio']:6.2f}  (target ≤ {row['target']:g}) {'ok' if ok else 'MISSED'}"
+        )
+    out = os.environ.get("BRDFCODEC_BENCH_RATIOS")
+    if out:
+        Path(out).write_text(json.dumps(report, indent=2))
+    if failed:
+        terminalreporter.write_line(f"targets missed: {', '.join(failed)}", red=True)
+        config._brdfcodec_targets_missed = failed  # type: ignore[attr-defined]
+
+
+def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
+    if getattr(session.config, "_brdfcodec_targets_missed", None) and exitstatus == 0:
+        session.exitstatus = 1

@@ -1,0 +1,44 @@
+"""The normative spec and the code agree on every constant the spec states."""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import numpy as np
+
+from brdfcodec import conventions
+from brdfcodec.dataset import DATASET_FORMAT, DATASET_FORMAT_VERSION
+from brdfcodec.mask import horizon_mask
+from brdfcodec.merl import MERL_FILE_SIZE
+
+SPEC = Path(__file__).resolve().parents[1] / "spec"
+
+
+def conventions_text() -> str:
+    return (SPEC / "conventions.md").read_text(encoding="utf-8")
+
+
+def test_version_matches() -> None:
+    assert re.search(rf"^Version {re.escape(conventions.CONVENTIONS_VERSION)} ", conventions_text(), re.M)
+    dataset_spec = (SPEC / "dataset-format.md").read_text(encoding="utf-8")
+    assert f"Format version {DATASET_FORMAT_VERSION} " in dataset_spec
+    assert f'`"{DATASET_FORMAT}"`' in dataset_spec
+
+
+def test_kept_slices_match() -> None:
+    match = re.search(r"KEPT_PHI_D_SLICES = ([0-9, ]+)", conventions_text())
+    assert match is not None
+    assert tuple(int(v) for v in match.group(1).split(",")) == conventions.KEPT_PHI_D_SLICES
+
+
+def test_numbers_stated_in_the_spec_match() -> None:
+    text = conventions_text()
+    assert f"**{MERL_FILE_SIZE:,} bytes**" in text
+    assert "S = (1.0, 1.15, 1.66) / 1500" in text
+    np.testing.assert_allclose(conventions.MERL_COLOR_SCALE, np.array([1.0, 1.15, 1.66]) / 1500)
+    assert f"[0, `MAPPED_MAX`] = [0, {conventions.MAPPED_MAX:g}]" in text
+    assert conventions.HORIZON_COS_MIN == 1e-9 and "cos θ > 1e-9 (`HORIZON_COS_MIN`)" in text
+    assert conventions.BIN_TOLERANCE == 1e-9 and "τ = 1e-9 (`BIN_TOLERANCE`)" in text
+    assert f"ε = {conventions.EPSILON:g}" in text
+    assert f"{100 * horizon_mask().mean():.2f} % of the 90×90×180 grid" in text
