@@ -9,6 +9,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from brdfcodec.cli import main
@@ -64,8 +65,10 @@ def test_analytic_then_info_then_dataset(capsys: pytest.CaptureFixture[str], tmp
         (struct.pack("<3i", 90, 90, 180) + b"\0" * 100, "truncated"),
         (b"GIF89a" + b"\0" * 50, "not a MERL"),
         (b"abc", "neither a MERL"),
+        (struct.pack("<3i", 90, 90, 180) + struct.pack("<d", np.nan) * (3 * 90 * 90 * 180), "NaN"),
+        (struct.pack("<3i", 90, 90, 180) + b"\0" * (24 * 90 * 90 * 180 + 8), "trailing bytes"),
     ],
-    ids=["truncated", "gif", "tiny"],
+    ids=["truncated", "gif", "tiny", "nan", "trailing"],
 )
 def test_info_rejects_bad_files_cleanly(
     capsys: pytest.CaptureFixture[str], tmp_path: Path, content: bytes, expected: str

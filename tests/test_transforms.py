@@ -4,6 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from hypothesis.extra import numpy as hnp
 
 from brdfcodec.conventions import (
     EPSILON,
@@ -149,3 +152,22 @@ def test_horizon_mask_counts() -> None:
     assert not mask[89, 89, 0]  # grazing in the plane of incidence
     assert kept_slice_horizon_mask().shape == (90, 90, 21)
     np.testing.assert_array_equal(kept_slice_horizon_mask(), mask[:, :, list(KEPT_PHI_D_SLICES)])
+
+
+@settings(max_examples=300, deadline=None)
+@given(
+    hnp.arrays(np.float64, st.tuples(st.just(3), st.integers(1, 6)),
+               elements=st.floats(0.0, 1e6, allow_nan=False, allow_infinity=False)),
+)
+def test_round_trip_property(values: np.ndarray) -> None:
+    back = unmap_values(map_values(values))
+    tiny = values < 1e-300  # subnormals and zero
+    np.testing.assert_allclose(back[~tiny], values[~tiny], rtol=1e-6)
+    assert (back[tiny] <= 1e-300).all()
+
+
+@settings(max_examples=200, deadline=None)
+@given(hnp.arrays(np.float32, (3, 4), elements=st.floats(width=32)))
+def test_unmap_is_finite_and_non_negative_for_any_float32(mapped: np.ndarray) -> None:
+    out = unmap_values(mapped)
+    assert np.isfinite(out).all() and (out >= 0).all()
