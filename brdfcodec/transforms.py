@@ -35,6 +35,7 @@ from brdfcodec.conventions import (
 
 __all__ = [
     "from_network_input",
+    "table_from_network_output",
     "interpolate_slices",
     "map_values",
     "network_input",
@@ -201,3 +202,23 @@ def interpolate_slices(kept: npt.ArrayLike) -> np.ndarray:
     exact = weight == 0
     out[..., exact] = array[..., left[exact]]
     return out
+
+
+def table_from_network_output(mapped: npt.ArrayLike) -> np.ndarray:
+    """Full table in stored units from mapped network slices.
+
+    Parameters
+    ----------
+    mapped : array_like, shape (..., 63, 90, 90)
+        Mapped values at the kept slices in the network layout (a decoder's
+        output); clamped to [0, MAPPED_MAX] by the inverse mapping.
+
+    Returns
+    -------
+    ndarray, shape (..., 3, 90, 90, 180)
+        Stored MERL values: the slices are interpolated in the mapped domain
+        (``spec/conventions.md`` §7), then unmapped (§4). Finite and ≥ 0.
+    """
+    kept = from_network_input(mapped)
+    full = interpolate_slices(kept)
+    return unmap_values(full, channel_axis=full.ndim - 4)

@@ -1,0 +1,1 @@
+"""Classical baselines the β-VAE is measured against."""

@@ -1,0 +1,60 @@
+"""``bvae model``: export a trained run as a model folder, list and verify models."""
+
+from __future__ import annotations
+
+import argparse
+import shlex
+import sys
+from pathlib import Path
+
+__all__ = ["register"]
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+    """Add the ``model`` sub-command group."""
+    parser = subparsers.add_parser("model", help="export, list and verify trained models",
+                                   description="Export, list and verify trained models.")
+    actions = parser.add_subparsers(dest="action", metavar="ACTION")
+    actions.required = True
+    export = actions.add_parser(
+        "export", help="export the best weights of a run with its measurements and model card",
+        description="Measure a finished run (per-material RelAE, PCA baseline, KL, traversals) and write "
+        "encoder/decoder safetensors, model.json and MODEL_CARD.md.",
+    )
+    export.add_argument("run_dir", type=Path, help="run folder of `bvae train`")
+    export.add_argument("-o", "--output", type=Path, required=True, help="model folder to write")
+    export.add_argument("--name", required=True, help="model name, e.g. bvae-nbrdf-proxy-small-v1")
+    export.add_argument("--dataset", type=Path, help="dataset to measure on (default: the run's)")
+    export.add_argument("--command", default="", help="the command that reproduces the run, for the card")
+    export.set_defaults(handler=run_export)
+    show = actions.add_parser("info", help="show a model folder's manifest, verifying its weights",
+                              description="Show a model (the default one without FOLDER) and verify its hashes.")
+    show.add_argument("folder", type=Path, nargs="?", help="model folder (default: the shipped default model)")
+    show.set_defaults(handler=run_info)
+
+
+def run_export(args: argparse.Namespace) -> int:
+    """Export and print the decoder hash."""
+    from brdfcodec.training.export import export_run
+
+    if args.output.exists() and any(args.output.iterdir()):
+        raise FileExistsError(f"{args.output}: folder is not empty")
+    command = args.command or " ".join(shlex.quote(a) for a in ["bvae", *sys.argv[1:]])
+    manifest = export_run(args.run_dir, args.output, name=args.name, dataset_path=args.dataset, command=command)
+    print(f"wrote {args.output}: {manifest.name}, decoder sha256 {manifest.decoder_sha256}")
+    return 0
+
+
+def run_info(args: argparse.Namespace) -> int:
+    """Print name, hashes, size and headline errors after verifying the weights."""
+    from brdfcodec.models.registry import default_model_folder
+    from brdfcodec.models.store import load_model
+
+    folder = args.folder or default_model_folder()
+    _, _, manifest = load_model(folder)
+    print(f"{manifest.folder}\n  name            {manifest.name}\n  decoder sha256  {manifest.decoder_sha256} (verified)"
+          f"\n  encoder sha256  {manifest.encoder_sha256} (verified)\n  latent size     {manifest.config.latent_dim}")
+    for split, row in manifest.info.get("summary", {}).items():
+        print(f"  {split:<15} mapped RelAE mean {row['mapped_mean']:.4f} (worst {row['mapped_max']:.4f}), "
+              f"linear {row['linear_mean']:.4f}")
+    return 0

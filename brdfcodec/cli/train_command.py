@@ -1,0 +1,75 @@
+"""``bvae train``: train a β-VAE on a dataset file (one process, or many under torchrun)."""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+from pathlib import Path
+
+__all__ = ["register"]
+
+_PRESETS = ("small", "paper", "tiny")
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+    """Add the ``train`` sub-command."""
+    parser = subparsers.add_parser(
+        "train",
+        help="train a β-VAE on a dataset (CPU, GPU, or torchrun for several processes)",
+        description="Train a β-VAE on the training split of a dataset built by `bvae dataset build`. "
+        "Several processes or machines: `torchrun --nproc_per_node N -m brdfcodec train ...`.",
+    )
+    parser.add_argument("dataset", type=Path, help="dataset .h5 file (with full tables)")
+    parser.add_argument("-o", "--run-dir", type=Path, required=True, help="run folder (logs, checkpoints)")
+    parser.add_argument("--model", default="small",
+                        help=f"model size: {', '.join(_PRESETS)}, or a JSON file of ModelConfig fields")
+    parser.add_argument("--latent-dim", type=int, help="override the latent size")
+    parser.add_argument("--epochs", type=int)
+    parser.add_argument("--batch-size", type=int, help="global batch")
+    parser.add_argument("--lr", type=float, dest="learning_rate")
+    parser.add_argument("--beta", type=float)
+    parser.add_argument("--recon", choices=("l2", "l1"))
+    parser.add_argument("--permute-colours", type=float, help="probability of a colour permutation")
+    parser.add_argument("--mix-probability", type=float, help="probability of a reflectance blend")
+    parser.add_argument("--seed", type=int)
+    parser.add_argument("--eval-every", type=int)
+    parser.add_argument("--patience", type=int, help="evaluations without gain before stopping (0: never)")
+    parser.add_argument("--time-limit", type=float, dest="time_limit_s", help="seconds; checkpoint and stop")
+    parser.add_argument("--resume", action="store_true", help="continue the run in --run-dir")
+    parser.add_argument("--quiet", action="store_true", help="no progress bar")
+    parser.set_defaults(handler=run)
+
+
+def _model_config(spec: str, latent_dim: int | None):  # noqa: ANN202 - torch-free signature
+    from brdfcodec.models.config import PAPER_CONFIG, SMALL_CONFIG, TINY_CONFIG, ModelConfig
+
+    presets = {"small": SMALL_CONFIG, "paper": PAPER_CONFIG, "tiny": TINY_CONFIG}
+    if spec in presets:
+        config = presets[spec]
+    else:
+        path = Path(spec)
+        if not path.is_file():
+            raise ValueError(f"--model must be one of {', '.join(_PRESETS)} or a JSON file; {spec!r} is neither")
+        config = ModelConfig.from_dict(json.loads(path.read_text()))
+    return config if latent_dim is None else dataclasses.replace(config, latent_dim=latent_dim)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Train, then print where the results are."""
+    from brdfcodec.training.config import TrainConfig
+    from brdfcodec.training.trainer import train
+
+    overrides = {
+        field.name: getattr(args, field.name)
+        for field in dataclasses.fields(TrainConfig)
+        if getattr(args, field.name, None) is not None
+    }
+    result = train(
+        args.dataset, args.run_dir, model_config=_model_config(args.model, args.latent_dim),
+        train_config=TrainConfig(**overrides), resume=args.resume, progress=not args.quiet,
+    )
+    if result.run_dir.joinpath("summary.json").exists():
+        print(f"{result.run_dir}: {result.epochs_done} epochs ({result.stop_reason}), best validation mapped "
+              f"RelAE {result.best_validation_relae:.4f} at epoch {result.best_epoch}, {result.seconds:.0f} s")
+    return 0

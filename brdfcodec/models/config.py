@@ -1,0 +1,107 @@
+"""Configuration of the β-VAE: every size is a field, so model variants are one line apart."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import asdict, dataclass, fields
+from typing import Any, Literal
+
+__all__ = ["PAPER_CONFIG", "SMALL_CONFIG", "TINY_CONFIG", "ModelConfig"]
+
+NormKind = Literal["batch", "group", "none"]
+
+
+@dataclass(frozen=True)
+class ModelConfig:
+    """Architecture of the β-VAE of the paper, with sizes as parameters.
+
+    The encoder applies three 3×3 stride-2 convolutions (90 → 45 → 23 → 12),
+    ``encoder_res_blocks`` residual blocks at 12×12, then fully connected
+    layers to μ and log σ². The decoder mirrors it: fully connected layers to
+    ``decoder_channels[0] × 12 × 12``, ``decoder_res_blocks`` residual
+    blocks, two 3×3 stride-2 transposed convolutions (12 → 23 → 45) and a
+    last 4×4 one (45 → 90) to the 63 mapped slices.
+
+    Attributes
+    ----------
+    latent_dim : int
+        Size of the latent code (8 in the paper).
+    encoder_channels : tuple of int
+        Output channels of the three stride-2 convolutions.
+    encoder_res_blocks : int
+        Residual blocks after them (9 in the paper).
+    encoder_fc : tuple of int
+        Hidden widths of the fully connected layers before μ, log σ².
+    decoder_fc : tuple of int
+        Hidden widths of the fully connected layers after z.
+    decoder_channels : tuple of int
+        Channels at 12×12, 23×23 and 45×45.
+    decoder_res_blocks : int
+        Residual blocks at 12×12 (3 in the paper).
+    norm : {"batch", "group", "none"}
+        Normalisation after each convolution ("batch" in the paper; "group"
+        does not depend on the batch, see the model card).
+    negative_slope : float
+        Slope of the leaky ReLU.
+    """
+
+    latent_dim: int = 8
+    encoder_channels: tuple[int, int, int] = (64, 64, 64)
+    encoder_res_blocks: int = 2
+    encoder_fc: tuple[int, ...] = (256,)
+    decoder_fc: tuple[int, ...] = (192,)
+    decoder_channels: tuple[int, int, int] = (64, 64, 64)
+    decoder_res_blocks: int = 2
+    norm: NormKind = "group"
+    negative_slope: float = 0.01
+
+    def __post_init__(self) -> None:
+        if self.latent_dim < 1:
+            raise ValueError(f"latent_dim must be ≥ 1, got {self.latent_dim}")
+        for name in ("encoder_channels", "decoder_channels"):
+            value = getattr(self, name)
+            if len(value) != 3 or min(value) < 1:
+                raise ValueError(f"{name} must be three positive channel counts, got {value}")
+        if self.norm not in ("batch", "group", "none"):
+            raise ValueError(f"norm must be 'batch', 'group' or 'none', got {self.norm!r}")
+        if self.norm == "group" and any(c % 8 for c in (*self.encoder_channels, *self.decoder_channels)):
+            raise ValueError("with norm='group' every channel count must be a multiple of 8")
+
+    def to_json(self) -> str:
+        """Canonical JSON (sorted keys), as stored beside the weights."""
+        return json.dumps(asdict(self), sort_keys=True)
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> ModelConfig:
+        """Inverse of :func:`dataclasses.asdict`; unknown keys are an error."""
+        known = {f.name for f in fields(cls)}
+        unknown = sorted(set(data) - known)
+        if unknown:
+            raise ValueError(f"unknown model config keys {unknown}")
+        values = {k: tuple(v) if isinstance(v, list) else v for k, v in data.items()}
+        return cls(**values)
+
+
+#: The paper's sizes as far as its text gives them (78.9 MB in the paper).
+PAPER_CONFIG = ModelConfig(
+    encoder_channels=(128, 128, 64),
+    encoder_res_blocks=9,
+    encoder_fc=(1024, 256),
+    decoder_fc=(256, 1024),
+    decoder_channels=(64, 128, 128),
+    decoder_res_blocks=3,
+    norm="batch",
+)
+
+#: Default size: a decoder of a few MB.
+SMALL_CONFIG = ModelConfig()
+
+#: For tests: seconds to build and run.
+TINY_CONFIG = ModelConfig(
+    encoder_channels=(8, 8, 8),
+    encoder_res_blocks=1,
+    encoder_fc=(16,),
+    decoder_fc=(16,),
+    decoder_channels=(8, 8, 8),
+    decoder_res_blocks=1,
+)

@@ -1,0 +1,86 @@
+"""Hyper-parameters of a training run."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import asdict, dataclass, fields
+from typing import Any, Literal
+
+__all__ = ["TrainConfig"]
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    """Schedule, objective and augmentation of a β-VAE training run.
+
+    Attributes
+    ----------
+    epochs : int
+        Passes over the training materials (each with fresh augmentation).
+    batch_size : int
+        Global batch (split evenly across processes under torchrun).
+    learning_rate, min_learning_rate : float
+        Adam's rate after warm-up, and the end of its cosine decay.
+    warmup_epochs : int
+        Linear warm-up.
+    beta : float
+        β of the objective (β_norm = β·M/N; 12 in the paper).
+    recon : {"l2", "l1"}
+        Reconstruction error summed over valid entries.
+    permute_colours : float
+        Probability that a material is shown with its colours permuted.
+    mix_probability : float
+        Probability that a material is blended (in reflectance) with another.
+    seed : int
+        Seeds initialisation, batching, augmentation and sampling.
+    eval_every : int
+        Epochs between validation evaluations (and early-stopping checks).
+    patience : int
+        Evaluations without improvement before stopping early; 0 disables.
+    checkpoint_every : int
+        Epochs between checkpoints.
+    time_limit_s : float or None
+        Wall-clock budget; the run checkpoints and stops when it is spent
+        (``--resume`` continues it).
+    """
+
+    epochs: int = 400
+    batch_size: int = 8
+    learning_rate: float = 1e-3
+    min_learning_rate: float = 1e-5
+    warmup_epochs: int = 5
+    beta: float = 12.0
+    recon: Literal["l2", "l1"] = "l2"
+    permute_colours: float = 0.5
+    mix_probability: float = 0.5
+    seed: int = 0
+    eval_every: int = 10
+    patience: int = 0
+    checkpoint_every: int = 10
+    time_limit_s: float | None = None
+
+    def __post_init__(self) -> None:
+        if self.epochs < 1 or self.batch_size < 1:
+            raise ValueError("epochs and batch_size must be ≥ 1")
+        if not 0 <= self.permute_colours <= 1 or not 0 <= self.mix_probability <= 1:
+            raise ValueError("permute_colours and mix_probability are probabilities in [0, 1]")
+        if self.recon not in ("l2", "l1"):
+            raise ValueError(f"recon must be 'l2' or 'l1', got {self.recon!r}")
+        if self.learning_rate <= 0 or self.min_learning_rate < 0 or self.beta < 0:
+            raise ValueError("learning rates must be positive and beta ≥ 0")
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain dictionary (JSON-ready)."""
+        return asdict(self)
+
+    def to_json(self) -> str:
+        """Canonical JSON (sorted keys)."""
+        return json.dumps(self.to_dict(), sort_keys=True)
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> TrainConfig:
+        """Inverse of :meth:`to_dict`; unknown keys are an error."""
+        unknown = sorted(set(data) - {f.name for f in fields(cls)})
+        if unknown:
+            raise ValueError(f"unknown training config keys {unknown}")
+        return cls(**data)

@@ -1,0 +1,117 @@
+"""Turn a finished run into a shippable model folder: weights, manifest with measurements, card."""
+
+from __future__ import annotations
+
+import json
+import os
+import platform
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from brdfcodec.dataset import BrdfDataset
+from brdfcodec.models.config import ModelConfig
+from brdfcodec.models.network import BetaVAE
+from brdfcodec.models.store import DECODER_FILE, ENCODER_FILE, MANIFEST, ModelManifest, export_model
+from brdfcodec.training.card import render_model_card
+from brdfcodec.training.report import (
+    encode_dataset,
+    kl_per_dim,
+    material_errors,
+    pca_errors,
+    summarise,
+    traversal_changes,
+)
+from brdfcodec.version import __version__
+
+__all__ = ["CARD", "export_run"]
+
+CARD = "MODEL_CARD.md"
+
+_LIMITS = [
+    "Trained and measured on the NBRDF proxy of MERL (neural fits evaluated on the MERL grid), which is smoother "
+    "than the measurements; errors on genuine MERL files will be larger.",
+    "Materials far from the training set (saturated greens above all; MERL has few) reconstruct worse; "
+    "colour-permutation augmentation reduces but does not remove this.",
+    "Float decoding is not bit-exact across devices or PyTorch versions; within one machine and dtype it is.",
+]
+
+
+def export_run(
+    run_dir: str | os.PathLike[str],
+    folder: str | os.PathLike[str],
+    *,
+    name: str,
+    dataset_path: str | os.PathLike[str] | None = None,
+    command: str = "",
+) -> ModelManifest:
+    """Export the best weights of a run with every measurement its card needs.
+
+    Parameters
+    ----------
+    run_dir : str or os.PathLike
+        Folder written by :func:`brdfcodec.training.trainer.train`.
+    folder : str or os.PathLike
+        Output model folder (``encoder.safetensors``, ``decoder.safetensors``,
+        ``model.json``, ``MODEL_CARD.md``).
+    name : str
+        Model name.
+    dataset_path : str or os.PathLike, optional
+        Dataset to measure on; the run's own by default.
+    command : str
+        The command that reproduces the run, quoted in the card.
+    """
+    run = Path(run_dir)
+    run_info = json.loads((run / "run.json").read_text())
+    best = torch.load(run / "best.pt", map_location="cpu", weights_only=False)
+    config = ModelConfig.from_dict(json.loads(best["model_config"]))
+    model = BetaVAE(config)
+    model.load_state_dict(best["model"])
+    model.eval()
+    log = [json.loads(line) for line in (run / "log.jsonl").read_text().splitlines()]
+    summary_file = run / "summary.json"
+    seconds = sum(record["seconds"] for record in log)
+    with BrdfDataset(dataset_path or run_info["dataset"]) as dataset:
+        errors = material_errors(model.encoder, model.decoder, dataset)
+        baseline = pca_errors(dataset, config.latent_dim)
+        train_inputs = dataset.inputs(dataset.indices("train"))
+        mu, _ = encode_dataset(model.encoder, train_inputs)
+        kl = kl_per_dim(model.encoder, train_inputs)
+        traversal = traversal_changes(model.decoder, mu.mean(0), np.maximum(mu.std(0), 1e-6))
+        data = {"source_kind": dataset.source_kind, "description": dataset.description,
+                "train": [dataset.names[i] for i in dataset.indices("train")],
+                "validation": [dataset.names[i] for i in dataset.indices("validation")]}
+    info: dict[str, Any] = {
+        "brdfcodec_version": __version__,
+        "torch_version": torch.__version__,
+        "data": data,
+        "train_config": run_info["train_config"],
+        "world_size": run_info["world_size"],
+        "device": f"{platform.processor() or platform.machine()} CPU" if not torch.cuda.is_available()
+        else torch.cuda.get_device_name(0),
+        "epochs_done": log[-1]["epoch"],
+        "best_epoch": best["epoch"],
+        "training_seconds": seconds,
+        "stop_reason": json.loads(summary_file.read_text())["stop_reason"] if summary_file.exists() else "",
+        "command": command,
+        "errors": [row.as_dict() for row in errors],
+        "summary": summarise(errors),
+        "pca_errors": [row.as_dict() for row in baseline],
+        "pca_summary": summarise(baseline),
+        "kl_per_dim": kl,
+        "latent_mean": mu.mean(0).tolist(),
+        "latent_std": mu.std(0).tolist(),
+        "traversal": traversal,
+        "limits": _LIMITS,
+    }
+    out = Path(folder)
+    manifest = export_model(model, out, name=name, info=info)
+    info["decoder_bytes"] = (out / DECODER_FILE).stat().st_size
+    info["encoder_bytes"] = (out / ENCODER_FILE).stat().st_size
+    stored = json.loads((out / MANIFEST).read_text())
+    stored["info"] = info
+    (out / MANIFEST).write_text(json.dumps(stored, indent=2, sort_keys=True) + "\n", encoding="utf-8")
+    (out / CARD).write_text(render_model_card(stored), encoding="utf-8")
+    return manifest

@@ -1,0 +1,125 @@
+"""The training loop: logs, checkpoints, resume, determinism, torchrun equivalence (tiny model, CPU)."""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from brdfcodec.dataset import build_dataset
+from brdfcodec.models.config import TINY_CONFIG
+from brdfcodec.sources import analytic_sources
+from brdfcodec.training.config import TrainConfig
+from brdfcodec.training.trainer import train
+
+TINY_TRAIN = TrainConfig(epochs=3, batch_size=4, learning_rate=1e-3, warmup_epochs=1, eval_every=1,
+                         checkpoint_every=1, seed=7)
+
+
+@pytest.fixture(scope="module")
+def tiny_dataset(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    path = tmp_path_factory.mktemp("train-data") / "analytic.h5"
+    build_dataset(path, analytic_sources(random_count=5), source_kind="analytic", description="analytic test set",
+                  validation_fraction=0.2, seed=0, progress=False)
+    return path
+
+
+def read_log(run_dir: Path) -> list[dict]:
+    return [json.loads(line) for line in (run_dir / "log.jsonl").read_text().splitlines()]
+
+
+def test_run_writes_log_checkpoints_and_summary(tiny_dataset: Path, tmp_path: Path) -> None:
+    run = tmp_path / "run"
+    result = train(tiny_dataset, run, model_config=TINY_CONFIG, train_config=TINY_TRAIN, progress=False)
+    assert result.epochs_done == 3 and result.stop_reason == "completed"
+    log = read_log(run)
+    assert [r["epoch"] for r in log] == [1, 2, 3]
+    for record in log:
+        assert len(record["kl_per_dim"]) == TINY_CONFIG.latent_dim
+        assert record["val_relae_mapped"] > 0
+    assert all(math.isfinite(r["loss"]) and math.isfinite(r["train_relae_mapped"]) for r in log)
+    assert {"run.json", "log.jsonl", "checkpoint.pt", "best.pt", "summary.json"} <= {p.name for p in run.iterdir()}
+    info = json.loads((run / "run.json").read_text())
+    assert len(info["data"]["validation"]) == 2 and info["data"]["source_kind"] == "analytic"
+    with pytest.raises(FileExistsError, match="not empty"):
+        train(tiny_dataset, run, model_config=TINY_CONFIG, train_config=TINY_TRAIN, progress=False)
+
+
+def test_resume_continues_exactly(tiny_dataset: Path, tmp_path: Path) -> None:
+    straight = tmp_path / "straight"
+    train(tiny_dataset, straight, model_config=TINY_CONFIG, train_config=TINY_TRAIN, progress=False)
+    split = tmp_path / "split"
+    first = TrainConfig(**{**TINY_TRAIN.to_dict(), "time_limit_s": 0.0})
+    result = train(tiny_dataset, split, model_config=TINY_CONFIG, train_config=first, progress=False)
+    assert result.stop_reason == "time limit" and result.epochs_done == 1
+    # A time limit is run control, not part of the recipe: resuming without it is allowed.
+    train(tiny_dataset, split, model_config=TINY_CONFIG, train_config=TINY_TRAIN, resume=True, progress=False)
+    a, b = read_log(straight), read_log(split)
+    assert [r["epoch"] for r in b] == [1, 2, 3]
+    for ra, rb in zip(a, b, strict=True):
+        assert rb["loss"] == pytest.approx(ra["loss"], rel=1e-5)
+        assert rb["val_relae_mapped"] == pytest.approx(ra["val_relae_mapped"], rel=1e-5)
+
+
+def test_resume_refuses_a_different_config(tiny_dataset: Path, tmp_path: Path) -> None:
+    run = tmp_path / "run"
+    train(tiny_dataset, run, model_config=TINY_CONFIG, train_config=TINY_TRAIN, progress=False)
+    other = TrainConfig(**{**TINY_TRAIN.to_dict(), "learning_rate": 5e-4})
+    with pytest.raises(ValueError, match="different train config"):
+        train(tiny_dataset, run, model_config=TINY_CONFIG, train_config=other, resume=True, progress=False)
+
+
+@pytest.mark.slow
+def test_two_torchrun_processes_match_one(tiny_dataset: Path, tmp_path: Path) -> None:
+    common = ["train", str(tiny_dataset), "--model", "tiny", "--epochs", "2", "--batch-size", "4", "--seed", "7",
+              "--eval-every", "1", "--quiet"]
+    env = {**os.environ, "OMP_NUM_THREADS": "1"}
+    single = subprocess.run([sys.executable, "-m", "brdfcodec", *common, "-o", str(tmp_path / "one")],
+                            capture_output=True, text=True, env=env, timeout=600)
+    assert single.returncode == 0, single.stderr[-2000:]
+    double = subprocess.run(
+        [sys.executable, "-m", "torch.distributed.run", "--standalone", "--nproc_per_node", "2",
+         "-m", "brdfcodec", *common, "-o", str(tmp_path / "two")],
+        capture_output=True, text=True, env=env, timeout=600,
+    )
+    assert double.returncode == 0, double.stderr[-3000:]
+    one, two = read_log(tmp_path / "one"), read_log(tmp_path / "two")
+    assert json.loads((tmp_path / "two" / "run.json").read_text())["world_size"] == 2
+    for a, b in zip(one, two, strict=True):
+        assert b["loss"] == pytest.approx(a["loss"], rel=1e-3)
+        assert b["val_relae_mapped"] == pytest.approx(a["val_relae_mapped"], rel=1e-3)
+
+
+def test_export_card_store_and_registry(tiny_dataset: Path, tmp_path: Path) -> None:
+    from brdfcodec.models.registry import ModelNotFoundError, find_model, register_model_folder
+    from brdfcodec.models.store import ModelChecksumError, load_model
+    from brdfcodec.training.export import export_run
+
+    run = tmp_path / "run"
+    train(tiny_dataset, run, model_config=TINY_CONFIG, train_config=TINY_TRAIN, progress=False)
+    folder = tmp_path / "model"
+    manifest = export_run(run, folder, name="tiny-test", command="bvae train ...")
+    assert {p.name for p in folder.iterdir()} == {"encoder.safetensors", "decoder.safetensors", "model.json",
+                                                  "MODEL_CARD.md"}
+    card = (folder / "MODEL_CARD.md").read_text()
+    for heading in ("## Data", "## Training", "## Reconstruction error", "PCA-8", "## Latent dimensions",
+                    "## Known limits", manifest.decoder_sha256):
+        assert heading in card
+    info = json.loads((folder / "model.json").read_text())["info"]
+    assert len(info["errors"]) == 12 and len(info["kl_per_dim"]) == 8 and len(info["traversal"]) == 8
+    assert info["summary"]["validation"]["count"] == 2
+    encoder, decoder, loaded = load_model(folder)
+    assert encoder is not None and decoder is not None and loaded.name == "tiny-test"
+    assert register_model_folder(folder).decoder_sha256 == find_model(manifest.decoder_sha256.upper()).decoder_sha256
+    with pytest.raises(ModelNotFoundError, match=manifest.decoder_sha256):
+        find_model("0" * 64)
+    data = bytearray((folder / "decoder.safetensors").read_bytes())
+    data[-1] ^= 0xFF
+    (folder / "decoder.safetensors").write_bytes(bytes(data))
+    with pytest.raises(ModelChecksumError, match="differs from the manifest"):
+        load_model(folder, parts=("decoder",))
