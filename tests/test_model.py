@@ -9,10 +9,12 @@ import numpy as np
 import pytest
 import torch
 
+from brdfcodec.baselines.pca import fit_pca
 from brdfcodec.conventions import MAPPED_MAX, NETWORK_INPUT_SHAPE
+from brdfcodec.mask import kept_slice_horizon_mask
 from brdfcodec.models.config import PAPER_CONFIG, SMALL_CONFIG, TINY_CONFIG, ModelConfig
 from brdfcodec.models.loss import beta_norm, beta_vae_loss, kl_per_dimension
-from brdfcodec.models.network import BetaVAE
+from brdfcodec.models.network import BetaVAE, initialise_linear_basis
 from brdfcodec.training.augment import COLOUR_PERMUTATIONS, mix_physical, permute_colours
 from brdfcodec.transforms import map_values, network_input, select_kept_slices
 
@@ -81,7 +83,8 @@ def test_paper_config_is_paper_sized() -> None:
     model = BetaVAE(PAPER_CONFIG)
     megabytes = sum(p.numel() for p in model.parameters()) * 4 / 1e6
     assert 70 < megabytes < 95  # the paper reports 78.9 MB
-    small_decoder = sum(p.numel() for p in BetaVAE(SMALL_CONFIG).decoder.parameters()) * 4 / 1e6
+    state = BetaVAE(SMALL_CONFIG).decoder.state_dict()
+    small_decoder = sum(t.numel() * t.element_size() for t in state.values()) / 1e6
     assert small_decoder <= 10.0
 
 
@@ -152,3 +155,43 @@ def test_physical_mixing_blends_reflectance() -> None:
 def test_replace_keeps_configs_frozen() -> None:
     bigger = dataclasses.replace(TINY_CONFIG, latent_dim=16)
     assert BetaVAE(bigger).encoder.head.out_features == 32
+
+
+@pytest.fixture(scope="module")
+def basis_model_and_data() -> tuple[BetaVAE, torch.Tensor]:
+    torch.manual_seed(5)
+    data = torch.rand(12, *NETWORK_INPUT_SHAPE) * 2
+    data = data * torch.from_numpy(network_input(np.repeat(kept_slice_horizon_mask()[None], 3, axis=0)))
+    config = dataclasses.replace(TINY_CONFIG, linear_basis=True, latent_dim=4)
+    model = BetaVAE(config)
+    initialise_linear_basis(model, data)
+    return model.eval(), data
+
+
+def test_linear_basis_starts_as_pca(basis_model_and_data: tuple[BetaVAE, torch.Tensor]) -> None:
+    model, data = basis_model_and_data
+    with torch.no_grad():
+        recon, mu, _ = model(data)
+    pca = fit_pca(data.numpy(), 4)
+    expected = pca.decode(pca.encode(data.numpy()))
+    np.testing.assert_allclose(recon.numpy(), expected, atol=2e-2)  # float16 storage of the basis
+    # μ starts as whitened coefficients: unit variance over the fitting set, matching the prior.
+    np.testing.assert_allclose(mu.std(0, unbiased=True).numpy(), 1.0, rtol=1e-3)
+
+
+@pytest.mark.parametrize("scale", [3.0, 50.0, 1e4])
+def test_linear_basis_extreme_latents_stay_in_domain(
+    basis_model_and_data: tuple[BetaVAE, torch.Tensor], scale: float
+) -> None:
+    model, _ = basis_model_and_data
+    with torch.no_grad():
+        out = model.decoder(torch.randn(3, 4) * scale)
+    assert torch.isfinite(out).all() and (out >= 0).all() and (out <= MAPPED_MAX).all()
+
+
+def test_training_mode_returns_unbounded_output(basis_model_and_data: tuple[BetaVAE, torch.Tensor]) -> None:
+    model, data = basis_model_and_data
+    z = torch.full((1, 4), 1e3)
+    assert (model.decoder.unbounded(z).abs() > MAPPED_MAX).any()  # the loss sees how far off it is
+    with pytest.raises(ValueError, match="no linear basis"):
+        initialise_linear_basis(BetaVAE(TINY_CONFIG), data)

@@ -42,3 +42,11 @@ def test_numbers_stated_in_the_spec_match() -> None:
     assert conventions.BIN_TOLERANCE == 1e-9 and "τ = 1e-9 (`BIN_TOLERANCE`)" in text
     assert f"ε = {conventions.EPSILON:g}" in text
     assert f"{100 * horizon_mask().mean():.2f} % of the 90×90×180 grid" in text
+
+
+def test_model_spec_counts_match() -> None:
+    from brdfcodec.models.network import valid_input_index
+
+    text = (SPEC / "model.md").read_text(encoding="utf-8")
+    assert f"{valid_input_index().numel():,} of" in text
+    assert "β = 12" in text

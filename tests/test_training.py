@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import os
@@ -10,9 +11,11 @@ import sys
 from pathlib import Path
 
 import pytest
+import torch
 
 from brdfcodec.dataset import build_dataset
 from brdfcodec.models.config import TINY_CONFIG
+from brdfcodec.models.network import BetaVAE
 from brdfcodec.sources import analytic_sources
 from brdfcodec.training.config import TrainConfig
 from brdfcodec.training.trainer import train
@@ -101,7 +104,8 @@ def test_export_card_store_and_registry(tiny_dataset: Path, tmp_path: Path) -> N
     from brdfcodec.training.export import export_run
 
     run = tmp_path / "run"
-    train(tiny_dataset, run, model_config=TINY_CONFIG, train_config=TINY_TRAIN, progress=False)
+    config = dataclasses.replace(TINY_CONFIG, linear_basis=True)  # as the shipped model
+    train(tiny_dataset, run, model_config=config, train_config=TINY_TRAIN, progress=False)
     folder = tmp_path / "model"
     manifest = export_run(run, folder, name="tiny-test", command="bvae train ...")
     assert {p.name for p in folder.iterdir()} == {"encoder.safetensors", "decoder.safetensors", "model.json",
@@ -115,6 +119,14 @@ def test_export_card_store_and_registry(tiny_dataset: Path, tmp_path: Path) -> N
     assert info["summary"]["validation"]["count"] == 2
     encoder, decoder, loaded = load_model(folder)
     assert encoder is not None and decoder is not None and loaded.name == "tiny-test"
+    # The exported weights reproduce the run's best model exactly.
+    best = torch.load(run / "best.pt", weights_only=False)
+    original = BetaVAE(config)
+    original.load_state_dict(best["model"])
+    original.eval()
+    z = torch.randn(2, config.latent_dim)
+    with torch.no_grad():
+        assert torch.equal(decoder(z), original.decoder(z))
     assert register_model_folder(folder).decoder_sha256 == find_model(manifest.decoder_sha256.upper()).decoder_sha256
     with pytest.raises(ModelNotFoundError, match=manifest.decoder_sha256):
         find_model("0" * 64)

@@ -26,6 +26,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     export.add_argument("--name", required=True, help="model name, e.g. bvae-nbrdf-proxy-small-v1")
     export.add_argument("--dataset", type=Path, help="dataset to measure on (default: the run's)")
     export.add_argument("--command", default="", help="the command that reproduces the run, for the card")
+    export.add_argument("--compare", action="append", default=[], metavar="LABEL=FOLDER",
+                        help="an exported model to show beside this one in the card (repeatable)")
     export.set_defaults(handler=run_export)
     show = actions.add_parser("info", help="show a model folder's manifest, verifying its weights",
                               description="Show a model (the default one without FOLDER) and verify its hashes.")
@@ -40,7 +42,14 @@ def run_export(args: argparse.Namespace) -> int:
     if args.output.exists() and any(args.output.iterdir()):
         raise FileExistsError(f"{args.output}: folder is not empty")
     command = args.command or " ".join(shlex.quote(a) for a in ["bvae", *sys.argv[1:]])
-    manifest = export_run(args.run_dir, args.output, name=args.name, dataset_path=args.dataset, command=command)
+    comparisons = {}
+    for item in args.compare:
+        label, sep, folder = item.partition("=")
+        if not sep or not label or not folder:
+            raise ValueError(f"--compare takes LABEL=FOLDER, got {item!r}")
+        comparisons[label] = Path(folder)
+    manifest = export_run(args.run_dir, args.output, name=args.name, dataset_path=args.dataset, command=command,
+                          comparisons=comparisons)
     print(f"wrote {args.output}: {manifest.name}, decoder sha256 {manifest.decoder_sha256}")
     return 0
 
@@ -52,7 +61,8 @@ def run_info(args: argparse.Namespace) -> int:
 
     folder = args.folder or default_model_folder()
     _, _, manifest = load_model(folder)
-    print(f"{manifest.folder}\n  name            {manifest.name}\n  decoder sha256  {manifest.decoder_sha256} (verified)"
+    print(f"{manifest.folder}\n  name            {manifest.name}"
+          f"\n  decoder sha256  {manifest.decoder_sha256} (verified)"
           f"\n  encoder sha256  {manifest.encoder_sha256} (verified)\n  latent size     {manifest.config.latent_dim}")
     for split, row in manifest.info.get("summary", {}).items():
         print(f"  {split:<15} mapped RelAE mean {row['mapped_mean']:.4f} (worst {row['mapped_max']:.4f}), "

@@ -25,6 +25,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     parser.add_argument("--model", default="small",
                         help=f"model size: {', '.join(_PRESETS)}, or a JSON file of ModelConfig fields")
     parser.add_argument("--latent-dim", type=int, help="override the latent size")
+    parser.add_argument("--linear-basis", action=argparse.BooleanOptionalAction, default=None,
+                        help="override the model's linear (PCA) path")
     parser.add_argument("--epochs", type=int)
     parser.add_argument("--batch-size", type=int, help="global batch")
     parser.add_argument("--lr", type=float, dest="learning_rate")
@@ -41,7 +43,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     parser.set_defaults(handler=run)
 
 
-def _model_config(spec: str, latent_dim: int | None):  # noqa: ANN202 - torch-free signature
+def _model_config(spec: str, latent_dim: int | None, linear_basis: bool | None):  # noqa: ANN202
     from brdfcodec.models.config import PAPER_CONFIG, SMALL_CONFIG, TINY_CONFIG, ModelConfig
 
     presets = {"small": SMALL_CONFIG, "paper": PAPER_CONFIG, "tiny": TINY_CONFIG}
@@ -52,7 +54,11 @@ def _model_config(spec: str, latent_dim: int | None):  # noqa: ANN202 - torch-fr
         if not path.is_file():
             raise ValueError(f"--model must be one of {', '.join(_PRESETS)} or a JSON file; {spec!r} is neither")
         config = ModelConfig.from_dict(json.loads(path.read_text()))
-    return config if latent_dim is None else dataclasses.replace(config, latent_dim=latent_dim)
+    if latent_dim is not None:
+        config = dataclasses.replace(config, latent_dim=latent_dim)
+    if linear_basis is not None:
+        config = dataclasses.replace(config, linear_basis=linear_basis)
+    return config
 
 
 def run(args: argparse.Namespace) -> int:
@@ -66,7 +72,7 @@ def run(args: argparse.Namespace) -> int:
         if getattr(args, field.name, None) is not None
     }
     result = train(
-        args.dataset, args.run_dir, model_config=_model_config(args.model, args.latent_dim),
+        args.dataset, args.run_dir, model_config=_model_config(args.model, args.latent_dim, args.linear_basis),
         train_config=TrainConfig(**overrides), resume=args.resume, progress=not args.quiet,
     )
     if result.run_dir.joinpath("summary.json").exists():

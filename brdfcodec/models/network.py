@@ -11,13 +11,21 @@ import torch
 from torch import nn
 
 from brdfcodec.conventions import MAPPED_MAX, NETWORK_INPUT_SHAPE
+from brdfcodec.mask import kept_slice_horizon_mask
 from brdfcodec.models.config import ModelConfig
+from brdfcodec.transforms import network_input
 
-__all__ = ["BetaVAE", "Decoder", "Encoder"]
+__all__ = ["BetaVAE", "Decoder", "Encoder", "initialise_linear_basis", "valid_input_index"]
 
 _IN_CHANNELS = NETWORK_INPUT_SHAPE[0]
 _BOTTLENECK = 12  # 90 → 45 → 23 → 12 with three 3×3 stride-2 convolutions
 _INITIAL_LOGIT = -2.5
+
+
+def valid_input_index() -> torch.Tensor:
+    """Flat indices of the entries of a (63, 90, 90) input that are above the horizon."""
+    mask = network_input(kept_slice_horizon_mask()[None].repeat(3, axis=0))
+    return torch.from_numpy(mask.reshape(-1).nonzero()[0])
 
 
 def _norm(kind: str, channels: int) -> nn.Module:
@@ -70,10 +78,22 @@ class Encoder(nn.Module):
         flat = channels * _BOTTLENECK * _BOTTLENECK
         self.fc = _fc_stack([flat, *config.encoder_fc], config.negative_slope)
         self.head = nn.Linear(config.encoder_fc[-1] if config.encoder_fc else flat, 2 * config.latent_dim)
+        if config.linear_basis:
+            n_valid = int(valid_input_index().numel())
+            self.register_buffer("valid_index", valid_input_index(), persistent=False)
+            self.register_buffer("basis_mean", torch.zeros(n_valid))
+            self.register_buffer("basis_projection", torch.zeros(config.latent_dim, n_valid))
+            with torch.no_grad():  # the non-linear path starts as a zero correction, σ small
+                self.head.weight.zero_()
+                self.head.bias.zero_()
+                self.head.bias[config.latent_dim :] = -8.0
 
     def forward(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         h = self.fc(self.features(x).flatten(1))
         mu, logvar = self.head(h).chunk(2, dim=1)
+        if self.config.linear_basis:
+            valid = x.flatten(1).index_select(1, self.valid_index)
+            mu = mu + (valid - self.basis_mean) @ self.basis_projection.T
         return mu, logvar
 
 
@@ -92,18 +112,40 @@ class Decoder(nn.Module):
             nn.ConvTranspose2d(c1, c2, 3, stride=2, padding=1), _norm(config.norm, c2), nn.LeakyReLU(slope),  # 45
             nn.ConvTranspose2d(c2, _IN_CHANNELS, 4, stride=2, padding=1),  # 90
         )
-        # Start near a typical mapped value (sigmoid(−2.5) · 5 ≈ 0.38) rather than the middle of the domain.
+        last = self.upsample[-1]
         with torch.no_grad():
-            self.upsample[-1].bias.fill_(_INITIAL_LOGIT)
+            if config.linear_basis:
+                # Linear path: mean + components · z over valid entries (float16 storage); the convolutional
+                # path adds a correction that starts at zero.
+                n_valid = int(valid_input_index().numel())
+                self.register_buffer("valid_index", valid_input_index(), persistent=False)
+                self.register_buffer("basis_mean", torch.zeros(n_valid, dtype=torch.float16))
+                self.register_buffer("basis_components", torch.zeros(config.latent_dim, n_valid, dtype=torch.float16))
+                last.weight.zero_()
+                last.bias.zero_()
+            else:
+                # Start near a typical mapped value (sigmoid(−2.5) · 5 ≈ 0.38), not mid-domain.
+                last.bias.fill_(_INITIAL_LOGIT)
 
     def logits(self, z: torch.Tensor) -> torch.Tensor:
-        """Pre-activation output, ``(B, 63, 90, 90)``."""
+        """Output of the convolutional path, ``(B, 63, 90, 90)``."""
         c0 = self.config.decoder_channels[0]
         h = self.fc(z).view(-1, c0, _BOTTLENECK, _BOTTLENECK)
         return self.upsample(self.blocks(h))
 
+    def unbounded(self, z: torch.Tensor) -> torch.Tensor:
+        """Output before it is limited to the mapped domain (the training loss uses it)."""
+        out = self.logits(z)
+        if not self.config.linear_basis:
+            return MAPPED_MAX * torch.sigmoid(out)
+        dtype = out.dtype
+        linear = self.basis_mean.to(dtype) + z @ self.basis_components.to(dtype)
+        flat = out.flatten(1).index_add(1, self.valid_index, linear)
+        return flat.view_as(out)
+
     def forward(self, z: torch.Tensor) -> torch.Tensor:
-        return MAPPED_MAX * torch.sigmoid(self.logits(z))
+        """Mapped slices in [0, MAPPED_MAX]."""
+        return self.unbounded(z).clamp(0.0, MAPPED_MAX)
 
 
 class BetaVAE(nn.Module):
@@ -124,6 +166,10 @@ class BetaVAE(nn.Module):
     ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         """Return ``(reconstruction, μ, log σ²)``.
 
+        In training mode the reconstruction is the decoder's unbounded output
+        (so the loss keeps its gradient outside the mapped domain); in
+        evaluation mode it is limited to [0, MAPPED_MAX].
+
         Parameters
         ----------
         x : Tensor, shape (B, 63, 90, 90)
@@ -137,6 +183,29 @@ class BetaVAE(nn.Module):
         if self.training:
             eps = torch.randn_like(mu) if noise is None else noise
             z = mu + torch.exp(0.5 * logvar) * eps
-        else:
-            z = mu
-        return self.decoder(z), mu, logvar
+            return self.decoder.unbounded(z), mu, logvar
+        return self.decoder(z=mu), mu, logvar
+
+
+@torch.no_grad()
+def initialise_linear_basis(model: BetaVAE, train_inputs: torch.Tensor) -> None:
+    """Fit the linear path of a ``linear_basis`` model to training inputs (PCA over valid entries).
+
+    The encoder projects onto the first ``latent_dim`` principal components
+    scaled to unit variance over the training set (so μ starts whitened,
+    matching the N(0, 1) prior), and the decoder maps back.
+    """
+    if not model.config.linear_basis:
+        raise ValueError("model has no linear basis (ModelConfig.linear_basis is False)")
+    k = model.config.latent_dim
+    valid = train_inputs.flatten(1).index_select(1, model.encoder.valid_index).double()
+    if valid.shape[0] < k:
+        raise ValueError(f"need at least {k} training materials to fit {k} components, got {valid.shape[0]}")
+    mean = valid.mean(0)
+    _, singular, vt = torch.linalg.svd(valid - mean, full_matrices=False)
+    components = vt[:k]
+    scale = (singular[:k] / max(1, valid.shape[0] - 1) ** 0.5).clamp_min(1e-12)  # std of each coefficient
+    model.encoder.basis_mean.copy_(mean.float())
+    model.encoder.basis_projection.copy_((components / scale[:, None]).float())
+    model.decoder.basis_mean.copy_(mean.half())
+    model.decoder.basis_components.copy_((components * scale[:, None]).half())

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 from typing import Any
 
 __all__ = ["render_model_card"]
@@ -43,7 +44,7 @@ def render_model_card(manifest: dict[str, Any]) -> str:
         "",
         f"- decoder SHA-256: `{manifest['decoder_sha256']}` ({info['decoder_bytes']:,} bytes)",
         f"- encoder SHA-256: `{manifest['encoder_sha256']}` ({info['encoder_bytes']:,} bytes)",
-        f"- architecture: `{config}`",
+        f"- architecture: `{json.dumps(config, sort_keys=True)}`",
         f"- brdfcodec {info['brdfcodec_version']}, torch {info['torch_version']}",
         "",
         "## Data",
@@ -87,6 +88,28 @@ def render_model_card(manifest: dict[str, Any]) -> str:
     for row in sorted(info["errors"], key=lambda r: (r["split"], r["name"])):
         lines.append(f"| {row['name']} | {row['split']} | {_fmt(row['relae_mapped'])} | {_fmt(row['relae_linear'])} "
                      f"| {_fmt(pca[row['name']]['relae_mapped'])} |")
+    if len(info.get("comparisons", [])) > 1:
+        lines += [
+            "",
+            "## Against other sizes and recipes",
+            "",
+            "Same data and split; mapped RelAE. Green: mean over the proxy's green materials.",
+            "",
+            "| model | decoder MB | epochs | train min | train mean | validation mean | validation worst | "
+            "worst (all) | green-acrylic | green mean | colour permutation |",
+            "|---|---|---|---|---|---|---|---|---|---|---|",
+        ]
+        for row in info["comparisons"]:
+            def cell(value: float | None) -> str:
+                return "–" if value is None else _fmt(value)
+            size = "–" if row["decoder_bytes"] is None else f"{row['decoder_bytes'] / 1e6:.1f}"
+            lines.append(
+                f"| {row['label']} | {size} | {row['epochs']} | {row['minutes']:.0f} | "
+                f"{cell(row['train_mapped_mean'])} "
+                f"| {cell(row['validation_mapped_mean'])} | {cell(row['validation_mapped_max'])} | "
+                f"{cell(row['worst_mapped'])} | {cell(row['green_acrylic'])} | {cell(row['green_mean'])} | "
+                f"{row['permute_colours']} |"
+            )
     lines += [
         "",
         "## Latent dimensions",

@@ -44,13 +44,13 @@ class TrainConfig:
         (``--resume`` continues it).
     """
 
-    epochs: int = 400
+    epochs: int = 300
     batch_size: int = 8
-    learning_rate: float = 1e-3
+    learning_rate: float = 3e-4
     min_learning_rate: float = 1e-5
-    warmup_epochs: int = 5
+    warmup_epochs: int = 2
     beta: float = 12.0
-    recon: Literal["l2", "l1"] = "l2"
+    recon: Literal["l2", "l1"] = "l1"
     permute_colours: float = 0.5
     mix_probability: float = 0.5
     seed: int = 0

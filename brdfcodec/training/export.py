@@ -46,6 +46,7 @@ def export_run(
     name: str,
     dataset_path: str | os.PathLike[str] | None = None,
     command: str = "",
+    comparisons: dict[str, str | os.PathLike[str]] | None = None,
 ) -> ModelManifest:
     """Export the best weights of a run with every measurement its card needs.
 
@@ -62,6 +63,9 @@ def export_run(
         Dataset to measure on; the run's own by default.
     command : str
         The command that reproduces the run, quoted in the card.
+    comparisons : dict of str to path, optional
+        Other exported model folders (label → folder) whose measurements the
+        card shows beside this model's (a paper-sized model, ablations).
     """
     run = Path(run_dir)
     run_info = json.loads((run / "run.json").read_text())
@@ -106,12 +110,40 @@ def export_run(
         "traversal": traversal,
         "limits": _LIMITS,
     }
+    info["comparisons"] = [_comparison_row("this model", info, None)]
+    for label, other in (comparisons or {}).items():
+        other_manifest = json.loads((Path(other) / MANIFEST).read_text())
+        info["comparisons"].append(_comparison_row(label, other_manifest["info"], Path(other)))
     out = Path(folder)
     manifest = export_model(model, out, name=name, info=info)
     info["decoder_bytes"] = (out / DECODER_FILE).stat().st_size
     info["encoder_bytes"] = (out / ENCODER_FILE).stat().st_size
     stored = json.loads((out / MANIFEST).read_text())
+    info["comparisons"][0]["decoder_bytes"] = info["decoder_bytes"]
     stored["info"] = info
     (out / MANIFEST).write_text(json.dumps(stored, indent=2, sort_keys=True) + "\n", encoding="utf-8")
     (out / CARD).write_text(render_model_card(stored), encoding="utf-8")
     return manifest
+
+
+#: Materials of the proxy whose colour is green (the paper's hard case).
+GREEN_MATERIALS = ("green-acrylic", "green-fabric", "green-latex", "green-metallic-paint", "green-metallic-paint2",
+                   "green-plastic", "specular-green-phenolic")
+
+
+def _comparison_row(label: str, info: dict[str, Any], folder: Path | None) -> dict[str, Any]:
+    errors = {row["name"]: row for row in info["errors"]}
+    greens = [errors[n]["relae_mapped"] for n in GREEN_MATERIALS if n in errors]
+    return {
+        "label": label,
+        "decoder_bytes": (folder / DECODER_FILE).stat().st_size if folder else None,
+        "epochs": info["epochs_done"],
+        "minutes": info["training_seconds"] / 60,
+        "train_mapped_mean": info["summary"]["train"]["mapped_mean"],
+        "validation_mapped_mean": info["summary"].get("validation", {}).get("mapped_mean"),
+        "validation_mapped_max": info["summary"].get("validation", {}).get("mapped_max"),
+        "worst_mapped": max(row["relae_mapped"] for row in info["errors"]),
+        "green_acrylic": errors.get("green-acrylic", {}).get("relae_mapped"),
+        "green_mean": sum(greens) / len(greens) if greens else None,
+        "permute_colours": info["train_config"]["permute_colours"],
+    }

@@ -33,7 +33,7 @@ from tqdm.auto import tqdm
 from brdfcodec.dataset import BrdfDataset
 from brdfcodec.models.config import ModelConfig
 from brdfcodec.models.loss import beta_vae_loss, kl_per_dimension
-from brdfcodec.models.network import BetaVAE
+from brdfcodec.models.network import BetaVAE, initialise_linear_basis
 from brdfcodec.training.augment import COLOUR_PERMUTATIONS, mix_physical, permute_colours
 from brdfcodec.training.config import TrainConfig
 from brdfcodec.training.evaluation import MappedReference, reconstruct_mapped
@@ -196,7 +196,10 @@ def train(
     run_info["data"] = data_info
 
     torch.manual_seed(train_config.seed)
-    model = BetaVAE(model_config).to(world.device)
+    model = BetaVAE(model_config)
+    if model_config.linear_basis and not resume:
+        initialise_linear_basis(model, inputs)
+    model = model.to(world.device)
     optimizer = torch.optim.Adam(model.parameters(), lr=train_config.learning_rate)
     first_epoch, best, best_epoch, step = 0, math.inf, -1, 0
     if resume:
@@ -275,7 +278,8 @@ def train(
         stop = None
         if train_config.patience and evals_without_gain >= train_config.patience:
             stop = "early stopping"
-        if train_config.time_limit_s is not None and elapsed >= train_config.time_limit_s and done < train_config.epochs:
+        out_of_time = train_config.time_limit_s is not None and elapsed >= train_config.time_limit_s
+        if out_of_time and done < train_config.epochs:
             stop = "time limit"
         stop_flag = torch.tensor([1.0 if stop else 0.0])
         if world.size > 1:
