@@ -88,8 +88,10 @@ def export_model(model: BetaVAE, folder: str | os.PathLike[str], *, name: str, i
     out.mkdir(parents=True, exist_ok=True)
     metadata = {"brdfcodec_model": name, "config": model.config.to_json()}
     for part, module, file in (("encoder", model.encoder, ENCODER_FILE), ("decoder", model.decoder, DECODER_FILE)):
-        tensors = {k: v.detach().to("cpu", torch.float32).contiguous() for k, v in module.state_dict().items()}
+        # Floating tensors keep their dtype (the linear basis is float16 by design); integers stay as they are.
+        tensors = {k: v.detach().to("cpu").contiguous() for k, v in module.state_dict().items()}
         save_file(tensors, str(out / file), metadata={**metadata, "part": part})
+        os.chmod(out / file, 0o644)
     manifest = {
         "name": name,
         "config": json.loads(model.config.to_json()),

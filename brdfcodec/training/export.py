@@ -33,8 +33,9 @@ CARD = "MODEL_CARD.md"
 _LIMITS = [
     "Trained and measured on the NBRDF proxy of MERL (neural fits evaluated on the MERL grid), which is smoother "
     "than the measurements; errors on genuine MERL files will be larger.",
-    "Materials far from the training set (saturated greens above all; MERL has few) reconstruct worse; "
-    "colour-permutation augmentation reduces but does not remove this.",
+    "Materials far from the training set (saturated greens above all; MERL has few) reconstruct worse. "
+    "Colour-permutation augmentation is meant to help there; whether it does for this model is in the "
+    "comparison table (green-acrylic and the green mean, with and without it).",
     "Float decoding is not bit-exact across devices or PyTorch versions; within one machine and dtype it is.",
 ]
 

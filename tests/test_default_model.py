@@ -1,0 +1,65 @@
+"""The model shipped in the package: present, verified, well-behaved, and its card reproducible."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from brdfcodec.conventions import MAPPED_MAX
+from brdfcodec.dataset import material_arrays
+from brdfcodec.metrics import relae_mapped
+from brdfcodec.models.registry import default_model_folder, find_model
+from brdfcodec.models.store import load_model
+from brdfcodec.sources import nbrdf_zip_sources
+from brdfcodec.transforms import table_from_network_output
+
+
+@pytest.fixture(scope="module")
+def default_model():  # noqa: ANN201
+    return load_model(default_model_folder())
+
+
+def test_default_model_is_registered_and_verified(default_model) -> None:  # noqa: ANN001
+    encoder, decoder, manifest = default_model
+    assert find_model(manifest.decoder_sha256).folder == manifest.folder
+    assert (manifest.folder / "decoder.safetensors").stat().st_size <= 10_000_000
+    assert (manifest.folder / "MODEL_CARD.md").is_file()
+    assert manifest.info["data"]["source_kind"] == "nbrdf-proxy"
+
+
+@pytest.mark.parametrize("scale", [0.0, 3.0, 50.0])
+def test_default_decoder_is_finite_for_extreme_latents(default_model, scale: float) -> None:  # noqa: ANN001
+    _, decoder, manifest = default_model
+    z = torch.randn(4, manifest.config.latent_dim, generator=torch.Generator().manual_seed(1)) * scale
+    with torch.no_grad():
+        out = decoder(z)
+    assert torch.isfinite(out).all() and (out >= 0).all() and (out <= MAPPED_MAX).all()
+    table = table_from_network_output(out.numpy())
+    assert np.isfinite(table).all() and (table >= 0).all()
+
+
+def test_every_latent_dimension_changes_the_material(default_model) -> None:  # noqa: ANN001
+    _, _, manifest = default_model
+    changes = [row["relative_change"] for row in manifest.info["traversal"]]
+    assert len(changes) == manifest.config.latent_dim and min(changes) > 0.01
+    assert all(kl > 0.1 for kl in manifest.info["kl_per_dim"])
+
+
+@pytest.mark.shared
+def test_card_numbers_are_reproduced(default_model, nbrdf_zip: Path) -> None:  # noqa: ANN001
+    """Re-measure some validation materials (and green-acrylic) from the proxy archive; compare with the card."""
+    encoder, decoder, manifest = default_model
+    card = {row["name"]: row for row in manifest.info["errors"]}
+    names = manifest.info["data"]["validation"][:4] + ["green-acrylic"]
+    for source in nbrdf_zip_sources(nbrdf_zip, names):
+        brdf = source.load().brdf
+        inputs, _ = material_arrays(brdf)
+        with torch.no_grad():
+            mu, _ = encoder(torch.from_numpy(inputs)[None])
+            out = decoder(mu).numpy()[0]
+        estimate = table_from_network_output(out).astype(np.float64)
+        measured = relae_mapped(brdf.values, estimate, brdf.mask).overall
+        assert measured == pytest.approx(card[source.name]["relae_mapped"], rel=1e-3, abs=1e-4), source.name
