@@ -10,6 +10,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 import torch
 
@@ -135,3 +136,15 @@ def test_export_card_store_and_registry(tiny_dataset: Path, tmp_path: Path) -> N
     (folder / "decoder.safetensors").write_bytes(bytes(data))
     with pytest.raises(ModelChecksumError, match="differs from the manifest"):
         load_model(folder, parts=("decoder",))
+
+
+def test_early_stopping_after_patience_evaluations_without_gain(
+    tiny_dataset: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from brdfcodec.training import evaluation
+
+    monkeypatch.setattr(evaluation.MappedReference, "relae", lambda self, outputs: np.full(len(self.indices), 0.5))
+    config = TrainConfig(**{**TINY_TRAIN.to_dict(), "epochs": 10, "patience": 2})
+    result = train(tiny_dataset, tmp_path / "run", model_config=TINY_CONFIG, train_config=config, progress=False)
+    assert result.stop_reason == "early stopping"
+    assert result.epochs_done == 3 and result.best_epoch == 1  # no gain at epochs 2 and 3
