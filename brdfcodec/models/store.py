@@ -14,7 +14,6 @@ used.
 
 from __future__ import annotations
 
-import hashlib
 import json
 import os
 from dataclasses import dataclass
@@ -25,6 +24,7 @@ import torch
 from safetensors.torch import load_file, save_file
 
 from brdfcodec.errors import BrdfcodecError
+from brdfcodec.genuine import sha256_of_file
 from brdfcodec.models.config import ModelConfig
 from brdfcodec.models.network import BetaVAE, Decoder, Encoder
 
@@ -65,11 +65,6 @@ class ModelManifest:
     info: dict[str, Any]
 
 
-def _sha256(path: Path) -> str:
-    with open(path, "rb") as stream:
-        return hashlib.file_digest(stream, "sha256").hexdigest()
-
-
 def export_model(model: BetaVAE, folder: str | os.PathLike[str], *, name: str, info: dict[str, Any]) -> ModelManifest:
     """Write a trained model as safetensors plus manifest.
 
@@ -95,8 +90,8 @@ def export_model(model: BetaVAE, folder: str | os.PathLike[str], *, name: str, i
     manifest = {
         "name": name,
         "config": json.loads(model.config.to_json()),
-        "decoder_sha256": _sha256(out / DECODER_FILE),
-        "encoder_sha256": _sha256(out / ENCODER_FILE),
+        "decoder_sha256": sha256_of_file(out / DECODER_FILE),
+        "encoder_sha256": sha256_of_file(out / ENCODER_FILE),
         "info": info,
     }
     (out / MANIFEST).write_text(json.dumps(manifest, indent=2, sort_keys=True) + "\n", encoding="utf-8")
@@ -122,7 +117,7 @@ def load_manifest(folder: str | os.PathLike[str]) -> ModelManifest:
 
 def _verified_weights(manifest: ModelManifest, file: str, expected: str) -> dict[str, torch.Tensor]:
     path = manifest.folder / file
-    actual = _sha256(path)
+    actual = sha256_of_file(path)
     if actual != expected:
         raise ModelChecksumError(
             f"{path}: SHA-256 {actual} differs from the manifest's {expected}; the file is corrupt or belongs "

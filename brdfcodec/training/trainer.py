@@ -189,7 +189,7 @@ def train(
         # Training RelAE is monitored on a fixed subset (every 4th material), without augmentation.
         monitored = train_rows[::4]
         train_reference = MappedReference(dataset, monitored) if world.is_main else None
-        monitored_inputs = dataset.inputs(monitored)
+        monitored_inputs = inputs[::4].numpy()  # the rows of `monitored`, already in memory
         data_info = {"source_kind": dataset.source_kind, "description": dataset.description,
                      "train": [dataset.names[i] for i in train_rows],
                      "validation": [dataset.names[i] for i in val_rows]}
