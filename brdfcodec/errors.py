@@ -13,11 +13,16 @@ import os
 
 __all__ = [
     "BrdfcodecError",
+    "BvaeChecksumError",
+    "BvaeFormatError",
     "DatasetError",
+    "DecoderMismatchError",
+    "DecoderNotFoundError",
     "FileFormatError",
     "MerlFormatError",
     "NonFiniteValueError",
     "SourceFormatError",
+    "UnsupportedVersionError",
 ]
 
 
@@ -56,3 +61,23 @@ class SourceFormatError(FileFormatError):
 
 class DatasetError(FileFormatError):
     """An HDF5 dataset file is missing, malformed or of an unknown version."""
+
+
+class BvaeFormatError(FileFormatError):
+    """A file is not a valid ``.bvae`` file (bad magic, malformed header or records, trailing bytes)."""
+
+
+class BvaeChecksumError(BvaeFormatError):
+    """A CRC-32 stored in a ``.bvae`` file does not match the bytes it covers: the file is corrupt."""
+
+
+class UnsupportedVersionError(BvaeFormatError):
+    """A ``.bvae`` file needs a newer reader: unknown major version, flag or record kind."""
+
+
+class DecoderNotFoundError(BrdfcodecError):
+    """No installed or registered model has the decoder a ``.bvae`` file refers to."""
+
+
+class DecoderMismatchError(BrdfcodecError):
+    """A decoder other than the one a ``.bvae`` file refers to was offered for decoding it."""

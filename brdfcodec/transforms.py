@@ -17,6 +17,7 @@ with ε = 0.01, so 0 maps to 0 and a reflectance of 1/sr maps to 1.
 from __future__ import annotations
 
 import functools
+from collections.abc import Sequence
 
 import numpy as np
 import numpy.typing as npt
@@ -35,6 +36,7 @@ from brdfcodec.conventions import (
 
 __all__ = [
     "from_network_input",
+    "kept_slots_for_bins",
     "table_from_network_output",
     "interpolate_slices",
     "map_values",
@@ -204,21 +206,64 @@ def interpolate_slices(kept: npt.ArrayLike) -> np.ndarray:
     return out
 
 
-def table_from_network_output(mapped: npt.ArrayLike) -> np.ndarray:
-    """Full table in stored units from mapped network slices.
+def kept_slots_for_bins(phi_d_bins: Sequence[int]) -> tuple[int, ...]:
+    """Positions (0–20) of the kept slices that the interpolation of the given φd bins reads, sorted."""
+    left, right, _ = _interpolation_plan()
+    bins = np.asarray(list(phi_d_bins), dtype=np.int64)
+    if bins.size == 0 or bins.min() < 0 or bins.max() >= N_PHI_D:
+        raise ValueError(f"phi_d_bins must be a non-empty sequence of bins in [0, {N_PHI_D}), got {phi_d_bins}")
+    return tuple(int(v) for v in np.union1d(left[bins], right[bins]))
+
+
+@functools.cache
+def _unmapping_matrix(phi_d_bins: tuple[int, ...]) -> np.ndarray:
+    """(21, K) float32 matrix: interpolation weights to the chosen bins, times the mapping's log range."""
+    left, right, weight = _interpolation_plan()
+    bins = np.asarray(phi_d_bins)
+    matrix = np.zeros((N_KEPT_SLICES, len(bins)), dtype=np.float64)
+    columns = np.arange(len(bins))
+    matrix[left[bins], columns] += 1.0 - weight[bins]
+    matrix[right[bins], columns] += weight[bins]
+    out = (matrix * _LOG_RANGE).astype(np.float32)
+    out.setflags(write=False)
+    return out
+
+
+def table_from_network_output(
+    mapped: npt.ArrayLike, *, phi_d_bins: Sequence[int] | None = None
+) -> npt.NDArray[np.float32]:
+    """Full table (or chosen φd bins) in stored units from mapped network slices.
 
     Parameters
     ----------
     mapped : array_like, shape (..., 63, 90, 90)
         Mapped values at the kept slices in the network layout (a decoder's
-        output); clamped to [0, MAPPED_MAX] by the inverse mapping.
+        output); clamped to [0, MAPPED_MAX] first (NaN becomes 0).
+    phi_d_bins : sequence of int, optional
+        φd bins to produce, each in [0, 180); all 180 by default. One bin
+        costs 1/180 of the full table.
 
     Returns
     -------
-    ndarray, shape (..., 3, 90, 90, 180)
-        Stored MERL values: the slices are interpolated in the mapped domain
-        (``spec/conventions.md`` §7), then unmapped (§4). Finite and ≥ 0.
+    ndarray of float32, shape (..., 3, 90, 90, K)
+        Stored MERL values, finite and ≥ 0: the slices are interpolated in the
+        mapped domain (``spec/conventions.md`` §7), then unmapped (§4). Both
+        steps are one product with a (21, K) weight matrix followed by
+        ``expm1`` and the channel scale; a kept bin has weight exactly 1, so
+        it equals :func:`unmap_values` of the decoder's slice up to float32
+        rounding of the log range.
     """
-    kept = from_network_input(mapped)
-    full = interpolate_slices(kept)
-    return unmap_values(full, channel_axis=full.ndim - 4)
+    bins = tuple(range(N_PHI_D)) if phi_d_bins is None else tuple(int(b) for b in phi_d_bins)
+    if not bins or min(bins) < 0 or max(bins) >= N_PHI_D:
+        raise ValueError(f"phi_d_bins must be a non-empty sequence of bins in [0, {N_PHI_D}), got {phi_d_bins}")
+    array = np.asarray(mapped)
+    if array.shape[-3:] != NETWORK_INPUT_SHAPE:
+        raise ValueError(f"mapped must have shape (..., {', '.join(map(str, NETWORK_INPUT_SHAPE))}), got {array.shape}")
+    lead = array.shape[:-3]
+    clamped = np.nan_to_num(np.clip(array.astype(np.float32, copy=False), 0.0, MAPPED_MAX), nan=0.0)
+    kept = clamped.reshape(*lead, N_CHANNELS, N_KEPT_SLICES, *NETWORK_INPUT_SHAPE[1:])
+    kept = np.moveaxis(kept, -3, -1)  # (..., 3, 90, 90, 21)
+    table = np.matmul(kept, _unmapping_matrix(bins))
+    np.expm1(table, out=table)
+    table *= (EPSILON / MERL_COLOR_SCALE).astype(np.float32).reshape(N_CHANNELS, 1, 1, 1)
+    return table

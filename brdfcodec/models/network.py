@@ -147,6 +147,43 @@ class Decoder(nn.Module):
         """Mapped slices in [0, MAPPED_MAX]."""
         return self.unbounded(z).clamp(0.0, MAPPED_MAX)
 
+    def forward_channels(self, z: torch.Tensor, channels: tuple[int, ...]) -> torch.Tensor:
+        """Only some output channels, ``(B, len(channels), 90, 90)`` in [0, MAPPED_MAX].
+
+        Equal to ``forward(z)[:, channels]`` up to floating-point summation
+        order; the last layer and the linear path are evaluated for the chosen
+        channels only (decoding one φd bin needs 6 of the 63).
+        """
+        c0 = self.config.decoder_channels[0]
+        hidden = self.upsample[:-1](self.blocks(self.fc(z).view(-1, c0, _BOTTLENECK, _BOTTLENECK)))
+        last = self.upsample[-1]
+        index = list(channels)
+        out = nn.functional.conv_transpose2d(
+            hidden, last.weight[:, index], last.bias[index], stride=last.stride, padding=last.padding
+        )
+        if not self.config.linear_basis:
+            return (MAPPED_MAX * torch.sigmoid(out)).clamp(0.0, MAPPED_MAX)
+        select, positions = self._channel_entries(channels)
+        dtype = out.dtype
+        linear = self.basis_mean[select].to(dtype) + z @ self.basis_components[:, select].to(dtype)
+        flat = out.flatten(1).index_add(1, positions, linear)
+        return flat.view_as(out).clamp(0.0, MAPPED_MAX)
+
+    def _channel_entries(self, channels: tuple[int, ...]) -> tuple[torch.Tensor, torch.Tensor]:
+        """Which linear-basis entries fall in ``channels``, and their flat positions in the reduced output."""
+        cache = self.__dict__.setdefault("_channel_cache", {})
+        key = (tuple(channels), self.valid_index.device)
+        if key not in cache:
+            plane = NETWORK_INPUT_SHAPE[1] * NETWORK_INPUT_SHAPE[2]
+            channel_of = self.valid_index // plane
+            selects, positions = [], []
+            for slot, channel in enumerate(channels):
+                hit = (channel_of == channel).nonzero().flatten()
+                selects.append(hit)
+                positions.append(self.valid_index[hit] - channel * plane + slot * plane)
+            cache[key] = (torch.cat(selects), torch.cat(positions))
+        return cache[key]
+
 
 class BetaVAE(nn.Module):
     """Encoder and decoder together.

@@ -13,7 +13,7 @@ import os
 from importlib import resources
 from pathlib import Path
 
-from brdfcodec.errors import BrdfcodecError
+from brdfcodec.errors import DecoderNotFoundError
 from brdfcodec.models.store import MANIFEST, ModelManifest, load_manifest
 
 __all__ = [
@@ -31,7 +31,7 @@ DEFAULT_MODEL_NAME = "default"
 _registered: list[Path] = []
 
 
-class ModelNotFoundError(BrdfcodecError):
+class ModelNotFoundError(DecoderNotFoundError):
     """No known model has the requested decoder."""
 
 
