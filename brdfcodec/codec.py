@@ -207,9 +207,9 @@ class BrdfDecoder:
     def mapped_record(self, record: Record) -> npt.NDArray[np.float32]:
         """Mapped slices of a record; a graft record's green block is the second code's red block."""
         if isinstance(record, GraftRecord):
-            both = self.decode_mapped(np.stack([record.mu, record.second_code()]))
-            out = both[0]
-            out[_GREEN] = both[1][_RED]
+            # One code at a time, so M1 is bit-identical to decoding V1 as a plain record.
+            out = self.decode_mapped(record.mu)
+            out[_GREEN] = self.decode_mapped(record.second_code())[_RED]
             return out
         return self.decode_mapped(record.mu)
 
@@ -279,15 +279,26 @@ class BrdfEncoder:
         self.device = torch.device(device)
         self.reference = DecoderReference(self.manifest.decoder_sha256, self.manifest.name)
 
+    def posterior_from_inputs(self, inputs: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray]:
+        """Posterior of network inputs ``(B, 63, 90, 90)`` (mapped, masked entries 0): mean and std, float32."""
+        batch = np.array(inputs, dtype=np.float32)
+        if batch.ndim != 4 or batch.shape[1:] != NETWORK_INPUT_SHAPE:
+            expected = ", ".join(map(str, NETWORK_INPUT_SHAPE))
+            raise ValueError(f"inputs must have shape (B, {expected}), got {batch.shape}")
+        with torch.inference_mode():
+            mu, logvar = self.network(torch.from_numpy(batch).to(self.device))
+            sigma = torch.exp(0.5 * logvar.float().clamp(-60.0, 60.0))
+            return mu.float().cpu().numpy(), sigma.cpu().numpy()
+
     def posterior(self, brdfs: Sequence[MerlBRDF], *, batch_size: int = 8) -> tuple[np.ndarray, np.ndarray]:
         """Posterior mean and standard deviation, each of shape (len(brdfs), latent_dim), float32."""
         mus, sigmas = [], []
-        with torch.inference_mode():
-            for start in range(0, len(brdfs), batch_size):
-                inputs = np.stack([material_arrays(b)[0] for b in brdfs[start : start + batch_size]])
-                mu, logvar = self.network(torch.from_numpy(inputs).to(self.device))
-                mus.append(mu.float().cpu().numpy())
-                sigmas.append(torch.exp(0.5 * logvar.float()).clamp_min(1e-30).cpu().numpy())
+        for start in range(0, len(brdfs), batch_size):
+            mu, sigma = self.posterior_from_inputs(
+                np.stack([material_arrays(b)[0] for b in brdfs[start : start + batch_size]])
+            )
+            mus.append(mu)
+            sigmas.append(sigma)
         return np.concatenate(mus), np.concatenate(sigmas)
 
     def encode(self, brdf: MerlBRDF, *, name: str | None = None) -> LatentRecord:

@@ -45,3 +45,25 @@ def red_plastic_file(tmp_path_factory: pytest.TempPathFactory, analytic_tables: 
     path = tmp_path_factory.mktemp("merl") / "red-plastic.binary"
     write_merl(path, analytic_tables["red-plastic"])
     return path
+
+
+@pytest.fixture(scope="session")
+def tiny_model_folder(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A randomly initialised tiny model (with a linear basis path), exported like a trained one."""
+    import dataclasses
+
+    import torch
+
+    from brdfcodec.models.config import TINY_CONFIG
+    from brdfcodec.models.network import BetaVAE
+    from brdfcodec.models.store import export_model
+
+    torch.manual_seed(7)
+    model = BetaVAE(dataclasses.replace(TINY_CONFIG, linear_basis=True)).eval()
+    with torch.no_grad():  # a non-trivial basis so that codes change the output
+        model.decoder.basis_mean.uniform_(0.2, 1.5)
+        model.decoder.basis_components.normal_(0.0, 0.05)
+        model.decoder.upsample[-1].bias.normal_(0.0, 0.1)
+    folder = tmp_path_factory.mktemp("models") / "tiny"
+    export_model(model, folder, name="tiny-test-model", info={"data": "none (random initialisation)"})
+    return folder

@@ -1,4 +1,4 @@
-"""``bvae info FILE...``: describe MERL tables and dataset files without decoding anything."""
+"""``bvae info FILE...``: describe MERL tables, ``.bvae`` files and dataset files without decoding anything."""
 
 from __future__ import annotations
 
@@ -10,6 +10,8 @@ from typing import Any
 
 import numpy as np
 
+from brdfcodec.bvae_format import MAGIC as BVAE_MAGIC
+from brdfcodec.bvae_format import read_header
 from brdfcodec.conventions import MERL_COLOR_SCALE, MERL_SHAPE
 from brdfcodec.errors import FileFormatError
 from brdfcodec.genuine import genuine_merl_name
@@ -26,9 +28,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     """Add the ``info`` sub-command."""
     parser = subparsers.add_parser(
         "info",
-        help="describe MERL .binary files and dataset files",
+        help="describe MERL .binary files, .bvae files and dataset files",
         description="Describe MERL .binary BRDF tables (dimensions, valid entries, per-channel "
-        "range, whether it is a genuine MERL file) and brdfcodec dataset files.",
+        "range, whether it is a genuine MERL file), .bvae files (version, decoder and whether it is installed, "
+        "materials, sizes) and brdfcodec dataset files. Nothing is decoded.",
     )
     parser.add_argument("files", nargs="+", metavar="FILE", type=Path, help="files to describe")
     parser.add_argument("--json", action="store_true", help="print one JSON object per file")
@@ -82,6 +85,39 @@ def _dataset_summary(path: Path) -> dict[str, Any]:
         }
 
 
+def _bvae_summary(path: Path) -> dict[str, Any]:
+    from brdfcodec.errors import DecoderNotFoundError
+    from brdfcodec.models.registry import find_model
+
+    header = read_header(path)
+    try:
+        model = find_model(header.decoder.sha256)
+        installed: str | None = str(model.folder)
+    except DecoderNotFoundError:
+        installed = None
+    materials = []
+    for entry in header.entries:
+        item: dict[str, Any] = {"name": entry.name, "kind": entry.kind, "payload_bytes": entry.length}
+        if entry.graft_dims:
+            item["graft_dims"] = list(entry.graft_dims)
+        item.update({k: v for k, v in entry.meta.items() if k in ("relae", "source_sha256", "edit")})
+        materials.append(item)
+    return {
+        "file": str(path),
+        "kind": "bvae",
+        "format_version": f"{header.major}.{header.minor}",
+        "created_by": header.created_by,
+        "decoder": {"sha256": header.decoder.sha256, "name": header.decoder.name, "installed_at": installed},
+        "latent_dim": header.latent_dim,
+        "latent_dtype": header.latent_dtype,
+        "header_compressed": bool(header.flags & 1),
+        "header_bytes": header.header_bytes,
+        "bytes": header.file_size,
+        "bytes_per_material": header.file_size / len(header.entries),
+        "materials": materials,
+    }
+
+
 def describe_file(path: Path) -> dict[str, Any]:
     """Summary of one file as a JSON-ready dictionary.
 
@@ -96,6 +132,8 @@ def describe_file(path: Path) -> dict[str, Any]:
         head = stream.read(8)
     if head == _HDF5_SIGNATURE:
         return _dataset_summary(path)
+    if head == BVAE_MAGIC or path.suffix == ".bvae":
+        return _bvae_summary(path)
     size = os.path.getsize(path)
     if size < 12:
         raise FileFormatError(path, f"file is {size} bytes: neither a MERL .binary file nor a dataset")
@@ -104,6 +142,26 @@ def describe_file(path: Path) -> dict[str, Any]:
 
 def _format_text(summary: dict[str, Any]) -> str:
     lines = [summary["file"]]
+    if summary["kind"] == "bvae":
+        decoder = summary["decoder"]
+        where = decoder["installed_at"] or "NOT INSTALLED: register the model folder that made this file"
+        lines += [
+            f"  kind            .bvae latent file, format {summary['format_version']} ({summary['created_by']})",
+            f"  decoder         {decoder['name']}  sha256 {decoder['sha256']}",
+            f"                  {where}",
+            f"  latents         {summary['latent_dim']} dimensions, {summary['latent_dtype']}",
+            f"  size            {summary['bytes']:,} bytes ({summary['bytes_per_material']:.1f} per material; "
+            f"header {summary['header_bytes']:,}{' zstd' if summary['header_compressed'] else ''})",
+            f"  materials       {len(summary['materials'])}",
+        ]
+        for item in summary["materials"][:50]:
+            relae = item.get("relae", {})
+            error = f"RelAE {relae['mapped']:.4f}" if isinstance(relae, dict) and "mapped" in relae else ""
+            kind = "" if item["kind"] == "latent" else f"[{item['kind']}] "
+            lines.append(f"    {item['name']:<32} {kind}{item['payload_bytes']} B  {error}".rstrip())
+        if len(summary["materials"]) > 50:
+            lines.append(f"    … and {len(summary['materials']) - 50} more (--json lists all)")
+        return "\n".join(lines)
     if summary["kind"] == "dataset":
         lines += [
             f"  kind            brdfcodec dataset ({summary['source_kind']})",

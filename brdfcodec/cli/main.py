@@ -13,7 +13,16 @@ import os
 import sys
 from collections.abc import Sequence
 
-from brdfcodec.cli import analytic_command, dataset_command, info_command, model_command, train_command
+from brdfcodec.cli import (
+    analytic_command,
+    compress_command,
+    dataset_command,
+    decompress_command,
+    extract_command,
+    info_command,
+    model_command,
+    train_command,
+)
 from brdfcodec.errors import BrdfcodecError
 from brdfcodec.version import __version__
 
@@ -35,7 +44,16 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"brdfcodec {__version__}")
     subparsers = parser.add_subparsers(dest="command", metavar="COMMAND")
     subparsers.required = True
-    for module in (info_command, analytic_command, dataset_command, train_command, model_command):
+    for module in (
+        compress_command,
+        decompress_command,
+        info_command,
+        extract_command,
+        analytic_command,
+        dataset_command,
+        train_command,
+        model_command,
+    ):
         module.register(subparsers)
     return parser
 

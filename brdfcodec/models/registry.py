@@ -14,7 +14,7 @@ from importlib import resources
 from pathlib import Path
 
 from brdfcodec.errors import DecoderNotFoundError
-from brdfcodec.models.store import MANIFEST, ModelManifest, load_manifest
+from brdfcodec.models.manifest import MANIFEST, ModelManifest, load_manifest
 
 __all__ = [
     "DEFAULT_MODEL_NAME",

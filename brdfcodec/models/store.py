@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import json
 import os
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -25,44 +24,13 @@ from safetensors.torch import load_file, save_file
 
 from brdfcodec.errors import BrdfcodecError
 from brdfcodec.genuine import sha256_of_file
-from brdfcodec.models.config import ModelConfig
+from brdfcodec.models.manifest import DECODER_FILE, ENCODER_FILE, MANIFEST, ModelManifest, load_manifest
 from brdfcodec.models.network import BetaVAE, Decoder, Encoder
 
 __all__ = ["MANIFEST", "ModelChecksumError", "ModelManifest", "export_model", "load_manifest", "load_model"]
 
-MANIFEST = "model.json"
-ENCODER_FILE = "encoder.safetensors"
-DECODER_FILE = "decoder.safetensors"
-
-
 class ModelChecksumError(BrdfcodecError):
     """A weight file's SHA-256 differs from its manifest: the file is corrupt or not the named model."""
-
-
-@dataclass(frozen=True)
-class ModelManifest:
-    """What ``model.json`` says of a model.
-
-    Attributes
-    ----------
-    name : str
-        Readable name, e.g. ``"bvae-nbrdf-proxy-small-v1"``.
-    config : ModelConfig
-        Architecture.
-    decoder_sha256, encoder_sha256 : str
-        Hex SHA-256 of the weight files.
-    folder : pathlib.Path
-        Where the files are.
-    info : dict
-        Training facts (data, split, schedule, metrics), free-form.
-    """
-
-    name: str
-    config: ModelConfig
-    decoder_sha256: str
-    encoder_sha256: str
-    folder: Path
-    info: dict[str, Any]
 
 
 def export_model(model: BetaVAE, folder: str | os.PathLike[str], *, name: str, info: dict[str, Any]) -> ModelManifest:
@@ -96,23 +64,6 @@ def export_model(model: BetaVAE, folder: str | os.PathLike[str], *, name: str, i
     }
     (out / MANIFEST).write_text(json.dumps(manifest, indent=2, sort_keys=True) + "\n", encoding="utf-8")
     return load_manifest(out)
-
-
-def load_manifest(folder: str | os.PathLike[str]) -> ModelManifest:
-    """Read ``model.json`` of a model folder (no weights are read)."""
-    path = Path(folder) / MANIFEST
-    try:
-        data = json.loads(path.read_text(encoding="utf-8"))
-        return ModelManifest(
-            name=str(data["name"]),
-            config=ModelConfig.from_dict(data["config"]),
-            decoder_sha256=str(data["decoder_sha256"]),
-            encoder_sha256=str(data["encoder_sha256"]),
-            folder=Path(folder),
-            info=dict(data.get("info", {})),
-        )
-    except (KeyError, TypeError, ValueError) as error:
-        raise BrdfcodecError(f"{path}: not a valid model manifest ({error})") from None
 
 
 def _verified_weights(manifest: ModelManifest, file: str, expected: str) -> dict[str, torch.Tensor]:

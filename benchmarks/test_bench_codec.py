@@ -1,0 +1,86 @@
+"""Codec speed: full-table and one-slice decode, encode from a MERL file, batch decode (shipped default model)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from brdfcodec.bvae_format import LatentRecord
+from brdfcodec.codec import BrdfDecoder, BrdfEncoder
+from brdfcodec.merl import read_merl
+
+
+@pytest.fixture(scope="module")
+def decoder() -> BrdfDecoder:
+    return BrdfDecoder()
+
+
+@pytest.fixture(scope="module")
+def record() -> LatentRecord:
+    return LatentRecord("bench", np.linspace(-1, 1, 8), np.full(8, 0.1))
+
+
+def test_full_table_baseline_numpy_copy(benchmark, decoder: BrdfDecoder, record: LatentRecord) -> None:
+    """Writing the same number of bytes (a float32 table, 17.5 MB) with numpy."""
+    benchmark.group = "decode-full"
+    benchmark.extra_info["role"] = "baseline"
+    table = decoder.table(record)
+    out = benchmark(np.copy, table)
+    assert out.nbytes == 3 * 90 * 90 * 180 * 4
+
+
+def test_full_table_decode(benchmark, decoder: BrdfDecoder, record: LatentRecord) -> None:
+    """Decoder, interpolation to 180 slices, inverse mapping, mask: one full table."""
+    benchmark.group = "decode-full"
+    benchmark.extra_info["role"] = "candidate"
+    table = benchmark(decoder.table, record)
+    assert table.shape == (3, 90, 90, 180)
+
+
+def test_slice_baseline_full_decode(benchmark, decoder: BrdfDecoder, record: LatentRecord) -> None:
+    benchmark.group = "decode-slice"
+    benchmark.extra_info["role"] = "baseline"
+    benchmark(decoder.table, record)
+
+
+def test_slice_decode(benchmark, decoder: BrdfDecoder, record: LatentRecord) -> None:
+    """One φd bin (between two kept slices): only 6 of 63 channels are computed."""
+    benchmark.group = "decode-slice"
+    benchmark.extra_info["role"] = "candidate"
+    table = benchmark(decoder.table, record, phi_d_bins=[85])
+    assert table.shape == (3, 90, 90, 1)
+
+
+def test_encode_baseline_read(benchmark, merl_file: Path) -> None:
+    benchmark.group = "encode"
+    benchmark.extra_info["role"] = "baseline"
+    benchmark(read_merl, merl_file)
+
+
+def test_encode_from_merl_file(benchmark, merl_file: Path) -> None:
+    """Read, map, select slices, run the encoder."""
+    encoder = BrdfEncoder()
+    benchmark.group = "encode"
+    benchmark.extra_info["role"] = "candidate"
+    record = benchmark(lambda: encoder.encode(read_merl(merl_file)))
+    assert record.mu.shape == (8,)
+
+
+_BATCH = 16
+
+
+def test_batch_baseline_one_at_a_time(benchmark, decoder: BrdfDecoder) -> None:
+    records = [LatentRecord(f"m{i}", np.full(8, i / _BATCH), np.ones(8)) for i in range(_BATCH)]
+    benchmark.group = "decode-batch16"
+    benchmark.extra_info["role"] = "baseline"
+    benchmark.pedantic(lambda: [decoder.table(r) for r in records], rounds=3, iterations=1)
+
+
+def test_batch_decode(benchmark, decoder: BrdfDecoder) -> None:
+    records = [LatentRecord(f"m{i}", np.full(8, i / _BATCH), np.ones(8)) for i in range(_BATCH)]
+    benchmark.group = "decode-batch16"
+    benchmark.extra_info["role"] = "candidate"
+    tables = benchmark.pedantic(lambda: list(decoder.tables(records)), rounds=3, iterations=1)
+    assert len(tables) == _BATCH

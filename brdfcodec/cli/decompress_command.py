@@ -1,0 +1,95 @@
+"""``bvae decompress IN.bvae -o OUT``: decode materials to MERL ``.binary``, ``.npy`` or EXR slices."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from tqdm import tqdm
+
+from brdfcodec.atomic import check_output_path
+from brdfcodec.conventions import N_PHI_D
+from brdfcodec.table_output import TABLE_FORMATS, table_format_of, write_table
+
+__all__ = ["parse_bins", "register"]
+
+
+def parse_bins(text: str) -> list[int]:
+    """``"0,90,170-179"`` to a sorted list of φd bins, each in [0, 180)."""
+    bins: set[int] = set()
+    try:
+        for part in text.split(","):
+            low, _, high = part.strip().partition("-")
+            bins.update(range(int(low), int(high or low) + 1))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected bins like 0,90,170-179, got {text!r}") from None
+    if not bins or min(bins) < 0 or max(bins) >= N_PHI_D:
+        raise argparse.ArgumentTypeError(f"φd bins must lie in [0, {N_PHI_D - 1}], got {text!r}")
+    return sorted(bins)
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+    """Add the ``decompress`` sub-command."""
+    parser = subparsers.add_parser(
+        "decompress",
+        help="decode a .bvae file to MERL .binary, .npy or EXR slices",
+        description="Decode materials of a .bvae file with the decoder it names (found by SHA-256). The output "
+        "type follows the suffix: .binary (MERL), .npy (float32 table in MERL units), .exr (one 90x90 RGB part "
+        "per phi_d bin, reflectance in 1/sr). With several materials and no --material, OUT is a folder that "
+        "receives NAME.binary for each (or the suffix of --format).",
+    )
+    parser.add_argument("input", type=Path, metavar="IN.bvae")
+    parser.add_argument("-o", "--output", type=Path, required=True, help="output file, or folder for a library")
+    parser.add_argument("--material", action="append", help="material to decode (repeatable; default: all)")
+    parser.add_argument("--format", choices=[s.lstrip(".") for s in TABLE_FORMATS], default="binary",
+                        help="file type written into an output folder (default binary)")
+    parser.add_argument("--phi-d", type=parse_bins, metavar="BINS",
+                        help="only these phi_d bins, e.g. 0,90,170-179 (.npy and .exr only)")
+    parser.add_argument("--masked", choices=("unmeasured", "zero"), default="unmeasured",
+                        help="below-horizon entries: -1 as MERL's unmeasured marker (default), or 0")
+    parser.add_argument("--reference", type=Path, metavar="SOURCE.binary",
+                        help="the original MERL file: print the RelAE of the decoded table against it")
+    parser.add_argument("--force", action="store_true", help="replace existing output files")
+    parser.set_defaults(handler=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Decode and write; every output is written atomically."""
+    from brdfcodec.codec import MaterialLibrary
+
+    with MaterialLibrary(args.input) as library:
+        names = args.material or library.names
+        for name in names:
+            library.header.entry(name)  # unknown names fail before anything is written
+        single = len(names) == 1 and (args.material is not None or len(library) == 1)
+        if single:
+            table_format_of(args.output)
+            targets = {names[0]: check_output_path(args.output, overwrite=args.force)}
+        else:
+            if args.output.exists() and not args.output.is_dir():
+                raise ValueError(f"{args.output}: several materials need an output folder, not a file")
+            args.output.mkdir(parents=True, exist_ok=True)
+            targets = {n: check_output_path(args.output / f"{n}.{args.format}", overwrite=args.force) for n in names}
+        if args.reference is not None and not single:
+            raise ValueError("--reference needs a single material (use --material)")
+        for name, target in tqdm(targets.items(), desc="decompress", unit="material", disable=len(targets) < 2 or None):
+            material = library[name]
+            table = material.table(phi_d_bins=args.phi_d, masked=args.masked)
+            kind = write_table(target, table, phi_d_bins=args.phi_d, overwrite=args.force)
+            stored = material.record.meta.get("relae", {})
+            note = f" (RelAE at encode time: mapped {stored['mapped']:.4f})" if "mapped" in stored else ""
+            print(f"wrote {target} ({name}, {kind}){note}")
+        if args.reference is not None:
+            _print_reference_error(args.reference, library[names[0]])
+    return 0
+
+
+def _print_reference_error(path: Path, material: object) -> None:
+    from brdfcodec.merl import read_merl
+    from brdfcodec.metrics import error_report
+
+    source = read_merl(path)
+    report = error_report(source.values, material.table(masked="keep").astype("float64"), source.mask)  # type: ignore[attr-defined]
+    print(
+        f"RelAE against {path}: mapped {report.relae_mapped.overall:.4f}, linear {report.relae_linear.overall:.4f}"
+    )

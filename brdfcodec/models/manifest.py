@@ -1,0 +1,61 @@
+"""Model manifests (``model.json``): what a model folder holds, read without importing torch."""
+
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from brdfcodec.errors import BrdfcodecError
+from brdfcodec.models.config import ModelConfig
+
+__all__ = ["DECODER_FILE", "ENCODER_FILE", "MANIFEST", "ModelManifest", "load_manifest"]
+
+MANIFEST = "model.json"
+ENCODER_FILE = "encoder.safetensors"
+DECODER_FILE = "decoder.safetensors"
+
+
+@dataclass(frozen=True)
+class ModelManifest:
+    """What ``model.json`` says of a model.
+
+    Attributes
+    ----------
+    name : str
+        Readable name, e.g. ``"bvae-nbrdf-proxy-small-v1"``.
+    config : ModelConfig
+        Architecture.
+    decoder_sha256, encoder_sha256 : str
+        Hex SHA-256 of the weight files.
+    folder : pathlib.Path
+        Where the files are.
+    info : dict
+        Training facts (data, split, schedule, metrics), free-form.
+    """
+
+    name: str
+    config: ModelConfig
+    decoder_sha256: str
+    encoder_sha256: str
+    folder: Path
+    info: dict[str, Any]
+
+
+def load_manifest(folder: str | os.PathLike[str]) -> ModelManifest:
+    """Read ``model.json`` of a model folder (no weights are read)."""
+    path = Path(folder) / MANIFEST
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+        return ModelManifest(
+            name=str(data["name"]),
+            config=ModelConfig.from_dict(data["config"]),
+            decoder_sha256=str(data["decoder_sha256"]),
+            encoder_sha256=str(data["encoder_sha256"]),
+            folder=Path(folder),
+            info=dict(data.get("info", {})),
+        )
+    except (KeyError, TypeError, ValueError) as error:
+        raise BrdfcodecError(f"{path}: not a valid model manifest ({error})") from None

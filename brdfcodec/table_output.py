@@ -1,0 +1,69 @@
+"""Writing decoded tables: MERL ``.binary``, NumPy ``.npy`` or EXR φd slices, chosen by file suffix."""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Literal
+
+import numpy as np
+import numpy.typing as npt
+
+from brdfcodec.atomic import atomic_output
+from brdfcodec.conventions import MERL_COLOR_SCALE, N_PHI_D, TABLE_SHAPE
+from brdfcodec.merl import write_merl
+
+__all__ = ["TABLE_FORMATS", "TableFormat", "table_format_of", "write_table"]
+
+TableFormat = Literal["binary", "npy", "exr"]
+TABLE_FORMATS: dict[str, TableFormat] = {".binary": "binary", ".npy": "npy", ".exr": "exr"}
+
+
+def table_format_of(path: str | os.PathLike[str]) -> TableFormat:
+    """The output format a path's suffix asks for (``ValueError`` naming the choices otherwise)."""
+    suffix = Path(path).suffix.lower()
+    if suffix not in TABLE_FORMATS:
+        raise ValueError(f"{path}: unknown output type {suffix or '(none)'}; use one of {', '.join(TABLE_FORMATS)}")
+    return TABLE_FORMATS[suffix]
+
+
+def write_table(
+    path: str | os.PathLike[str],
+    table: npt.ArrayLike,
+    *,
+    phi_d_bins: Sequence[int] | None = None,
+    overwrite: bool = False,
+) -> TableFormat:
+    """Write a decoded table (stored MERL units) atomically, in the format the suffix names.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        ``.binary``: a MERL file (needs all 180 bins). ``.npy``: the float32
+        array as given, shape (3, 90, 90, K). ``.exr``: one 90×90 RGB part per
+        φd bin holding reflectance in 1/sr (stored × channel scale; negative,
+        unmeasured entries written as 0).
+    table : array_like, shape (3, 90, 90, K)
+    phi_d_bins : sequence of int, optional
+        The bins the table's last axis holds (all 180 when absent).
+    overwrite : bool, default False
+    """
+    kind = table_format_of(path)
+    array = np.asarray(table)
+    bins = list(range(N_PHI_D)) if phi_d_bins is None else [int(b) for b in phi_d_bins]
+    if array.shape != (*TABLE_SHAPE[:3], len(bins)):
+        raise ValueError(f"table shape {array.shape} does not match {len(bins)} φd bins")
+    if kind == "binary":
+        if len(bins) != N_PHI_D or bins != list(range(N_PHI_D)):
+            raise ValueError(f"{path}: a MERL .binary file needs all 180 φd bins; use .npy or .exr for a subset")
+        write_merl(path, array.astype(np.float64), overwrite=overwrite)
+    elif kind == "npy":
+        with atomic_output(path, overwrite=overwrite) as tmp, open(tmp, "wb") as stream:
+            np.save(stream, np.ascontiguousarray(array, dtype=np.float32))
+    else:
+        from brdfcodec.exr import write_exr_slices
+
+        reflectance = np.maximum(array, 0) * MERL_COLOR_SCALE.reshape(3, 1, 1, 1)
+        write_exr_slices(path, reflectance, bins, overwrite=overwrite)
+    return kind

@@ -1,0 +1,172 @@
+"""The codec API: encode, decode (full, slices, query directions), libraries, grafts, decoder checks."""
+
+from __future__ import annotations
+
+import struct
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from brdfcodec.bvae_format import DecoderReference, GraftRecord, LatentRecord, read_bvae, write_bvae
+from brdfcodec.codec import BrdfDecoder, BrdfEncoder, MaterialLibrary, compress, decompress
+from brdfcodec.conventions import MERL_COLOR_SCALE, UNMEASURED_VALUE
+from brdfcodec.errors import DecoderMismatchError, DecoderNotFoundError
+from brdfcodec.mask import horizon_mask
+from brdfcodec.merl import MerlBRDF, write_merl
+from brdfcodec.models.registry import default_model_folder
+from brdfcodec.transforms import map_values, table_from_network_output
+
+
+@pytest.fixture(scope="module")
+def decoder(tiny_model_folder: Path) -> BrdfDecoder:
+    return BrdfDecoder(tiny_model_folder)
+
+
+@pytest.fixture(autouse=True)
+def tiny_model_registered(tiny_model_folder: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setenv("BRDFCODEC_MODEL_PATH", str(tiny_model_folder))
+
+
+def records(count: int, dim: int, seed: int = 0) -> list[LatentRecord]:
+    rng = np.random.default_rng(seed)
+    return [LatentRecord(f"m{i:03d}", rng.normal(size=dim), np.full(dim, 0.2)) for i in range(count)]
+
+
+def assert_same_decode(a: np.ndarray, b: np.ndarray) -> None:
+    """Equal up to floating-point summation order, compared in the mapped domain where the network rounds."""
+    np.testing.assert_allclose(map_values(np.maximum(a, 0)), map_values(np.maximum(b, 0)), rtol=0, atol=2e-6)
+    np.testing.assert_array_equal(a < 0, b < 0)
+
+
+def read_merl_from_spec(path: Path) -> np.ndarray:
+    """Independent MERL reader (spec/conventions.md §1): 3 int32 dims, then float64 R, G, B planes."""
+    raw = path.read_bytes()
+    dims = struct.unpack_from("<3i", raw, 0)
+    assert dims == (90, 90, 180) and len(raw) == 12 + 8 * 3 * 90 * 90 * 180
+    return np.frombuffer(raw, dtype="<f8", offset=12).reshape(3, 90, 90, 180)
+
+
+def test_round_trip_is_bit_exact_and_follows_the_decoding_rules(decoder: BrdfDecoder, tmp_path: Path) -> None:
+    record = records(1, decoder.latent_dim)[0]
+    path = tmp_path / "one.bvae"
+    write_bvae(path, [record], decoder.reference)
+    decoded = decompress(path)
+    with torch.inference_mode():
+        mapped = decoder.network(torch.from_numpy(record.mu[None].copy())).numpy()[0]
+    expected = table_from_network_output(mapped)
+    above = np.broadcast_to(horizon_mask(), expected.shape)
+    np.testing.assert_array_equal(decoded[above], expected[above])
+    assert (decoded[~above] == UNMEASURED_VALUE).all()
+    np.testing.assert_array_equal(decoded, decompress(path))  # deterministic
+    merl_path = tmp_path / "one.binary"
+    write_merl(merl_path, decoded.astype(np.float64))
+    np.testing.assert_array_equal(read_merl_from_spec(merl_path), decoded.astype(np.float64))
+
+
+def test_slices_equal_the_full_table(decoder: BrdfDecoder) -> None:
+    rng = np.random.default_rng(3)
+    graft = GraftRecord("g", rng.normal(size=decoder.latent_dim), np.ones(decoder.latent_dim), (0, 1), [2.0, -1.0])
+    for record in (records(1, decoder.latent_dim)[0], graft):
+        full = decoder.table(record)
+        for bins in ([0], [9], [90, 91], [179], [170, 175, 179], list(range(0, 180, 3))):
+            part = decoder.table(record, phi_d_bins=bins)
+            assert_same_decode(part, full[..., bins])
+    with pytest.raises(ValueError, match="phi_d_bins"):
+        decoder.table(graft, phi_d_bins=[180])
+
+
+def test_library_decodes_only_what_is_used(decoder: BrdfDecoder, tmp_path: Path) -> None:
+    path = tmp_path / "lib.bvae"
+    write_bvae(path, records(100, decoder.latent_dim), decoder.reference)
+    with MaterialLibrary(path, decoder=decoder) as library:
+        assert len(library) == 100 and "m042" in library
+        for name in ("m001", "m042", "m099"):
+            value = library[name].eval(np.array([0.0, 0.0, 1.0]), np.array([0.2, 0.1, 0.97]))
+            assert value.shape == (3,) and np.isfinite(value).all() and (value >= 0).all()
+        library["m042"].eval(np.array([0.0, 0.6, 0.8]), np.array([0.0, -0.6, 0.8]))
+        assert library.decoded_count == 3
+        one_slice = library["m050"].table(phi_d_bins=[90])
+        assert one_slice.shape == (3, 90, 90, 1) and library.decoded_count == 3
+    batch = list(decoder.tables(read_bvae(path).records[:5]))
+    single = [decoder.table(r) for r in read_bvae(path).records[:5]]
+    for a, b in zip(batch, single, strict=True):
+        assert_same_decode(a, b)
+
+
+def test_eval_matches_the_decoded_table(decoder: BrdfDecoder, tmp_path: Path) -> None:
+    path = tmp_path / "lib.bvae"
+    write_bvae(path, records(1, decoder.latent_dim), decoder.reference)
+    material = MaterialLibrary(path, decoder=decoder)["m000"]
+    physical = material.physical()
+    wi, wo = np.array([0.0, 0.0, 1.0]), np.array([np.sin(0.5), 0.0, np.cos(0.5)])
+    from brdfcodec.lookup import lookup
+
+    np.testing.assert_allclose(material.eval(wi, wo), lookup(physical, wi, wo), rtol=1e-6)
+    np.testing.assert_array_equal(material.eval(np.array([0, 0, 1.0]), np.array([1.0, 0, -0.1])), 0.0)
+    assert material.to_merl().values.dtype == np.float64
+
+
+def test_wrong_or_missing_decoder_is_refused(decoder: BrdfDecoder, tmp_path: Path, monkeypatch) -> None:
+    monkeypatch.delenv("BRDFCODEC_MODEL_PATH")
+    other = tmp_path / "other.bvae"
+    write_bvae(other, records(1, decoder.latent_dim), DecoderReference("0" * 64, "vanished-model"))
+    with pytest.raises(DecoderNotFoundError, match="0{64}.*available: .*bvae-nbrdf-proxy-small-v1"):
+        MaterialLibrary(other)
+    default = BrdfDecoder()
+    mine = tmp_path / "mine.bvae"
+    write_bvae(mine, records(1, decoder.latent_dim), decoder.reference)
+    with pytest.raises(DecoderMismatchError, match=f"{decoder.reference.sha256}.*{default.reference.sha256}"):
+        MaterialLibrary(mine, decoder=default)
+
+
+def test_decoder_is_found_by_hash_when_registered(decoder: BrdfDecoder, tmp_path: Path, monkeypatch) -> None:
+    path = tmp_path / "x.bvae"
+    write_bvae(path, records(1, decoder.latent_dim), decoder.reference)
+    with MaterialLibrary(path) as library:
+        assert library.decoder.reference == decoder.reference
+    np.testing.assert_array_equal(BrdfDecoder(decoder.reference.sha256).table(records(1, 8)[0]),
+                                  decoder.table(records(1, 8)[0]))
+
+
+def test_graft_with_equal_codes_copies_red_into_green(decoder: BrdfDecoder) -> None:
+    base = records(1, decoder.latent_dim, seed=5)[0]
+    dims = (0, 3)
+    graft = GraftRecord("g", base.mu, base.sigma, dims, base.mu[list(dims)])
+    plain = decoder.table(base, masked="zero")
+    grafted = decoder.table(graft, masked="zero")
+    np.testing.assert_array_equal(grafted[0], plain[0])
+    np.testing.assert_array_equal(grafted[2], plain[2])
+    physical = grafted * MERL_COLOR_SCALE.astype(np.float32)[:, None, None, None]
+    np.testing.assert_allclose(physical[1], physical[0], rtol=1e-5, atol=1e-9)
+    changed = GraftRecord("g2", base.mu, base.sigma, dims, base.mu[list(dims)] + 3.0)
+    other = decoder.table(changed, masked="zero")
+    np.testing.assert_array_equal(other[0], plain[0])
+    assert not np.allclose(other[1], grafted[1])
+
+
+def test_compress_encodes_and_measures(tiny_model_folder: Path, analytic_tables: dict[str, MerlBRDF],
+                                       tmp_path: Path) -> None:
+    brdf = analytic_tables["gold"]
+    out = tmp_path / "gold.bvae"
+    [record] = compress(brdf, out, model=tiny_model_folder)
+    assert record.meta["source_sha256"] == brdf.sha256
+    assert 0 <= record.meta["relae"]["mapped"] < 10
+    encoder = BrdfEncoder(tiny_model_folder)
+    batch = encoder.encode_many([analytic_tables["gold"], analytic_tables["chrome"]])
+    np.testing.assert_allclose(batch[0].mu, record.mu, rtol=1e-5, atol=1e-6)
+    assert read_bvae(out).header.decoder.sha256 == encoder.reference.sha256
+    with pytest.raises(ValueError, match="holds 2 materials"):
+        write_bvae(tmp_path / "two.bvae", batch, encoder.reference)
+        decompress(tmp_path / "two.bvae")
+
+
+@pytest.mark.parametrize("scale", [10.0, 50.0])
+def test_extreme_latents_decode_to_finite_non_negative_tables(scale: float) -> None:
+    decoder = BrdfDecoder(default_model_folder())
+    rng = np.random.default_rng(int(scale))
+    for code in (rng.normal(size=(4, 8)) * scale, np.full((1, 8), scale), np.full((1, 8), -scale)):
+        for row in code:
+            table = decoder.table(LatentRecord("x", row, np.ones(8)), masked="zero")
+            assert np.isfinite(table).all() and (table >= 0).all()
