@@ -136,6 +136,16 @@ class BrdfDecoder:
         """Length of the latent code."""
         return self.manifest.config.latent_dim
 
+    @functools.cached_property
+    def colour_dims(self) -> tuple[int, ...]:
+        """Latent dimensions that control colour: from the manifest, else measured now by traversal."""
+        stored = self.manifest.parameters.get("colour_dims")
+        if stored:
+            return tuple(int(d) for d in stored)
+        from brdfcodec.parameters import colour_dims_of, measure_dimension_effects
+
+        return colour_dims_of(measure_dimension_effects(self))
+
     def check(self, header: BvaeHeader, path: str | os.PathLike[str] = "") -> None:
         """Refuse to decode a file made for another decoder.
 

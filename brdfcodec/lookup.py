@@ -68,7 +68,9 @@ def lookup(
         RGB values. Pairs with either direction at or below the horizon
         give 0.
     """
-    values = np.asarray(table, dtype=np.float64)
+    values = np.asarray(table)
+    if values.dtype not in (np.float32, np.float64):  # float32 tables (decoded materials) are read as they are
+        values = values.astype(np.float64)
     if values.shape != TABLE_SHAPE:
         raise ValueError(f"table must have shape {TABLE_SHAPE}, got {values.shape}")
     if mode not in ("nearest", "trilinear"):

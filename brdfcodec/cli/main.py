@@ -18,9 +18,11 @@ from brdfcodec.cli import (
     compress_command,
     dataset_command,
     decompress_command,
+    edit_command,
     extract_command,
     info_command,
     model_command,
+    render_command,
     train_command,
 )
 from brdfcodec.errors import BrdfcodecError
@@ -49,6 +51,8 @@ def build_parser() -> argparse.ArgumentParser:
         decompress_command,
         info_command,
         extract_command,
+        edit_command,
+        render_command,
         analytic_command,
         dataset_command,
         train_command,

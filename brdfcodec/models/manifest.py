@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import json
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -42,6 +42,7 @@ class ModelManifest:
     encoder_sha256: str
     folder: Path
     info: dict[str, Any]
+    parameters: dict[str, Any] = field(default_factory=dict)
 
 
 def load_manifest(folder: str | os.PathLike[str]) -> ModelManifest:
@@ -56,6 +57,7 @@ def load_manifest(folder: str | os.PathLike[str]) -> ModelManifest:
             encoder_sha256=str(data["encoder_sha256"]),
             folder=Path(folder),
             info=dict(data.get("info", {})),
+            parameters=dict(data.get("parameters", {})),
         )
     except (KeyError, TypeError, ValueError) as error:
         raise BrdfcodecError(f"{path}: not a valid model manifest ({error})") from None

@@ -14,7 +14,7 @@ import torch
 from brdfcodec.dataset import BrdfDataset
 from brdfcodec.models.config import ModelConfig
 from brdfcodec.models.network import BetaVAE
-from brdfcodec.models.store import DECODER_FILE, ENCODER_FILE, MANIFEST, ModelManifest, export_model
+from brdfcodec.models.store import DECODER_FILE, ENCODER_FILE, MANIFEST, ModelManifest, export_model, load_manifest
 from brdfcodec.training.card import render_model_card
 from brdfcodec.training.report import (
     encode_dataset,
@@ -116,15 +116,31 @@ def export_run(
         other_manifest = json.loads((Path(other) / MANIFEST).read_text())
         info["comparisons"].append(_comparison_row(label, other_manifest["info"], Path(other)))
     out = Path(folder)
-    manifest = export_model(model, out, name=name, info=info)
+    export_model(model, out, name=name, info=info)
     info["decoder_bytes"] = (out / DECODER_FILE).stat().st_size
     info["encoder_bytes"] = (out / ENCODER_FILE).stat().st_size
     stored = json.loads((out / MANIFEST).read_text())
     info["comparisons"][0]["decoder_bytes"] = info["decoder_bytes"]
     stored["info"] = info
     (out / MANIFEST).write_text(json.dumps(stored, indent=2, sort_keys=True) + "\n", encoding="utf-8")
+    add_named_parameters(out)
+    return load_manifest(out)
+
+
+def add_named_parameters(folder: str | Path) -> dict[str, Any]:
+    """Measure what each latent dimension controls, store it as ``parameters`` in ``model.json``, rewrite the card.
+
+    The weights are not touched, so the model's identity (its decoder hash) is unchanged.
+    """
+    from brdfcodec.codec import BrdfDecoder
+    from brdfcodec.parameters import describe_parameters
+
+    out = Path(folder)
+    stored = json.loads((out / MANIFEST).read_text())
+    stored["parameters"] = describe_parameters(BrdfDecoder(load_manifest(out)))
+    (out / MANIFEST).write_text(json.dumps(stored, indent=2, sort_keys=True) + "\n", encoding="utf-8")
     (out / CARD).write_text(render_model_card(stored), encoding="utf-8")
-    return manifest
+    return stored["parameters"]
 
 
 #: Materials of the proxy whose colour is green (the paper's hard case).

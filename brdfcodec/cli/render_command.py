@@ -1,0 +1,138 @@
+"""``bvae render IN -o OUT.png|OUT.exr``: preview a material (sphere, flat sample, environment, traversal sheet)."""
+
+from __future__ import annotations
+
+import argparse
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from brdfcodec.atomic import check_output_path
+from brdfcodec.cli.edit_command import parse_floats
+
+__all__ = ["register"]
+
+
+def _vector(text: str) -> tuple[float, float, float]:
+    values = parse_floats(text)
+    if len(values) != 3:
+        raise argparse.ArgumentTypeError(f"expected x,y,z, got {text!r}")
+    return (values[0], values[1], values[2])
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+    """Add the ``render`` sub-command."""
+    parser = subparsers.add_parser(
+        "render",
+        help="render a material (.bvae or MERL .binary) to PNG or EXR",
+        description="Render a sphere (default) or a flat sample under a directional light, or a sphere under an "
+        "environment; or, with --traversal, a sheet with one row per latent parameter. PNG is exposed and "
+        "sRGB-encoded; EXR holds linear radiance.",
+    )
+    parser.add_argument("input", type=Path, metavar="IN", help=".bvae file or MERL .binary file")
+    parser.add_argument("-o", "--output", type=Path, required=True, help="output .png or .exr")
+    parser.add_argument("--material", help="material of a .bvae library (default: the only one)")
+    parser.add_argument("--size", type=int, default=256, help="image size in pixels (default 256)")
+    parser.add_argument("--light", type=_vector, default=(-1.0, 1.0, 1.0),
+                        help="direction towards the light, x,y,z (camera looks down -z; default -1,1,1)")
+    parser.add_argument("--env", metavar="sky|MAP.exr",
+                        help="light with an environment instead: the built-in sky or a lat-long EXR")
+    parser.add_argument("--flat", action="store_true", help="a flat sample under a point light instead of a sphere")
+    parser.add_argument("--traversal", action="store_true", help="a traversal sheet (rows: parameters, ±3σ)")
+    parser.add_argument("--exposure", type=float, help="PNG exposure (default: automatic)")
+    parser.add_argument("--force", action="store_true", help="replace an existing output file")
+    parser.set_defaults(handler=run)
+
+
+def _load(path: Path, material: str | None) -> tuple[Any, Any]:
+    """(material to render, (library record, decoder) or None)."""
+    with open(path, "rb") as stream:
+        head = stream.read(8)
+    from brdfcodec.bvae_format import MAGIC
+
+    if head != MAGIC:
+        from brdfcodec.merl import read_merl
+
+        if material is not None:
+            raise ValueError(f"{path}: --material applies to .bvae files only")
+        return read_merl(path), None
+    from brdfcodec.codec import MaterialLibrary
+
+    with MaterialLibrary(path) as library:
+        if material is None:
+            if len(library) != 1:
+                raise ValueError(f"{path}: holds {len(library)} materials; name one with --material")
+            material = library.names[0]
+        decoded = library[material]
+        return decoded, decoded
+
+
+def _environment(spec: str) -> Any:
+    from brdfcodec.render import Environment, sky_environment
+
+    if spec == "sky":
+        return sky_environment()
+    from brdfcodec.exr import read_exr_rgb
+
+    parts = read_exr_rgb(spec)
+    return Environment.from_latlong(next(iter(parts.values())))
+
+
+def _traversal_sheet(decoded: Any, size: int, light: tuple[float, float, float]) -> np.ndarray:
+    from brdfcodec.codec import DecodedMaterial
+    from brdfcodec.edit import parameter_vector, traverse
+    from brdfcodec.images import auto_exposure, compose_sheet, encode_srgb
+    from brdfcodec.render import render_sphere
+
+    record, decoder = decoded.record, decoded.decoder
+    steps = [-3.0, -2.0, -1.0, 0.0, 1.0, 2.0, 3.0]
+    effects = decoder.manifest.parameters.get("dimensions", [])
+    rows, labels = [], []
+    for dim in range(parameter_vector(record).size):
+        edited = traverse(record, dim, steps)
+        rows.append([render_sphere(DecodedMaterial(r, decoder), size=size, light=light) for r in edited])
+        label = effects[dim]["label"] if dim < len(effects) else "grafted green"
+        labels.append(f"z{dim + 1}: {label}")
+    exposure = auto_exposure(np.concatenate([row[3] for row in rows]))
+    tiles = [[encode_srgb(img, exposure=exposure) for img in row] for row in rows]
+    return compose_sheet(tiles, row_labels=labels, column_labels=[f"{s:+g}σ" for s in steps],
+                         title=f"{record.name}: latent traversal ({decoder.manifest.name})")
+
+
+def run(args: argparse.Namespace) -> int:
+    """Decode (if needed), render and write."""
+    from brdfcodec.images import write_image, write_png
+    from brdfcodec.render import render_flat, render_sphere, render_sphere_environment
+
+    if args.size < 8 or args.size > 4096:
+        raise ValueError("--size must be between 8 and 4096 pixels")
+    check_output_path(args.output, overwrite=args.force)
+    if args.output.suffix.lower() not in (".png", ".exr"):
+        raise ValueError(f"{args.output}: the output must be .png or .exr")
+    material, decoded = _load(args.input, args.material)
+    start = time.perf_counter()
+    if decoded is not None:
+        decoded.physical()  # decode now, so the timings below are apart
+    decode_s = time.perf_counter() - start
+    start = time.perf_counter()
+    if args.traversal:
+        if decoded is None:
+            raise ValueError("--traversal needs a .bvae material (a latent code to traverse)")
+        if args.output.suffix.lower() != ".png":
+            raise ValueError("a traversal sheet is written as .png")
+        write_png(args.output, _traversal_sheet(decoded, max(32, args.size // 3), args.light), overwrite=args.force)
+        print(f"wrote {args.output} (traversal sheet, {time.perf_counter() - start:.2f} s)")
+        return 0
+    if args.env:
+        image = render_sphere_environment(material, _environment(args.env), size=args.size)
+    elif args.flat:
+        image = render_flat(material, size=args.size)
+    else:
+        image = render_sphere(material, size=args.size, light=args.light)
+    render_s = time.perf_counter() - start
+    exposure = write_image(args.output, image, exposure=args.exposure, overwrite=args.force)
+    print(f"wrote {args.output} ({args.size}x{args.size}; decode {decode_s:.2f} s, render {render_s:.2f} s"
+          f"{f', exposure {exposure:.3g}' if args.output.suffix.lower() == '.png' else ''})")
+    return 0

@@ -1,0 +1,288 @@
+"""Latent edits: traversal, interpolation, per-factor mixing and green-channel grafting.
+
+Every edit returns a record (:class:`~brdfcodec.bvae_format.LatentRecord` or
+:class:`~brdfcodec.bvae_format.GraftRecord`) that can be written to a
+``.bvae`` file and decoded like any other. A graft record has D + k
+parameters (its code and the k grafted colour values); edits act on all of
+them, so interpolating two grafted materials also interpolates their green.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any, Literal
+
+import numpy as np
+import numpy.typing as npt
+
+from brdfcodec.bvae_format import GraftRecord, LatentRecord, Record
+from brdfcodec.conventions import N_KEPT_SLICES
+
+__all__ = [
+    "fit_graft",
+    "refine_code",
+    "graft",
+    "interpolate",
+    "mix_factors",
+    "parameter_vector",
+    "traverse",
+    "with_parameters",
+]
+
+
+def parameter_vector(record: Record) -> np.ndarray:
+    """All editable parameters: the code, then (for a graft) the grafted values."""
+    if isinstance(record, GraftRecord):
+        return np.concatenate([record.mu, record.graft_values])
+    return record.mu.copy()
+
+
+def with_parameters(record: Record, values: npt.ArrayLike, *, name: str, edit: dict[str, Any]) -> Record:
+    """A record like ``record`` with new parameter values (same kind and graft dims), ``meta["edit"]`` set."""
+    values = np.asarray(values, dtype=np.float32)
+    meta = {"edit": edit}
+    d = record.latent_dim
+    if isinstance(record, GraftRecord):
+        return GraftRecord(name, values[:d], record.sigma, record.graft_dims, values[d:], meta)
+    return LatentRecord(name, values, record.sigma, meta)
+
+
+def traverse(
+    record: Record,
+    dim: int,
+    values: Sequence[float],
+    *,
+    unit: Literal["sigma", "absolute"] = "sigma",
+    name: str | None = None,
+) -> list[Record]:
+    """Vary one parameter, the others fixed.
+
+    Parameters
+    ----------
+    record : LatentRecord or GraftRecord
+    dim : int
+        Parameter index (0-based): 0 … D−1 are latent dimensions; for a graft
+        record D … D+k−1 are its grafted colour values.
+    values : sequence of float
+        ``unit="sigma"``: offsets from the record's value in units of the
+        prior's standard deviation (1 in latent units), so 0 reproduces the
+        material. ``unit="absolute"``: the parameter's new values.
+    name : str, optional
+        Base of the new records' names (default: the record's), suffixed with
+        the dimension and value.
+    """
+    params = parameter_vector(record)
+    if not 0 <= dim < params.size:
+        raise ValueError(f"dim must be in [0, {params.size}), got {dim}")
+    if unit not in ("sigma", "absolute"):
+        raise ValueError(f"unit must be 'sigma' or 'absolute', got {unit!r}")
+    base = name or record.name
+    out = []
+    for value in values:
+        new = params.copy()
+        new[dim] = params[dim] + value if unit == "sigma" else value
+        edit = {"op": "traverse", "source": record.name, "dim": dim, "value": float(value), "unit": unit}
+        out.append(with_parameters(record, new, name=f"{base}.z{dim + 1}{value:+g}", edit=edit))
+    return out
+
+
+def _check_compatible(a: Record, b: Record) -> None:
+    if a.latent_dim != b.latent_dim:
+        raise ValueError(f"{a.name} and {b.name} have different latent dimensions")
+    if type(a) is not type(b) or (isinstance(a, GraftRecord) and a.graft_dims != b.graft_dims):  # type: ignore[union-attr]
+        raise ValueError(
+            f"{a.name} ({a.kind}) and {b.name} ({b.kind}) are not the same kind of material; both must be plain "
+            "latent records, or grafts over the same dimensions"
+        )
+
+
+def interpolate(a: Record, b: Record, t: float, *, name: str | None = None) -> Record:
+    """Linear interpolation of all parameters: ``(1 − t)·a + t·b``; t = 0 gives a, t = 1 gives b exactly."""
+    _check_compatible(a, b)
+    pa, pb = parameter_vector(a), parameter_vector(b)
+    values = pa if t == 0 else pb if t == 1 else (1 - t) * pa + t * pb
+    sigma_source = a if t < 0.5 else b
+    record = with_parameters(sigma_source, values, name=name or f"{a.name}~{b.name}@{t:g}",
+                             edit={"op": "interpolate", "a": a.name, "b": b.name, "t": float(t)})
+    return record
+
+
+def mix_factors(a: Record, b: Record, dims_from_a: Sequence[int], *, name: str | None = None) -> Record:
+    """Per-factor interpolation (paper, Fig. 9): the chosen parameters from ``a``, all others from ``b``."""
+    _check_compatible(a, b)
+    pa, pb = parameter_vector(a), parameter_vector(b)
+    chosen = sorted({int(d) for d in dims_from_a})
+    if any(not 0 <= d < pa.size for d in chosen):
+        raise ValueError(f"dims_from_a must lie in [0, {pa.size}), got {list(dims_from_a)}")
+    values = pb.copy()
+    values[chosen] = pa[chosen]
+    return with_parameters(b, values, name=name or f"{a.name}+{b.name}",
+                           edit={"op": "mix", "a": a.name, "b": b.name, "dims_from_a": chosen})
+
+
+def graft(
+    record: Record, graft_values: npt.ArrayLike, colour_dims: Sequence[int], *, name: str | None = None
+) -> GraftRecord:
+    """Green-channel grafting (paper §5): M1 = decode(V1), M2 = decode(V2), green of M = red of M2.
+
+    Parameters
+    ----------
+    record : LatentRecord
+        V1 (its code is kept).
+    graft_values : array_like, shape (k,)
+        V2's values at ``colour_dims``; V2 equals V1 elsewhere. Passing V1's own
+        values gives green = red.
+    colour_dims : sequence of int
+        The model's colour dimensions (``BrdfDecoder.colour_dims``).
+    """
+    if isinstance(record, GraftRecord):
+        raise ValueError(f"{record.name} is already a graft; edit its parameters instead")
+    return GraftRecord(
+        name or f"{record.name}.graft",
+        record.mu,
+        record.sigma,
+        tuple(int(d) for d in colour_dims),
+        np.asarray(graft_values, dtype=np.float32).reshape(-1),
+        {**record.meta, "edit": {"op": "graft", "source": record.name}},
+    )
+
+
+_GRID = np.linspace(-3.0, 3.0, 7)
+
+
+def _grid_start(decoder: Any, code: np.ndarray, dims: list[int], target: Any, mask: Any) -> np.ndarray:
+    """Best grafted values on a 7^k grid over [−3, 3] (green-channel L1, code fixed): a global start for Adam."""
+    import itertools
+
+    import torch
+
+    green = slice(N_KEPT_SLICES, 2 * N_KEPT_SLICES)
+    red = tuple(range(N_KEPT_SLICES))
+    candidates = [np.array(v, dtype=np.float32) for v in itertools.product(_GRID, repeat=len(dims))]
+    candidates.append(code[dims].astype(np.float32))  # V2 = V1
+    best, best_loss = candidates[-1], float("inf")
+    with torch.no_grad():
+        for values in candidates:
+            second = code.copy()
+            second[dims] = values
+            z = torch.as_tensor(second)[None].to(decoder.device, decoder.dtype)
+            out = decoder.network.forward_channels(z, red)[0].float().cpu()
+            loss = (out - target[green]).abs()[mask[green]].mean().item()
+            if loss < best_loss:
+                best, best_loss = values, loss
+    return best
+
+
+def _fit(
+    decoder: Any,
+    record: LatentRecord,
+    target_mapped: npt.ArrayLike,
+    target_mask: npt.ArrayLike,
+    graft_dims: list[int] | None,
+    optimise_code: bool,
+    steps: int,
+    learning_rate: float,
+) -> tuple[np.ndarray, np.ndarray | None, float]:
+    """Adam on the mapped L1 error over valid entries; returns the best code, graft values and loss."""
+    import torch
+
+    target = torch.as_tensor(np.asarray(target_mapped, dtype=np.float32))
+    mask = torch.as_tensor(np.asarray(target_mask, dtype=bool))
+    network = decoder.network
+    code = torch.nn.Parameter(torch.as_tensor(record.mu.copy()))
+    params = [code] if optimise_code else []
+    values = None
+    if graft_dims is not None:
+        start = _grid_start(decoder, record.mu, graft_dims, target, mask)
+        values = torch.nn.Parameter(torch.as_tensor(start))
+        params.append(values)
+    optimiser = torch.optim.Adam(params, lr=learning_rate)
+    red = tuple(range(N_KEPT_SLICES))
+    green = slice(N_KEPT_SLICES, 2 * N_KEPT_SLICES)
+    best: tuple[float, np.ndarray, np.ndarray | None] = (float("inf"), record.mu.copy(), None)
+
+    def to_device(z: torch.Tensor) -> torch.Tensor:
+        return z[None].to(decoder.device, decoder.dtype)
+
+    for _ in range(steps):
+        if graft_dims is None:
+            output = network.unbounded(to_device(code))[0].float().cpu()
+            loss = (output - target).abs()[mask].mean()
+        else:
+            second = code.detach().clone() if not optimise_code else code.clone()
+            second = torch.index_put(second, (torch.tensor(graft_dims),), values)
+            grafted_green = network.forward_channels(to_device(second), red)[0].float().cpu()
+            if optimise_code:
+                own = network.unbounded(to_device(code))[0].float().cpu()
+                output = torch.cat([own[:N_KEPT_SLICES], grafted_green, own[2 * N_KEPT_SLICES :]])
+                loss = (output - target).abs()[mask].mean()
+            else:
+                loss = (grafted_green - target[green]).abs()[mask[green]].mean()
+        if loss.item() < best[0]:
+            best = (
+                loss.item(),
+                code.detach().numpy().copy(),
+                None if values is None else values.detach().numpy().copy(),
+            )
+        optimiser.zero_grad()
+        loss.backward()
+        optimiser.step()
+    return best[1], best[2], best[0]
+
+
+def refine_code(
+    decoder: Any,
+    record: LatentRecord,
+    target_mapped: npt.ArrayLike,
+    target_mask: npt.ArrayLike,
+    *,
+    steps: int = 150,
+    learning_rate: float = 0.05,
+) -> LatentRecord:
+    """Optimise the 8 latent values (no graft) to fit a target: the network's best without extra parameters.
+
+    Parameters are as for :func:`fit_graft`.
+    """
+    code, _, loss = _fit(decoder, record, target_mapped, target_mask, None, True, steps, learning_rate)
+    return LatentRecord(record.name, code, record.sigma,
+                        {**record.meta, "edit": {"op": "refine", "source": record.name, "l1_mapped": loss}})
+
+
+def fit_graft(
+    decoder: Any,
+    record: LatentRecord,
+    target_mapped: npt.ArrayLike,
+    target_mask: npt.ArrayLike,
+    *,
+    colour_dims: Sequence[int] | None = None,
+    optimise_code: bool = True,
+    steps: int = 150,
+    learning_rate: float = 0.05,
+) -> GraftRecord:
+    """Tune the 10 parameters of a grafted material to fit a target (paper §5, Fig. 8).
+
+    The green channel of the graft is the red channel of decode(V2), where V2
+    equals V1 except at the colour dimensions. Adam minimises the L1 error in
+    the mapped domain over the valid entries of the target's network input,
+    starting from V1 = the record's code and V2 = V1.
+
+    Parameters
+    ----------
+    decoder : brdfcodec.codec.BrdfDecoder
+    record : LatentRecord
+        Starting code, usually the encoder's code for the target.
+    target_mapped, target_mask : array_like, shape (63, 90, 90)
+        The target's network input and validity mask (``dataset.material_arrays``).
+    colour_dims : sequence of int, optional
+        Default: the decoder's colour dimensions.
+    optimise_code : bool, default True
+        Tune V1's 8 values too (10 parameters in all); with False only the
+        k grafted values move and only the green channel is fitted.
+    steps, learning_rate : int, float
+        Adam iterations and step size (latent units).
+    """
+    dims = [int(d) for d in (decoder.colour_dims if colour_dims is None else colour_dims)]
+    code, values, loss = _fit(decoder, record, target_mapped, target_mask, dims, optimise_code, steps, learning_rate)
+    assert values is not None
+    meta = {**record.meta, "edit": {"op": "fit-graft", "source": record.name, "l1_mapped": loss}}
+    return GraftRecord(record.name, code, record.sigma, tuple(dims), values, meta)

@@ -1,0 +1,105 @@
+"""Latent edits: traversal, interpolation, per-factor mixing, grafting, named parameters."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from brdfcodec.bvae_format import GraftRecord, LatentRecord, parse_bvae, encode_bvae
+from brdfcodec.codec import BrdfDecoder
+from brdfcodec.conventions import MERL_COLOR_SCALE
+from brdfcodec.dataset import material_arrays
+from brdfcodec.edit import fit_graft, graft, interpolate, mix_factors, parameter_vector, refine_code, traverse
+from brdfcodec.merl import MerlBRDF
+from brdfcodec.models.registry import default_model_folder
+from brdfcodec.parameters import colour_dims_of, measure_dimension_effects
+
+
+@pytest.fixture(scope="module")
+def decoder(tiny_model_folder: Path) -> BrdfDecoder:
+    return BrdfDecoder(tiny_model_folder)
+
+
+def code(seed: int, dim: int = 8) -> LatentRecord:
+    rng = np.random.default_rng(seed)
+    return LatentRecord(f"m{seed}", rng.normal(size=dim), np.full(dim, 0.3))
+
+
+def test_traverse_with_zero_step_reproduces_the_material(decoder: BrdfDecoder) -> None:
+    record = code(1)
+    steps = traverse(record, 2, [-3.0, 0.0, 3.0])
+    np.testing.assert_array_equal(steps[1].mu, record.mu)
+    np.testing.assert_array_equal(decoder.table(steps[1]), decoder.table(record))
+    assert steps[0].mu[2] == pytest.approx(record.mu[2] - 3) and np.delete(steps[0].mu, 2) == pytest.approx(
+        np.delete(record.mu, 2))
+    absolute = traverse(record, 0, [1.25], unit="absolute")[0]
+    assert absolute.mu[0] == 1.25 and absolute.meta["edit"]["op"] == "traverse"
+    with pytest.raises(ValueError, match="dim"):
+        traverse(record, 8, [1.0])
+
+
+def test_interpolation_ends_reproduce_the_materials(decoder: BrdfDecoder) -> None:
+    a, b = code(1), code(2)
+    np.testing.assert_array_equal(decoder.table(interpolate(a, b, 0.0)), decoder.table(a))
+    np.testing.assert_array_equal(decoder.table(interpolate(a, b, 1.0)), decoder.table(b))
+    np.testing.assert_allclose(interpolate(a, b, 0.25).mu, 0.75 * a.mu + 0.25 * b.mu, rtol=1e-6)
+    mixed = mix_factors(a, b, [0, 7])
+    np.testing.assert_array_equal(mixed.mu[[0, 7]], a.mu[[0, 7]])
+    np.testing.assert_array_equal(mixed.mu[1:7], b.mu[1:7])
+    with pytest.raises(ValueError, match="same kind"):
+        interpolate(a, graft(b, [0.0, 0.0], (0, 1)), 0.5)
+
+
+def test_graft_edits_act_on_all_ten_parameters(decoder: BrdfDecoder) -> None:
+    g1 = graft(code(1), [1.0, -1.0], (3, 4))
+    g2 = graft(code(2), [-1.0, 2.0], (3, 4))
+    assert parameter_vector(g1).size == 10
+    half = interpolate(g1, g2, 0.5)
+    assert isinstance(half, GraftRecord)
+    np.testing.assert_allclose(half.graft_values, [0.0, 0.5])
+    moved = traverse(g1, 9, [1.0])[0]
+    np.testing.assert_allclose(moved.graft_values, [1.0, 0.0])
+    back = parse_bvae(encode_bvae([moved], decoder.reference)).records[0]
+    np.testing.assert_array_equal(decoder.table(back), decoder.table(moved))
+
+
+def test_graft_with_v2_equal_v1_gives_green_equal_red(decoder: BrdfDecoder) -> None:
+    record = code(3)
+    dims = (3, 4)
+    grafted = decoder.table(graft(record, record.mu[list(dims)], dims), masked="zero")
+    plain = decoder.table(record, masked="zero")
+    np.testing.assert_array_equal(grafted[[0, 2]], plain[[0, 2]])
+    physical = grafted * MERL_COLOR_SCALE.astype(np.float32)[:, None, None, None]
+    np.testing.assert_allclose(physical[1], physical[0], rtol=1e-5, atol=1e-9)
+
+
+def test_fitting_never_makes_the_fit_worse(decoder: BrdfDecoder, analytic_tables: dict[str, MerlBRDF]) -> None:
+    inputs, mask = material_arrays(analytic_tables["red-plastic"])
+    start = code(4)
+
+    def l1(mapped: np.ndarray) -> float:
+        return float(np.abs(mapped - inputs)[mask].mean())
+
+    refined = refine_code(decoder, start, inputs, mask, steps=15)
+    assert l1(decoder.mapped_record(refined)) <= l1(decoder.mapped_record(start)) + 1e-6
+    fitted = fit_graft(decoder, start, inputs, mask, colour_dims=(0, 1), steps=15)
+    assert isinstance(fitted, GraftRecord) and fitted.graft_dims == (0, 1)
+    assert np.isfinite(fitted.graft_values).all()
+    assert l1(decoder.mapped_record(fitted)) <= fitted.meta["edit"]["l1_mapped"] + 1e-4
+
+
+def test_colour_dims_are_measured_and_shipped_with_the_default_model() -> None:
+    decoder = BrdfDecoder(default_model_folder())
+    effects = measure_dimension_effects(decoder)
+    assert len(effects) == 8 and all(e.label for e in effects)
+    measured = colour_dims_of(effects)
+    assert decoder.colour_dims == measured  # the stored table is what the model does now
+    for dim in measured:  # colour dimensions change the red-blue balance more than the others
+        assert effects[dim].colour_strength >= max(e.colour_strength for e in effects if e.dim not in measured)
+
+
+def test_tiny_model_without_stored_parameters_measures_its_colour_dims(decoder: BrdfDecoder) -> None:
+    assert decoder.manifest.parameters == {}
+    assert len(decoder.colour_dims) == 2 and all(0 <= d < 8 for d in decoder.colour_dims)
