@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from brdfcodec.bvae_format import GraftRecord, LatentRecord, parse_bvae, encode_bvae
+from brdfcodec.bvae_format import GraftRecord, LatentRecord, encode_bvae, parse_bvae
 from brdfcodec.codec import BrdfDecoder
 from brdfcodec.conventions import MERL_COLOR_SCALE
 from brdfcodec.dataset import material_arrays
