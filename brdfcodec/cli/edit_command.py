@@ -44,8 +44,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     traverse.add_argument("--material", help="material to start from (default: the only one)")
     traverse.add_argument("--dim", type=int, required=True, help="parameter number, from 1")
     traverse.add_argument("--values", type=parse_floats, default=[-3.0, -1.5, 0.0, 1.5, 3.0],
-                          help="offsets in prior σ (default -3,-1.5,0,1.5,3; write --values=-2,0,2 when the first is negative), "
-                          "or values with --absolute")
+                          help="offsets in prior σ (default -3,-1.5,0,1.5,3; write --values=-2,0,2 when the "
+                          "first is negative), or values with --absolute")
     traverse.add_argument("--absolute", action="store_true", help="--values are the parameter's new values")
 
     interp = ops.add_parser("interp", help="interpolate two materials, linearly or per factor")
