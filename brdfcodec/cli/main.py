@@ -15,6 +15,7 @@ from collections.abc import Sequence
 
 from brdfcodec.cli import (
     analytic_command,
+    bench_command,
     compress_command,
     dataset_command,
     decompress_command,
@@ -57,6 +58,7 @@ def build_parser() -> argparse.ArgumentParser:
         dataset_command,
         train_command,
         model_command,
+        bench_command,
     ):
         module.register(subparsers)
     return parser

@@ -1,0 +1,1 @@
+"""The size / error / run-time report (``bvae bench report``): operating points, evaluation, outputs."""

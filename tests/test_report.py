@@ -1,0 +1,56 @@
+"""The size / error / time report: operating points, records, Markdown and plots."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from brdfcodec.dataset import build_dataset
+from brdfcodec.report.evaluate import evaluate_dataset, summarise
+from brdfcodec.report.output import write_report
+from brdfcodec.report.points import BvaeCodec, KeptSlices, Pca, RawTable, ZstdTable
+from brdfcodec.sources import analytic_sources
+
+
+@pytest.fixture(scope="module")
+def small_dataset(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    path = tmp_path_factory.mktemp("report") / "data.h5"
+    build_dataset(path, analytic_sources(["gold", "red-plastic", "chrome"]), source_kind="analytic",
+                  description="analytic test materials", validation_fraction=0.34, progress=False)
+    return path
+
+
+def test_report_records_and_files(small_dataset: Path, tmp_path: Path) -> None:
+    from brdfcodec.dataset import BrdfDataset
+
+    with BrdfDataset(small_dataset) as dataset:
+        train_inputs = dataset.inputs(dataset.indices("train"))
+    points = [BvaeCodec("float32"), Pca(train_inputs, 1), KeptSlices(), RawTable("float32"), ZstdTable("float32")]
+    points, rows, data = evaluate_dataset(small_dataset, points=points, progress=False)
+    assert len(rows) == 5 * 3 and data["materials"] == 3
+    records = {r["name"]: r for r in summarise(points, rows, data)}
+    raw = records["raw-float32"]
+    assert raw["bytes_per_material"] == 3 * 90 * 90 * 180 * 4 and raw["shared_bytes"] == 0
+    assert raw["errors"]["all"]["relae_mapped"]["worst"] < 1e-6
+    assert records["zstd-float32"]["errors"]["all"]["relae_mapped"]["worst"] < 1e-6
+    assert records["zstd-float32"]["bytes_per_material"] < raw["bytes_per_material"]
+    assert 0 < records["kept-slices"]["errors"]["all"]["relae_mapped"]["mean"] < 0.05
+    bvae = next(r for name, r in records.items() if name.startswith("bvae"))
+    assert bvae["bytes_per_material"] < 1000 and bvae["shared_bytes"] > 1e6
+    for record in records.values():
+        for key in ("device", "torch", "brdfcodec", "encode_ms_median", "decode_ms_median", "data"):
+            assert key in record
+        stats = record["errors"]["all"]
+        assert {"mean", "median", "p90", "worst", "worst_material"} <= stats["relae_mapped"].keys()
+        assert np.isfinite(stats["delta_e_itp"]["mean"]) and np.isfinite(stats["log_domain_mae"]["mean"])
+    written = write_report(tmp_path / "out", list(records.values()), rows)
+    assert {p.name for p in written} == {"report.jsonl", "materials.jsonl", "report.md", "relae_vs_decode_time.png",
+                                         "relae_vs_bytes.png"}
+    lines = (tmp_path / "out" / "report.jsonl").read_text().splitlines()
+    assert [json.loads(line)["name"] for line in lines] == list(records)
+    table = (tmp_path / "out" / "report.md").read_text()
+    assert "analytic test materials" in table and table.count("\n| ") >= 6
+    assert (tmp_path / "out" / "relae_vs_bytes.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
