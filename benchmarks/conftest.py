@@ -27,6 +27,7 @@ TARGETS = {
     "decode-slice": 0.5,  # one φd bin vs the full table: a caller that needs one slice does not pay for 180
     "encode": 6.0,  # read + encode a MERL file (mapping, masking, encoder network) vs reading it
     "decode-batch16": 1.1,  # 16 tables through the batched decoder vs one at a time
+    "decode-query": 1.5,  # 20,000 eval(wi, wo) on a decoded material vs on the original MERL table
     "render-sphere-256": 8.0,  # a 256² sphere from a decoded material vs decoding the material once
     "edit-and-decode": 1.2,  # traversal + interpolation + decode vs decode alone
 }

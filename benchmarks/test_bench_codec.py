@@ -84,3 +84,34 @@ def test_batch_decode(benchmark, decoder: BrdfDecoder) -> None:
     benchmark.extra_info["role"] = "candidate"
     tables = benchmark.pedantic(lambda: list(decoder.tables(records)), rounds=3, iterations=1)
     assert len(tables) == _BATCH
+
+
+_QUERIES = 20_000
+
+
+@pytest.fixture(scope="module")
+def directions() -> tuple[np.ndarray, np.ndarray]:
+    rng = np.random.default_rng(0)
+    wi, wo = rng.normal(size=(2, _QUERIES, 3))
+    wi[:, 2], wo[:, 2] = np.abs(wi[:, 2]), np.abs(wo[:, 2])
+    return wi, wo
+
+
+def test_query_baseline_merl_eval(benchmark, merl_file: Path, directions) -> None:
+    """Looking up 20,000 direction pairs in the original MERL table."""
+    brdf = read_merl(merl_file)
+    benchmark.group = "decode-query"
+    benchmark.extra_info["role"] = "baseline"
+    benchmark(brdf.eval, *directions)
+
+
+def test_query_decoded_material(benchmark, decoder: BrdfDecoder, record: LatentRecord, directions) -> None:
+    """The same 20,000 lookups in a decoded material (decoded once, cached)."""
+    from brdfcodec.codec import DecodedMaterial
+
+    material = DecodedMaterial(record, decoder)
+    material.eval(*directions)
+    benchmark.group = "decode-query"
+    benchmark.extra_info["role"] = "candidate"
+    values = benchmark(material.eval, *directions)
+    assert values.shape == (_QUERIES, 3) and np.isfinite(values).all()

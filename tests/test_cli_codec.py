@@ -121,3 +121,33 @@ def test_missing_decoder_names_the_hashes(capsys, merl_folder: Path, tmp_path: P
     code, _, err = run(capsys, "decompress", str(lib), "-o", str(tmp_path / "x.binary"))
     sha = read_bvae(lib).header.decoder.sha256
     assert code == 1 and sha in err and "available" in err
+
+
+def test_model_register_persists_for_later_processes(capsys, tiny_model_folder: Path, tmp_path: Path,
+                                                     monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.delenv("BRDFCODEC_MODEL_PATH")
+    monkeypatch.setenv("BRDFCODEC_CONFIG_DIR", str(tmp_path / "config"))
+    code, out, _ = run(capsys, "model", "list")
+    assert code == 0 and "tiny-test-model" not in out
+    code, out, err = run(capsys, "model", "register", str(tiny_model_folder))
+    assert code == 0, err
+    assert (tmp_path / "config" / "model-folders.txt").read_text().strip() == str(tiny_model_folder.resolve())
+    code, out, _ = run(capsys, "model", "list")
+    assert "tiny-test-model" in out and "bvae-nbrdf-proxy-small-v1" in out
+    code, _, err = run(capsys, "model", "register", str(tmp_path))
+    assert code == 1 and "model.json" in err
+
+
+def test_bvae_info_does_not_import_torch(tmp_path: Path) -> None:
+    import subprocess
+    import sys
+
+    from brdfcodec.bvae_format import DecoderReference, LatentRecord, write_bvae
+
+    path = tmp_path / "x.bvae"
+    write_bvae(path, [LatentRecord("a", np.zeros(8), np.ones(8))], DecoderReference("c" * 64, "elsewhere"))
+    code = ("import sys; from brdfcodec.cli import main; rc = main(['info', sys.argv[1]]); "
+            "assert 'torch' not in sys.modules, 'torch was imported'; sys.exit(rc)")
+    result = subprocess.run([sys.executable, "-c", code, str(path)], capture_output=True, text=True, timeout=120)
+    assert result.returncode == 0, result.stderr
+    assert "NOT INSTALLED" in result.stdout

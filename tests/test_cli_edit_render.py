@@ -72,5 +72,9 @@ def test_render_outputs(capsys, library: Path, tmp_path: Path) -> None:
 
     sheet = np.asarray(Image.open(tmp_path / "sheet.png"))
     assert sheet.shape[0] > 8 * 32 and sheet.shape[1] > 7 * 32
+    code, out, err = run(capsys, "render", str(library), "--material", "gold", "-o", str(tmp_path / "c.png"),
+                         "--size", "32", "--compare", str(tmp_path / "gold.binary"))
+    assert code == 0, err
+    assert "ΔE ITP mean" in out and "PSNR" in out
     code, _, err = run(capsys, "render", str(library), "--material", "gold", "-o", str(tmp_path / "s.jpg"))
     assert code == 1 and "png" in err

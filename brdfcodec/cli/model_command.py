@@ -33,6 +33,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
                               description="Show a model (the default one without FOLDER) and verify its hashes.")
     show.add_argument("folder", type=Path, nargs="?", help="model folder (default: the shipped default model)")
     show.set_defaults(handler=run_info)
+    reg = actions.add_parser("register", help="make a model folder findable by its decoder hash from now on",
+                             description="Verify a model folder and add it to the user's list of model folders, "
+                             "so that .bvae files made with it decode in any later session.")
+    reg.add_argument("folder", type=Path, help="model folder (written by bvae model export)")
+    reg.set_defaults(handler=run_register)
+    listing = actions.add_parser("list", help="list every model that can be found, in search order",
+                                 description="List every findable model: name, decoder SHA-256, folder.")
+    listing.set_defaults(handler=run_list)
 
 
 def run_export(args: argparse.Namespace) -> int:
@@ -67,4 +75,24 @@ def run_info(args: argparse.Namespace) -> int:
     for split, row in manifest.info.get("summary", {}).items():
         print(f"  {split:<15} mapped RelAE mean {row['mapped_mean']:.4f} (worst {row['mapped_max']:.4f}), "
               f"linear {row['linear_mean']:.4f}")
+    return 0
+
+
+def run_register(args: argparse.Namespace) -> int:
+    """Verify the weights, then save the folder in the user's configuration."""
+    from brdfcodec.models.registry import config_file, save_model_folder
+    from brdfcodec.models.store import load_model
+
+    load_model(args.folder)  # verifies both hashes before anything is saved
+    manifest = save_model_folder(args.folder)
+    print(f"registered {manifest.name} (decoder sha256 {manifest.decoder_sha256}) in {config_file()}")
+    return 0
+
+
+def run_list(args: argparse.Namespace) -> int:
+    """One line per findable model."""
+    from brdfcodec.models.registry import available_models
+
+    for manifest in available_models():
+        print(f"{manifest.decoder_sha256}  {manifest.name:<36} {manifest.folder}")
     return 0

@@ -42,6 +42,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     parser.add_argument("--flat", action="store_true", help="a flat sample under a point light instead of a sphere")
     parser.add_argument("--traversal", action="store_true", help="a traversal sheet (rows: parameters, ±3σ)")
     parser.add_argument("--exposure", type=float, help="PNG exposure (default: automatic)")
+    parser.add_argument("--compare", type=Path, metavar="SOURCE.binary",
+                        help="also render this MERL file the same way and print ΔE ITP, ΔE 2000 and PSNR against it")
     parser.add_argument("--force", action="store_true", help="replace an existing output file")
     parser.set_defaults(handler=run)
 
@@ -132,6 +134,23 @@ def run(args: argparse.Namespace) -> int:
     else:
         image = render_sphere(material, size=args.size, light=args.light)
     render_s = time.perf_counter() - start
+    if args.compare is not None:
+        from brdfcodec.image_metrics import image_error
+        from brdfcodec.merl import read_merl
+
+        source = read_merl(args.compare)
+        if args.env:
+            reference = render_sphere_environment(source, _environment(args.env), size=args.size)
+        elif args.flat:
+            reference = render_flat(source, size=args.size)
+        else:
+            reference = render_sphere(source, size=args.size, light=args.light)
+        error = image_error(reference, image)
+        if args.exposure is None:
+            args.exposure = error.exposure  # same exposure for both, the reference's
+        print(f"against {args.compare}: ΔE ITP mean {error.delta_e_itp_mean:.3f} (p95 {error.delta_e_itp_p95:.3f}), "
+              f"ΔE 2000 mean {error.delta_e_2000_mean:.3f} (p95 {error.delta_e_2000_p95:.3f}), "
+              f"PSNR {error.psnr_db:.2f} dB")
     exposure = write_image(args.output, image, exposure=args.exposure, overwrite=args.force)
     print(f"wrote {args.output} ({args.size}x{args.size}; decode {decode_s:.2f} s, render {render_s:.2f} s"
           f"{f', exposure {exposure:.3g}' if args.output.suffix.lower() == '.png' else ''})")

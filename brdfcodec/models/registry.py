@@ -4,7 +4,10 @@ Models are found by the SHA-256 of their decoder weights (the reference a
 ``.bvae`` file carries), never by a list position. Search order: folders
 registered with :func:`register_model_folder` in this process, the folders
 in ``$BRDFCODEC_MODEL_PATH`` (``os.pathsep``-separated; each a model folder
-or a folder of model folders), then the models shipped in the package.
+or a folder of model folders), the folders saved by ``bvae model register``
+(one per line in ``model-folders.txt`` of the user configuration folder:
+``$BRDFCODEC_CONFIG_DIR``, else ``$XDG_CONFIG_HOME/brdfcodec``, else
+``~/.config/brdfcodec``), then the models shipped in the package.
 """
 
 from __future__ import annotations
@@ -22,7 +25,10 @@ __all__ = [
     "available_models",
     "default_model_folder",
     "find_model",
+    "config_file",
     "register_model_folder",
+    "save_model_folder",
+    "saved_model_folders",
 ]
 
 #: Folder name (under ``brdfcodec/data/models``) of the model used when none is named.
@@ -62,9 +68,39 @@ def register_model_folder(folder: str | os.PathLike[str]) -> ModelManifest:
     return manifest
 
 
+def config_file() -> Path:
+    """The user's list of registered model folders (may not exist)."""
+    explicit = os.environ.get("BRDFCODEC_CONFIG_DIR")
+    if explicit:
+        return Path(explicit) / "model-folders.txt"
+    base = os.environ.get("XDG_CONFIG_HOME") or str(Path.home() / ".config")
+    return Path(base) / "brdfcodec" / "model-folders.txt"
+
+
+def saved_model_folders() -> list[Path]:
+    """Folders saved by :func:`save_model_folder`, in the order saved."""
+    path = config_file()
+    if not path.is_file():
+        return []
+    return [Path(line.strip()) for line in path.read_text(encoding="utf-8").splitlines() if line.strip()]
+
+
+def save_model_folder(folder: str | os.PathLike[str]) -> ModelManifest:
+    """Register a model folder for every later process (written to :func:`config_file`)."""
+    manifest = load_manifest(folder)
+    resolved = Path(folder).resolve()
+    known = saved_model_folders()
+    if resolved not in known:
+        path = config_file()
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text("".join(f"{p}\n" for p in [*known, resolved]), encoding="utf-8")
+    return manifest
+
+
 def _candidate_folders() -> list[Path]:
     roots = list(_registered)
     roots += [Path(p) for p in os.environ.get("BRDFCODEC_MODEL_PATH", "").split(os.pathsep) if p]
+    roots += saved_model_folders()
     roots.append(_package_models())
     folders: list[Path] = []
     for root in roots:
@@ -96,5 +132,5 @@ def find_model(decoder_sha256: str) -> ModelManifest:
     known = ", ".join(f"{m.decoder_sha256} ({m.name})" for m in models) or "none"
     raise ModelNotFoundError(
         f"no decoder with SHA-256 {wanted}; available: {known}. Register the model folder that made the file "
-        "(brdfcodec.models.registry.register_model_folder or $BRDFCODEC_MODEL_PATH)"
+        "(bvae model register FOLDER, $BRDFCODEC_MODEL_PATH, or brdfcodec.models.registry.register_model_folder)"
     )

@@ -77,6 +77,7 @@ def evaluate_dataset(
     *,
     points: Sequence[OperatingPoint] | None = None,
     pca_sizes: Sequence[int] = (8, 16, 32),
+    extra_models: Sequence[str | os.PathLike[str]] = (),
     limit: int | None = None,
     progress: bool = True,
 ) -> tuple[list[OperatingPoint], list[dict[str, Any]], dict[str, Any]]:
@@ -105,7 +106,7 @@ def evaluate_dataset(
             "validation": sum(1 for i in indices if i not in train),
         }
         if points is None:
-            points = standard_points(dataset.inputs(train), pca_sizes)
+            points = standard_points(dataset.inputs(train), pca_sizes, extra_models)
         rows: list[dict[str, Any]] = []
         for index in tqdm(indices, desc="report", unit="material", disable=not progress or None):
             brdf = dataset.table(index)

@@ -171,9 +171,12 @@ class BvaeCodec(OperatingPoint):
         return self.decoder.table(record, masked="keep").astype(np.float64)
 
 
-def standard_points(train_inputs: np.ndarray, pca_sizes: Sequence[int] = (8, 16, 32)) -> list[OperatingPoint]:
-    """The report's operating points: the shipped model (float32, float16 latents) and every baseline."""
+def standard_points(
+    train_inputs: np.ndarray, pca_sizes: Sequence[int] = (8, 16, 32), extra_models: Sequence[Any] = ()
+) -> list[OperatingPoint]:
+    """The report's operating points: the shipped model (float32, float16 latents), other models, every baseline."""
     points: list[OperatingPoint] = [BvaeCodec("float32"), BvaeCodec("float16")]
+    points += [BvaeCodec("float32", model) for model in extra_models]
     points += [Pca(train_inputs, k) for k in pca_sizes if k <= len(train_inputs)]
     points += [KeptSlices(), RawTable("float32"), RawTable("float16"), ZstdTable("float32"), ZstdTable("float16")]
     return points
