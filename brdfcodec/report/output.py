@@ -67,14 +67,16 @@ def _plot(records: Sequence[dict[str, Any]], x_key: str, x_label: str, path: Pat
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, ax = plt.subplots(figsize=(7.5, 4.8), dpi=110)
-    for r in records:
+    fig, ax = plt.subplots(figsize=(9.0, 4.8), dpi=110)
+    colours = plt.get_cmap("tab20").colors
+    markers = "ovs^D<>phX8"
+    for k, r in enumerate(records):
         relae = max(r["errors"][_split(r)]["relae_mapped"]["mean"], _FLOOR)
-        x = max(r[x_key], 1e-3)
         bvae = r["name"].startswith("bvae")
-        ax.scatter([x], [relae], s=60 if bvae else 30, marker="*" if bvae else "o",
-                   color="tab:red" if bvae else "tab:blue", zorder=3)
-        ax.annotate(r["name"], (x, relae), textcoords="offset points", xytext=(5, 4), fontsize=7)
+        label = r["name"] + (" (lossless, drawn at 1e-7)" if relae <= _FLOOR else "")
+        ax.scatter([max(r[x_key], 1e-3)], [relae], s=110 if bvae else 40, marker="*" if bvae else markers[k % 11],
+                   color=colours[(2 * k) % 20], edgecolors="black", linewidths=0.4, zorder=3, label=label)
+    ax.legend(loc="center left", bbox_to_anchor=(1.01, 0.5), fontsize=7, frameon=False)
     ax.set_xscale("log")
     ax.set_yscale("log")
     ax.set_xlabel(x_label)
