@@ -13,6 +13,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from brdfcodec.bvae_format import (
+    FORMAT_MAJOR,
+    FORMAT_MINOR,
     MAGIC,
     MAX_HEADER_BYTES,
     BvaeReader,
@@ -94,6 +96,7 @@ def test_latent_payload_is_64_bytes_in_float32() -> None:
 
 def test_spec_states_the_limits_the_code_uses() -> None:
     text = SPEC.read_text(encoding="utf-8")
+    assert f"Format version {FORMAT_MAJOR}.{FORMAT_MINOR} " in text
     assert f"**{MAX_HEADER_BYTES:,}** bytes" in text
     assert "`89 42 56 41 45 0D 0A 1A`" in text and MAGIC == bytes.fromhex("89 42 56 41 45 0D 0A 1A")
     assert "**64 bytes** for D = 8 in float32" in text
