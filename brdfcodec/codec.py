@@ -464,6 +464,13 @@ class MaterialLibrary:
             self._materials[name] = DecodedMaterial(self._reader.read(name), self.decoder)
         return self._materials[name]
 
+    def forget(self, name: str | None = None) -> None:
+        """Drop a decoded material (or all) from the cache; it is decoded again if used again."""
+        if name is None:
+            self._materials.clear()
+        else:
+            self._materials.pop(name, None)
+
     def record(self, name: str) -> Record:
         """The stored record of a material (no decoding)."""
         return self[name].record

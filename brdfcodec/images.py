@@ -72,6 +72,14 @@ def write_image(
     return scale
 
 
+_ASCII = str.maketrans({"σ": "sd", "→": "->", "−": "-", "±": "+/-", "°": " deg", "²": "^2"})
+
+
+def _ascii(text: str) -> str:
+    """Pillow's built-in font has ASCII glyphs only."""
+    return text.translate(_ASCII).encode("ascii", "replace").decode("ascii")
+
+
 def compose_sheet(
     tiles: Sequence[Sequence[npt.NDArray[np.uint8]]],
     *,
@@ -89,13 +97,14 @@ def compose_sheet(
     sheet = Image.new("RGB", (label_width + cols * tile_w, header_height + rows * tile_h), (24, 24, 24))
     draw = ImageDraw.Draw(sheet)
     if title:
-        draw.text((6, 4), title, fill=(235, 235, 235))
+        draw.text((6, 4), _ascii(title), fill=(235, 235, 235))
     for j, label in enumerate(column_labels):
-        draw.text((label_width + j * tile_w + tile_w // 2 - 3 * len(label), header_height - 16), label,
+        text = _ascii(label)
+        draw.text((label_width + j * tile_w + tile_w // 2 - 3 * len(text), header_height - 16), text,
                   fill=(200, 200, 200))
     for i, row in enumerate(tiles):
         y = header_height + i * tile_h
-        draw.text((6, y + tile_h // 2 - 6), row_labels[i], fill=(220, 220, 220))
+        draw.text((6, y + tile_h // 2 - 6), _ascii(row_labels[i]), fill=(220, 220, 220))
         for j, tile in enumerate(row):
             sheet.paste(Image.fromarray(tile, mode="RGB"), (label_width + j * tile_w, y))
     return np.asarray(sheet)
