@@ -26,7 +26,7 @@ import os
 import re
 import struct
 import zlib
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, BinaryIO, Literal
@@ -707,18 +707,3 @@ class BvaeReader:
     def read_all(self) -> list[Record]:
         """Every record, in file order."""
         return [self.read(name) for name in self.names]
-
-
-def records_from(items: Iterable[Record]) -> tuple[Record, ...]:
-    """Records as a tuple, checked to be record objects (helper for callers building libraries)."""
-    out = tuple(items)
-    for item in out:
-        if not isinstance(item, LatentRecord | GraftRecord):
-            raise TypeError(f"expected LatentRecord or GraftRecord, got {type(item).__name__}")
-    return out
-
-
-def payload_bytes_per_material(latent_dim: int, latent_dtype: LatentDtype = "float32") -> int:
-    """Payload size of a latent record (``2 · latent_dim`` values)."""
-    return _payload_length("latent", latent_dim, 0, _DTYPES[latent_dtype].itemsize)
-

@@ -253,18 +253,16 @@ class BrdfDecoder:
     def tables(
         self, records: Sequence[Record], *, masked: MaskedEntries = "unmeasured", batch_size: int = 16
     ) -> Iterator[npt.NDArray[np.float32]]:
-        """Full tables of many records, decoded in batches (a generator: one table in memory at a time)."""
-        plain = [r for r in records if isinstance(r, LatentRecord)]
-        for r in records:
-            self._check_record(r)
-        mapped_plain: dict[int, np.ndarray] = {}
-        for start in range(0, len(plain), batch_size):
-            chunk = plain[start : start + batch_size]
-            for record, mapped in zip(chunk, self.decode_mapped(np.stack([r.mu for r in chunk])), strict=True):
-                mapped_plain[id(record)] = mapped
+        """Full tables of many records, decoded ``batch_size`` at a time (a generator: one table built at a time)."""
         for record in records:
-            mapped = mapped_plain.pop(id(record)) if id(record) in mapped_plain else self.mapped_record(record)
-            yield _apply_mask(table_from_network_output(mapped), None, masked)
+            self._check_record(record)
+        for start in range(0, len(records), batch_size):
+            chunk = records[start : start + batch_size]
+            codes = [r.mu for r in chunk if isinstance(r, LatentRecord)]
+            batch = iter(self.decode_mapped(np.stack(codes)) if codes else ())
+            for record in chunk:  # grafts need two codes each: decoded on their own
+                mapped = next(batch) if isinstance(record, LatentRecord) else self.mapped_record(record)
+                yield _apply_mask(table_from_network_output(mapped), None, masked)
 
     def _check_record(self, record: Record) -> None:
         if record.latent_dim != self.latent_dim:
@@ -321,15 +319,19 @@ class BrdfEncoder:
         """Records of many materials, encoded in batches."""
         mu, sigma = self.posterior(brdfs, batch_size=batch_size)
         labels = list(names) if names is not None else [b.name or f"material-{i}" for i, b in enumerate(brdfs)]
-        return [
-            LatentRecord(
-                label,
-                mu[i],
-                sigma[i],
-                {"source_sha256": brdfs[i].sha256, "encoder_sha256": self.manifest.encoder_sha256},
-            )
-            for i, label in enumerate(labels)
-        ]
+        return self.make_records(labels, mu, sigma, brdfs)
+
+    def make_records(
+        self, names: Sequence[str], mu: np.ndarray, sigma: np.ndarray, sources: Sequence[MerlBRDF | None]
+    ) -> list[LatentRecord]:
+        """Records from posteriors, with metadata: the encoder's SHA-256, and the source's where it is known."""
+        records = []
+        for i, name in enumerate(names):
+            meta = {"encoder_sha256": self.manifest.encoder_sha256}
+            if sources[i] is not None:
+                meta["source_sha256"] = sources[i].sha256  # type: ignore[union-attr]
+            records.append(LatentRecord(name, mu[i], sigma[i], meta))
+        return records
 
 
 def measure(record: Record, decoder: BrdfDecoder, source: MerlBRDF) -> LatentRecord | GraftRecord:

@@ -102,9 +102,8 @@ def interpolate(a: Record, b: Record, t: float, *, name: str | None = None) -> R
     pa, pb = parameter_vector(a), parameter_vector(b)
     values = pa if t == 0 else pb if t == 1 else (1 - t) * pa + t * pb
     sigma_source = a if t < 0.5 else b
-    record = with_parameters(sigma_source, values, name=name or f"{a.name}~{b.name}@{t:g}",
-                             edit={"op": "interpolate", "a": a.name, "b": b.name, "t": float(t)})
-    return record
+    return with_parameters(sigma_source, values, name=name or f"{a.name}~{b.name}@{t:g}",
+                           edit={"op": "interpolate", "a": a.name, "b": b.name, "t": float(t)})
 
 
 def mix_factors(a: Record, b: Record, dims_from_a: Sequence[int], *, name: str | None = None) -> Record:

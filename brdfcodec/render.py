@@ -214,7 +214,7 @@ def sky_environment(*, sun: Sequence[float] = (-0.5, 0.8, 0.6), sun_strength: fl
     image = np.broadcast_to(sky, (rows, cols, 3)).copy()
     env = Environment.from_latlong(image)
     sun_dir = _unit(sun)
-    sun_weight = np.full((1, 3), sun_strength * 6.8e-5 * 1e3)  # bright, small (≈ 0.07 sr · strength)
+    sun_weight = np.full((1, 3), 0.068 * sun_strength)  # radiance × solid angle of a small, bright disc
     return Environment(np.concatenate([env.directions, sun_dir[None]]), np.concatenate([env.weights, sun_weight]))
 
 
@@ -233,7 +233,7 @@ def render_sphere_environment(
     t, b = _frames(normals)
     wo = _to_local(np.broadcast_to([0.0, 0.0, 1.0], normals.shape), normals, t, b)
     radiance = np.zeros((normals.shape[0], 3))
-    for k, (direction, weight) in enumerate(zip(env.directions, env.weights, strict=True)):
+    for direction, weight in zip(env.directions, env.weights, strict=True):
         cos_world = normals @ direction
         lit = cos_world > 0
         if not lit.any():
@@ -243,7 +243,6 @@ def render_sphere_environment(
             part = idx[start : start + chunk]
             wi = _to_local(np.broadcast_to(direction, (part.size, 3)), normals[part], t[part], b[part])
             radiance[part] += table.eval(wi, wo[part], mode) * (cos_world[part, None] * weight)
-        del k
     image = np.zeros((size, size, 3), dtype=np.float32)
     image[inside] = np.maximum(radiance, 0)
     return image

@@ -11,14 +11,12 @@ import numpy as np
 from tqdm import tqdm
 
 from brdfcodec.atomic import check_output_path
-from brdfcodec.bvae_format import LatentRecord, Record, write_bvae
+from brdfcodec.bvae_format import Record, write_bvae
+from brdfcodec.cli.info_command import HDF5_SIGNATURE
 from brdfcodec.dataset import material_arrays
 from brdfcodec.merl import MerlBRDF, read_merl
 
 __all__ = ["register"]
-
-_HDF5_SIGNATURE = b"\x89HDF\r\n\x1a\n"
-
 
 @dataclass(frozen=True)
 class _Item:
@@ -88,7 +86,7 @@ def collect_items(inputs: list[Path], split: str | None) -> list[_Item]:
             continue
         with open(path, "rb") as stream:  # FileNotFoundError names the file
             head = stream.read(8)
-        if head == _HDF5_SIGNATURE:
+        if head == HDF5_SIGNATURE:
             items += list(_dataset_items(path, split))
         else:
             items.append(_merl_item(path))
@@ -119,11 +117,10 @@ def run(args: argparse.Namespace) -> int:
             chunk = items[start : start + args.batch_size]
             loaded = [item.load() for item in chunk]
             mu, sigma = encoder.posterior_from_inputs(np.stack([inputs for _, inputs in loaded]))
-            for k, (item, (brdf, _)) in enumerate(zip(chunk, loaded, strict=True)):
-                meta = {"encoder_sha256": encoder.manifest.encoder_sha256}
-                if brdf is not None:
-                    meta["source_sha256"] = brdf.sha256
-                record: Record = LatentRecord(item.name, mu[k], sigma[k], meta)
+            sources = [brdf for brdf, _ in loaded]
+            for item, brdf, record in zip(
+                chunk, sources, encoder.make_records([i.name for i in chunk], mu, sigma, sources), strict=True
+            ):
                 if decoder is not None and brdf is not None:
                     record = measure(record, decoder, brdf)
                     relae = record.meta["relae"]

@@ -4,12 +4,16 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from tqdm import tqdm
 
 from brdfcodec.atomic import check_output_path
 from brdfcodec.conventions import N_PHI_D
 from brdfcodec.table_output import TABLE_FORMATS, table_format_of, write_table
+
+if TYPE_CHECKING:
+    from brdfcodec.codec import DecodedMaterial
 
 __all__ = ["parse_bins", "register"]
 
@@ -84,12 +88,9 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _print_reference_error(path: Path, material: object) -> None:
+def _print_reference_error(path: Path, material: DecodedMaterial) -> None:
+    from brdfcodec.codec import measure
     from brdfcodec.merl import read_merl
-    from brdfcodec.metrics import error_report
 
-    source = read_merl(path)
-    report = error_report(source.values, material.table(masked="keep").astype("float64"), source.mask)  # type: ignore[attr-defined]
-    print(
-        f"RelAE against {path}: mapped {report.relae_mapped.overall:.4f}, linear {report.relae_linear.overall:.4f}"
-    )
+    relae = measure(material.record, material.decoder, read_merl(path)).meta["relae"]
+    print(f"RelAE against {path}: mapped {relae['mapped']:.4f}, linear {relae['linear']:.4f}")

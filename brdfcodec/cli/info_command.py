@@ -10,17 +10,18 @@ from typing import Any
 
 import numpy as np
 
+from brdfcodec.bvae_format import FLAG_HEADER_ZSTD, read_header
 from brdfcodec.bvae_format import MAGIC as BVAE_MAGIC
-from brdfcodec.bvae_format import read_header
 from brdfcodec.conventions import MERL_COLOR_SCALE, MERL_SHAPE
 from brdfcodec.errors import FileFormatError
 from brdfcodec.genuine import genuine_merl_name
 from brdfcodec.mask import horizon_mask
 from brdfcodec.merl import MERL_FILE_SIZE, read_merl
 
-__all__ = ["describe_file", "register"]
+__all__ = ["HDF5_SIGNATURE", "describe_file", "register"]
 
-_HDF5_SIGNATURE = b"\x89HDF\r\n\x1a\n"
+#: First bytes of every HDF5 file (datasets).
+HDF5_SIGNATURE = b"\x89HDF\r\n\x1a\n"
 _CHANNELS = ("red", "green", "blue")
 
 
@@ -110,7 +111,7 @@ def _bvae_summary(path: Path) -> dict[str, Any]:
         "decoder": {"sha256": header.decoder.sha256, "name": header.decoder.name, "installed_at": installed},
         "latent_dim": header.latent_dim,
         "latent_dtype": header.latent_dtype,
-        "header_compressed": bool(header.flags & 1),
+        "header_compressed": bool(header.flags & FLAG_HEADER_ZSTD),
         "header_bytes": header.header_bytes,
         "bytes": header.file_size,
         "bytes_per_material": header.file_size / len(header.entries),
@@ -130,7 +131,7 @@ def describe_file(path: Path) -> dict[str, Any]:
         raise IsADirectoryError(f"{path}: is a directory, expected a file")
     with open(path, "rb") as stream:
         head = stream.read(8)
-    if head == _HDF5_SIGNATURE:
+    if head == HDF5_SIGNATURE:
         return _dataset_summary(path)
     if head == BVAE_MAGIC or path.suffix == ".bvae":
         return _bvae_summary(path)

@@ -127,25 +127,22 @@ def run(args: argparse.Namespace) -> int:
         write_png(args.output, _traversal_sheet(decoded, max(32, args.size // 3), args.light), overwrite=args.force)
         print(f"wrote {args.output} (traversal sheet, {time.perf_counter() - start:.2f} s)")
         return 0
-    if args.env:
-        image = render_sphere_environment(material, _environment(args.env), size=args.size)
-    elif args.flat:
-        image = render_flat(material, size=args.size)
-    else:
-        image = render_sphere(material, size=args.size, light=args.light)
+    environment = _environment(args.env) if args.env else None
+
+    def view(subject: Any) -> np.ndarray:
+        if environment is not None:
+            return render_sphere_environment(subject, environment, size=args.size)
+        if args.flat:
+            return render_flat(subject, size=args.size)
+        return render_sphere(subject, size=args.size, light=args.light)
+
+    image = view(material)
     render_s = time.perf_counter() - start
     if args.compare is not None:
         from brdfcodec.image_metrics import image_error
         from brdfcodec.merl import read_merl
 
-        source = read_merl(args.compare)
-        if args.env:
-            reference = render_sphere_environment(source, _environment(args.env), size=args.size)
-        elif args.flat:
-            reference = render_flat(source, size=args.size)
-        else:
-            reference = render_sphere(source, size=args.size, light=args.light)
-        error = image_error(reference, image)
+        error = image_error(view(read_merl(args.compare)), image)
         if args.exposure is None:
             args.exposure = error.exposure  # same exposure for both, the reference's
         print(f"against {args.compare}: ΔE ITP mean {error.delta_e_itp_mean:.3f} (p95 {error.delta_e_itp_p95:.3f}), "
