@@ -36,10 +36,31 @@ from brdfcodec.genuine import genuine_merl_name
 from brdfcodec.lookup import lookup
 from brdfcodec.merl import MerlBRDF, read_merl, write_merl
 from brdfcodec.metrics import cosine_weighted_rmse, error_report, relae_linear, relae_mapped
-from brdfcodec.transforms import interpolate_slices, map_values, select_kept_slices, unmap_values
+from brdfcodec.representation import (
+    interpolate_slices,
+    map_values,
+    network_input_from_table,
+    reflectance_from_stored,
+    select_kept_slices,
+    stored_from_reflectance,
+    table_from_network_output,
+    unmap_values,
+)
 from brdfcodec.version import __version__
 
-_CODEC_NAMES = ("BrdfDecoder", "BrdfEncoder", "DecodedMaterial", "MaterialLibrary", "compress", "decompress")
+_CODEC_NAMES = (
+    "BrdfDecoder",
+    "BrdfEncoder",
+    "DecodedMaterial",
+    "MaterialInput",
+    "MaterialInput",
+    "MaterialLibrary",
+    "compress",
+    "decode",
+    "decompress",
+    "encode",
+    "encode_records",
+)
 
 
 def __getattr__(name: str) -> Any:
@@ -57,6 +78,7 @@ __all__ = [
     "BvaeFormatError",
     "BvaeReader",
     "DecodedMaterial",
+    "MaterialInput",
     "DecoderMismatchError",
     "DecoderNotFoundError",
     "DecoderReference",
@@ -65,7 +87,10 @@ __all__ = [
     "MaterialLibrary",
     "UnsupportedVersionError",
     "compress",
+    "decode",
     "decompress",
+    "encode",
+    "encode_records",
     "read_bvae",
     "read_header",
     "write_bvae",
@@ -83,10 +108,14 @@ __all__ = [
     "interpolate_slices",
     "lookup",
     "map_values",
+    "network_input_from_table",
     "read_merl",
+    "reflectance_from_stored",
     "relae_linear",
     "relae_mapped",
     "select_kept_slices",
+    "stored_from_reflectance",
+    "table_from_network_output",
     "unmap_values",
     "write_merl",
 ]

@@ -21,10 +21,11 @@ from types import MappingProxyType
 import numpy as np
 import numpy.typing as npt
 
-from brdfcodec.conventions import MERL_COLOR_SCALE, UNMEASURED_VALUE
+from brdfcodec.conventions import UNMEASURED_VALUE
 from brdfcodec.coords import directions_from_half_diff, grid_angles
 from brdfcodec.mask import horizon_mask
 from brdfcodec.merl import MerlBRDF
+from brdfcodec.representation import stored_from_reflectance
 
 __all__ = [
     "ANALYTIC_PRESETS",
@@ -103,14 +104,17 @@ class AnalyticBRDF:
         value = np.asarray(self.diffuse) / np.pi + lobe
         return np.where(above[..., None], value, 0.0)
 
-    def physical_table(self) -> npt.NDArray[np.float64]:
+    def reflectance(self) -> npt.NDArray[np.float64]:
         """Reflectance (1/sr) on the MERL grid, shape (3, 90, 90, 180); 0 below the horizon."""
         wi, wo = directions_from_half_diff(*grid_angles())
         return np.moveaxis(self.evaluate(wi, wo), -1, 0)
 
+    #: Former name of :meth:`reflectance`.
+    physical_table = reflectance
+
     def to_merl(self) -> MerlBRDF:
         """The material as a MERL table (stored units; below-horizon entries unmeasured)."""
-        stored = self.physical_table() / MERL_COLOR_SCALE[:, None, None, None]
+        stored = stored_from_reflectance(self.reflectance())
         stored = np.where(horizon_mask()[None], stored, UNMEASURED_VALUE)
         return MerlBRDF(np.ascontiguousarray(stored), name=self.name)
 

@@ -1,21 +1,35 @@
-"""Encoding MERL tables to latent records and decoding records back to tables.
+"""The codec: MERL tables to ``.bvae`` bytes and back.
 
-:class:`BrdfEncoder` and :class:`BrdfDecoder` hold a loaded model and its
-device and are meant to be reused; :func:`compress` and :func:`decompress`
-are one-shot shortcuts. :class:`MaterialLibrary` opens a ``.bvae`` file and
-decodes a material only when it is first used, so a scene that uses 3
-materials of a library of 100 decodes 3.
+Two inverse functions on bytes, the shape codec libraries have::
+
+    data = encode(brdfs)            # MerlBRDF objects or MERL file paths -> bytes of a .bvae file
+    library = decode(data)          # bytes -> MaterialLibrary (name -> DecodedMaterial, decoded lazily)
+
+and file helpers on top: :func:`compress` writes ``encode(...)`` atomically,
+:func:`decompress` reads one material's table from a file. ``bvae compress``
+calls :func:`encode_records`, the loop underneath :func:`encode`.
+
+:class:`BrdfEncoder` and :class:`BrdfDecoder` hold a loaded network and its
+device and are meant to be reused; they are the only code that runs the
+networks in batches (training evaluation, export, the report and the named
+parameters use them too, through :meth:`BrdfDecoder.from_network` for a
+network in memory). :class:`MaterialLibrary` opens a ``.bvae`` file (or
+bytes) and decodes a material only when it is first used, so a scene that
+uses 3 materials of a library of 100 decodes 3.
 
 Decoded tables follow ``spec/bvae-format.md`` §6: stored MERL units
-(multiply by the channel scale for reflectance), float32, and entries whose
-bin lies below the horizon set to ``-1`` (unmeasured) unless asked otherwise.
+(:func:`brdfcodec.representation.reflectance_from_stored` gives 1/sr),
+float32, and entries whose bin lies below the horizon set to ``-1``
+(unmeasured) unless asked otherwise.
 """
 
 from __future__ import annotations
 
 import functools
+import itertools
 import os
-from collections.abc import Iterable, Iterator, Sequence
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
 
@@ -23,6 +37,7 @@ import numpy as np
 import numpy.typing as npt
 import torch
 
+from brdfcodec.atomic import atomic_output, check_output_path
 from brdfcodec.bvae_format import (
     BvaeHeader,
     BvaeReader,
@@ -31,35 +46,46 @@ from brdfcodec.bvae_format import (
     LatentDtype,
     LatentRecord,
     Record,
-    write_bvae,
+    encode_bvae,
+    parse_bvae,
 )
-from brdfcodec.conventions import MERL_COLOR_SCALE, N_KEPT_SLICES, NETWORK_INPUT_SHAPE, UNMEASURED_VALUE
-from brdfcodec.dataset import material_arrays
+from brdfcodec.conventions import N_KEPT_SLICES, NETWORK_INPUT_SHAPE, UNMEASURED_VALUE
 from brdfcodec.errors import DecoderMismatchError
 from brdfcodec.mask import horizon_mask
 from brdfcodec.merl import MerlBRDF, read_merl
 from brdfcodec.metrics import error_report
 from brdfcodec.models.registry import default_model_folder, find_model
 from brdfcodec.models.store import ModelManifest, load_manifest, load_model
-from brdfcodec.transforms import kept_slots_for_bins, table_from_network_output
+from brdfcodec.representation import (
+    GREEN_BLOCK,
+    RED_BLOCK,
+    clamp_mapped,
+    kept_slots_for_bins,
+    network_channels_for_slots,
+    network_input_from_table,
+    reflectance_from_stored,
+    table_from_mapped,
+    validate_phi_d_bins,
+)
 
 __all__ = [
     "BrdfDecoder",
     "BrdfEncoder",
     "DecodedMaterial",
     "MaskedEntries",
+    "MaterialInput",
     "MaterialLibrary",
     "compress",
+    "decode",
     "decompress",
+    "encode",
+    "encode_records",
+    "measure",
     "resolve_model",
 ]
 
 MaskedEntries = Literal["unmeasured", "zero", "keep"]
 ModelSpec = str | os.PathLike[str] | ModelManifest | None
-
-#: Green block of the network layout (channel k holds colour k // 21).
-_GREEN = slice(N_KEPT_SLICES, 2 * N_KEPT_SLICES)
-_RED = slice(0, N_KEPT_SLICES)
 
 
 def resolve_model(model: ModelSpec) -> ModelManifest:
@@ -99,6 +125,20 @@ def _apply_mask(table: np.ndarray, bins: Sequence[int] | None, masked: MaskedEnt
     return table
 
 
+class _EvalMode:
+    """Puts a module in evaluation mode for a ``with`` block and restores its mode after."""
+
+    def __init__(self, module: torch.nn.Module) -> None:
+        self.module = module
+
+    def __enter__(self) -> None:
+        self.was_training = self.module.training
+        self.module.eval()
+
+    def __exit__(self, *exc: object) -> None:
+        self.module.train(self.was_training)
+
+
 class BrdfDecoder:
     """A loaded decoder: latent codes to mapped slices and tables.
 
@@ -111,18 +151,49 @@ class BrdfDecoder:
     dtype : torch.dtype, default torch.float32
         Computation dtype (``torch.float16`` or ``torch.bfloat16`` where the
         device supports them). Outputs are float32 either way.
+
+    Examples
+    --------
+    >>> import brdfcodec as bc
+    >>> decoder = bc.BrdfDecoder()                     # the shipped default model
+    >>> record = bc.LatentRecord("centre", [0.0] * decoder.latent_dim, [1.0] * decoder.latent_dim)
+    >>> decoder.decode(record, phi_d_bins=[0]).shape   # stored MERL units, one φd bin
+    (3, 90, 90, 1)
     """
+
+    manifest: ModelManifest | None
+    reference: DecoderReference | None
 
     def __init__(
         self, model: ModelSpec = None, *, device: str | torch.device = "cpu", dtype: torch.dtype = torch.float32
     ) -> None:
         manifest = resolve_model(model)
-        _, network, self.manifest = load_model(manifest.folder, parts=("decoder",), device=str(device))
-        assert network is not None
+        _, network, loaded = load_model(manifest.folder, parts=("decoder",), device=str(device))
+        if network is None:  # load_model returns the parts asked for
+            raise RuntimeError(f"{manifest.folder}: the decoder did not load")
+        self._setup(network, device, dtype, loaded)
+
+    def _setup(
+        self, network: torch.nn.Module, device: str | torch.device, dtype: torch.dtype, manifest: ModelManifest | None
+    ) -> None:
         self.network = network.to(dtype)
         self.device = torch.device(device)
         self.dtype = dtype
-        self.reference = DecoderReference(self.manifest.decoder_sha256, self.manifest.name)
+        self.manifest = manifest
+        self.reference = None if manifest is None else DecoderReference(manifest.decoder_sha256, manifest.name)
+        self._latent_dim = int(network.config.latent_dim)
+
+    @classmethod
+    def from_network(
+        cls, network: torch.nn.Module, *, device: str | torch.device = "cpu", dtype: torch.dtype = torch.float32
+    ) -> BrdfDecoder:
+        """Wrap a decoder network held in memory (training, export): no manifest, no file reference.
+
+        The network is put in evaluation mode while it runs and given back in the mode it had.
+        """
+        decoder = cls.__new__(cls)
+        decoder._setup(network, device, dtype, None)
+        return decoder
 
     @classmethod
     def for_header(
@@ -134,12 +205,12 @@ class BrdfDecoder:
     @property
     def latent_dim(self) -> int:
         """Length of the latent code."""
-        return self.manifest.config.latent_dim
+        return self._latent_dim
 
     @functools.cached_property
     def colour_dims(self) -> tuple[int, ...]:
         """Latent dimensions that control colour: from the manifest, else measured now by traversal."""
-        stored = self.manifest.parameters.get("colour_dims")
+        stored = self.manifest.parameters.get("colour_dims") if self.manifest is not None else None
         if stored:
             return tuple(int(d) for d in stored)
         from brdfcodec.parameters import colour_dims_of, measure_dimension_effects
@@ -154,13 +225,37 @@ class BrdfDecoder:
         DecoderMismatchError
             Names both hashes and says how to get the right model.
         """
-        if header.decoder.sha256 != self.reference.sha256:
+        mine = self.reference
+        if mine is None or header.decoder.sha256 != mine.sha256:
             where = f"{os.fspath(path)}: " if path else ""
+            own = "a decoder held in memory" if mine is None else f"{mine.sha256} ({mine.name})"
             raise DecoderMismatchError(
                 f"{where}the file needs decoder {header.decoder.sha256} ({header.decoder.name}), but this decoder is "
-                f"{self.reference.sha256} ({self.reference.name}); open it with BrdfDecoder.for_header, or register "
-                "the model folder that made it"
+                f"{own}; open it with BrdfDecoder.for_header, or register the model folder that made it"
             )
+
+    def _codes(self, codes: npt.ArrayLike) -> tuple[np.ndarray, bool]:
+        array = np.asarray(codes, dtype=np.float32)
+        single = array.ndim == 1
+        batch = np.array(array.reshape(-1, array.shape[-1]) if array.ndim else array.reshape(1, 1))
+        if batch.shape[-1] != self.latent_dim:
+            raise ValueError(f"codes must have {self.latent_dim} values each, got shape {array.shape}")
+        if not np.isfinite(batch).all():
+            raise ValueError("latent codes must be finite")
+        return batch, single
+
+    def _run(self, batch: np.ndarray, channels: tuple[int, ...] | None, batch_size: int) -> np.ndarray:
+        """The batched network loop: clamped mapped output (:func:`~brdfcodec.representation.clamp_mapped`)."""
+        if batch_size < 1:
+            raise ValueError(f"batch_size must be at least 1, got {batch_size}")
+        outputs = []
+        with torch.inference_mode(), _EvalMode(self.network):
+            for start in range(0, len(batch), batch_size):
+                z = torch.from_numpy(batch[start : start + batch_size]).to(self.device, self.dtype)
+                out = self.network(z) if channels is None else self.network.forward_channels(z, channels)
+                outputs.append(out.float().cpu().numpy())
+        out = np.concatenate(outputs) if len(outputs) > 1 else outputs[0]
+        return clamp_mapped(out, out=out)
 
     def decode_mapped(self, codes: npt.ArrayLike, *, batch_size: int = 16) -> npt.NDArray[np.float32]:
         """Mapped slices of latent codes.
@@ -169,35 +264,22 @@ class BrdfDecoder:
         ----------
         codes : array_like, shape (B, latent_dim) or (latent_dim,)
             Latent codes (any finite values; the output is clamped).
+        batch_size : int, default 16
+            Codes run through the network at once.
 
         Returns
         -------
         ndarray of float32, shape (B, 63, 90, 90) or (63, 90, 90)
             Mapped values in [0, MAPPED_MAX], network layout.
         """
-        array = np.asarray(codes, dtype=np.float32)
-        single = array.ndim == 1
-        batch = np.array(array.reshape(-1, array.shape[-1]) if array.ndim else array.reshape(1, 1))
-        if batch.shape[-1] != self.latent_dim:
-            raise ValueError(f"codes must have {self.latent_dim} values each, got shape {array.shape}")
-        if not np.isfinite(batch).all():
-            raise ValueError("latent codes must be finite")
-        outputs = []
-        with torch.inference_mode():
-            for start in range(0, len(batch), batch_size):
-                z = torch.from_numpy(batch[start : start + batch_size]).to(self.device, self.dtype)
-                outputs.append(self.network(z).float().nan_to_num_(0.0).clamp_(0.0).cpu().numpy())
-        out = np.concatenate(outputs) if len(outputs) > 1 else outputs[0]
+        batch, single = self._codes(codes)
+        out = self._run(batch, None, batch_size)
         return out[0] if single else out
 
     def decode_channels(self, code: npt.ArrayLike, channels: Sequence[int]) -> npt.NDArray[np.float32]:
         """Only some mapped channels of one latent code, shape (len(channels), 90, 90)."""
-        z = np.array(code, dtype=np.float32).reshape(1, -1)
-        if z.shape[1] != self.latent_dim or not np.isfinite(z).all():
-            raise ValueError(f"a code must hold {self.latent_dim} finite values, got {code}")
-        with torch.inference_mode():
-            out = self.network.forward_channels(torch.from_numpy(z).to(self.device, self.dtype), tuple(channels))
-            return out[0].float().nan_to_num_(0.0).clamp_(0.0).cpu().numpy()
+        batch, _ = self._codes(np.asarray(code, dtype=np.float32).reshape(-1))
+        return self._run(batch, tuple(channels), 1)[0]
 
     def mapped_for_bins(self, record: Record, phi_d_bins: Sequence[int]) -> npt.NDArray[np.float32]:
         """Mapped slices (63, 90, 90) with only the kept slices that ``phi_d_bins`` need filled (others 0)."""
@@ -206,11 +288,12 @@ class BrdfDecoder:
             return self.mapped_record(record)
         out = np.zeros(NETWORK_INPUT_SHAPE, dtype=np.float32)
         if isinstance(record, GraftRecord):
-            own = [c * N_KEPT_SLICES + s for c in (0, 2) for s in slots]
+            own = network_channels_for_slots(slots, colours=(0, 2))
             out[own] = self.decode_channels(record.mu, own)
-            out[[N_KEPT_SLICES + s for s in slots]] = self.decode_channels(record.second_code(), list(slots))
+            green = network_channels_for_slots(slots, colours=(1,))
+            out[green] = self.decode_channels(record.second_code(), network_channels_for_slots(slots, colours=(0,)))
         else:
-            channels = [c * N_KEPT_SLICES + s for c in range(3) for s in slots]
+            channels = network_channels_for_slots(slots)
             out[channels] = self.decode_channels(record.mu, channels)
         return out
 
@@ -219,11 +302,11 @@ class BrdfDecoder:
         if isinstance(record, GraftRecord):
             # One code at a time, so M1 is bit-identical to decoding V1 as a plain record.
             out = self.decode_mapped(record.mu)
-            out[_GREEN] = self.decode_mapped(record.second_code())[_RED]
+            out[GREEN_BLOCK] = self.decode_mapped(record.second_code())[RED_BLOCK]
             return out
         return self.decode_mapped(record.mu)
 
-    def table(
+    def decode(
         self,
         record: Record,
         *,
@@ -246,11 +329,16 @@ class BrdfDecoder:
         ndarray of float32, shape (3, 90, 90, K)
         """
         self._check_record(record)
-        mapped = self.mapped_record(record) if phi_d_bins is None else self.mapped_for_bins(record, phi_d_bins)
-        table = table_from_network_output(mapped, phi_d_bins=phi_d_bins)
-        return _apply_mask(table, phi_d_bins, masked)
+        if phi_d_bins is None:
+            return _apply_mask(table_from_mapped(self.mapped_record(record)), None, masked)
+        bins = validate_phi_d_bins(phi_d_bins)
+        table = table_from_mapped(self.mapped_for_bins(record, bins), phi_d_bins=bins)
+        return _apply_mask(table, bins, masked)
 
-    def tables(
+    #: Former name of :meth:`decode`.
+    table = decode
+
+    def decode_many(
         self, records: Sequence[Record], *, masked: MaskedEntries = "unmeasured", batch_size: int = 16
     ) -> Iterator[npt.NDArray[np.float32]]:
         """Full tables of many records, decoded ``batch_size`` at a time (a generator: one table built at a time)."""
@@ -259,14 +347,35 @@ class BrdfDecoder:
         for start in range(0, len(records), batch_size):
             chunk = records[start : start + batch_size]
             codes = [r.mu for r in chunk if isinstance(r, LatentRecord)]
-            batch = iter(self.decode_mapped(np.stack(codes)) if codes else ())
+            batch = iter(self.decode_mapped(np.stack(codes), batch_size=batch_size) if codes else ())
             for record in chunk:  # grafts need two codes each: decoded on their own
                 mapped = next(batch) if isinstance(record, LatentRecord) else self.mapped_record(record)
-                yield _apply_mask(table_from_network_output(mapped), None, masked)
+                yield _apply_mask(table_from_mapped(mapped), None, masked)
+
+    #: Former name of :meth:`decode_many`.
+    tables = decode_many
 
     def _check_record(self, record: Record) -> None:
         if record.latent_dim != self.latent_dim:
             raise ValueError(f"{record.name}: latent dimension {record.latent_dim}, decoder needs {self.latent_dim}")
+
+
+@dataclass(frozen=True)
+class MaterialInput:
+    """A material already turned into a network input (a dataset row), with its table when known.
+
+    Attributes
+    ----------
+    name : str
+    inputs : ndarray of float32, shape (63, 90, 90)
+        :func:`~brdfcodec.representation.network_input_from_table` of the table.
+    source : MerlBRDF or None
+        The table, for measuring the error and the source hash; None if not at hand.
+    """
+
+    name: str
+    inputs: np.ndarray
+    source: MerlBRDF | None = None
 
 
 class BrdfEncoder:
@@ -279,32 +388,77 @@ class BrdfEncoder:
     device : str or torch.device, default "cpu"
     """
 
+    manifest: ModelManifest | None
+
     def __init__(self, model: ModelSpec = None, *, device: str | torch.device = "cpu") -> None:
         manifest = resolve_model(model)
-        network, _, self.manifest = load_model(manifest.folder, parts=("encoder",), device=str(device))
-        assert network is not None
+        network, _, loaded = load_model(manifest.folder, parts=("encoder",), device=str(device))
+        if network is None:  # load_model returns the parts asked for
+            raise RuntimeError(f"{manifest.folder}: the encoder did not load")
+        self._setup(network, device, loaded)
+
+    def _setup(self, network: torch.nn.Module, device: str | torch.device, manifest: ModelManifest | None) -> None:
         self.network = network
         self.device = torch.device(device)
-        self.reference = DecoderReference(self.manifest.decoder_sha256, self.manifest.name)
+        self.manifest = manifest
+        self.reference = None if manifest is None else DecoderReference(manifest.decoder_sha256, manifest.name)
 
-    def posterior_from_inputs(self, inputs: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray]:
-        """Posterior of network inputs ``(B, 63, 90, 90)`` (mapped, masked entries 0): mean and std, float32."""
-        batch = np.array(inputs, dtype=np.float32)
+    @classmethod
+    def from_network(cls, network: torch.nn.Module, *, device: str | torch.device = "cpu") -> BrdfEncoder:
+        """Wrap an encoder network held in memory (training, export): no manifest.
+
+        The network is put in evaluation mode while it runs and given back in the mode it had.
+        """
+        encoder = cls.__new__(cls)
+        encoder._setup(network, device, None)
+        return encoder
+
+    def posterior_from_inputs(
+        self, inputs: npt.ArrayLike, *, batch_size: int = 8, log_variance: bool = False
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Posterior of network inputs: the batched encoder loop.
+
+        Parameters
+        ----------
+        inputs : array_like, shape (B, 63, 90, 90)
+            Mapped inputs, invalid entries 0
+            (:func:`~brdfcodec.representation.network_input_from_table`).
+        batch_size : int, default 8
+        log_variance : bool, default False
+            Return log σ² (as the network gives it) instead of σ.
+
+        Returns
+        -------
+        mu, sigma (or log σ²) : ndarray of float32, shape (B, latent_dim)
+            σ = exp(½·clamp(log σ², −60, 60)), finite and > 0.
+        """
+        batch = np.asarray(inputs, dtype=np.float32)
         if batch.ndim != 4 or batch.shape[1:] != NETWORK_INPUT_SHAPE:
             expected = ", ".join(map(str, NETWORK_INPUT_SHAPE))
             raise ValueError(f"inputs must have shape (B, {expected}), got {batch.shape}")
-        with torch.inference_mode():
-            mu, logvar = self.network(torch.from_numpy(batch).to(self.device))
-            sigma = torch.exp(0.5 * logvar.float().clamp(-60.0, 60.0))
-            return mu.float().cpu().numpy(), sigma.cpu().numpy()
+        if batch_size < 1:
+            raise ValueError(f"batch_size must be at least 1, got {batch_size}")
+        mus, spreads = [], []
+        with torch.inference_mode(), _EvalMode(self.network):
+            for start in range(0, len(batch), batch_size):
+                x = torch.from_numpy(np.ascontiguousarray(batch[start : start + batch_size])).to(self.device)
+                mu, logvar = self.network(x)
+                logvar = logvar.float()
+                mus.append(mu.float().cpu().numpy())
+                spread = logvar if log_variance else torch.exp(0.5 * logvar.clamp(-60.0, 60.0))
+                spreads.append(spread.cpu().numpy())
+        if not mus:
+            empty = np.empty((0, int(self.network.config.latent_dim)), dtype=np.float32)
+            return empty, empty.copy()
+        return np.concatenate(mus), np.concatenate(spreads)
 
     def posterior(self, brdfs: Sequence[MerlBRDF], *, batch_size: int = 8) -> tuple[np.ndarray, np.ndarray]:
         """Posterior mean and standard deviation, each of shape (len(brdfs), latent_dim), float32."""
         mus, sigmas = [], []
         for start in range(0, len(brdfs), batch_size):
-            mu, sigma = self.posterior_from_inputs(
-                np.stack([material_arrays(b)[0] for b in brdfs[start : start + batch_size]])
-            )
+            chunk = brdfs[start : start + batch_size]
+            inputs = np.stack([network_input_from_table(b.values, b.mask)[0] for b in chunk])
+            mu, sigma = self.posterior_from_inputs(inputs, batch_size=batch_size)
             mus.append(mu)
             sigmas.append(sigma)
         return np.concatenate(mus), np.concatenate(sigmas)
@@ -327,7 +481,7 @@ class BrdfEncoder:
         """Records from posteriors, with metadata: the encoder's SHA-256, and the source's where it is known."""
         records = []
         for i, name in enumerate(names):
-            meta = {"encoder_sha256": self.manifest.encoder_sha256}
+            meta = {} if self.manifest is None else {"encoder_sha256": self.manifest.encoder_sha256}
             if sources[i] is not None:
                 meta["source_sha256"] = sources[i].sha256  # type: ignore[union-attr]
             records.append(LatentRecord(name, mu[i], sigma[i], meta))
@@ -336,7 +490,7 @@ class BrdfEncoder:
 
 def measure(record: Record, decoder: BrdfDecoder, source: MerlBRDF) -> LatentRecord | GraftRecord:
     """The record with ``meta["relae"]`` set to the mapped and linear RelAE of its decode against ``source``."""
-    estimate = decoder.table(record, masked="keep").astype(np.float64)
+    estimate = decoder.decode(record, masked="keep").astype(np.float64)
     report = error_report(source.values, estimate, source.mask)
     meta = {
         **record.meta,
@@ -368,32 +522,36 @@ class DecodedMaterial:
 
     @functools.cached_property
     def mapped(self) -> npt.NDArray[np.float32]:
-        """Decoder output, (63, 90, 90) mapped slices (computed once)."""
+        """Decoder output, (63, 90, 90) mapped slices in [0, MAPPED_MAX] (computed once)."""
         return self.decoder.mapped_record(self.record)
 
     def table(
         self, *, phi_d_bins: Sequence[int] | None = None, masked: MaskedEntries = "unmeasured"
     ) -> npt.NDArray[np.float32]:
-        """Stored-unit table, all or chosen φd bins (see :meth:`BrdfDecoder.table`).
+        """Stored-unit table, all or chosen φd bins (see :meth:`BrdfDecoder.decode`).
 
         Chosen bins of a material not yet decoded are decoded alone (only the
         kept slices they need); the full decode is cached once made.
         """
-        if phi_d_bins is not None and "mapped" not in self.__dict__:
-            return self.decoder.table(self.record, phi_d_bins=phi_d_bins, masked=masked)
-        return _apply_mask(table_from_network_output(self.mapped, phi_d_bins=phi_d_bins), phi_d_bins, masked)
+        if phi_d_bins is None:
+            return _apply_mask(table_from_mapped(self.mapped), None, masked)
+        if "mapped" not in self.__dict__:
+            return self.decoder.decode(self.record, phi_d_bins=phi_d_bins, masked=masked)
+        bins = validate_phi_d_bins(phi_d_bins)
+        return _apply_mask(table_from_mapped(self.mapped, phi_d_bins=bins), bins, masked)
 
     @functools.cached_property
-    def _physical(self) -> npt.NDArray[np.float32]:
-        table = self.table(masked="zero")
-        table *= MERL_COLOR_SCALE.astype(np.float32).reshape(3, 1, 1, 1)
+    def _reflectance(self) -> npt.NDArray[np.float32]:
+        table = reflectance_from_stored(self.table(masked="zero"))
+        table.setflags(write=False)
         return table
 
-    def physical(self) -> npt.NDArray[np.float32]:
+    def reflectance(self) -> npt.NDArray[np.float32]:
         """Reflectance in 1/sr, linear RGB, shape (3, 90, 90, 180); 0 below the horizon (cached, read-only)."""
-        view = self._physical.view()
-        view.setflags(write=False)
-        return view
+        return self._reflectance
+
+    #: Former name of :meth:`reflectance`.
+    physical = reflectance
 
     def eval(
         self, wi: npt.ArrayLike, wo: npt.ArrayLike, *, mode: Literal["nearest", "trilinear"] = "nearest"
@@ -402,20 +560,21 @@ class DecodedMaterial:
         from brdfcodec.lookup import lookup
 
         mask = np.broadcast_to(horizon_mask(), (3, *horizon_mask().shape))
-        return lookup(self._physical, wi, wo, mode=mode, mask=mask)
+        return lookup(self._reflectance, wi, wo, mode=mode, mask=mask)
 
     def to_merl(self, *, masked: MaskedEntries = "unmeasured") -> MerlBRDF:
         """The decoded table as a :class:`~brdfcodec.merl.MerlBRDF` (float64, for writing or metrics)."""
         return MerlBRDF(self.table(masked=masked).astype(np.float64), name=self.name)
 
 
-class MaterialLibrary:
-    """A ``.bvae`` file opened for decoding materials on demand.
+class MaterialLibrary(Mapping[str, DecodedMaterial]):
+    """A ``.bvae`` file (or its bytes) opened for decoding materials on demand: name → :class:`DecodedMaterial`.
 
     Opening reads the header only and checks that ``decoder`` (or the model
     found by the file's decoder hash) is the one the file needs. Indexing by
     name reads that record and returns a lazily decoded, cached
-    :class:`DecodedMaterial`.
+    :class:`DecodedMaterial`. This is the one library class: :func:`decode`
+    returns it for bytes, ``MaterialLibrary(path)`` opens a file.
 
     Parameters
     ----------
@@ -426,19 +585,49 @@ class MaterialLibrary:
     Raises
     ------
     DecoderNotFoundError, DecoderMismatchError, BvaeFormatError
+
+    Examples
+    --------
+    >>> import brdfcodec as bc
+    >>> from brdfcodec.examples import example_library
+    >>> with bc.MaterialLibrary(example_library()) as library:
+    ...     print(len(library), library.names[:2], library["gold-metallic-paint"].table(phi_d_bins=[90]).shape)
+    90 ['alum-bronze', 'alumina-oxide'] (3, 90, 90, 1)
     """
 
     def __init__(self, path: str | os.PathLike[str], *, decoder: BrdfDecoder | None = None) -> None:
-        self.path = Path(path)
-        self._reader = BvaeReader(path)
+        self.path: Path | None = Path(path)
+        reader = BvaeReader(path)
         try:
-            self.header = self._reader.header
-            self.decoder = decoder if decoder is not None else BrdfDecoder.for_header(self.header)
-            self.decoder.check(self.header, path)
+            self._open(reader.header, reader.read, reader.close, decoder, path)
         except BaseException:
-            self._reader.close()
+            reader.close()
             raise
+
+    def _open(
+        self,
+        header: BvaeHeader,
+        read: Callable[[str], Record],
+        close: Callable[[], None],
+        decoder: BrdfDecoder | None,
+        where: str | os.PathLike[str],
+    ) -> None:
+        self.header = header
+        self._read = read
+        self._close = close
+        self.decoder = decoder if decoder is not None else BrdfDecoder.for_header(header)
+        self.decoder.check(header, where)
         self._materials: dict[str, DecodedMaterial] = {}
+
+    @classmethod
+    def from_bytes(cls, data: bytes, *, decoder: BrdfDecoder | None = None) -> MaterialLibrary:
+        """A library from the bytes of a ``.bvae`` file (parsed and checked at once, records decoded lazily)."""
+        parsed = parse_bvae(bytes(data))
+        records = {record.name: record for record in parsed.records}
+        library = cls.__new__(cls)
+        library.path = None
+        library._open(parsed.header, records.__getitem__, lambda: None, decoder, "<bytes>")
+        return library
 
     def __enter__(self) -> MaterialLibrary:
         return self
@@ -448,7 +637,7 @@ class MaterialLibrary:
 
     def close(self) -> None:
         """Close the file (decoded materials stay usable)."""
-        self._reader.close()
+        self._close()
 
     @property
     def names(self) -> list[str]:
@@ -458,12 +647,15 @@ class MaterialLibrary:
     def __len__(self) -> int:
         return len(self.header.entries)
 
+    def __iter__(self) -> Iterator[str]:
+        return iter(self.header.names)
+
     def __contains__(self, name: object) -> bool:
         return name in self.header.names
 
     def __getitem__(self, name: str) -> DecodedMaterial:
         if name not in self._materials:
-            self._materials[name] = DecodedMaterial(self._reader.read(name), self.decoder)
+            self._materials[name] = DecodedMaterial(self._read(name), self.decoder)
         return self._materials[name]
 
     def forget(self, name: str | None = None) -> None:
@@ -483,46 +675,164 @@ class MaterialLibrary:
         return sum("mapped" in m.__dict__ for m in self._materials.values())
 
 
-def _as_brdfs(sources: Iterable[MerlBRDF | str | os.PathLike[str]]) -> list[MerlBRDF]:
-    return [s if isinstance(s, MerlBRDF) else read_merl(s) for s in sources]
+EncodeSource = MerlBRDF | MaterialInput | str | os.PathLike[str]
 
 
-def compress(
-    sources: MerlBRDF | str | os.PathLike[str] | Sequence[MerlBRDF | str | os.PathLike[str]],
-    output: str | os.PathLike[str] | None = None,
+def _as_input(source: EncodeSource, index: int, name: str | None) -> MaterialInput:
+    if isinstance(source, MaterialInput):
+        return source if name is None else MaterialInput(name, source.inputs, source.source)
+    brdf = source if isinstance(source, MerlBRDF) else read_merl(source)
+    label = name or brdf.name or (Path(source).stem if not isinstance(source, MerlBRDF) else f"material-{index}")
+    return MaterialInput(label, network_input_from_table(brdf.values, brdf.mask)[0], brdf)
+
+
+def encode_records(
+    sources: Iterable[EncodeSource],
     *,
-    model: ModelSpec = None,
-    latent_dtype: LatentDtype = "float32",
+    names: Sequence[str] | None = None,
+    encoder: BrdfEncoder | None = None,
+    decoder: BrdfDecoder | None = None,
     measure_error: bool = True,
-    overwrite: bool = False,
+    batch_size: int = 8,
+    on_batch: Callable[[list[Record]], None] | None = None,
 ) -> list[Record]:
-    """Encode MERL tables (objects or file paths) and optionally write them as one ``.bvae`` file.
+    """Encode materials into records, ``batch_size`` at a time (sources are read as they are needed).
 
     Parameters
     ----------
-    sources : MerlBRDF, path, or a sequence of them
-    output : path, optional
-        Where to write the ``.bvae`` file (atomically).
-    model : model folder, decoder SHA-256, or None for the default
-    latent_dtype : {"float32", "float16"}
+    sources : iterable of MerlBRDF, MaterialInput or MERL file path
+        Consumed lazily, so a generator that loads one table at a time keeps
+        at most ``batch_size`` tables in memory.
+    names : sequence of str, optional
+        Record names; by default each source's name (file stem, ``MerlBRDF.name``).
+    encoder : BrdfEncoder, optional
+        The shipped default model's encoder when absent.
+    decoder : BrdfDecoder, optional
+        For measuring; loaded from the encoder's model when needed.
     measure_error : bool, default True
-        Decode each record and store its RelAE against the source in ``meta``.
-    overwrite : bool, default False
+        Decode each record and store its RelAE against its source table in
+        ``meta["relae"]`` (skipped for a :class:`MaterialInput` without table).
+    batch_size : int, default 8
+    on_batch : callable, optional
+        Called with the records of each batch as it is done (progress).
 
     Returns
     -------
     list of LatentRecord
     """
-    items = [sources] if isinstance(sources, MerlBRDF | str | os.PathLike) else list(sources)
-    brdfs = _as_brdfs(items)
-    encoder = BrdfEncoder(model)
-    records: list[Record] = list(encoder.encode_many(brdfs))
-    if measure_error:
+    if batch_size < 1:
+        raise ValueError(f"batch_size must be at least 1, got {batch_size}")
+    encoder = encoder if encoder is not None else BrdfEncoder()
+    if measure_error and decoder is None:
         decoder = BrdfDecoder(encoder.manifest)
-        records = [measure(r, decoder, b) for r, b in zip(records, brdfs, strict=True)]
-    if output is not None:
-        write_bvae(output, records, encoder.reference, latent_dtype=latent_dtype, overwrite=overwrite)
+    labels = iter(names) if names is not None else itertools.repeat(None)
+    records: list[Record] = []
+    numbered = enumerate(sources)
+    while chunk := list(itertools.islice(numbered, batch_size)):
+        items = [_as_input(source, index, next(labels)) for index, source in chunk]
+        mu, sigma = encoder.posterior_from_inputs(np.stack([item.inputs for item in items]), batch_size=batch_size)
+        sources_of = [item.source for item in items]
+        batch: list[Record] = list(encoder.make_records([item.name for item in items], mu, sigma, sources_of))
+        if measure_error and decoder is not None:
+            batch = [r if s is None else measure(r, decoder, s) for r, s in zip(batch, sources_of, strict=True)]
+        records += batch
+        if on_batch is not None:
+            on_batch(batch)
     return records
+
+
+def encode(
+    sources: EncodeSource | Iterable[EncodeSource],
+    *,
+    names: Sequence[str] | None = None,
+    model: ModelSpec = None,
+    latent_dtype: LatentDtype = "float32",
+    measure_error: bool = True,
+    batch_size: int = 8,
+) -> bytes:
+    """Encode MERL tables into the bytes of one ``.bvae`` file (one material, or a library of many).
+
+    The inverse of :func:`decode`: ``decode(encode([brdf]))[brdf.name]`` is the
+    material as the model reconstructs it.
+
+    Parameters
+    ----------
+    sources : MerlBRDF, MaterialInput, MERL file path, or an iterable of them
+    names : sequence of str, optional
+        Material names (by default the sources' names).
+    model : model folder, decoder SHA-256, or None for the default
+    latent_dtype : {"float32", "float16"}
+    measure_error : bool, default True
+        Store each record's RelAE against its source in ``meta["relae"]``.
+    batch_size : int, default 8
+
+    Returns
+    -------
+    bytes
+        A complete ``.bvae`` file (``spec/bvae-format.md``).
+
+    Examples
+    --------
+    >>> import brdfcodec as bc
+    >>> from brdfcodec.analytic import ANALYTIC_PRESETS
+    >>> data = bc.encode([ANALYTIC_PRESETS["gold"].to_merl()], measure_error=False)
+    >>> data[1:5], len(data) < 400
+    (b'BVAE', True)
+    >>> bc.decode(data)["gold"].table(phi_d_bins=[0]).shape
+    (3, 90, 90, 1)
+    """
+    items = [sources] if isinstance(sources, MerlBRDF | MaterialInput | str | os.PathLike) else sources
+    encoder = BrdfEncoder(model)
+    records = encode_records(items, names=names, encoder=encoder, measure_error=measure_error, batch_size=batch_size)
+    if encoder.reference is None:  # loaded from a model folder, so it has one
+        raise RuntimeError("the encoder has no decoder reference")
+    return encode_bvae(records, encoder.reference, latent_dtype=latent_dtype)
+
+
+def decode(data: bytes, *, decoder: BrdfDecoder | None = None) -> MaterialLibrary:
+    """The materials of a ``.bvae`` file's bytes: the inverse of :func:`encode`.
+
+    Parameters
+    ----------
+    data : bytes
+        A complete ``.bvae`` file.
+    decoder : BrdfDecoder, optional
+        Reuse a loaded decoder; by default the one the file names is found by its SHA-256.
+
+    Returns
+    -------
+    MaterialLibrary
+        Name → :class:`DecodedMaterial`; each decoded when first used.
+
+    Raises
+    ------
+    BvaeFormatError, DecoderNotFoundError, DecoderMismatchError
+    """
+    return MaterialLibrary.from_bytes(data, decoder=decoder)
+
+
+def compress(
+    sources: EncodeSource | Iterable[EncodeSource],
+    output: str | os.PathLike[str],
+    *,
+    names: Sequence[str] | None = None,
+    model: ModelSpec = None,
+    latent_dtype: LatentDtype = "float32",
+    measure_error: bool = True,
+    overwrite: bool = False,
+) -> int:
+    """Write :func:`encode` of the sources to a ``.bvae`` file, atomically.
+
+    Returns
+    -------
+    int
+        Bytes written.
+    """
+    check_output_path(output, overwrite=overwrite)  # before the work, not after
+    data = encode(sources, names=names, model=model, latent_dtype=latent_dtype, measure_error=measure_error)
+    with atomic_output(output, overwrite=overwrite) as tmp:
+        Path(tmp).write_bytes(data)
+    return len(data)
 
 
 def decompress(
@@ -537,7 +847,7 @@ def decompress(
     Returns
     -------
     ndarray of float32, shape (3, 90, 90, K)
-        Stored MERL units; see :meth:`BrdfDecoder.table`.
+        Stored MERL units; see :meth:`BrdfDecoder.decode`.
     """
     with MaterialLibrary(path) as library:
         if material is None:
@@ -548,4 +858,3 @@ def decompress(
                 )
             material = library.names[0]
         return library[material].table(phi_d_bins=phi_d_bins, masked=masked)
-

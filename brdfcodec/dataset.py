@@ -32,24 +32,33 @@ from brdfcodec.conventions import (
 )
 from brdfcodec.errors import DatasetError
 from brdfcodec.merl import MerlBRDF
+from brdfcodec.representation import network_input_from_table
 from brdfcodec.sources import MaterialSource
 from brdfcodec.split import TRAIN, VALIDATION, split_materials
-from brdfcodec.transforms import map_values, network_input, select_kept_slices
 from brdfcodec.version import __version__
 
-__all__ = ["DATASET_FORMAT", "DATASET_FORMAT_VERSION", "BrdfDataset", "build_dataset", "material_arrays"]
+__all__ = [
+    "DATASET_FORMAT",
+    "DATASET_FORMAT_VERSION",
+    "HDF5_SIGNATURE",
+    "BrdfDataset",
+    "build_dataset",
+    "material_arrays",
+]
 
 #: Value of the root attribute ``format``.
 DATASET_FORMAT: Final = "brdfcodec-dataset"
 #: Value of the root attribute ``format_version`` written by this code.
 DATASET_FORMAT_VERSION: Final = 1
+#: First bytes of every HDF5 file, hence of every dataset file (how ``bvae info`` and ``bvae compress`` tell one).
+HDF5_SIGNATURE: Final = b"\x89HDF\r\n\x1a\n"
 
 _STRING = h5py.string_dtype("utf-8")
 _COMPRESSION: Final = {"compression": "gzip", "compression_opts": 1, "shuffle": True}
 
 
 def material_arrays(brdf: MerlBRDF) -> tuple[np.ndarray, np.ndarray]:
-    """Network input and its mask for one table.
+    """Network input and its mask for one table: :func:`brdfcodec.representation.network_input_from_table`.
 
     Returns
     -------
@@ -58,10 +67,7 @@ def material_arrays(brdf: MerlBRDF) -> tuple[np.ndarray, np.ndarray]:
     mask : ndarray of bool, shape (63, 90, 90)
         Valid entries.
     """
-    kept_mask = select_kept_slices(brdf.mask)
-    kept_values = np.where(kept_mask, select_kept_slices(brdf.values), 0.0)
-    mapped = np.where(kept_mask, map_values(kept_values), 0.0).astype(np.float32)
-    return network_input(mapped), network_input(kept_mask)
+    return network_input_from_table(brdf.values, brdf.mask)
 
 
 def build_dataset(
@@ -146,7 +152,7 @@ def build_dataset(
             )
         for index, source in enumerate(tqdm(sources, desc="materials", unit="mat", disable=not progress)):
             loaded = source.load()
-            inputs[index], masks[index] = material_arrays(loaded.brdf)
+            inputs[index], masks[index] = network_input_from_table(loaded.brdf.values, loaded.brdf.mask)
             digests[index] = loaded.source_sha256
             genuine[index] = loaded.genuine_merl
             if tables is not None:

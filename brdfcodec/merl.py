@@ -20,10 +20,11 @@ import numpy as np
 import numpy.typing as npt
 
 from brdfcodec.atomic import atomic_output
-from brdfcodec.conventions import MERL_COLOR_SCALE, MERL_SHAPE, TABLE_SHAPE, UNMEASURED_VALUE
+from brdfcodec.conventions import MERL_SHAPE, TABLE_SHAPE, UNMEASURED_VALUE
 from brdfcodec.errors import MerlFormatError, NonFiniteValueError
 from brdfcodec.genuine import sha256_of_file
 from brdfcodec.mask import validity_mask
+from brdfcodec.representation.units import reflectance_from_stored
 
 __all__ = [
     "MERL_FILE_SIZE",
@@ -79,15 +80,17 @@ class MerlBRDF:
         """Fraction of entries that are valid, in [0, 1]."""
         return float(self.mask.mean())
 
-    def physical(self) -> npt.NDArray[np.float64]:
+    def reflectance(self) -> npt.NDArray[np.float64]:
         """Linear RGB reflectance in 1/sr, with invalid entries set to 0.
 
         Returns
         -------
         ndarray of float64, shape (3, 90, 90, 180)
         """
-        scaled = self.values * MERL_COLOR_SCALE[:, None, None, None]
-        return np.where(self.mask, scaled, 0.0)
+        return np.where(self.mask, reflectance_from_stored(self.values), 0.0)
+
+    #: Former name of :meth:`reflectance`.
+    physical = reflectance
 
     @functools.cached_property
     def sha256(self) -> str:
@@ -112,7 +115,7 @@ class MerlBRDF:
         """
         from brdfcodec.lookup import lookup
 
-        return lookup(self.physical(), wi, wo, mode=mode, mask=self.mask)
+        return lookup(self.reflectance(), wi, wo, mode=mode, mask=self.mask)
 
 
 def _check_header(path: Path, header: bytes, size: int) -> None:

@@ -32,10 +32,10 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from brdfcodec.conventions import MERL_COLOR_SCALE, TABLE_SHAPE
+from brdfcodec.conventions import TABLE_SHAPE
 from brdfcodec.coords import directions_from_half_diff, grid_angles
 from brdfcodec.mask import validity_mask
-from brdfcodec.transforms import map_values
+from brdfcodec.representation import map_values, reflectance_from_stored
 
 __all__ = [
     "ChannelError",
@@ -45,9 +45,6 @@ __all__ = [
     "relae_linear",
     "relae_mapped",
 ]
-
-_SCALE = MERL_COLOR_SCALE[:, None, None, None]
-
 
 @dataclass(frozen=True)
 class ChannelError:
@@ -132,7 +129,7 @@ def relae_linear(
         reference is zero on every compared entry.
     """
     ref, est, valid = _prepare(reference, estimate, mask)
-    return _relative_absolute(ref * _SCALE, est * _SCALE, valid)
+    return _relative_absolute(reflectance_from_stored(ref), reflectance_from_stored(est), valid)
 
 
 def relae_mapped(
@@ -162,7 +159,7 @@ def cosine_weighted_rmse(
     Parameters and return as :func:`relae_linear`; the unit is 1/sr.
     """
     ref, est, valid = _prepare(reference, estimate, mask)
-    weighted = (est - ref) * _SCALE * _cos_theta_in()[None]
+    weighted = reflectance_from_stored(est - ref) * _cos_theta_in()[None]
     squared = np.where(valid, weighted**2, 0.0).reshape(3, -1)
     counts = valid.reshape(3, -1).sum(axis=1)
     per_channel = np.sqrt(np.divide(squared.sum(axis=1), counts, out=np.full(3, np.nan), where=counts > 0))

@@ -28,11 +28,12 @@ import h5py
 import numpy as np
 import numpy.typing as npt
 
-from brdfcodec.conventions import MERL_COLOR_SCALE, UNMEASURED_VALUE
+from brdfcodec.conventions import UNMEASURED_VALUE
 from brdfcodec.coords import grid_angles
 from brdfcodec.errors import SourceFormatError
 from brdfcodec.mask import horizon_mask
 from brdfcodec.merl import MerlBRDF
+from brdfcodec.representation import stored_from_reflectance
 
 __all__ = ["NBRDF_SOURCE_KIND", "NbrdfFit", "iter_nbrdf_zip", "list_nbrdf_zip", "read_nbrdf_fit"]
 
@@ -89,8 +90,8 @@ class NbrdfFit:
         diff = np.stack(
             [np.sin(theta_d) * np.cos(phi_d), np.sin(theta_d) * np.sin(phi_d), np.cos(theta_d)], axis=-1
         )
-        physical = np.moveaxis(self.evaluate_vectors(half, diff).astype(np.float64), -1, 0)
-        stored = np.maximum(physical, 0.0) / MERL_COLOR_SCALE[:, None, None, None]
+        reflectance = np.moveaxis(self.evaluate_vectors(half, diff).astype(np.float64), -1, 0)
+        stored = stored_from_reflectance(np.maximum(reflectance, 0.0))
         stored = np.where(horizon_mask()[None], stored, UNMEASURED_VALUE)
         if not np.isfinite(stored).all():
             raise SourceFormatError(self.name, "the fit produces non-finite values on the MERL grid")

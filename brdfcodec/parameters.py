@@ -23,8 +23,8 @@ from typing import Any
 
 import numpy as np
 
-from brdfcodec.conventions import MERL_COLOR_SCALE
 from brdfcodec.coords import theta_h_from_index
+from brdfcodec.representation import reflectance_from_stored
 
 __all__ = ["DimensionEffect", "colour_dims_of", "describe_parameters", "measure_dimension_effects"]
 
@@ -130,7 +130,6 @@ def measure_dimension_effects(
 
     dim = decoder.latent_dim
     centre = np.zeros(dim, dtype=np.float32) if base is None else np.asarray(base, dtype=np.float32)
-    scale = MERL_COLOR_SCALE.reshape(3, 1, 1)
     effects = []
     for d in range(dim):
         stats = []
@@ -138,7 +137,7 @@ def measure_dimension_effects(
             code = centre.copy()
             code[d] += sign * span
             table = decoder.table(LatentRecord("probe", code, np.ones(dim)), phi_d_bins=[_PHI_D_BIN], masked="zero")
-            stats.append(_statistics(table[..., 0] * scale))
+            stats.append(_statistics(reflectance_from_stored(table[..., 0])))
         change = {k: stats[1][k] - stats[0][k] for k in stats[0]}
         effects.append(DimensionEffect(dim=d, label=_label(change), **change))
     return effects

@@ -11,8 +11,9 @@ import numpy as np
 import numpy.typing as npt
 
 from brdfcodec.atomic import atomic_output
-from brdfcodec.conventions import MERL_COLOR_SCALE, N_PHI_D, TABLE_SHAPE
+from brdfcodec.conventions import N_PHI_D, TABLE_SHAPE
 from brdfcodec.merl import write_merl
+from brdfcodec.representation import reflectance_from_stored
 
 __all__ = ["TABLE_FORMATS", "TableFormat", "table_format_of", "write_table"]
 
@@ -64,6 +65,6 @@ def write_table(
     else:
         from brdfcodec.exr import write_exr_slices
 
-        reflectance = np.maximum(array, 0) * MERL_COLOR_SCALE.reshape(3, 1, 1, 1)
+        reflectance = reflectance_from_stored(np.maximum(array, 0).astype(np.float64))
         write_exr_slices(path, reflectance, bins, overwrite=overwrite)
     return kind

@@ -9,14 +9,38 @@ import numpy as np
 import pytest
 import torch
 
-from brdfcodec.bvae_format import DecoderReference, GraftRecord, LatentRecord, read_bvae, write_bvae
-from brdfcodec.codec import BrdfDecoder, BrdfEncoder, MaterialLibrary, compress, decompress
-from brdfcodec.conventions import MERL_COLOR_SCALE, UNMEASURED_VALUE
+from brdfcodec.bvae_format import (
+    MAGIC,
+    DecoderReference,
+    GraftRecord,
+    LatentRecord,
+    parse_bvae,
+    read_bvae,
+    write_bvae,
+)
+from brdfcodec.codec import (
+    BrdfDecoder,
+    BrdfEncoder,
+    MaterialInput,
+    MaterialLibrary,
+    compress,
+    decode,
+    decompress,
+    encode,
+    encode_records,
+)
+from brdfcodec.conventions import UNMEASURED_VALUE
 from brdfcodec.errors import DecoderMismatchError, DecoderNotFoundError
 from brdfcodec.mask import horizon_mask
 from brdfcodec.merl import MerlBRDF, write_merl
+from brdfcodec.metrics import error_report
 from brdfcodec.models.registry import default_model_folder
-from brdfcodec.transforms import map_values, table_from_network_output
+from brdfcodec.representation import (
+    map_values,
+    network_input_from_table,
+    reflectance_from_stored,
+    table_from_network_output,
+)
 
 
 @pytest.fixture(scope="module")
@@ -69,12 +93,12 @@ def test_slices_equal_the_full_table(decoder: BrdfDecoder) -> None:
     rng = np.random.default_rng(3)
     graft = GraftRecord("g", rng.normal(size=decoder.latent_dim), np.ones(decoder.latent_dim), (0, 1), [2.0, -1.0])
     for record in (records(1, decoder.latent_dim)[0], graft):
-        full = decoder.table(record)
+        full = decoder.decode(record)
         for bins in ([0], [9], [90, 91], [179], [170, 175, 179], list(range(0, 180, 3))):
-            part = decoder.table(record, phi_d_bins=bins)
+            part = decoder.decode(record, phi_d_bins=bins)
             assert_same_decode(part, full[..., bins])
     with pytest.raises(ValueError, match="phi_d_bins"):
-        decoder.table(graft, phi_d_bins=[180])
+        decoder.decode(graft, phi_d_bins=[180])
 
 
 def test_library_decodes_only_what_is_used(decoder: BrdfDecoder, tmp_path: Path) -> None:
@@ -89,8 +113,8 @@ def test_library_decodes_only_what_is_used(decoder: BrdfDecoder, tmp_path: Path)
         assert library.decoded_count == 3
         one_slice = library["m050"].table(phi_d_bins=[90])
         assert one_slice.shape == (3, 90, 90, 1) and library.decoded_count == 3
-    batch = list(decoder.tables(read_bvae(path).records[:5]))
-    single = [decoder.table(r) for r in read_bvae(path).records[:5]]
+    batch = list(decoder.decode_many(read_bvae(path).records[:5]))
+    single = [decoder.decode(r) for r in read_bvae(path).records[:5]]
     for a, b in zip(batch, single, strict=True):
         assert_same_decode(a, b)
 
@@ -99,11 +123,11 @@ def test_eval_matches_the_decoded_table(decoder: BrdfDecoder, tmp_path: Path) ->
     path = tmp_path / "lib.bvae"
     write_bvae(path, records(1, decoder.latent_dim), decoder.reference)
     material = MaterialLibrary(path, decoder=decoder)["m000"]
-    physical = material.physical()
+    reflectance = material.reflectance()
     wi, wo = np.array([0.0, 0.0, 1.0]), np.array([np.sin(0.5), 0.0, np.cos(0.5)])
     from brdfcodec.lookup import lookup
 
-    np.testing.assert_allclose(material.eval(wi, wo), lookup(physical, wi, wo), rtol=1e-6)
+    np.testing.assert_allclose(material.eval(wi, wo), lookup(reflectance, wi, wo), rtol=1e-6)
     np.testing.assert_array_equal(material.eval(np.array([0, 0, 1.0]), np.array([1.0, 0, -0.1])), 0.0)
     assert material.to_merl().values.dtype == np.float64
 
@@ -126,40 +150,76 @@ def test_decoder_is_found_by_hash_when_registered(decoder: BrdfDecoder, tmp_path
     write_bvae(path, records(1, decoder.latent_dim), decoder.reference)
     with MaterialLibrary(path) as library:
         assert library.decoder.reference == decoder.reference
-    np.testing.assert_array_equal(BrdfDecoder(decoder.reference.sha256).table(records(1, 8)[0]),
-                                  decoder.table(records(1, 8)[0]))
+    np.testing.assert_array_equal(BrdfDecoder(decoder.reference.sha256).decode(records(1, 8)[0]),
+                                  decoder.decode(records(1, 8)[0]))
 
 
 def test_graft_with_equal_codes_copies_red_into_green(decoder: BrdfDecoder) -> None:
     base = records(1, decoder.latent_dim, seed=5)[0]
     dims = (0, 3)
     graft = GraftRecord("g", base.mu, base.sigma, dims, base.mu[list(dims)])
-    plain = decoder.table(base, masked="zero")
-    grafted = decoder.table(graft, masked="zero")
+    plain = decoder.decode(base, masked="zero")
+    grafted = decoder.decode(graft, masked="zero")
     np.testing.assert_array_equal(grafted[0], plain[0])
     np.testing.assert_array_equal(grafted[2], plain[2])
-    physical = grafted * MERL_COLOR_SCALE.astype(np.float32)[:, None, None, None]
-    np.testing.assert_allclose(physical[1], physical[0], rtol=1e-5, atol=1e-9)
+    reflectance = reflectance_from_stored(grafted)
+    np.testing.assert_allclose(reflectance[1], reflectance[0], rtol=1e-5, atol=1e-9)
     changed = GraftRecord("g2", base.mu, base.sigma, dims, base.mu[list(dims)] + 3.0)
-    other = decoder.table(changed, masked="zero")
+    other = decoder.decode(changed, masked="zero")
     np.testing.assert_array_equal(other[0], plain[0])
     assert not np.allclose(other[1], grafted[1])
 
 
-def test_compress_encodes_and_measures(tiny_model_folder: Path, analytic_tables: dict[str, MerlBRDF],
-                                       tmp_path: Path) -> None:
-    brdf = analytic_tables["gold"]
-    out = tmp_path / "gold.bvae"
-    [record] = compress(brdf, out, model=tiny_model_folder)
-    assert record.meta["source_sha256"] == brdf.sha256
-    assert 0 <= record.meta["relae"]["mapped"] < 10
+def test_encode_and_decode_are_inverse_on_bytes(tiny_model_folder: Path, analytic_tables: dict[str, MerlBRDF],
+                                                tmp_path: Path) -> None:
+    gold, chrome = analytic_tables["gold"], analytic_tables["chrome"]
+    data = encode([gold, chrome], names=["gold", "chrome"], model=tiny_model_folder)
+    assert isinstance(data, bytes) and data.startswith(MAGIC)
+    parsed = parse_bvae(data)
     encoder = BrdfEncoder(tiny_model_folder)
-    batch = encoder.encode_many([analytic_tables["gold"], analytic_tables["chrome"]])
-    np.testing.assert_allclose(batch[0].mu, record.mu, rtol=1e-5, atol=1e-6)
-    assert read_bvae(out).header.decoder.sha256 == encoder.reference.sha256
+    assert parsed.header.decoder == encoder.reference and parsed.header.names == ["gold", "chrome"]
+    batch = encoder.encode_many([gold, chrome])
+    for stored, fresh, source in zip(parsed.records, batch, (gold, chrome), strict=True):
+        np.testing.assert_allclose(stored.mu, fresh.mu, rtol=1e-5, atol=1e-6)
+        assert stored.meta["source_sha256"] == source.sha256
+    library = decode(data)
+    decoder = BrdfDecoder(tiny_model_folder)
+    for record, source in zip(parsed.records, (gold, chrome), strict=True):
+        table = library[record.name].table()
+        np.testing.assert_array_equal(table, decoder.decode(record))  # decode(bytes) is the decoder's table
+        report = error_report(source.values, library[record.name].table(masked="keep").astype(np.float64), source.mask)
+        assert record.meta["relae"] == {"mapped": report.relae_mapped.overall, "linear": report.relae_linear.overall}
+    assert list(library) == ["gold", "chrome"] and library.path is None
+    # The file helpers write exactly encode()'s bytes and read them back.
+    size = compress([gold, chrome], tmp_path / "two.bvae", names=["gold", "chrome"], model=tiny_model_folder)
+    assert (tmp_path / "two.bvae").read_bytes() == data and size == len(data)
+    with pytest.raises(FileExistsError):
+        compress(gold, tmp_path / "two.bvae", model=tiny_model_folder)
     with pytest.raises(ValueError, match="holds 2 materials"):
-        write_bvae(tmp_path / "two.bvae", batch, encoder.reference)
         decompress(tmp_path / "two.bvae")
+    np.testing.assert_array_equal(decompress(tmp_path / "two.bvae", "chrome"), library["chrome"].table())
+
+
+def test_encode_records_streams_sources_in_batches(tiny_model_folder: Path,
+                                                  analytic_tables: dict[str, MerlBRDF]) -> None:
+    encoder = BrdfEncoder(tiny_model_folder)
+    tables = list(analytic_tables.values())[:5]
+    loaded: list[int] = []
+
+    def lazily():
+        for i, table in enumerate(tables):
+            loaded.append(i)
+            yield table
+
+    seen: list[int] = []
+    records = encode_records(lazily(), encoder=encoder, measure_error=False, batch_size=2,
+                             on_batch=lambda batch: seen.append(len(batch)))
+    assert seen == [2, 2, 1] and loaded == list(range(5))
+    assert [r.name for r in records] == [t.name for t in tables] and all("relae" not in r.meta for r in records)
+    inputs = MaterialInput("from-inputs", network_input_from_table(tables[0].values)[0])
+    [record] = encode_records([inputs], encoder=encoder)  # no table: nothing to measure
+    np.testing.assert_array_equal(record.mu, records[0].mu)
+    assert "relae" not in record.meta and "source_sha256" not in record.meta
 
 
 @pytest.mark.parametrize("scale", [10.0, 50.0])
@@ -168,5 +228,5 @@ def test_extreme_latents_decode_to_finite_non_negative_tables(scale: float) -> N
     rng = np.random.default_rng(int(scale))
     for code in (rng.normal(size=(4, 8)) * scale, np.full((1, 8), scale), np.full((1, 8), -scale)):
         for row in code:
-            table = decoder.table(LatentRecord("x", row, np.ones(8)), masked="zero")
+            table = decoder.decode(LatentRecord("x", row, np.ones(8)), masked="zero")
             assert np.isfinite(table).all() and (table >= 0).all()

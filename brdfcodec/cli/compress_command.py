@@ -6,25 +6,29 @@ import argparse
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 from tqdm import tqdm
 
 from brdfcodec.atomic import check_output_path
 from brdfcodec.bvae_format import Record, write_bvae
-from brdfcodec.cli.info_command import HDF5_SIGNATURE
-from brdfcodec.dataset import material_arrays
-from brdfcodec.merl import MerlBRDF, read_merl
+from brdfcodec.dataset import HDF5_SIGNATURE
+from brdfcodec.merl import read_merl
+from brdfcodec.representation import network_input_from_table
+
+if TYPE_CHECKING:
+    from brdfcodec.codec import MaterialInput
 
 __all__ = ["register"]
 
 @dataclass(frozen=True)
 class _Item:
-    """One material to encode: its name and how to load it (table if known, network input)."""
+    """One material to encode: its name, where it comes from, and how to load it."""
 
     name: str
     origin: str
-    load: Callable[[], tuple[MerlBRDF | None, np.ndarray]]
+    load: Callable[[], MaterialInput]
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
@@ -49,9 +53,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
 
 
 def _merl_item(path: Path) -> _Item:
-    def load() -> tuple[MerlBRDF | None, np.ndarray]:
+    def load() -> MaterialInput:
+        from brdfcodec.codec import MaterialInput
+
         brdf = read_merl(path)
-        return brdf, material_arrays(brdf)[0]
+        return MaterialInput(path.stem, network_input_from_table(brdf.values, brdf.mask)[0], brdf)
 
     return _Item(path.stem, str(path), load)
 
@@ -66,10 +72,12 @@ def _dataset_items(path: Path, split: str | None) -> Iterator[_Item]:
 
     for index, name in zip(indices, names, strict=True):
 
-        def load(index: int = index) -> tuple[MerlBRDF | None, np.ndarray]:
+        def load(index: int = index, name: str = name) -> MaterialInput:
+            from brdfcodec.codec import MaterialInput
+
             with BrdfDataset(path) as dataset:
                 table = dataset.table(index) if has_tables else None
-                return table, dataset.inputs([index])[0]
+                return MaterialInput(name, dataset.inputs([index])[0], table)
 
         yield _Item(name, f"{path}[{name}]", load)
 
@@ -99,8 +107,8 @@ def collect_items(inputs: list[Path], split: str | None) -> list[_Item]:
 
 
 def run(args: argparse.Namespace) -> int:
-    """Encode every input, write the file, print per-material RelAE and sizes."""
-    from brdfcodec.codec import BrdfDecoder, BrdfEncoder, measure
+    """Encode every input (:func:`brdfcodec.codec.encode_records`), write the file, print RelAE and sizes."""
+    from brdfcodec.codec import BrdfEncoder, encode_records
 
     if args.batch_size < 1:
         raise ValueError("--batch-size must be at least 1")
@@ -109,36 +117,34 @@ def run(args: argparse.Namespace) -> int:
         raise ValueError(f"{args.output}: the output must end in .bvae")
     items = collect_items(args.inputs, args.split)
     encoder = BrdfEncoder(args.model)
-    decoder = None if args.no_measure else BrdfDecoder(encoder.manifest)
-    records: list[Record] = []
-    lines: list[str] = []
     with tqdm(total=len(items), desc="compress", unit="material", disable=len(items) < 2 or None) as bar:
-        for start in range(0, len(items), args.batch_size):
-            chunk = items[start : start + args.batch_size]
-            loaded = [item.load() for item in chunk]
-            mu, sigma = encoder.posterior_from_inputs(np.stack([inputs for _, inputs in loaded]))
-            sources = [brdf for brdf, _ in loaded]
-            for item, brdf, record in zip(
-                chunk, sources, encoder.make_records([i.name for i in chunk], mu, sigma, sources), strict=True
-            ):
-                if decoder is not None and brdf is not None:
-                    record = measure(record, decoder, brdf)
-                    relae = record.meta["relae"]
-                    lines.append(f"  {item.name:<32} RelAE mapped {relae['mapped']:.4f}  linear {relae['linear']:.4f}")
-                else:
-                    why = "--no-measure" if decoder is None else "no source table"
-                    lines.append(f"  {item.name:<32} (RelAE not measured: {why})")
-                records.append(record)
-            bar.update(len(chunk))
+        records: list[Record] = encode_records(
+            (item.load() for item in items),
+            encoder=encoder,
+            measure_error=not args.no_measure,
+            batch_size=args.batch_size,
+            on_batch=lambda batch: bar.update(len(batch)),
+        )
+    lines = []
+    for record in records:
+        if "relae" in record.meta:
+            relae = record.meta["relae"]
+            lines.append(f"  {record.name:<32} RelAE mapped {relae['mapped']:.4f}  linear {relae['linear']:.4f}")
+        else:
+            why = "--no-measure" if args.no_measure else "no source table"
+            lines.append(f"  {record.name:<32} (RelAE not measured: {why})")
     dtype = "float16" if args.float16 else "float32"
+    if encoder.reference is None:  # loaded from a model folder, so it has one
+        raise RuntimeError("the encoder has no decoder reference")
     size = write_bvae(args.output, records, encoder.reference, latent_dtype=dtype, overwrite=args.force)
     print("\n".join(lines))
     measured = [r.meta["relae"]["mapped"] for r in records if "relae" in r.meta]
     if measured:
         print(f"  mean RelAE (mapped) over {len(measured)} materials: {np.mean(measured):.4f}")
+    model_name = encoder.manifest.name if encoder.manifest is not None else "?"
     print(
         f"wrote {args.output}: {len(records)} material{'s' if len(records) != 1 else ''}, {size:,} bytes "
-        f"({size / len(records):.1f} bytes per material; latents {dtype}; decoder {encoder.manifest.name} "
+        f"({size / len(records):.1f} bytes per material; latents {dtype}; decoder {model_name} "
         f"{encoder.reference.sha256[:12]}…)"
     )
     return 0

@@ -12,16 +12,16 @@ import numpy as np
 
 from brdfcodec.bvae_format import FLAG_HEADER_ZSTD, read_header
 from brdfcodec.bvae_format import MAGIC as BVAE_MAGIC
-from brdfcodec.conventions import MERL_COLOR_SCALE, MERL_SHAPE
+from brdfcodec.conventions import MERL_SHAPE
+from brdfcodec.dataset import HDF5_SIGNATURE
 from brdfcodec.errors import FileFormatError
 from brdfcodec.genuine import genuine_merl_name
 from brdfcodec.mask import horizon_mask
 from brdfcodec.merl import MERL_FILE_SIZE, read_merl
+from brdfcodec.representation import reflectance_from_stored
 
 __all__ = ["HDF5_SIGNATURE", "describe_file", "register"]
 
-#: First bytes of every HDF5 file (datasets).
-HDF5_SIGNATURE = b"\x89HDF\r\n\x1a\n"
 _CHANNELS = ("red", "green", "blue")
 
 
@@ -42,7 +42,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
 def _merl_summary(path: Path) -> dict[str, Any]:
     brdf = read_merl(path)
     mask = brdf.mask
-    physical = brdf.values * MERL_COLOR_SCALE[:, None, None, None]
+    physical = reflectance_from_stored(brdf.values)
     above = horizon_mask()
     channels = {}
     for c, label in enumerate(_CHANNELS):

@@ -13,7 +13,7 @@ from torch import nn
 from brdfcodec.conventions import MAPPED_MAX, NETWORK_INPUT_SHAPE
 from brdfcodec.mask import kept_slice_horizon_mask
 from brdfcodec.models.config import ModelConfig
-from brdfcodec.transforms import network_input
+from brdfcodec.representation import to_network_layout
 
 __all__ = ["BetaVAE", "Decoder", "Encoder", "initialise_linear_basis", "valid_input_index"]
 
@@ -24,7 +24,7 @@ _INITIAL_LOGIT = -2.5
 
 def valid_input_index() -> torch.Tensor:
     """Flat indices of the entries of a (63, 90, 90) input that are above the horizon."""
-    mask = network_input(kept_slice_horizon_mask()[None].repeat(3, axis=0))
+    mask = to_network_layout(kept_slice_horizon_mask()[None].repeat(3, axis=0))
     return torch.from_numpy(mask.reshape(-1).nonzero()[0])
 
 

@@ -18,13 +18,14 @@ import itertools
 
 import torch
 
-from brdfcodec.conventions import EPSILON, N_CHANNELS, N_KEPT_SLICES
+from brdfcodec.conventions import N_CHANNELS, N_KEPT_SLICES
+from brdfcodec.representation import LOG_RANGE
 
 __all__ = ["COLOUR_PERMUTATIONS", "mix_physical", "permute_colours"]
 
 #: The 6 orders of (R, G, B); index 0 is the identity.
 COLOUR_PERMUTATIONS = torch.tensor(list(itertools.permutations(range(N_CHANNELS))))
-_LOG_RANGE = float(torch.log1p(torch.tensor(1.0 / EPSILON, dtype=torch.float64)))
+_LOG_RANGE = LOG_RANGE
 
 
 def permute_colours(batch: torch.Tensor, permutation_index: torch.Tensor) -> torch.Tensor:
