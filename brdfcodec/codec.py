@@ -171,12 +171,12 @@ class BrdfDecoder:
         _, network, loaded = load_model(manifest.folder, parts=("decoder",), device=str(device))
         if network is None:  # load_model returns the parts asked for
             raise RuntimeError(f"{manifest.folder}: the decoder did not load")
-        self._setup(network, device, dtype, loaded)
+        self._setup(network.to(dtype), device, dtype, loaded)
 
     def _setup(
         self, network: torch.nn.Module, device: str | torch.device, dtype: torch.dtype, manifest: ModelManifest | None
     ) -> None:
-        self.network = network.to(dtype)
+        self.network = network
         self.device = torch.device(device)
         self.dtype = dtype
         self.manifest = manifest
@@ -189,7 +189,8 @@ class BrdfDecoder:
     ) -> BrdfDecoder:
         """Wrap a decoder network held in memory (training, export): no manifest, no file reference.
 
-        The network is put in evaluation mode while it runs and given back in the mode it had.
+        The network is not copied or converted (its parameters keep their dtypes); it is put in evaluation
+        mode while it runs and given back in the mode it had. ``dtype`` is the dtype of the codes fed to it.
         """
         decoder = cls.__new__(cls)
         decoder._setup(network, device, dtype, None)

@@ -20,6 +20,8 @@ __all__ = [
     "DecoderNotFoundError",
     "FileFormatError",
     "MerlFormatError",
+    "ModelChecksumError",
+    "ModelNotFoundError",
     "NonFiniteValueError",
     "SourceFormatError",
     "UnsupportedVersionError",
@@ -81,3 +83,11 @@ class DecoderNotFoundError(BrdfcodecError):
 
 class DecoderMismatchError(BrdfcodecError):
     """A decoder other than the one a ``.bvae`` file refers to was offered for decoding it."""
+
+
+class ModelNotFoundError(DecoderNotFoundError):
+    """No known model has the requested decoder (or the shipped default model is missing)."""
+
+
+class ModelChecksumError(BrdfcodecError):
+    """A weight file's SHA-256 differs from its manifest: the file is corrupt or not the named model."""

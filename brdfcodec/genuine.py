@@ -9,11 +9,11 @@ is not, whatever its name.
 from __future__ import annotations
 
 import functools
-import hashlib
-import os
 from collections.abc import Mapping
 from importlib import resources
 from types import MappingProxyType
+
+from brdfcodec.hashing import sha256_of_file  # re-exported: its former home
 
 __all__ = ["genuine_merl_checksums", "genuine_merl_name", "sha256_of_file"]
 
@@ -46,9 +46,3 @@ def genuine_merl_name(sha256: str) -> str | None:
         Hex digest of a file's bytes.
     """
     return genuine_merl_checksums().get(sha256.lower())
-
-
-def sha256_of_file(path: str | os.PathLike[str]) -> str:
-    """SHA-256 (lower-case hex) of a file's bytes, read in chunks."""
-    with open(path, "rb") as stream:
-        return hashlib.file_digest(stream, "sha256").hexdigest()

@@ -18,15 +18,15 @@ import numpy.typing as npt
 
 from brdfcodec.images import auto_exposure
 
-__all__ = ["ImageError", "image_error"]
+__all__ = ["ImageComparison", "compare_images", "image_error"]
 
 _WHITE_NITS = 100.0
 _PEAK = 10.0
 
 
 @dataclass(frozen=True)
-class ImageError:
-    """Image-space differences between a reference render and a test render.
+class ImageComparison:
+    """Image-space comparison of a test render with a reference render (a result, not an exception).
 
     Attributes
     ----------
@@ -52,7 +52,7 @@ class ImageError:
         return asdict(self)
 
 
-def image_error(reference: npt.ArrayLike, test: npt.ArrayLike, *, exposure: float | None = None) -> ImageError:
+def compare_images(reference: npt.ArrayLike, test: npt.ArrayLike, *, exposure: float | None = None) -> ImageComparison:
     """ΔE ITP, ΔE 2000 and PSNR between two linear-RGB renders of equal shape (H, W, 3)."""
     from brdfcodec.images import colour_module
 
@@ -67,7 +67,7 @@ def image_error(reference: npt.ArrayLike, test: npt.ArrayLike, *, exposure: floa
     scale = auto_exposure(ref) if exposure is None else exposure
     covered = (ref.sum(-1) > 0) | (est.sum(-1) > 0)
     if not covered.any():
-        return ImageError(0.0, 0.0, 0.0, 0.0, float("inf"), scale)
+        return ImageComparison(0.0, 0.0, 0.0, 0.0, float("inf"), scale)
     a = np.clip(ref[covered] * scale, 0, _PEAK)
     b = np.clip(est[covered] * scale, 0, _PEAK)
 
@@ -84,7 +84,7 @@ def image_error(reference: npt.ArrayLike, test: npt.ArrayLike, *, exposure: floa
     enc_b = colour.cctf_encoding(np.clip(b, 0, 1), function="sRGB")
     mse = float(np.mean((np.asarray(enc_a) - np.asarray(enc_b)) ** 2))
     psnr = float("inf") if mse == 0 else float(10 * np.log10(1.0 / mse))
-    return ImageError(
+    return ImageComparison(
         delta_e_itp_mean=float(d_itp.mean()),
         delta_e_itp_p95=float(np.percentile(d_itp, 95)),
         delta_e_2000_mean=float(d_2000.mean()),
@@ -92,3 +92,7 @@ def image_error(reference: npt.ArrayLike, test: npt.ArrayLike, *, exposure: floa
         psnr_db=psnr,
         exposure=scale,
     )
+
+
+#: Former name of :func:`compare_images`.
+image_error = compare_images

@@ -22,7 +22,7 @@ import numpy.typing as npt
 from brdfcodec.atomic import atomic_output
 from brdfcodec.conventions import MERL_SHAPE, TABLE_SHAPE, UNMEASURED_VALUE
 from brdfcodec.errors import MerlFormatError, NonFiniteValueError
-from brdfcodec.genuine import sha256_of_file
+from brdfcodec.hashing import sha256_of_file
 from brdfcodec.mask import validity_mask
 from brdfcodec.representation.units import reflectance_from_stored
 

@@ -38,8 +38,9 @@ from brdfcodec.mask import validity_mask
 from brdfcodec.representation import map_values, reflectance_from_stored
 
 __all__ = [
-    "ChannelError",
+    "ChannelErrors",
     "ErrorReport",
+    "relae_between_mapped",
     "cosine_weighted_rmse",
     "error_report",
     "relae_linear",
@@ -47,8 +48,8 @@ __all__ = [
 ]
 
 @dataclass(frozen=True)
-class ChannelError:
-    """One metric, overall and per channel.
+class ChannelErrors:
+    """The values of one metric, overall and per channel (a result, not an exception).
 
     Attributes
     ----------
@@ -72,12 +73,12 @@ class ChannelError:
 class ErrorReport:
     """All metrics of one reconstruction."""
 
-    relae_linear: ChannelError
-    relae_mapped: ChannelError
-    cosine_weighted_rmse: ChannelError
+    relae_linear: ChannelErrors
+    relae_mapped: ChannelErrors
+    cosine_weighted_rmse: ChannelErrors
 
     def as_dict(self) -> dict[str, dict[str, float]]:
-        """Nested dictionary, metric name to :meth:`ChannelError.as_dict`."""
+        """Nested dictionary, metric name to :meth:`ChannelErrors.as_dict`."""
         return {
             "relae_linear": self.relae_linear.as_dict(),
             "relae_mapped": self.relae_mapped.as_dict(),
@@ -101,18 +102,18 @@ def _prepare(
     return ref, est, valid
 
 
-def _relative_absolute(ref: np.ndarray, est: np.ndarray, valid: np.ndarray) -> ChannelError:
+def _relative_absolute(ref: np.ndarray, est: np.ndarray, valid: np.ndarray) -> ChannelErrors:
     error = np.where(valid, np.abs(est - ref), 0.0).reshape(3, -1).sum(axis=1)
     magnitude = np.where(valid, np.abs(ref), 0.0).reshape(3, -1).sum(axis=1)
     per_channel = np.divide(error, magnitude, out=np.full(3, np.nan), where=magnitude > 0)
     total = magnitude.sum()
     overall = float(error.sum() / total) if total > 0 else float("nan")
-    return ChannelError(overall, *(float(v) for v in per_channel))
+    return ChannelErrors(overall, *(float(v) for v in per_channel))
 
 
 def relae_linear(
     reference: npt.ArrayLike, estimate: npt.ArrayLike, mask: npt.ArrayLike | None = None
-) -> ChannelError:
+) -> ChannelErrors:
     """RelAE of physical reflectance (strict variant).
 
     Parameters
@@ -124,7 +125,7 @@ def relae_linear(
 
     Returns
     -------
-    ChannelError
+    ChannelErrors
         Dimensionless, ≥ 0 (0 for a perfect reconstruction); NaN where the
         reference is zero on every compared entry.
     """
@@ -134,13 +135,43 @@ def relae_linear(
 
 def relae_mapped(
     reference: npt.ArrayLike, estimate: npt.ArrayLike, mask: npt.ArrayLike | None = None
-) -> ChannelError:
+) -> ChannelErrors:
     """RelAE of log-mapped values (the paper's variant).
 
     Parameters and return as :func:`relae_linear`.
     """
     ref, est, valid = _prepare(reference, estimate, mask)
     return _relative_absolute(map_values(ref), map_values(est), valid)
+
+
+def relae_between_mapped(
+    mapped_reference: npt.ArrayLike, mapped_estimate: npt.ArrayLike, mask: npt.ArrayLike
+) -> ChannelErrors:
+    """The mapped RelAE of :func:`relae_mapped`, from tables already mapped (map a reference once, compare often).
+
+    Parameters
+    ----------
+    mapped_reference, mapped_estimate : array_like, shape (3, 90, 90, 180)
+        :func:`~brdfcodec.representation.map_values` of the reference and
+        of the estimate (e.g. a decoder's mapped output interpolated to 180
+        φd bins: the inverse mapping is exact on the mapped domain, so no
+        round trip through stored units is needed).
+    mask : array_like of bool, shape (3, 90, 90, 180)
+        Entries to compare (the reference's valid entries).
+
+    Returns
+    -------
+    ChannelErrors
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> reference = np.ones((3, 90, 90, 180))
+    >>> relae_between_mapped(reference, 1.5 * reference, reference > 0).overall
+    0.5
+    """
+    ref, est, valid = _prepare(mapped_reference, mapped_estimate, mask)
+    return _relative_absolute(ref, est, valid)
 
 
 @functools.cache
@@ -153,7 +184,7 @@ def _cos_theta_in() -> np.ndarray:
 
 def cosine_weighted_rmse(
     reference: npt.ArrayLike, estimate: npt.ArrayLike, mask: npt.ArrayLike | None = None
-) -> ChannelError:
+) -> ChannelErrors:
     """Root mean square of cos θi-weighted differences of physical reflectance.
 
     Parameters and return as :func:`relae_linear`; the unit is 1/sr.
@@ -164,7 +195,11 @@ def cosine_weighted_rmse(
     counts = valid.reshape(3, -1).sum(axis=1)
     per_channel = np.sqrt(np.divide(squared.sum(axis=1), counts, out=np.full(3, np.nan), where=counts > 0))
     overall = float(np.sqrt(squared.sum() / counts.sum())) if counts.sum() else float("nan")
-    return ChannelError(overall, *(float(v) for v in per_channel))
+    return ChannelErrors(overall, *(float(v) for v in per_channel))
+
+
+#: Former name of :class:`ChannelErrors`.
+ChannelError = ChannelErrors
 
 
 def error_report(

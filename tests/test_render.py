@@ -12,7 +12,7 @@ from brdfcodec.bvae_format import LatentRecord, write_bvae
 from brdfcodec.codec import BrdfDecoder, DecodedMaterial, MaterialLibrary
 from brdfcodec.edit import traverse
 from brdfcodec.exr import read_exr_rgb
-from brdfcodec.image_metrics import image_error
+from brdfcodec.image_metrics import compare_images
 from brdfcodec.images import write_image
 from brdfcodec.merl import MerlBRDF
 from brdfcodec.render import Environment, render_flat, render_sphere, render_sphere_environment
@@ -76,16 +76,16 @@ def test_image_output(lambert: MerlBRDF, tmp_path: Path) -> None:
 
 def test_image_error_metrics(lambert: MerlBRDF) -> None:
     reference = render_sphere(lambert, size=32)
-    same = image_error(reference, reference)
+    same = compare_images(reference, reference)
     assert same.delta_e_itp_mean == 0 and same.delta_e_2000_mean == 0 and same.psnr_db == float("inf")
-    darker = image_error(reference, reference * 0.9)
-    much_darker = image_error(reference, reference * 0.5)
+    darker = compare_images(reference, reference * 0.9)
+    much_darker = compare_images(reference, reference * 0.5)
     assert 0 < darker.delta_e_itp_mean < much_darker.delta_e_itp_mean
     assert 0 < darker.delta_e_2000_mean < much_darker.delta_e_2000_mean
     assert darker.psnr_db > much_darker.psnr_db
     tinted = reference.copy()
     tinted[..., 1] *= 1.2
-    assert image_error(reference, tinted).delta_e_itp_mean > 0
+    assert compare_images(reference, tinted).delta_e_itp_mean > 0
 
 
 def test_mitsuba_plugin_matches_the_builtin_renderer(tmp_path: Path) -> None:

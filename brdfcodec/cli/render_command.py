@@ -139,10 +139,10 @@ def run(args: argparse.Namespace) -> int:
     image = view(material)
     render_s = time.perf_counter() - start
     if args.compare is not None:
-        from brdfcodec.image_metrics import image_error
+        from brdfcodec.image_metrics import compare_images
         from brdfcodec.merl import read_merl
 
-        error = image_error(view(read_merl(args.compare)), image)
+        error = compare_images(view(read_merl(args.compare)), image)
         if args.exposure is None:
             args.exposure = error.exposure  # same exposure for both, the reference's
         print(f"against {args.compare}: ΔE ITP mean {error.delta_e_itp_mean:.3f} (p95 {error.delta_e_itp_p95:.3f}), "

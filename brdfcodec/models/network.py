@@ -7,9 +7,11 @@ mapped domain [0, MAPPED_MAX], so every decoded table is finite.
 
 from __future__ import annotations
 
+import numpy as np
 import torch
 from torch import nn
 
+from brdfcodec.baselines.pca import fit_pca
 from brdfcodec.conventions import MAPPED_MAX, NETWORK_INPUT_SHAPE
 from brdfcodec.mask import kept_slice_horizon_mask
 from brdfcodec.models.config import ModelConfig
@@ -226,7 +228,8 @@ class BetaVAE(nn.Module):
 
 @torch.no_grad()
 def initialise_linear_basis(model: BetaVAE, train_inputs: torch.Tensor) -> None:
-    """Fit the linear path of a ``linear_basis`` model to training inputs (PCA over valid entries).
+    """Fit the linear path of a ``linear_basis`` model to training inputs (:func:`~brdfcodec.baselines.pca.fit_pca`
+    over the entries above the horizon).
 
     The encoder projects onto the first ``latent_dim`` principal components
     scaled to unit variance over the training set (so μ starts whitened,
@@ -235,13 +238,12 @@ def initialise_linear_basis(model: BetaVAE, train_inputs: torch.Tensor) -> None:
     if not model.config.linear_basis:
         raise ValueError("model has no linear basis (ModelConfig.linear_basis is False)")
     k = model.config.latent_dim
-    valid = train_inputs.flatten(1).index_select(1, model.encoder.valid_index).double()
-    if valid.shape[0] < k:
-        raise ValueError(f"need at least {k} training materials to fit {k} components, got {valid.shape[0]}")
-    mean = valid.mean(0)
-    _, singular, vt = torch.linalg.svd(valid - mean, full_matrices=False)
-    components = vt[:k]
-    scale = (singular[:k] / max(1, valid.shape[0] - 1) ** 0.5).clamp_min(1e-12)  # std of each coefficient
+    if train_inputs.shape[0] < k:
+        raise ValueError(f"need at least {k} training materials to fit {k} components, got {train_inputs.shape[0]}")
+    basis = fit_pca(train_inputs.detach().cpu().numpy(), k, entries=model.encoder.valid_index.cpu().numpy())
+    mean = torch.from_numpy(basis.mean.astype(np.float64))
+    components = torch.from_numpy(basis.components.astype(np.float64))
+    scale = torch.from_numpy(basis.scale.astype(np.float64))
     model.encoder.basis_mean.copy_(mean.float())
     model.encoder.basis_projection.copy_((components / scale[:, None]).float())
     model.decoder.basis_mean.copy_(mean.half())

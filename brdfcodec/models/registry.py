@@ -2,7 +2,8 @@
 
 Models are found by the SHA-256 of their decoder weights (the reference a
 ``.bvae`` file carries), never by a list position. Search order: folders
-registered with :func:`register_model_folder` in this process, the folders
+registered in this process (a :class:`ModelRegistry`; the module-level
+functions use the process's :func:`process_registry`), the folders
 in ``$BRDFCODEC_MODEL_PATH`` (``os.pathsep``-separated; each a model folder
 or a folder of model folders), the folders saved by ``bvae model register``
 (one per line in ``model-folders.txt`` of the user configuration folder:
@@ -16,12 +17,15 @@ import os
 from importlib import resources
 from pathlib import Path
 
-from brdfcodec.errors import DecoderNotFoundError
+from brdfcodec.errors import ModelNotFoundError
 from brdfcodec.models.manifest import MANIFEST, ModelManifest, load_manifest
 
 __all__ = [
     "DEFAULT_MODEL_NAME",
     "ModelNotFoundError",
+    "ModelRegistry",
+    "process_registry",
+    "unregister_model_folder",
     "available_models",
     "default_model_folder",
     "find_model",
@@ -34,11 +38,49 @@ __all__ = [
 #: Folder name (under ``brdfcodec/data/models``) of the model used when none is named.
 DEFAULT_MODEL_NAME = "default"
 
-_registered: list[Path] = []
 
 
-class ModelNotFoundError(DecoderNotFoundError):
-    """No known model has the requested decoder."""
+class ModelRegistry:
+    """Model folders registered in this process, newest first (searched before the environment and the package).
+
+    The folders are held as a tuple that each change replaces, so a search in
+    progress never sees a half-made change.
+
+    Examples
+    --------
+    >>> registry = ModelRegistry()
+    >>> registry.folders
+    ()
+    """
+
+    def __init__(self) -> None:
+        self._folders: tuple[Path, ...] = ()
+
+    @property
+    def folders(self) -> tuple[Path, ...]:
+        """Registered folders, the most recently registered first."""
+        return self._folders
+
+    def register(self, folder: str | os.PathLike[str]) -> ModelManifest:
+        """Add a model folder (checked by loading its manifest); registering it again moves nothing."""
+        manifest = load_manifest(folder)
+        path = Path(folder).resolve()
+        if path not in self._folders:
+            self._folders = (path, *self._folders)
+        return manifest
+
+    def unregister(self, folder: str | os.PathLike[str]) -> None:
+        """Remove a folder (no error if it was not registered)."""
+        path = Path(folder).resolve()
+        self._folders = tuple(p for p in self._folders if p != path)
+
+
+_PROCESS_REGISTRY = ModelRegistry()
+
+
+def process_registry() -> ModelRegistry:
+    """The registry the module-level functions and :func:`find_model` search."""
+    return _PROCESS_REGISTRY
 
 
 def _package_models() -> Path:
@@ -61,11 +103,12 @@ def default_model_folder() -> Path:
 
 def register_model_folder(folder: str | os.PathLike[str]) -> ModelManifest:
     """Make a user-trained model (a folder written by ``bvae model export``) findable by its decoder hash."""
-    manifest = load_manifest(folder)
-    path = Path(folder).resolve()
-    if path not in _registered:
-        _registered.insert(0, path)
-    return manifest
+    return _PROCESS_REGISTRY.register(folder)
+
+
+def unregister_model_folder(folder: str | os.PathLike[str]) -> None:
+    """Undo :func:`register_model_folder` for this process."""
+    _PROCESS_REGISTRY.unregister(folder)
 
 
 def config_file() -> Path:
@@ -98,7 +141,7 @@ def save_model_folder(folder: str | os.PathLike[str]) -> ModelManifest:
 
 
 def _candidate_folders() -> list[Path]:
-    roots = list(_registered)
+    roots = list(_PROCESS_REGISTRY.folders)
     roots += [Path(p) for p in os.environ.get("BRDFCODEC_MODEL_PATH", "").split(os.pathsep) if p]
     roots += saved_model_folders()
     roots.append(_package_models())

@@ -22,30 +22,41 @@ from typing import Any
 import torch
 from safetensors.torch import load_file, save_file
 
-from brdfcodec.errors import BrdfcodecError
-from brdfcodec.genuine import sha256_of_file
+from brdfcodec.atomic import atomic_output
+from brdfcodec.errors import ModelChecksumError
+from brdfcodec.hashing import sha256_of_file
 from brdfcodec.models.manifest import DECODER_FILE, ENCODER_FILE, MANIFEST, ModelManifest, load_manifest
 from brdfcodec.models.network import BetaVAE, Decoder, Encoder
 
-__all__ = ["MANIFEST", "ModelChecksumError", "ModelManifest", "export_model", "load_manifest", "load_model"]
+__all__ = [
+    "MANIFEST",
+    "ModelChecksumError",
+    "ModelManifest",
+    "export_model",
+    "load_manifest",
+    "load_model",
+    "write_manifest",
+    "write_weights",
+]
 
-class ModelChecksumError(BrdfcodecError):
-    """A weight file's SHA-256 differs from its manifest: the file is corrupt or not the named model."""
 
-
-def export_model(model: BetaVAE, folder: str | os.PathLike[str], *, name: str, info: dict[str, Any]) -> ModelManifest:
-    """Write a trained model as safetensors plus manifest.
+def write_weights(model: BetaVAE, folder: str | os.PathLike[str], *, name: str) -> dict[str, Any]:
+    """Write the encoder's and decoder's weights as safetensors (atomically, each file), nothing else.
 
     Parameters
     ----------
     model : BetaVAE
-        Trained network (moved to CPU float32 for export).
+        Trained network (tensors copied to CPU; floating tensors keep their dtype).
     folder : str or os.PathLike
-        Created if absent; existing files of the same names are replaced.
+        Created if absent; existing weight files are replaced.
     name : str
-        Readable name stored in the manifest and the files' metadata.
-    info : dict
-        JSON-serialisable training facts.
+        Readable name stored in the files' metadata.
+
+    Returns
+    -------
+    dict
+        The manifest's identity fields: ``name``, ``config``, ``decoder_sha256``,
+        ``encoder_sha256``, and the two files' sizes in bytes (``decoder_bytes``, ``encoder_bytes``).
     """
     out = Path(folder)
     out.mkdir(parents=True, exist_ok=True)
@@ -53,17 +64,56 @@ def export_model(model: BetaVAE, folder: str | os.PathLike[str], *, name: str, i
     for part, module, file in (("encoder", model.encoder, ENCODER_FILE), ("decoder", model.decoder, DECODER_FILE)):
         # Floating tensors keep their dtype (the linear basis is float16 by design); integers stay as they are.
         tensors = {k: v.detach().to("cpu").contiguous() for k, v in module.state_dict().items()}
-        save_file(tensors, str(out / file), metadata={**metadata, "part": part})
+        with atomic_output(out / file, overwrite=True) as tmp:
+            save_file(tensors, str(tmp), metadata={**metadata, "part": part})
         os.chmod(out / file, 0o644)
-    manifest = {
+    return {
         "name": name,
         "config": json.loads(model.config.to_json()),
         "decoder_sha256": sha256_of_file(out / DECODER_FILE),
         "encoder_sha256": sha256_of_file(out / ENCODER_FILE),
-        "info": info,
+        "decoder_bytes": (out / DECODER_FILE).stat().st_size,
+        "encoder_bytes": (out / ENCODER_FILE).stat().st_size,
     }
-    (out / MANIFEST).write_text(json.dumps(manifest, indent=2, sort_keys=True) + "\n", encoding="utf-8")
+
+
+def write_manifest(folder: str | os.PathLike[str], manifest: dict[str, Any]) -> ModelManifest:
+    """Write ``model.json`` once, atomically (sorted keys, 2-space indent), and load it back."""
+    out = Path(folder)
+    with atomic_output(out / MANIFEST, overwrite=True) as tmp:
+        tmp.write_text(json.dumps(manifest, indent=2, sort_keys=True) + "\n", encoding="utf-8")
     return load_manifest(out)
+
+
+def export_model(
+    model: BetaVAE,
+    folder: str | os.PathLike[str],
+    *,
+    name: str,
+    info: dict[str, Any],
+    parameters: dict[str, Any] | None = None,
+) -> ModelManifest:
+    """Write a trained model as safetensors plus manifest (``model.json`` written once, atomically).
+
+    Parameters
+    ----------
+    model : BetaVAE
+        Trained network.
+    folder : str or os.PathLike
+        Created if absent; existing files of the same names are replaced.
+    name : str
+        Readable name stored in the manifest and the files' metadata.
+    info : dict
+        JSON-serialisable training facts.
+    parameters : dict, optional
+        The named parameters (:func:`brdfcodec.parameters.describe_parameters`).
+    """
+    identity = write_weights(model, folder, name=name)
+    manifest = {key: identity[key] for key in ("name", "config", "decoder_sha256", "encoder_sha256")}
+    manifest["info"] = info
+    if parameters is not None:
+        manifest["parameters"] = parameters
+    return write_manifest(folder, manifest)
 
 
 def _verified_weights(manifest: ModelManifest, file: str, expected: str) -> dict[str, torch.Tensor]:

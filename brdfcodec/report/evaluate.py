@@ -12,13 +12,12 @@ from typing import Any
 import numpy as np
 from tqdm import tqdm
 
-from brdfcodec.conventions import MERL_COLOR_SCALE
 from brdfcodec.dataset import BrdfDataset
-from brdfcodec.image_metrics import image_error
-from brdfcodec.metrics import relae_linear, relae_mapped
+from brdfcodec.image_metrics import compare_images
+from brdfcodec.metrics import relae_between_mapped, relae_linear
 from brdfcodec.render import MaterialTable, render_sphere
 from brdfcodec.report.points import Material, OperatingPoint, standard_points
-from brdfcodec.transforms import map_values
+from brdfcodec.representation import map_values, reflectance_from_stored
 from brdfcodec.version import __version__
 
 __all__ = ["environment", "evaluate_dataset", "summarise"]
@@ -42,8 +41,8 @@ def environment() -> dict[str, Any]:
 
 
 def _render(values: np.ndarray, mask: np.ndarray) -> np.ndarray:
-    physical = np.where(mask, np.maximum(values, 0.0), 0.0) * MERL_COLOR_SCALE[:, None, None, None]
-    return render_sphere(MaterialTable(physical, mask), size=_RENDER_SIZE, light=_LIGHT)
+    reflectance = reflectance_from_stored(np.where(mask, np.maximum(values, 0.0), 0.0))
+    return render_sphere(MaterialTable(reflectance, mask), size=_RENDER_SIZE, light=_LIGHT)
 
 
 def _measure(
@@ -57,14 +56,14 @@ def _measure(
     estimate = np.nan_to_num(estimate, nan=0.0, posinf=0.0, neginf=0.0)
     valid = material.mask
     mapped_est = map_values(estimate)
-    image = image_error(reference_image, _render(estimate, valid))
+    image = compare_images(reference_image, _render(estimate, valid))
     return {
         "material": material.name,
         "split": material.split,
         "bytes": point.payload_bytes(payload),
         "encode_s": encoded - start,
         "decode_s": decoded - encoded,
-        "relae_mapped": relae_mapped(material.values, estimate, valid).overall,
+        "relae_mapped": relae_between_mapped(mapped_reference, mapped_est, valid).overall,
         "relae_linear": relae_linear(material.values, estimate, valid).overall,
         "log_domain_mae": float(np.abs(mapped_est - mapped_reference)[valid].mean()),
         "delta_e_itp": image.delta_e_itp_mean,

@@ -1,4 +1,4 @@
-"""Per-material RelAE of a model's reconstructions on the full 90×90×180 table."""
+"""Per-material mapped RelAE of a model's reconstructions on the full 90×90×180 table, while it trains."""
 
 from __future__ import annotations
 
@@ -10,8 +10,9 @@ import torch
 
 from brdfcodec.dataset import BrdfDataset
 from brdfcodec.errors import DatasetError
+from brdfcodec.metrics import relae_between_mapped
 from brdfcodec.models.network import BetaVAE
-from brdfcodec.transforms import from_network_input, interpolate_slices, map_values
+from brdfcodec.representation import from_network_layout, interpolate_slices, map_values
 
 __all__ = ["MappedReference", "reconstruct_mapped"]
 
@@ -22,7 +23,8 @@ class MappedReference:
     The mapped RelAE of ``spec/conventions.md`` §8 compares mapped values;
     since the inverse mapping is exact on [0, MAPPED_MAX], a decoder's mapped
     output, interpolated to 180 slices, is compared directly with the mapped
-    reference (no round trip through stored units).
+    reference (:func:`~brdfcodec.metrics.relae_between_mapped`, no round trip
+    through stored units).
 
     Parameters
     ----------
@@ -55,24 +57,23 @@ class MappedReference:
         outputs = np.asarray(outputs, dtype=np.float32)
         errors = np.empty(len(self.indices))
         for k, (reference, mask) in enumerate(zip(self._mapped, self._masks, strict=True)):
-            full = interpolate_slices(from_network_input(outputs[k]))
-            errors[k] = np.abs(full - reference)[mask].sum() / np.abs(reference[mask]).sum()
+            full = interpolate_slices(from_network_layout(outputs[k]))
+            errors[k] = relae_between_mapped(reference, full, mask).overall
         return errors
 
 
-@torch.no_grad()
 def reconstruct_mapped(
     model: BetaVAE, inputs: npt.ArrayLike, *, device: torch.device | str = "cpu", batch_size: int = 16
 ) -> npt.NDArray[np.float32]:
-    """Mapped reconstructions ``decoder(μ(x))`` in evaluation mode, shape (n, 63, 90, 90)."""
-    was_training = model.training
-    model.eval()
-    try:
-        array = np.asarray(inputs, dtype=np.float32)
-        out = []
-        for start in range(0, len(array), batch_size):
-            batch = torch.from_numpy(array[start : start + batch_size]).to(device)
-            out.append(model(batch)[0].float().cpu().numpy())
-        return np.concatenate(out) if out else np.empty((0, *array.shape[1:]), np.float32)
-    finally:
-        model.train(was_training)
+    """Mapped reconstructions ``decoder(μ(x))`` in evaluation mode, shape (n, 63, 90, 90).
+
+    Runs through :class:`~brdfcodec.codec.BrdfEncoder` and
+    :class:`~brdfcodec.codec.BrdfDecoder`, as a shipped model decodes.
+    """
+    from brdfcodec.codec import BrdfDecoder, BrdfEncoder
+
+    array = np.asarray(inputs, dtype=np.float32)
+    if not len(array):
+        return np.empty((0, *array.shape[1:]), np.float32)
+    mu, _ = BrdfEncoder.from_network(model.encoder, device=device).posterior_from_inputs(array, batch_size=batch_size)
+    return BrdfDecoder.from_network(model.decoder, device=device).decode_mapped(mu, batch_size=batch_size)

@@ -11,19 +11,15 @@ from typing import Any
 import numpy as np
 import torch
 
+from brdfcodec.atomic import atomic_output
+from brdfcodec.codec import BrdfDecoder
 from brdfcodec.dataset import BrdfDataset
 from brdfcodec.models.config import ModelConfig
 from brdfcodec.models.network import BetaVAE
-from brdfcodec.models.store import DECODER_FILE, ENCODER_FILE, MANIFEST, ModelManifest, export_model, load_manifest
+from brdfcodec.models.store import DECODER_FILE, MANIFEST, ModelManifest, load_manifest, write_manifest, write_weights
+from brdfcodec.parameters import describe_parameters
 from brdfcodec.training.card import render_model_card
-from brdfcodec.training.report import (
-    encode_dataset,
-    kl_per_dim,
-    material_errors,
-    pca_errors,
-    summarise,
-    traversal_changes,
-)
+from brdfcodec.training.measurements import kl_per_dim, measure_model, summarise, traversal_changes
 from brdfcodec.version import __version__
 
 __all__ = ["CARD", "export_run"]
@@ -79,11 +75,11 @@ def export_run(
     summary_file = run / "summary.json"
     seconds = sum(record["seconds"] for record in log)
     with BrdfDataset(dataset_path or run_info["dataset"]) as dataset:
-        errors = material_errors(model.encoder, model.decoder, dataset)
-        baseline = pca_errors(dataset, config.latent_dim)
-        train_inputs = dataset.inputs(dataset.indices("train"))
-        mu, _ = encode_dataset(model.encoder, train_inputs)
-        kl = kl_per_dim(model.encoder, train_inputs)
+        measured = measure_model(model.encoder, model.decoder, dataset, config.latent_dim)
+        errors, baseline = measured.errors, measured.pca_errors
+        train_rows = dataset.indices("train")
+        mu, logvar = measured.mu[train_rows], measured.logvar[train_rows]
+        kl = kl_per_dim(mu, logvar)
         traversal = traversal_changes(model.decoder, mu.mean(0), np.maximum(mu.std(0), 1e-6))
         data = {"source_kind": dataset.source_kind, "description": dataset.description,
                 "train": [dataset.names[i] for i in dataset.indices("train")],
@@ -116,30 +112,36 @@ def export_run(
         other_manifest = json.loads((Path(other) / MANIFEST).read_text())
         info["comparisons"].append(_comparison_row(label, other_manifest["info"], Path(other)))
     out = Path(folder)
-    export_model(model, out, name=name, info=info)
-    info["decoder_bytes"] = (out / DECODER_FILE).stat().st_size
-    info["encoder_bytes"] = (out / ENCODER_FILE).stat().st_size
-    stored = json.loads((out / MANIFEST).read_text())
+    identity = write_weights(model, out, name=name)
+    info["decoder_bytes"] = identity["decoder_bytes"]
+    info["encoder_bytes"] = identity["encoder_bytes"]
     info["comparisons"][0]["decoder_bytes"] = info["decoder_bytes"]
-    stored["info"] = info
-    (out / MANIFEST).write_text(json.dumps(stored, indent=2, sort_keys=True) + "\n", encoding="utf-8")
-    add_named_parameters(out)
-    return load_manifest(out)
+    manifest = {key: identity[key] for key in ("name", "config", "decoder_sha256", "encoder_sha256")}
+    manifest["info"] = info
+    manifest["parameters"] = describe_parameters(BrdfDecoder.from_network(model.decoder))
+    write_card(out, manifest)
+    return write_manifest(out, manifest)  # last: a folder with a model.json is a complete model
+
+
+def write_card(folder: str | os.PathLike[str], manifest: dict[str, Any]) -> Path:
+    """Write ``MODEL_CARD.md`` from a manifest, atomically."""
+    path = Path(folder) / CARD
+    with atomic_output(path, overwrite=True) as tmp:
+        tmp.write_text(render_model_card(manifest), encoding="utf-8")
+    return path
 
 
 def add_named_parameters(folder: str | Path) -> dict[str, Any]:
     """Measure what each latent dimension controls, store it as ``parameters`` in ``model.json``, rewrite the card.
 
-    The weights are not touched, so the model's identity (its decoder hash) is unchanged.
+    For a model exported before named parameters existed (:func:`export_run` measures them itself). The
+    weights are not touched, so the model's identity (its decoder hash) is unchanged.
     """
-    from brdfcodec.codec import BrdfDecoder
-    from brdfcodec.parameters import describe_parameters
-
     out = Path(folder)
     stored = json.loads((out / MANIFEST).read_text())
     stored["parameters"] = describe_parameters(BrdfDecoder(load_manifest(out)))
-    (out / MANIFEST).write_text(json.dumps(stored, indent=2, sort_keys=True) + "\n", encoding="utf-8")
-    (out / CARD).write_text(render_model_card(stored), encoding="utf-8")
+    write_card(out, stored)
+    write_manifest(out, stored)
     return stored["parameters"]
 
 
