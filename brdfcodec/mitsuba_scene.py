@@ -22,6 +22,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from brdfcodec.errors import FileFormatError
 
 __all__ = [
@@ -231,12 +233,93 @@ def material_memory(scene: Any) -> dict[str, int]:
     return memory
 
 
-def render_scene(path: str | os.PathLike[str], *, spp: int | None = None, seed: int = 0) -> tuple[Any, Any]:
+def render_scene(path: str | os.PathLike[str], *, spp: int | None = None, seed: int = 0) -> tuple[np.ndarray, Any]:
     """Load and render a scene in the current variant: (linear RGB image (H, W, 3) float32, scene)."""
-    import numpy as np
-
     import mitsuba as mi
 
     scene = load_scene(path)
     image = mi.render(scene, spp=spp or 0, seed=seed)
     return np.asarray(image, dtype=np.float32)[..., :3], scene
+
+
+def render_command(args: Any) -> int:
+    """``bvae render --mitsuba SCENE -o OUT`` (called by :mod:`brdfcodec.cli.render_command`)."""
+    import time
+
+    from brdfcodec.atomic import check_output_path
+    from brdfcodec.images import write_image
+    from brdfcodec.mitsuba_runtime import set_variant
+
+    if args.input is not None:
+        raise ValueError("--mitsuba renders a scene: give the scene only, not IN as well")
+    if args.output.suffix.lower() not in (".png", ".exr"):
+        raise ValueError(f"{args.output}: the output must be .png or .exr")
+    if args.spp is not None and not 1 <= args.spp <= 1 << 16:
+        raise ValueError("--spp must be between 1 and 65536")
+    check_output_path(args.output, overwrite=args.force)
+    _check_scene_path(args.mitsuba)
+    variant = set_variant(args.variant)
+    start = time.perf_counter()
+    try:
+        image, scene = render_scene(args.mitsuba, spp=args.spp)
+    except RuntimeError as error:  # Mitsuba reports plug-in and XML errors as RuntimeError
+        raise SceneFormatError(args.mitsuba, str(error).strip().splitlines()[-1]) from None
+    elapsed = time.perf_counter() - start
+    if not np.isfinite(image).all():
+        raise ValueError(f"{args.mitsuba}: the render holds non-finite pixels")
+    write_image(args.output, image, exposure=args.exposure, overwrite=args.force)
+    memory = material_memory(scene)
+    height, width = image.shape[:2]
+    print(f"wrote {args.output} ({width}x{height}, {variant}, {elapsed:.2f} s including loading)")
+    for name, size in memory.items():
+        print(f"  {name}: {size / 1e6:.1f} MB")
+    return 0
+
+
+def scene_selection(
+    scene: str | os.PathLike[str], library: Path | None, extra: list[str] | None
+) -> tuple[Path, list[str]]:
+    """(library, materials) that ``bvae extract --scene`` keeps: those the scene takes from the library.
+
+    Parameters
+    ----------
+    scene : path-like
+        The scene.
+    library : Path or None
+        The library; None means the one ``.bvae`` file the scene's ``bvae`` BSDFs name.
+    extra : list of str or None
+        ``--material`` names to keep as well.
+
+    Returns
+    -------
+    (Path, list of str)
+        The library and its referenced materials, each once, in scene order.
+    """
+    from brdfcodec.bvae_format import read_header
+
+    references = [r for r in scene_materials(scene) if r.plugin == "bvae" and r.filename.suffix.lower() != ".binary"]
+    if library is None:
+        files = sorted({r.filename for r in references})
+        if len(files) != 1:
+            raise SceneFormatError(scene, f"names {len(files)} .bvae files ({', '.join(map(str, files)) or 'none'}); "
+                                   "give the library as LIB.bvae")
+        library = files[0]
+    target = Path(library).resolve()
+    chosen = [r for r in references if r.filename == target]
+    if not chosen:
+        raise SceneFormatError(scene, f"takes no material from {library}")
+    header = read_header(library)
+    names: list[str] = []
+    for reference in chosen:
+        name = reference.material
+        if name is None:
+            if len(header.names) != 1:
+                raise SceneFormatError(scene, f"a bvae BSDF names {library} without a material, and it holds "
+                                       f"{len(header.names)}")
+            name = header.names[0]
+        if name not in header.names:
+            raise SceneFormatError(scene, f"material {name!r} is not in {library}")
+        if name not in names:
+            names.append(name)
+    names += [name for name in extra or [] if name not in names]
+    return Path(library), names
