@@ -100,7 +100,8 @@ def _source_properties(props: Any, default_kind: str) -> dict[str, Any]:
     if "filename" not in props:
         raise ValueError("a bvae/merl BSDF needs a 'filename' property (.bvae or MERL .binary file)")
     filename = str(props["filename"])
-    resolved = str(mi.Thread.thread().file_resolver().resolve(filename))
+    resolver = mi.file_resolver() if hasattr(mi, "file_resolver") else mi.Thread.thread().file_resolver()
+    resolved = str(resolver.resolve(filename))
     precision = str(props["precision"]) if "precision" in props else "float32"
     if precision not in ("float32", "float16"):
         raise ValueError(f"{filename}: 'precision' must be float32 or float16, got {precision!r}")

@@ -214,7 +214,11 @@ def load_scene(path: str | os.PathLike[str], **parameters: Any) -> Any:
 
     if scene.suffix.lower() == ".xml":
         return mi.load_file(str(scene), **{k: str(v) for k, v in parameters.items()})
-    return mi.load_dict(_prepare_dict(mi, scene, _read_json(scene)))
+    scene_dict = _prepare_dict(mi, scene, _read_json(scene))
+    if not any(isinstance(v, dict) and mi.PluginManager.instance().plugin_type(v.get("type", "")) == mi.ObjectType.Integrator
+               for v in scene_dict.values()):
+        scene_dict["default_integrator"] = {"type": "path"}
+    return mi.load_dict(scene_dict)
 
 
 def material_memory(scene: Any) -> dict[str, int]:
@@ -262,7 +266,7 @@ def render_command(args: Any) -> int:
     start = time.perf_counter()
     try:
         image, scene = render_scene(args.mitsuba, spp=args.spp)
-    except RuntimeError as error:  # Mitsuba reports plug-in and XML errors as RuntimeError
+    except Exception as error:  # noqa: BLE001 - Mitsuba reports plug-in and XML errors as plain exceptions
         raise SceneFormatError(args.mitsuba, str(error).strip().splitlines()[-1]) from None
     elapsed = time.perf_counter() - start
     if not np.isfinite(image).all():
