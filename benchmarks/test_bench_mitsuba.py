@@ -136,7 +136,11 @@ def test_importance_sampling_beats_cosine_at_equal_time(llvm: str, record_proper
     t_tab, tab_images = _timed(tabulated, spp, seeds)
     t_cos, _ = _timed(cosine, spp, seeds)
     cos_spp = max(spp, int(np.ceil(spp * t_tab / t_cos)))  # cosine gets at least the same time
-    t_cos_eq, cos_images = _timed(cosine, cos_spp, seeds)
+    for _ in range(4):  # the machine is shared: re-time until the cosine render is not the faster one
+        t_cos_eq, cos_images = _timed(cosine, cos_spp, seeds)
+        if t_cos_eq >= 0.95 * t_tab:
+            break
+        cos_spp = int(np.ceil(cos_spp * t_tab / t_cos_eq)) + 1
 
     def rmse(images: list[np.ndarray]) -> float:
         return float(np.mean([np.sqrt(np.mean((image - reference) ** 2)) for image in images]))
@@ -146,5 +150,5 @@ def test_importance_sampling_beats_cosine_at_equal_time(llvm: str, record_proper
                f"cosine {cos_spp} spp {t_cos_eq * 1e3:.0f} ms RMSE {rmse_cos:.4f}")
     print(summary)
     record_property("sampling", summary)
-    assert t_cos_eq >= 0.9 * t_tab
+    assert t_cos_eq >= 0.9 * t_tab, summary
     assert rmse_tab < rmse_cos, summary

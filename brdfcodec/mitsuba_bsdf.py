@@ -14,7 +14,7 @@ i.e. against the scene's folder), ``material`` (for a library of several),
 ``precision`` (``"float32"``, default, or ``"float16"``: half the memory),
 ``sampling`` (``"tabulated"``, default, or ``"cosine"``) and
 ``cosine_fraction`` (share of cosine-weighted samples in the tabulated
-mixture, default 0.25).
+mixture; default from the material, :func:`~brdfcodec.mitsuba_tables.cosine_share`).
 
 The material is decoded once per process for every BSDF that names the same
 file, material and precision (:func:`brdfcodec.mitsuba_tables.material_tables`),
@@ -42,13 +42,12 @@ from typing import Any
 import numpy as np
 
 from brdfcodec.conventions import BIN_TOLERANCE, HORIZON_COS_MIN, N_PHI_D, N_THETA_D, N_THETA_H
-from brdfcodec.mitsuba_tables import MaterialTables, material_tables, theta_h_edges
+from brdfcodec.mitsuba_tables import MaterialTables, cosine_share, material_tables, theta_h_edges
 
 __all__ = ["MERL_PLUGIN_NAME", "PLUGIN_NAME", "bsdf_class", "material_of", "nearest_value", "register"]
 
 PLUGIN_NAME = "bvae"
 MERL_PLUGIN_NAME = "merl"
-DEFAULT_COSINE_FRACTION = 0.25
 
 
 def _mitsuba() -> Any:
@@ -108,8 +107,8 @@ def _source_properties(props: Any, default_kind: str) -> dict[str, Any]:
     sampling = str(props["sampling"]) if "sampling" in props else "tabulated"
     if sampling not in ("tabulated", "cosine"):
         raise ValueError(f"{filename}: 'sampling' must be tabulated or cosine, got {sampling!r}")
-    fraction = float(props["cosine_fraction"]) if "cosine_fraction" in props else DEFAULT_COSINE_FRACTION
-    if not 0.0 < fraction <= 1.0:
+    fraction = float(props["cosine_fraction"]) if "cosine_fraction" in props else None
+    if fraction is not None and not 0.0 < fraction <= 1.0:
         raise ValueError(f"{filename}: 'cosine_fraction' must be in (0, 1], got {fraction}")
     lookup = str(props["lookup"]) if "lookup" in props else "nearest"
     if lookup != "nearest":
@@ -238,7 +237,10 @@ def _vector_class(mi: Any, default_kind: str) -> type:
             self.m_gather_type = array_module.Array3f16 if self.tables.precision == "float16" else mi.Color3f
             self.m_scale = float(self.tables.scale)
             marginal = self.tables.marginal
-            self.m_cosine_fraction = options["cosine_fraction"] if marginal.sum() > 0 else 1.0
+            fraction = options["cosine_fraction"]
+            self.m_cosine_fraction = cosine_share(marginal) if fraction is None else fraction
+            if not marginal.sum() > 0:
+                self.m_cosine_fraction = 1.0
             self.m_marginal = mi.Float(marginal)
             self.m_band = mi.Float(band)
             self.m_edges_sin2 = mi.Float(edges_sin2)

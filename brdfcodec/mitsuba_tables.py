@@ -35,6 +35,7 @@ __all__ = [
     "MaterialTables",
     "Precision",
     "cache_info",
+    "cosine_share",
     "load_physical",
     "material_tables",
     "theta_h_edges",
@@ -82,6 +83,26 @@ def theta_h_marginal(physical: npt.ArrayLike) -> npt.NDArray[np.float64]:
     weights = mean * band
     total = weights.sum()
     return weights / total if total > 0 and np.isfinite(total) else np.zeros(N_THETA_H)
+
+
+def cosine_share(marginal: npt.ArrayLike) -> float:
+    """Share of cosine-weighted samples to mix with half-vector samples, from a θh marginal.
+
+    ``2 · P(θh > 45°)`` clipped to [0.1, 1]: a Lambertian material (whose
+    marginal puts half its mass beyond 45°) is sampled by cosine alone, a
+    sharp lobe mostly by its half vectors, with at least 10 % cosine samples
+    everywhere so that no direction of non-zero reflectance is missed.
+
+    Parameters
+    ----------
+    marginal : array_like, shape (90,)
+        θh bin probabilities (:func:`theta_h_marginal`); all zeros gives 1.
+    """
+    weights = np.asarray(marginal, dtype=np.float64)
+    if not weights.sum() > 0:
+        return 1.0
+    beyond = weights[theta_h_edges()[:-1] >= np.pi / 4].sum() / weights.sum()
+    return float(np.clip(2.0 * beyond, 0.1, 1.0))
 
 
 @dataclass(eq=False)
