@@ -215,7 +215,8 @@ def load_scene(path: str | os.PathLike[str], **parameters: Any) -> Any:
     if scene.suffix.lower() == ".xml":
         return mi.load_file(str(scene), **{k: str(v) for k, v in parameters.items()})
     scene_dict = _prepare_dict(mi, scene, _read_json(scene))
-    if not any(isinstance(v, dict) and mi.PluginManager.instance().plugin_type(v.get("type", "")) == mi.ObjectType.Integrator
+    plugins = mi.PluginManager.instance()
+    if not any(isinstance(v, dict) and plugins.plugin_type(v.get("type", "")) == mi.ObjectType.Integrator
                for v in scene_dict.values()):
         scene_dict["default_integrator"] = {"type": "path"}
     return mi.load_dict(scene_dict)
