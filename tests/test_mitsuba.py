@@ -407,4 +407,5 @@ def test_original_and_decoded_material_in_one_scene_match_the_report(llvm: str, 
         {"type": "bvae", "filename": str(example_library()), "material": name})]
     inner = _inner(size)
     error = image_error(np.where(inner[..., None], images[0], 0), np.where(inner[..., None], images[1], 0))
+    print(f"{name}: Mitsuba ΔE ITP {error.delta_e_itp_mean:.3f}, report {row['delta_e_itp']:.3f}")
     assert error.delta_e_itp_mean == pytest.approx(row["delta_e_itp"], rel=0.25), (error, row["delta_e_itp"])
