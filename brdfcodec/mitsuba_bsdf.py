@@ -138,7 +138,7 @@ def _scalar_class(mi: Any, default_kind: str) -> type:
             self.tables = material_tables(options["filename"], options["material"], precision=options["precision"],
                                           kind=options["kind"])
             self.name = self.tables.name
-            channels_last = self.tables.values.reshape(N_THETA_H, N_THETA_D, N_PHI_D, 3)
+            channels_last = self.tables.host().reshape(N_THETA_H, N_THETA_D, N_PHI_D, 3)
             self.table = np.moveaxis(channels_last, -1, 0)  # a view: (3, 90, 90, 180)
             self.scale = self.tables.scale
             self.m_flags = mi.BSDFFlags.GlossyReflection | mi.BSDFFlags.FrontSide
@@ -232,7 +232,8 @@ def _vector_class(mi: Any, default_kind: str) -> type:
             device = self.tables.device.get(variant)
             if device is None:  # upload once per variant, shared by every BSDF using these tables
                 array_type = mi.Float16 if self.tables.precision == "float16" else mi.Float
-                device = self.tables.device[variant] = array_type(self.tables.values)
+                device = self.tables.device[variant] = array_type(self.tables.host())
+                self.tables.release_host()
             self.m_values = device
             self.m_gather_type = array_module.Array3f16 if self.tables.precision == "float16" else mi.Color3f
             self.m_scale = float(self.tables.scale)

@@ -201,16 +201,17 @@ def find_libllvm(*, extra_globs: Iterable[str] = (), environ: dict[str, str] | N
     raise LibLLVMNotFoundError(f"no usable libLLVM found (seen: {seen}); {INSTALL_HINT}")
 
 
-def _llvm_ready() -> bool:
-    """Point Dr.Jit at a usable libLLVM (unless already set) and say whether its LLVM backend loads."""
-    if "DRJIT_LIBLLVM_PATH" not in os.environ:
-        try:
-            os.environ["DRJIT_LIBLLVM_PATH"] = str(find_libllvm().path)
-        except LibLLVMNotFoundError:
-            return False
+def _llvm_problem() -> str | None:
+    """Point Dr.Jit at a usable libLLVM (checking a preset DRJIT_LIBLLVM_PATH); None if its backend loads."""
+    try:
+        os.environ["DRJIT_LIBLLVM_PATH"] = str(find_libllvm().path)
+    except LibLLVMNotFoundError as error:
+        return str(error)
     import drjit as dr
 
-    return bool(dr.has_backend(dr.JitBackend.LLVM))
+    if not dr.has_backend(dr.JitBackend.LLVM):
+        return f"Dr.Jit could not load {os.environ['DRJIT_LIBLLVM_PATH']} ({INSTALL_HINT})"
+    return None
 
 
 def set_variant(
@@ -259,8 +260,9 @@ def set_variant(
         if variant not in mi.variants():
             reasons.append(f"{variant}: not built into this Mitsuba ({', '.join(mi.variants())})")
             continue
-        if variant.startswith("llvm_") and not _llvm_ready():
-            reasons.append(f"{variant}: no usable libLLVM ({INSTALL_HINT})")
+        problem = _llvm_problem() if variant.startswith("llvm_") else None
+        if problem is not None:
+            reasons.append(f"{variant}: {problem}")
             continue
         if variant.startswith("cuda_"):
             import drjit as dr

@@ -4,8 +4,9 @@ A scene is a Mitsuba XML file or a scene dictionary saved as JSON (the
 dictionary :func:`mitsuba.load_dict` takes; transforms are written as
 ``{"look_at": {"origin": [...], "target": [...], "up": [...]}}``,
 ``{"translate": [...]}``, ``{"scale": s or [...]}``, ``{"matrix": 4×4}``, or
-a list of these applied left to right). Relative ``filename`` values of
-``bvae`` / ``merl`` BSDFs are relative to the scene file's folder.
+a list of these applied left to right; a ``path`` integrator is added when
+the dictionary names none). Relative ``filename`` values are relative to the
+scene file's folder.
 
 :func:`scene_materials` reads a scene *without* Mitsuba, so that
 ``bvae extract --scene`` can keep only the materials a scene needs.

@@ -115,9 +115,10 @@ class MaterialTables:
         Material name.
     source : str
         The file it came from.
-    values : ndarray, shape (90 · 90 · 180 · 3,)
+    values : ndarray, shape (90 · 90 · 180 · 3,), or None
         Reflectance / ``scale`` in 1/sr, channels last
         (index ``((iθh · 90 + iθd) · 180 + iφd) · 3 + c``); invalid entries −1.
+        None once a renderer holds its own copy (:meth:`release_host`).
     scale : float
         Multiply a value by this to get 1/sr (1 unless a float16 table had to be scaled).
     marginal : ndarray, shape (90,)
@@ -129,16 +130,28 @@ class MaterialTables:
 
     name: str
     source: str
-    values: np.ndarray
+    values: np.ndarray | None
     scale: float
     marginal: np.ndarray
     precision: Precision
     device: dict[str, Any] = field(default_factory=dict)
+    nbytes: int = 0  # bytes of one copy of the table: 8,748,000 in float16, 17,496,000 in float32
 
-    @property
-    def nbytes(self) -> int:
-        """Bytes of the reflectance table (8,748,000 in float16, 17,496,000 in float32)."""
-        return int(self.values.nbytes)
+    def __post_init__(self) -> None:
+        if self.values is not None:
+            self.nbytes = int(self.values.nbytes)
+
+    def host(self) -> np.ndarray:
+        """The table as a numpy array (copied back from a renderer's array if the host copy was released)."""
+        if self.values is None:
+            dtype = np.float16 if self.precision == "float16" else np.float32
+            self.values = np.asarray(next(iter(self.device.values())), dtype=dtype)
+        return self.values
+
+    def release_host(self) -> None:
+        """Drop the numpy copy once a renderer holds the table (halves the memory of vectorised variants)."""
+        if self.device:
+            self.values = None
 
 
 _CACHE: weakref.WeakValueDictionary[tuple[Any, ...], MaterialTables] = weakref.WeakValueDictionary()

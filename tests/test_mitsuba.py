@@ -66,6 +66,23 @@ def test_find_libllvm_honours_and_checks_the_environment_variable(tmp_path: Path
         find_libllvm(environ={"DRJIT_LIBLLVM_PATH": str(tmp_path / "missing.so")})
 
 
+def test_set_variant_falls_back_with_a_warning() -> None:
+    """A variant that cannot run here (no CUDA device in CI) gives the fallback and says why."""
+    import drjit as dr
+
+    if dr.has_backend(dr.JitBackend.CUDA):
+        pytest.skip("a CUDA device is present")
+    previous = mi.variant()
+    try:
+        with pytest.warns(mitsuba_runtime.MitsubaVariantWarning, match="cuda_ad_rgb: no CUDA device"):
+            assert mitsuba_runtime.set_variant("cuda_ad_rgb") == "scalar_rgb"
+        with pytest.raises(RuntimeError, match="no CUDA device"):
+            mitsuba_runtime.set_variant("cuda_ad_rgb", fallback=None)
+    finally:
+        if previous is not None:
+            mi.set_variant(previous)
+
+
 # ---------------------------------------------------------------- fixtures
 
 @pytest.fixture(scope="module")
@@ -294,6 +311,7 @@ def test_float16_tables_halve_memory_and_render_the_same(llvm: str, glossy_bvae:
         images.append(np.array(mi.render(scene)))
         sizes.append(material_of(scene.shapes()[0].bsdf()).nbytes)
     assert sizes == [17_496_000, 8_748_000]
+    assert material_of(scene.shapes()[0].bsdf()).values is None  # the numpy copy is dropped after upload
     assert np.abs(images[0] - images[1]).max() <= 2e-3 * images[0].max()
 
 
