@@ -18,11 +18,12 @@ mixture; default from the material, :func:`~brdfcodec.mitsuba_tables.cosine_shar
 
 The material is decoded once per process for every BSDF that names the same
 file, material and precision (:func:`brdfcodec.mitsuba_tables.material_tables`),
-so shapes of a scene share one table. Evaluation is the nearest-bin lookup of
+so shapes of a scene share one table. Evaluation is the lookup of
 ``spec/conventions.md`` §3 (θh's square-root bins, φd folded by reciprocity,
-0 at or below the horizon), in the precision of the variant (float32 in the
-``*_rgb`` variants, so a direction pair within float32 rounding of a bin edge
-may land in the neighbouring bin).
+0 at or below the horizon; ``"lookup"``: ``"nearest"``, default, or
+``"trilinear"``, both as :func:`brdfcodec.lookup.lookup`), in the precision of
+the variant (float32 in the ``*_rgb`` variants, so a direction pair within
+float32 rounding of a bin edge may land in the neighbouring bin).
 
 * ``llvm_*`` / ``cuda_*`` variants (:class:`VectorBvaeBSDF`, built per variant):
   the table is one Dr.Jit array gathered for whole wavefronts. Sampling is a
@@ -111,8 +112,8 @@ def _source_properties(props: Any, default_kind: str) -> dict[str, Any]:
     if fraction is not None and not 0.0 < fraction <= 1.0:
         raise ValueError(f"{filename}: 'cosine_fraction' must be in (0, 1], got {fraction}")
     lookup = str(props["lookup"]) if "lookup" in props else "nearest"
-    if lookup != "nearest":
-        raise ValueError(f"{filename}: 'lookup' must be 'nearest' (the only mode of the plug-in), got {lookup!r}")
+    if lookup not in ("nearest", "trilinear"):
+        raise ValueError(f"{filename}: 'lookup' must be nearest or trilinear, got {lookup!r}")
     return {
         "filename": resolved,
         "material": str(props["material"]) if "material" in props else None,
@@ -120,6 +121,7 @@ def _source_properties(props: Any, default_kind: str) -> dict[str, Any]:
         "precision": precision,
         "sampling": sampling,
         "cosine_fraction": 1.0 if sampling == "cosine" else fraction,
+        "lookup": lookup,
     }
 
 
@@ -141,14 +143,23 @@ def _scalar_class(mi: Any, default_kind: str) -> type:
             channels_last = self.tables.host().reshape(N_THETA_H, N_THETA_D, N_PHI_D, 3)
             self.table = np.moveaxis(channels_last, -1, 0)  # a view: (3, 90, 90, 180)
             self.scale = self.tables.scale
+            self.lookup = options["lookup"]
+            if self.lookup == "trilinear":  # brdfcodec.lookup's inputs, made once
+                self.table = np.ascontiguousarray(self.table, dtype=np.float32)
+                self.mask = self.table >= 0
             self.m_flags = mi.BSDFFlags.GlossyReflection | mi.BSDFFlags.FrontSide
             self.m_components = [self.m_flags]
 
         def _value(self, wi: Any, wo: Any) -> Any:
             if wi.z <= 0 or wo.z <= 0:
                 return mi.Color3f(0.0)
-            rgb = nearest_value(self.table, (float(wi.x), float(wi.y), float(wi.z)),
-                                (float(wo.x), float(wo.y), float(wo.z))) * self.scale
+            a, b = (float(wi.x), float(wi.y), float(wi.z)), (float(wo.x), float(wo.y), float(wo.z))
+            if self.lookup == "nearest":
+                rgb = nearest_value(self.table, a, b) * self.scale
+            else:
+                from brdfcodec.lookup import lookup
+
+                rgb = lookup(self.table, a, b, mode="trilinear", mask=self.mask) * self.scale
             return mi.Color3f(float(rgb[0]), float(rgb[1]), float(rgb[2]))
 
         def eval(self, ctx: Any, si: Any, wo: Any, active: bool = True) -> Any:
@@ -195,8 +206,8 @@ def _vector_class(mi: Any, default_kind: str) -> type:
     edges_sin2 = np.sin(theta_h_edges()) ** 2
     band = np.diff(edges_sin2)
 
-    def bins(wi: Any, wo: Any) -> tuple[Any, Any, Any, Any]:
-        """(θh bin, θd bin, φd bin, half vector) of unit direction pairs, spec/conventions.md §3."""
+    def coordinates(wi: Any, wo: Any) -> tuple[Any, Any, Any, Any]:
+        """(θh, θd, φd folded into [0, π], half vector) of unit direction pairs, spec/conventions.md §3."""
         h = dr.normalize(wi + wo)
         rxy = dr.sqrt(dr.fma(h.x, h.x, h.y * h.y))
         theta_h = dr.atan2(rxy, h.z)
@@ -210,6 +221,11 @@ def _vector_class(mi: Any, default_kind: str) -> type:
         theta_d = dr.atan2(dr.sqrt(dr.fma(x2, x2, y1 * y1)), z2)
         phi_d = dr.atan2(y1, x2)
         phi_d = dr.select(phi_d < 0, phi_d + math.pi, phi_d)  # fold by reciprocity into [0, π]
+        return theta_h, theta_d, phi_d, h
+
+    def bins(wi: Any, wo: Any) -> tuple[Any, Any, Any, Any]:
+        """(θh bin, θd bin, φd bin, half vector) of unit direction pairs, spec/conventions.md §3."""
+        theta_h, theta_d, phi_d, h = coordinates(wi, wo)
         i_h = mi.Int32(dr.floor(N_THETA_H * dr.sqrt(dr.maximum(theta_h, 0.0) / half_pi) + BIN_TOLERANCE))
         i_d = mi.Int32(dr.floor(N_THETA_D * theta_d / half_pi + BIN_TOLERANCE))
         i_p = mi.Int32(dr.floor(N_PHI_D * phi_d / math.pi + BIN_TOLERANCE))
@@ -217,6 +233,19 @@ def _vector_class(mi: Any, default_kind: str) -> type:
         i_d = dr.clip(i_d, 0, N_THETA_D - 1)
         i_p = dr.select(i_p >= N_PHI_D, i_p - N_PHI_D, dr.maximum(i_p, 0))  # φd = π is bin 0
         return mi.UInt32(i_h), mi.UInt32(i_d), mi.UInt32(i_p), h
+
+    def corners(u: Any, n: int, periodic: bool) -> tuple[Any, Any, Any]:
+        """Lower and upper neighbouring bins of bin coordinate u and the upper one's weight (brdfcodec.lookup)."""
+        if periodic:
+            lower = dr.floor(u)
+            frac = u - lower
+            low = mi.Int32(lower)
+            low = dr.select(low >= n, low - n, low)
+            high = dr.select(low + 1 >= n, low + 1 - n, low + 1)
+            return mi.UInt32(low), mi.UInt32(high), frac
+        clamped = dr.clip(u, 0.0, n - 1.0)
+        low = dr.minimum(mi.Int32(dr.floor(clamped)), n - 2)
+        return mi.UInt32(low), mi.UInt32(low + 1), clamped - mi.Float(low)
 
     class VectorBvaeBSDF(mi.BSDF):  # type: ignore[misc, name-defined]
         """A brdfcodec material as a vectorised Mitsuba BSDF (reflection only, one-sided)."""
@@ -228,6 +257,7 @@ def _vector_class(mi: Any, default_kind: str) -> type:
                                           kind=options["kind"])
             self.name = self.tables.name
             self.sampling = options["sampling"]
+            self.lookup = options["lookup"]
             variant = mi.variant()
             device = self.tables.device.get(variant)
             if device is None:  # upload once per variant, shared by every BSDF using these tables
@@ -257,10 +287,31 @@ def _vector_class(mi: Any, default_kind: str) -> type:
         def reflectance(self, wi: Any, wo: Any, active: Any = True) -> Any:
             """Reflectance (1/sr, RGB) at unit local-frame direction pairs, 0 at or below the horizon."""
             active = active & (wi.z > HORIZON_COS_MIN) & (wo.z > HORIZON_COS_MIN)
+            if self.lookup == "trilinear":
+                return self._trilinear(wi, wo, active)
             i_h, i_d, i_p, _ = bins(wi, wo)
             index = (i_h * N_THETA_D + i_d) * N_PHI_D + i_p
             rgb = mi.Color3f(dr.gather(self.m_gather_type, self.m_values, index, active))
             return dr.select(active, dr.maximum(rgb, 0.0) * self.m_scale, 0.0)
+
+        def _trilinear(self, wi: Any, wo: Any, active: Any) -> Any:
+            """Interpolation between the 8 neighbouring bins, invalid entries left out (brdfcodec.lookup)."""
+            theta_h, theta_d, phi_d, _ = coordinates(wi, wo)
+            axes = (corners(N_THETA_H * dr.sqrt(dr.maximum(theta_h, 0.0) / half_pi), N_THETA_H, False),
+                    corners(N_THETA_D * theta_d / half_pi, N_THETA_D, False),
+                    corners(N_PHI_D * phi_d / math.pi, N_PHI_D, True))
+            total, weights = mi.Color3f(0.0), mi.Color3f(0.0)
+            for corner in range(8):
+                picks = [(high, frac) if (corner >> axis) & 1 else (low, 1.0 - frac)
+                         for axis, (low, high, frac) in enumerate(axes)]
+                index = (picks[0][0] * N_THETA_D + picks[1][0]) * N_PHI_D + picks[2][0]
+                weight = picks[0][1] * picks[1][1] * picks[2][1]
+                rgb = mi.Color3f(dr.gather(self.m_gather_type, self.m_values, index, active))
+                valid_weight = dr.select(rgb >= 0, mi.Color3f(weight), 0.0)
+                total += valid_weight * dr.maximum(rgb, 0.0)
+                weights += valid_weight
+            value = dr.select(weights > 0, total / dr.maximum(weights, 1e-30), 0.0) * self.m_scale
+            return dr.select(active, value, 0.0)
 
         def _pdf(self, wi: Any, wo: Any, active: Any) -> Any:
             active = active & (wi.z > 0) & (wo.z > 0)
