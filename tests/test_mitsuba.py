@@ -412,6 +412,7 @@ def test_extract_scene_keeps_exactly_the_referenced_materials(tmp_path: Path) ->
     assert main(["extract", str(example_library()), "--scene", str(json_scene), "-o", str(out2)]) == 0
     assert read_header(out2).names == ["pvc"]
     assert not (tmp_path / "bad.bvae").exists()
+    assert main(["extract", "-o", str(tmp_path / "bad.bvae")]) == 2  # neither materials nor a scene: usage
     missing = tmp_path / "m.json"
     missing.write_text(json.dumps({"type": "scene", "a": {"type": "sphere", "bsdf": {
         "type": "bvae", "filename": str(example_library()), "material": "unobtainium"}}}))

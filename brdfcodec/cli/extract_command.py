@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
 from brdfcodec.bvae_format import read_bvae, write_bvae
@@ -35,7 +36,8 @@ def run(args: argparse.Namespace) -> int:
 
         args.input, args.material = scene_selection(args.scene, args.input, args.material)
     if args.input is None or not args.material:
-        raise ValueError("name the library and at least one --material, or a --scene")
+        print("bvae extract: error: name the library and at least one --material, or a --scene", file=sys.stderr)
+        return 2  # a usage error, as argparse's own
     if args.output.resolve() == args.input.resolve():
         raise ValueError(f"{args.output}: the output must not be the input")
     library = read_bvae(args.input)
