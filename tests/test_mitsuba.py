@@ -436,6 +436,7 @@ def test_render_mitsuba_command(llvm: str, tmp_path: Path, capsys) -> None:
     assert out.stat().st_size > 100
     assert "pvc (float16): 8.7 MB" in capsys.readouterr().out
     assert main(["render", "--mitsuba", str(tmp_path / "none.xml"), "-o", str(tmp_path / "x.png")]) == 1
+    assert main(["render", "-o", str(tmp_path / "x.png")]) == 2  # neither IN nor a scene: usage
     broken = tmp_path / "broken.json"
     broken.write_text(json.dumps({"type": "scene", "a": {"type": "sphere", "bsdf": {"type": "bvae",
                                                                                     "filename": "missing.bvae"}}}))

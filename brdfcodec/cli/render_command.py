@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import sys
 import time
 from pathlib import Path
 from typing import Any
@@ -118,7 +119,9 @@ def run(args: argparse.Namespace) -> int:
 
         return render_command(args)
     if args.input is None:
-        raise ValueError("name the material to render (IN), or a scene with --mitsuba SCENE")
+        print("bvae render: error: name the material to render (IN), or a scene with --mitsuba SCENE",
+              file=sys.stderr)
+        return 2  # a usage error, as argparse's own
     if args.size < 8 or args.size > 4096:
         raise ValueError("--size must be between 8 and 4096 pixels")
     check_output_path(args.output, overwrite=args.force)
