@@ -406,3 +406,10 @@ def register() -> None:
 def material_of(bsdf: Any) -> MaterialTables | None:
     """The :class:`~brdfcodec.mitsuba_tables.MaterialTables` behind a loaded ``bvae``/``merl`` BSDF (else None)."""
     return getattr(bsdf, "tables", None)
+
+
+def __getattr__(name: str) -> Any:
+    """``BvaeBSDF``: the BSDF class of the current variant (the name earlier versions exported)."""
+    if name == "BvaeBSDF":
+        return bsdf_class()
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
