@@ -239,11 +239,16 @@ def material_memory(scene: Any) -> dict[str, int]:
     return memory
 
 
-def render_scene(path: str | os.PathLike[str], *, spp: int | None = None, seed: int = 0) -> tuple[np.ndarray, Any]:
-    """Load and render a scene in the current variant: (linear RGB image (H, W, 3) float32, scene)."""
+def render_scene(
+    path: str | os.PathLike[str], *, spp: int | None = None, seed: int = 0, **parameters: Any
+) -> tuple[np.ndarray, Any]:
+    """Load and render a scene in the current variant: (linear RGB image (H, W, 3) float32, scene).
+
+    ``spp`` overrides the scene's sample count; ``parameters`` are XML ``$name`` parameters.
+    """
     import mitsuba as mi
 
-    scene = load_scene(path)
+    scene = load_scene(path, **parameters)
     image = mi.render(scene, spp=spp or 0, seed=seed)
     return np.asarray(image, dtype=np.float32)[..., :3], scene
 
