@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
 from brdfcodec.bvae_format import read_bvae, write_bvae
@@ -18,8 +19,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
         description="Write a .bvae file holding only the named materials of a library: their records and "
         "metadata are copied unchanged (same latents, same decoder), nothing is decoded or re-encoded.",
     )
-    parser.add_argument("input", type=Path, metavar="LIB.bvae")
-    parser.add_argument("--material", action="append", required=True, help="material to keep (repeatable)")
+    parser.add_argument("input", type=Path, metavar="LIB.bvae", nargs="?",
+                        help="the library (with --scene: default, the one .bvae file the scene names)")
+    parser.add_argument("--material", action="append", help="material to keep (repeatable)")
+    parser.add_argument("--scene", type=Path, metavar="SCENE",
+                        help="keep the materials this Mitsuba scene (.xml or .json) takes from the library")
     parser.add_argument("-o", "--output", type=Path, required=True, help="output .bvae file")
     parser.add_argument("--force", action="store_true", help="replace an existing output file")
     parser.set_defaults(handler=run)
@@ -27,6 +31,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
 
 def run(args: argparse.Namespace) -> int:
     """Copy the chosen records in the order given."""
+    if args.scene is not None:
+        from brdfcodec.mitsuba_scene import scene_selection
+
+        args.input, args.material = scene_selection(args.scene, args.input, args.material)
+    if args.input is None or not args.material:
+        print("bvae extract: error: name the library and at least one --material, or a --scene", file=sys.stderr)
+        return 2  # a usage error, as argparse's own
     if args.output.resolve() == args.input.resolve():
         raise ValueError(f"{args.output}: the output must not be the input")
     library = read_bvae(args.input)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import sys
 import time
 from pathlib import Path
 from typing import Any
@@ -31,7 +32,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
         "environment; or, with --traversal, a sheet with one row per latent parameter. PNG is exposed and "
         "sRGB-encoded; EXR holds linear radiance.",
     )
-    parser.add_argument("input", type=Path, metavar="IN", help=".bvae file or MERL .binary file")
+    parser.add_argument("input", type=Path, metavar="IN", nargs="?", help=".bvae file or MERL .binary file")
     parser.add_argument("-o", "--output", type=Path, required=True, help="output .png or .exr")
     parser.add_argument("--material", help="material of a .bvae library (default: the only one)")
     parser.add_argument("--size", type=int, default=256, help="image size in pixels (default 256)")
@@ -44,6 +45,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     parser.add_argument("--exposure", type=float, help="PNG exposure (default: automatic)")
     parser.add_argument("--compare", type=Path, metavar="SOURCE.binary",
                         help="also render this MERL file the same way and print ΔE ITP, ΔE 2000 and PSNR against it")
+    parser.add_argument("--mitsuba", type=Path, metavar="SCENE",
+                        help="render a Mitsuba 3 scene (.xml or .json) instead of IN, with its bvae/merl BSDFs")
+    parser.add_argument("--spp", type=int, help="with --mitsuba: samples per pixel (default: the scene's)")
+    parser.add_argument("--variant", default="llvm_ad_rgb",
+                        help="with --mitsuba: Mitsuba variant (default llvm_ad_rgb, else scalar_rgb with a warning)")
     parser.add_argument("--force", action="store_true", help="replace an existing output file")
     parser.set_defaults(handler=run)
 
@@ -108,6 +114,14 @@ def run(args: argparse.Namespace) -> int:
     from brdfcodec.images import write_image, write_png
     from brdfcodec.render import render_flat, render_sphere, render_sphere_environment
 
+    if args.mitsuba is not None:
+        from brdfcodec.mitsuba_scene import render_command
+
+        return render_command(args)
+    if args.input is None:
+        print("bvae render: error: name the material to render (IN), or a scene with --mitsuba SCENE",
+              file=sys.stderr)
+        return 2  # a usage error, as argparse's own
     if args.size < 8 or args.size > 4096:
         raise ValueError("--size must be between 8 and 4096 pixels")
     check_output_path(args.output, overwrite=args.force)
