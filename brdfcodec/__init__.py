@@ -29,10 +29,12 @@ from brdfcodec.errors import (
     FileFormatError,
     MerlFormatError,
     NonFiniteValueError,
+    OptionalDependencyError,
     SourceFormatError,
     UnsupportedVersionError,
 )
 from brdfcodec.genuine import genuine_merl_name
+from brdfcodec.inputs import read_measured
 from brdfcodec.lookup import lookup
 from brdfcodec.merl import MerlBRDF, read_merl, write_merl
 from brdfcodec.metrics import cosine_weighted_rmse, error_report, relae_linear, relae_mapped
@@ -75,6 +77,7 @@ __all__ = [
     "MerlBRDF",
     "MerlFormatError",
     "NonFiniteValueError",
+    "OptionalDependencyError",
     "SourceFormatError",
     "__version__",
     "cosine_weighted_rmse",
@@ -83,6 +86,7 @@ __all__ = [
     "interpolate_slices",
     "lookup",
     "map_values",
+    "read_measured",
     "read_merl",
     "relae_linear",
     "relae_mapped",

@@ -36,8 +36,9 @@ from brdfcodec.bvae_format import (
 from brdfcodec.conventions import MERL_COLOR_SCALE, N_KEPT_SLICES, NETWORK_INPUT_SHAPE, UNMEASURED_VALUE
 from brdfcodec.dataset import material_arrays
 from brdfcodec.errors import DecoderMismatchError
+from brdfcodec.inputs import read_measured
 from brdfcodec.mask import horizon_mask
-from brdfcodec.merl import MerlBRDF, read_merl
+from brdfcodec.merl import MerlBRDF
 from brdfcodec.metrics import error_report
 from brdfcodec.models.registry import default_model_folder, find_model
 from brdfcodec.models.store import ModelManifest, load_manifest, load_model
@@ -328,8 +329,11 @@ class BrdfEncoder:
         records = []
         for i, name in enumerate(names):
             meta = {"encoder_sha256": self.manifest.encoder_sha256}
-            if sources[i] is not None:
-                meta["source_sha256"] = sources[i].sha256  # type: ignore[union-attr]
+            source = sources[i]
+            if source is not None:
+                meta["source_sha256"] = source.source_sha256 or source.sha256
+                if source.source_kind is not None:
+                    meta["source_kind"] = source.source_kind
             records.append(LatentRecord(name, mu[i], sigma[i], meta))
         return records
 
@@ -484,7 +488,7 @@ class MaterialLibrary:
 
 
 def _as_brdfs(sources: Iterable[MerlBRDF | str | os.PathLike[str]]) -> list[MerlBRDF]:
-    return [s if isinstance(s, MerlBRDF) else read_merl(s) for s in sources]
+    return [s if isinstance(s, MerlBRDF) else read_measured(s) for s in sources]
 
 
 def compress(

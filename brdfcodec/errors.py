@@ -21,6 +21,7 @@ __all__ = [
     "FileFormatError",
     "MerlFormatError",
     "NonFiniteValueError",
+    "OptionalDependencyError",
     "SourceFormatError",
     "UnsupportedVersionError",
 ]
@@ -81,3 +82,7 @@ class DecoderNotFoundError(BrdfcodecError):
 
 class DecoderMismatchError(BrdfcodecError):
     """A decoder other than the one a ``.bvae`` file refers to was offered for decoding it."""
+
+
+class OptionalDependencyError(BrdfcodecError, ImportError):
+    """An optional extra this operation needs is not installed; the message names the pip command."""
