@@ -32,6 +32,7 @@ TARGETS = {
     "edit-and-decode": 1.2,  # traversal + interpolation + decode vs decode alone
     "mitsuba-vs-roughconductor": 3.0,  # bvae BSDF (llvm_ad_rgb) vs built-in roughconductor, 256², 64 spp path tracer
     "mitsuba-vs-scalar": 1 / 50,  # the same render in llvm_ad_rgb vs the scalar_rgb plug-in (scaled from 32², 4 spp)
+    "rgl-tabulate": 4.0,  # an RGL .bsdf through Mitsuba's measured plugin vs an NBRDF proxy fit, same MERL grid
 }
 
 #: Largest acceptable candidate median, in seconds, on 2 CPU cores (issue 4 targets).
@@ -39,6 +40,7 @@ ABSOLUTE_TARGETS = {
     "decode-full": 0.050,
     "decode-slice": 0.010,
     "render-sphere-256": 0.5,  # "a fraction of a second" (issue 5)
+    "rgl-tabulate": 10.0,  # one RGL file on the MERL grid (issue 12)
 }
 
 

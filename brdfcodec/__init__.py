@@ -31,10 +31,12 @@ from brdfcodec.errors import (
     ModelChecksumError,
     ModelNotFoundError,
     NonFiniteValueError,
+    OptionalDependencyError,
     SourceFormatError,
     UnsupportedVersionError,
 )
 from brdfcodec.genuine import genuine_merl_name
+from brdfcodec.inputs import read_measured
 from brdfcodec.lookup import lookup
 from brdfcodec.merl import MerlBRDF, read_merl, write_merl
 from brdfcodec.metrics import cosine_weighted_rmse, error_report, relae_linear, relae_mapped
@@ -104,6 +106,7 @@ __all__ = [
     "ModelChecksumError",
     "ModelNotFoundError",
     "NonFiniteValueError",
+    "OptionalDependencyError",
     "SourceFormatError",
     "__version__",
     "cosine_weighted_rmse",
@@ -113,6 +116,7 @@ __all__ = [
     "lookup",
     "map_values",
     "network_input_from_table",
+    "read_measured",
     "read_merl",
     "reflectance_from_stored",
     "relae_linear",

@@ -51,8 +51,9 @@ from brdfcodec.bvae_format import (
 )
 from brdfcodec.conventions import N_KEPT_SLICES, NETWORK_INPUT_SHAPE, UNMEASURED_VALUE
 from brdfcodec.errors import DecoderMismatchError
+from brdfcodec.inputs import read_measured
 from brdfcodec.mask import horizon_mask
-from brdfcodec.merl import MerlBRDF, read_merl
+from brdfcodec.merl import MerlBRDF
 from brdfcodec.metrics import error_report
 from brdfcodec.models.registry import default_model_folder, find_model
 from brdfcodec.models.store import ModelManifest, load_manifest, load_model
@@ -483,8 +484,11 @@ class BrdfEncoder:
         records = []
         for i, name in enumerate(names):
             meta = {} if self.manifest is None else {"encoder_sha256": self.manifest.encoder_sha256}
-            if sources[i] is not None:
-                meta["source_sha256"] = sources[i].sha256  # type: ignore[union-attr]
+            source = sources[i]
+            if source is not None:
+                meta["source_sha256"] = source.source_sha256 or source.sha256
+                if source.source_kind is not None:
+                    meta["source_kind"] = source.source_kind
             records.append(LatentRecord(name, mu[i], sigma[i], meta))
         return records
 
@@ -682,8 +686,8 @@ EncodeSource = MerlBRDF | MaterialInput | str | os.PathLike[str]
 def _as_input(source: EncodeSource, index: int, name: str | None) -> MaterialInput:
     if isinstance(source, MaterialInput):
         return source if name is None else MaterialInput(name, source.inputs, source.source)
-    brdf = source if isinstance(source, MerlBRDF) else read_merl(source)
-    label = name or brdf.name or (Path(source).stem if not isinstance(source, MerlBRDF) else f"material-{index}")
+    brdf = source if isinstance(source, MerlBRDF) else read_measured(source)
+    label = name or brdf.name or f"material-{index}"
     return MaterialInput(label, network_input_from_table(brdf.values, brdf.mask)[0], brdf)
 
 

@@ -30,7 +30,7 @@ __all__ = [
 ]
 
 #: Version of ``spec/conventions.md`` that this module implements.
-CONVENTIONS_VERSION: Final = "1.1"
+CONVENTIONS_VERSION: Final = "1.2"
 
 #: Number of θh bins (non-linear, see :func:`brdfcodec.coords.theta_h_index`).
 N_THETA_H: Final = 90

@@ -34,13 +34,14 @@ from brdfcodec.errors import DatasetError
 from brdfcodec.merl import MerlBRDF
 from brdfcodec.representation import network_input_from_table
 from brdfcodec.sources import MaterialSource
-from brdfcodec.split import TRAIN, VALIDATION, split_materials
+from brdfcodec.split import TRAIN, VALIDATION, split_by_family
 from brdfcodec.version import __version__
 
 __all__ = [
     "DATASET_FORMAT",
     "DATASET_FORMAT_VERSION",
     "HDF5_SIGNATURE",
+    "MIXED_SOURCE_KIND",
     "BrdfDataset",
     "build_dataset",
     "material_arrays",
@@ -52,6 +53,11 @@ DATASET_FORMAT: Final = "brdfcodec-dataset"
 DATASET_FORMAT_VERSION: Final = 1
 #: First bytes of every HDF5 file, hence of every dataset file (how ``bvae info`` and ``bvae compress`` tell one).
 HDF5_SIGNATURE: Final = b"\x89HDF\r\n\x1a\n"
+
+#: Root ``source_kind`` of a dataset whose materials come from sources of different kinds.
+MIXED_SOURCE_KIND: Final = "mixed"
+# Family of every material of a dataset written before per-material families existed.
+_LEGACY_FAMILIES: Final = {"merl": "merl", "nbrdf-proxy": "merl", "analytic": "analytic"}
 
 _STRING = h5py.string_dtype("utf-8")
 _COMPRESSION: Final = {"compression": "gzip", "compression_opts": 1, "shuffle": True}
@@ -74,8 +80,8 @@ def build_dataset(
     output: str | os.PathLike[str],
     sources: Sequence[MaterialSource],
     *,
-    source_kind: str,
     description: str,
+    source_kind: str | None = None,
     validation_fraction: float = 0.15,
     seed: int = 0,
     include_tables: bool = True,
@@ -90,13 +96,17 @@ def build_dataset(
         The ``.h5`` file to create.
     sources : sequence of MaterialSource
         Materials, each loaded once (see :mod:`brdfcodec.sources`).
-    source_kind : str
-        ``"merl"``, ``"nbrdf-proxy"`` or ``"analytic"``; stored so no one
-        mistakes a proxy for measurements.
     description : str
         One sentence naming the data, stored as the ``description`` attribute.
+    source_kind : str, optional
+        The root ``source_kind`` attribute; by default the sources' common
+        kind (``"merl"``, ``"rgl-measured"``, ``"nbrdf-proxy"``,
+        ``"analytic"``), or ``"mixed"`` when they differ. Each material's
+        own kind and family are stored too, so no one mistakes a proxy for
+        measurements.
     validation_fraction : float, default 0.15
-        Share held out for validation (see :func:`brdfcodec.split.split_materials`).
+        Share of each family held out for validation (see
+        :func:`brdfcodec.split.split_by_family`).
     seed : int, default 0
         Seed of the split.
     include_tables : bool, default True
@@ -115,7 +125,12 @@ def build_dataset(
     if not sources:
         raise ValueError("no materials to write")
     names = [source.name for source in sources]
-    split = split_materials(names, validation_fraction=validation_fraction, seed=seed)
+    _check_distinct(sources)
+    families = [source.family for source in sources]
+    kinds = [source.source_kind for source in sources]
+    if source_kind is None:
+        source_kind = kinds[0] if len(set(kinds)) == 1 else MIXED_SOURCE_KIND
+    split = split_by_family(names, families, validation_fraction=validation_fraction, seed=seed)
     n = len(sources)
     with atomic_output(output, overwrite=overwrite) as tmp, h5py.File(tmp, "w") as handle:
         attrs = handle.attrs
@@ -134,6 +149,8 @@ def build_dataset(
         handle.create_dataset("names", data=names, dtype=_STRING)
         handle.create_dataset("split", data=split, dtype=_STRING)
         handle.create_dataset("origins", data=[s.origin for s in sources], dtype=_STRING)
+        handle.create_dataset("families", data=families, dtype=_STRING)
+        handle.create_dataset("source_kinds", data=kinds, dtype=_STRING)
         digests = handle.create_dataset("source_sha256", shape=(n,), dtype=_STRING)
         genuine = handle.create_dataset("genuine_merl", shape=(n,), dtype=_STRING)
         inputs = handle.create_dataset(
@@ -158,6 +175,16 @@ def build_dataset(
             if tables is not None:
                 tables[index] = np.where(loaded.brdf.mask, loaded.brdf.values, UNMEASURED_VALUE)
     return Path(output)
+
+
+def _check_distinct(sources: Sequence[MaterialSource]) -> None:
+    seen: dict[str, str] = {}
+    for source in sources:
+        if source.name in seen:
+            raise ValueError(
+                f"two sources give the material name {source.name!r}: {seen[source.name]} and {source.origin}"
+            )
+        seen[source.name] = source.origin
 
 
 class BrdfDataset:
@@ -189,8 +216,20 @@ class BrdfDataset:
         except BaseException:
             self._handle.close()
             raise
-        self.names: list[str] = [s.decode() if isinstance(s, bytes) else s for s in self._handle["names"][()]]
-        self.split: list[str] = [s.decode() if isinstance(s, bytes) else s for s in self._handle["split"][()]]
+        self.names: list[str] = self._strings("names")
+        self.split: list[str] = self._strings("split")
+        kind = str(self._handle.attrs["source_kind"])
+        #: Each material's measurement family (``"merl"``, ``"rgl"``, ``"analytic"``, ...).
+        self.families: list[str] = (
+            self._strings("families") if "families" in self._handle else [_LEGACY_FAMILIES.get(kind, kind)] * len(self)
+        )
+        #: Each material's source kind (``"merl"``, ``"rgl-measured"``, ``"nbrdf-proxy"``, ``"analytic"``).
+        self.source_kinds: list[str] = (
+            self._strings("source_kinds") if "source_kinds" in self._handle else [kind] * len(self)
+        )
+
+    def _strings(self, key: str) -> list[str]:
+        return [s.decode() if isinstance(s, bytes) else str(s) for s in self._handle[key][()]]
 
     def _validate(self) -> None:
         attrs = self._handle.attrs
@@ -210,6 +249,9 @@ class BrdfDataset:
         expected = {"split": (n,), "inputs": (n, *NETWORK_INPUT_SHAPE), "input_masks": (n, *NETWORK_INPUT_SHAPE)}
         if "tables" in self._handle:
             expected["tables"] = (n, *TABLE_SHAPE)
+        for optional in ("families", "source_kinds"):
+            if optional in self._handle:
+                expected[optional] = (n,)
         for key, shape in expected.items():
             if self._handle[key].shape != shape:
                 raise DatasetError(self.path, f"{key} has shape {self._handle[key].shape}, expected {shape}")
@@ -231,7 +273,7 @@ class BrdfDataset:
 
     @property
     def source_kind(self) -> str:
-        """``"merl"``, ``"nbrdf-proxy"`` or ``"analytic"``."""
+        """``"merl"``, ``"rgl-measured"``, ``"nbrdf-proxy"``, ``"analytic"``, or ``"mixed"`` (see ``source_kinds``)."""
         return str(self._handle.attrs["source_kind"])
 
     @property
@@ -248,13 +290,17 @@ class BrdfDataset:
         """A root attribute of the file (``created``, ``split_seed``, ...)."""
         return self._handle.attrs[key]
 
-    def indices(self, split: str | None = None) -> list[int]:
-        """Material indices of one split (``"train"`` or ``"validation"``), or all."""
-        if split is None:
-            return list(range(len(self)))
-        if split not in (TRAIN, VALIDATION):
+    def indices(self, split: str | None = None, *, family: str | None = None) -> list[int]:
+        """Material indices of one split (``"train"`` or ``"validation"``) and/or one family; all by default."""
+        if split is not None and split not in (TRAIN, VALIDATION):
             raise ValueError(f"split must be {TRAIN!r} or {VALIDATION!r}, got {split!r}")
-        return [i for i, s in enumerate(self.split) if s == split]
+        if family is not None and family not in self.families:
+            raise ValueError(f"{self.path}: no family {family!r}; it has {sorted(set(self.families))}")
+        return [
+            i
+            for i in range(len(self))
+            if (split is None or self.split[i] == split) and (family is None or self.families[i] == family)
+        ]
 
     def index_of(self, name: str) -> int:
         """Index of a material by name."""

@@ -23,6 +23,7 @@ __all__ = [
     "ModelChecksumError",
     "ModelNotFoundError",
     "NonFiniteValueError",
+    "OptionalDependencyError",
     "SourceFormatError",
     "UnsupportedVersionError",
 ]
@@ -91,3 +92,5 @@ class ModelNotFoundError(DecoderNotFoundError):
 
 class ModelChecksumError(BrdfcodecError):
     """A weight file's SHA-256 differs from its manifest: the file is corrupt or not the named model."""
+class OptionalDependencyError(BrdfcodecError, ImportError):
+    """An optional extra this operation needs is not installed; the message names the pip command."""

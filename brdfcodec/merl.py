@@ -57,12 +57,21 @@ class MerlBRDF:
         Material name (by default the file's stem).
     path : pathlib.Path, optional
         File it was read from.
+    source_kind : str, optional
+        Where the table comes from when it was not read from a MERL file
+        (``"rgl-measured"``, ``"nbrdf-proxy"``, ``"analytic"``); None for a
+        MERL file.
+    source_sha256 : str, optional
+        SHA-256 of the source file it was tabulated from, when that is not a
+        MERL file (e.g. an RGL ``.bsdf``); None otherwise.
     """
 
     values: npt.NDArray[np.float64]
     name: str | None = None
     path: Path | None = None
     _file_sha256: str | None = field(default=None, repr=False)
+    source_kind: str | None = None
+    source_sha256: str | None = None
 
     def __post_init__(self) -> None:
         if self.values.shape != TABLE_SHAPE:

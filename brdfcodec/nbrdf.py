@@ -35,7 +35,7 @@ from brdfcodec.mask import horizon_mask
 from brdfcodec.merl import MerlBRDF
 from brdfcodec.representation import stored_from_reflectance
 
-__all__ = ["NBRDF_SOURCE_KIND", "NbrdfFit", "iter_nbrdf_zip", "list_nbrdf_zip", "read_nbrdf_fit"]
+__all__ = ["NBRDF_SOURCE_KIND", "NbrdfFit", "iter_nbrdf_zip", "list_nbrdf_zip", "nbrdf_zip_family", "read_nbrdf_fit"]
 
 #: ``source_kind`` of datasets built from these fits.
 NBRDF_SOURCE_KIND = "nbrdf-proxy"
@@ -160,6 +160,34 @@ def list_nbrdf_zip(path: str | os.PathLike[str]) -> list[str]:
     if len(set(names)) != len(names):
         raise SourceFormatError(path, "archive holds two weight files of the same material name")
     return names
+
+
+def nbrdf_zip_family(path: str | os.PathLike[str]) -> str:
+    """Measurement family of an NBRDF archive: the database its fits were made of.
+
+    The published archives keep their members in one folder named after the
+    database (``merl-nbrdf/``, ``rgl-nbrdf/``); the family is that folder's
+    name without ``-nbrdf`` (``"merl"``, ``"rgl"``). An archive laid out
+    otherwise takes the archive's file name instead (``"my-fits"`` for
+    ``my-fits.zip``).
+
+    Raises
+    ------
+    SourceFormatError
+        Not a zip archive.
+    """
+    try:
+        with zipfile.ZipFile(path) as archive:
+            folders = {
+                PurePosixPath(member).parts[0]
+                for member in archive.namelist()
+                if member.endswith(".h5") and len(PurePosixPath(member).parts) > 1
+            }
+    except zipfile.BadZipFile as error:
+        raise SourceFormatError(path, f"not a zip archive ({error})") from None
+    if len(folders) == 1:
+        return folders.pop().removesuffix("-nbrdf")
+    return Path(path).stem.split("-nbrdf")[0]
 
 
 def iter_nbrdf_zip(path: str | os.PathLike[str], names: list[str] | None = None) -> Iterator[NbrdfFit]:

@@ -1,8 +1,13 @@
-"""Where dataset materials come from: MERL files, the NBRDF proxy, analytic BRDFs.
+"""Where dataset materials come from: MERL files, RGL files, NBRDF proxies, analytic BRDFs.
 
 Each builder returns a list of :class:`MaterialSource`: the names are known
 before anything heavy is read (the split needs them), and each table is
-loaded only when the dataset writer asks for it.
+loaded only when the dataset writer asks for it. Every source names its
+*family* — the measurement database the material belongs to (``"merl"``,
+``"rgl"``, ``"analytic"``), whether the table is a measurement or a fit of
+one — and its *source kind* — how the table was made (``"merl"``,
+``"rgl-measured"``, ``"nbrdf-proxy"``, ``"analytic"``). Datasets record both
+and hold out materials per family (:func:`brdfcodec.split.split_by_family`).
 """
 
 from __future__ import annotations
@@ -18,7 +23,8 @@ from brdfcodec.analytic import ANALYTIC_PRESETS, AnalyticBRDF, random_analytic_m
 from brdfcodec.errors import SourceFormatError
 from brdfcodec.genuine import genuine_merl_name
 from brdfcodec.merl import MerlBRDF, read_merl
-from brdfcodec.nbrdf import NBRDF_SOURCE_KIND, iter_nbrdf_zip, list_nbrdf_zip
+from brdfcodec.nbrdf import NBRDF_SOURCE_KIND, iter_nbrdf_zip, list_nbrdf_zip, nbrdf_zip_family
+from brdfcodec.rgl import RGL_SOURCE_KIND, read_rgl_bsdf
 
 __all__ = [
     "ANALYTIC_SOURCE_KIND",
@@ -28,6 +34,7 @@ __all__ = [
     "analytic_sources",
     "merl_folder_sources",
     "nbrdf_zip_sources",
+    "rgl_folder_sources",
 ]
 
 MERL_SOURCE_KIND = "merl"
@@ -65,11 +72,19 @@ class MaterialSource:
         Human-readable provenance (a file path, an archive member, parameters).
     load : callable
         Returns the :class:`LoadedMaterial`.
+    family : str
+        Measurement database the material belongs to: ``"merl"``, ``"rgl"``,
+        ``"analytic"`` (or an archive's own name).
+    source_kind : str
+        How the table is made: ``"merl"``, ``"rgl-measured"``,
+        ``"nbrdf-proxy"`` or ``"analytic"``.
     """
 
     name: str
     origin: str
     load: Callable[[], LoadedMaterial]
+    family: str = MERL_SOURCE_KIND
+    source_kind: str = MERL_SOURCE_KIND
 
 
 def merl_folder_sources(folder: str | os.PathLike[str]) -> list[MaterialSource]:
@@ -98,7 +113,38 @@ def merl_folder_sources(folder: str | os.PathLike[str]) -> list[MaterialSource]:
 
         return load
 
-    return [MaterialSource(p.stem, str(p), loader(p)) for p in files]
+    return [MaterialSource(p.stem, str(p), loader(p), "merl", MERL_SOURCE_KIND) for p in files]
+
+
+def rgl_folder_sources(folder: str | os.PathLike[str]) -> list[MaterialSource]:
+    """Every RGL ``*.bsdf`` file of a folder (not recursive), sorted by name, tabulated when loaded.
+
+    Material names drop the database's ``_rgb`` suffix (``paper_white_rgb.bsdf`` → ``paper_white``).
+
+    Raises
+    ------
+    NotADirectoryError, FileNotFoundError
+        ``folder`` is not an existing folder.
+    SourceFormatError
+        The folder holds no ``.bsdf`` file.
+    """
+    root = Path(folder)
+    if not root.exists():
+        raise FileNotFoundError(f"{root}: no such folder")
+    if not root.is_dir():
+        raise NotADirectoryError(f"{root}: is not a folder of RGL .bsdf files")
+    files = sorted(p for p in root.glob("*.bsdf") if p.is_file())
+    if not files:
+        raise SourceFormatError(root, "folder holds no RGL .bsdf files")
+
+    def loader(path: Path) -> Callable[[], LoadedMaterial]:
+        def load() -> LoadedMaterial:
+            brdf = read_rgl_bsdf(path)
+            return LoadedMaterial(brdf, brdf.source_sha256 or brdf.sha256)
+
+        return load
+
+    return [MaterialSource(p.stem.removesuffix("_rgb"), str(p), loader(p), "rgl", RGL_SOURCE_KIND) for p in files]
 
 
 def nbrdf_zip_sources(
@@ -114,6 +160,7 @@ def nbrdf_zip_sources(
         A subset of materials; all by default.
     """
     available = list_nbrdf_zip(archive)
+    family = nbrdf_zip_family(archive)
     chosen = available if names is None else list(names)
     unknown = sorted(set(chosen) - set(available))
     if unknown:
@@ -126,7 +173,10 @@ def nbrdf_zip_sources(
 
         return load
 
-    return [MaterialSource(n, f"{os.fspath(archive)}:{n}.h5 ({NBRDF_SOURCE_KIND})", loader(n)) for n in chosen]
+    return [
+        MaterialSource(n, f"{os.fspath(archive)}:{n}.h5 ({NBRDF_SOURCE_KIND})", loader(n), family, NBRDF_SOURCE_KIND)
+        for n in chosen
+    ]
 
 
 def analytic_sources(
@@ -157,7 +207,10 @@ def analytic_sources(
 
         return load
 
-    return [MaterialSource(m.name, _describe(m), loader(m)) for m in materials]
+    return [
+        MaterialSource(m.name, _describe(m), loader(m), ANALYTIC_SOURCE_KIND, ANALYTIC_SOURCE_KIND)
+        for m in materials
+    ]
 
 
 def _describe(material: AnalyticBRDF) -> str:

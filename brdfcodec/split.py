@@ -1,6 +1,8 @@
 """Deterministic train/validation split of named materials.
 
-A material's rank is the SHA-256 of ``"{seed}:{name}"``; the
+Materials are split *per family* (:func:`split_by_family`), so every
+measurement family has held-out materials; within a family, a material's
+rank is the SHA-256 of ``"{seed}:{name}"``; the
 ``round(fraction · n)`` lowest-ranked materials (at least one when
 ``fraction > 0`` and there are two or more materials) go to validation. The
 split depends only on names, seed and fraction, never on input order, NumPy
@@ -12,7 +14,7 @@ from __future__ import annotations
 import hashlib
 from collections.abc import Sequence
 
-__all__ = ["TRAIN", "VALIDATION", "split_materials"]
+__all__ = ["TRAIN", "VALIDATION", "split_by_family", "split_materials"]
 
 TRAIN = "train"
 VALIDATION = "validation"
@@ -49,3 +51,38 @@ def split_materials(names: Sequence[str], *, validation_fraction: float = 0.15, 
         n_validation = min(max(n_validation, 1), n - 1)
     held_out = set(sorted(names, key=lambda name: _rank(seed, name))[:n_validation])
     return [VALIDATION if name in held_out else TRAIN for name in names]
+
+
+def split_by_family(
+    names: Sequence[str], families: Sequence[str], *, validation_fraction: float = 0.15, seed: int = 0
+) -> list[str]:
+    """:func:`split_materials` applied within each family, so every family is held out in proportion.
+
+    A dataset of one family splits exactly as :func:`split_materials`.
+
+    Parameters
+    ----------
+    names : sequence of str
+        Distinct material names.
+    families : sequence of str
+        Each material's family (``"merl"``, ``"rgl"``, ...), same length as ``names``.
+    validation_fraction : float, default 0.15
+        Share of each family held out, in [0, 1).
+    seed : int, default 0
+
+    Returns
+    -------
+    list of str
+        ``"train"`` or ``"validation"`` for each name, in the input order.
+    """
+    if len(families) != len(names):
+        raise ValueError(f"got {len(names)} names but {len(families)} families")
+    if len(set(names)) != len(names):
+        raise ValueError("material names must be distinct")
+    result = [TRAIN] * len(names)
+    for family in sorted(set(families)):
+        members = [i for i, f in enumerate(families) if f == family]
+        for i, side in zip(members, split_materials([names[i] for i in members],
+                                                    validation_fraction=validation_fraction, seed=seed), strict=True):
+            result[i] = side
+    return result

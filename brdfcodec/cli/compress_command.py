@@ -14,7 +14,7 @@ from tqdm import tqdm
 from brdfcodec.atomic import check_output_path
 from brdfcodec.bvae_format import Record, write_bvae
 from brdfcodec.dataset import HDF5_SIGNATURE
-from brdfcodec.merl import read_merl
+from brdfcodec.inputs import default_material_name, is_measured_file, read_measured
 from brdfcodec.representation import network_input_from_table
 
 if TYPE_CHECKING:
@@ -35,13 +35,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     """Add the ``compress`` sub-command."""
     parser = subparsers.add_parser(
         "compress",
-        help="encode MERL .binary files (or a folder, or a dataset) into a .bvae file",
+        help="encode MERL .binary or RGL .bsdf files (or a folder, or a dataset) into a .bvae file",
         description="Encode measured BRDFs into latent codes and write them, with a reference to the decoder, "
         "as one .bvae file (one material, or a library of many). Prints the RelAE of each decoded material "
         "against its source.",
     )
     parser.add_argument("inputs", nargs="+", type=Path, metavar="IN",
-                        help="MERL .binary files, folders of them, or a dataset file (.h5)")
+                        help="MERL .binary or RGL .bsdf files, folders of them, or a dataset file (.h5)")
     parser.add_argument("-o", "--output", type=Path, required=True, help="output .bvae file")
     parser.add_argument("--model", help="model folder or decoder SHA-256 (default: the shipped model)")
     parser.add_argument("--float16", action="store_true", help="store latents as float16 (half the payload)")
@@ -52,14 +52,16 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     parser.set_defaults(handler=run)
 
 
-def _merl_item(path: Path) -> _Item:
+def _measured_item(path: Path) -> _Item:
+    name = default_material_name(path)
+
     def load() -> MaterialInput:
         from brdfcodec.codec import MaterialInput
 
-        brdf = read_merl(path)
-        return MaterialInput(path.stem, network_input_from_table(brdf.values, brdf.mask)[0], brdf)
+        brdf = read_measured(path, name=name)
+        return MaterialInput(name, network_input_from_table(brdf.values, brdf.mask)[0], brdf)
 
-    return _Item(path.stem, str(path), load)
+    return _Item(name, str(path), load)
 
 
 def _dataset_items(path: Path, split: str | None) -> Iterator[_Item]:
@@ -87,17 +89,17 @@ def collect_items(inputs: list[Path], split: str | None) -> list[_Item]:
     items: list[_Item] = []
     for path in inputs:
         if path.is_dir():
-            files = sorted(p for p in path.iterdir() if p.suffix == ".binary" and p.is_file())
+            files = sorted(p for p in path.iterdir() if is_measured_file(p))
             if not files:
-                raise FileNotFoundError(f"{path}: folder holds no .binary file")
-            items += [_merl_item(p) for p in files]
+                raise FileNotFoundError(f"{path}: folder holds no MERL .binary or RGL .bsdf file")
+            items += [_measured_item(p) for p in files]
             continue
         with open(path, "rb") as stream:  # FileNotFoundError names the file
             head = stream.read(8)
         if head == HDF5_SIGNATURE:
             items += list(_dataset_items(path, split))
         else:
-            items.append(_merl_item(path))
+            items.append(_measured_item(path))
     seen: dict[str, str] = {}
     for item in items:
         if item.name in seen:

@@ -90,7 +90,7 @@ def run(args: argparse.Namespace) -> int:
 
 def _print_reference_error(path: Path, material: DecodedMaterial) -> None:
     from brdfcodec.codec import measure
-    from brdfcodec.merl import read_merl
+    from brdfcodec.inputs import read_measured
 
-    relae = measure(material.record, material.decoder, read_merl(path)).meta["relae"]
+    relae = measure(material.record, material.decoder, read_measured(path)).meta["relae"]
     print(f"RelAE against {path}: mapped {relae['mapped']:.4f}, linear {relae['linear']:.4f}")

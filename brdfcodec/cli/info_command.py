@@ -19,6 +19,7 @@ from brdfcodec.genuine import genuine_merl_name
 from brdfcodec.mask import horizon_mask
 from brdfcodec.merl import MERL_FILE_SIZE, read_merl
 from brdfcodec.representation import reflectance_from_stored
+from brdfcodec.rgl import TENSOR_FILE_MAGIC
 
 __all__ = ["HDF5_SIGNATURE", "describe_file", "register"]
 
@@ -119,6 +120,33 @@ def _bvae_summary(path: Path) -> dict[str, Any]:
     }
 
 
+def _rgl_summary(path: Path) -> dict[str, Any]:
+    from brdfcodec.errors import SourceFormatError
+    from brdfcodec.hashing import sha256_of_file
+    from brdfcodec.rgl import check_supported, read_rgl_header
+
+    header = read_rgl_header(path)
+    try:
+        check_supported(header)
+        problem = None
+    except SourceFormatError as error:
+        problem = error.problem
+    return {
+        "file": str(path),
+        "kind": "rgl",
+        "description": header.description,
+        "tensor_file_version": list(header.version),
+        "bytes": path.stat().st_size,
+        "sha256": sha256_of_file(path),
+        "isotropic": header.isotropic,
+        "colour": header.colour,
+        "incident_elevations": header.theta_i_count,
+        "fields": {name: list(field.shape) for name, field in header.fields.items()},
+        "supported": problem is None,
+        "unsupported_because": problem,
+    }
+
+
 def describe_file(path: Path) -> dict[str, Any]:
     """Summary of one file as a JSON-ready dictionary.
 
@@ -135,6 +163,8 @@ def describe_file(path: Path) -> dict[str, Any]:
         return _dataset_summary(path)
     if head == BVAE_MAGIC or path.suffix == ".bvae":
         return _bvae_summary(path)
+    if head == TENSOR_FILE_MAGIC[:8]:
+        return _rgl_summary(path)
     size = os.path.getsize(path)
     if size < 12:
         raise FileFormatError(path, f"file is {size} bytes: neither a MERL .binary file nor a dataset")
@@ -173,6 +203,18 @@ def _format_text(summary: dict[str, Any]) -> str:
             f"  full tables     {'yes' if summary['full_tables'] else 'no'}",
             f"  created         {summary['created']}",
             f"  size            {summary['bytes']:,} bytes",
+        ]
+        return "\n".join(lines)
+    if summary["kind"] == "rgl":
+        support = "yes" if summary["supported"] else f"no: {summary['unsupported_because']}"
+        lines += [
+            "  kind            RGL .bsdf measurement (Mitsuba tensor file "
+            f"{'.'.join(map(str, summary['tensor_file_version']))}, {summary['bytes']:,} bytes)",
+            f"  material        {summary['description'] or '-'}",
+            f"  sha256          {summary['sha256']}",
+            f"  layout          {'isotropic' if summary['isotropic'] else 'anisotropic'}, {summary['colour']}, "
+            f"{summary['incident_elevations']} incident elevations",
+            f"  brdfcodec reads {support}",
         ]
         return "\n".join(lines)
     genuine = summary["genuine_merl"]
