@@ -121,13 +121,15 @@ def set_slider(page: Any, element_id: str, value: float) -> None:
 
 
 def canvas_pixels(page: Any, canvas_id: str) -> np.ndarray:
-    """The canvas's pixels, (H, W, 3) uint8."""
-    data = page.evaluate(
-        f"(() => {{ const c = document.getElementById('{canvas_id}'); "
-        "return Array.from(c.getContext('2d').getImageData(0, 0, c.width, c.height).data); })()"
-    )
-    width = int(page.evaluate(f"document.getElementById('{canvas_id}').width"))
-    return np.asarray(data, dtype=np.uint8).reshape(width, width, 4)[..., :3]
+    """The canvas's pixels, (H, W, 3) uint8 (read back as a lossless PNG)."""
+    import base64
+    import io
+
+    from PIL import Image
+
+    url = page.evaluate(f"document.getElementById('{canvas_id}').toDataURL('image/png')")
+    data = base64.b64decode(url.split(",", 1)[1])
+    return np.asarray(Image.open(io.BytesIO(data)).convert("RGB"))
 
 
 def srgb_to_linear(pixels: np.ndarray) -> np.ndarray:
