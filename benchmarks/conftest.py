@@ -30,6 +30,7 @@ TARGETS = {
     "decode-query": 1.5,  # 20,000 eval(wi, wo) on a decoded material vs on the original MERL table
     "render-sphere-256": 8.0,  # a 256² sphere from a decoded material vs decoding the material once
     "edit-and-decode": 1.2,  # traversal + interpolation + decode vs decode alone
+    "studio-slider-to-paint": 1.5,  # browser: slider input → painted preview vs a server-side render before transfer
 }
 
 #: Largest acceptable candidate median, in seconds, on 2 CPU cores (issue 4 targets).
@@ -37,6 +38,7 @@ ABSOLUTE_TARGETS = {
     "decode-full": 0.050,
     "decode-slice": 0.010,
     "render-sphere-256": 0.5,  # "a fraction of a second" (issue 5)
+    "studio-slider-to-paint": 0.100,  # median slider input → painted 256² preview (issue 10)
 }
 
 
