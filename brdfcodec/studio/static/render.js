@@ -94,8 +94,10 @@ const BvaeRender = (() => {
         cosine.push(cos);
       }
     }
+    const inside = new Uint8Array(size * size);
+    for (const p of pixels) inside[p] = 1;
     return {
-      size, light: L, pixels: Int32Array.from(pixels), base: Int32Array.from(base),
+      size, light: L, inside, pixels: Int32Array.from(pixels), base: Int32Array.from(base),
       left: Uint8Array.from(left), right: Uint8Array.from(right), weight: Float64Array.from(weight),
       cosine: Float64Array.from(cosine),
     };
@@ -144,15 +146,16 @@ const BvaeRender = (() => {
   const SRGB_LUT = new Uint8Array(LUT_SIZE + 1);
   for (let i = 0; i <= LUT_SIZE; i++) SRGB_LUT[i] = Math.round(srgb(i / LUT_SIZE) * 255);
 
-  // Exposed, clipped, sRGB-encoded 8-bit pixels into an ImageData.
-  function encode(image, exposure, imageData) {
+  // Exposed, clipped, sRGB-encoded 8-bit pixels into an ImageData; transparent outside the sphere when
+  // `inside` (a coverage mask) is given, so the page's background shows the silhouette.
+  function encode(image, exposure, imageData, inside) {
     const data = imageData.data, scale = exposure * LUT_SIZE;
     for (let p = 0, q = 0; p < image.length; p += 3, q += 4) {
       for (let c = 0; c < 3; c++) {
         const v = image[p + c] * scale;
         data[q + c] = SRGB_LUT[v >= LUT_SIZE ? LUT_SIZE : v > 0 ? Math.round(v) : 0];
       }
-      data[q + 3] = 255;
+      data[q + 3] = inside && !inside[q >> 2] ? 0 : 255;
     }
     return imageData;
   }

@@ -99,7 +99,7 @@ class Preview {
     if (!this.slices) return;
     this.linear = BvaeRender.renderSphere(this.geometry, this.slices, this.linear);
     if (this.exposure === null) this.exposure = BvaeRender.autoExposure(this.linear);
-    BvaeRender.encode(this.linear, this.exposure * this.exposureScale, this.imageData);
+    BvaeRender.encode(this.linear, this.exposure * this.exposureScale, this.imageData, this.geometry.inside);
     this.context.putImageData(this.imageData, 0, 0);
     this.markPainted(t0);
   }
@@ -113,6 +113,7 @@ class Preview {
       { ...state, env: this.lighting, exposure: this.exposure * this.exposureScale });
     const bitmap = await createImageBitmap(await response.blob());
     this.context.imageSmoothingEnabled = true;
+    this.context.clearRect(0, 0, this.canvas.width, this.canvas.height);
     this.context.drawImage(bitmap, 0, 0, this.canvas.width, this.canvas.height);
     this.markPainted(t0);
   }
