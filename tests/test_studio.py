@@ -358,3 +358,22 @@ def test_front_end_ships_in_the_package_and_loads_nothing_from_outside() -> None
     assert {"index.html", "studio.js", "render.js", "studio.css"} <= files.keys()
     for text in files.values():
         assert "http://" not in text and "https://" not in text and "//cdn" not in text
+
+
+def test_user_environment_map_is_offered_by_name_only(tmp_path: Path, catalogue: Catalogue) -> None:
+    from brdfcodec.exr import write_exr_rgb
+
+    latlong = np.ones((16, 32, 3), np.float32)
+    latlong[:8] *= np.array([0.4, 0.6, 1.0], np.float32)  # blue upper half
+    env_path = tmp_path / "studio-env.exr"
+    write_exr_rgb(env_path, latlong)
+    server = StudioServer(catalogue, save_dir=tmp_path, environment=env_path)
+    with running_studio(create_app(server)) as url:
+        info = json.loads(request(f"{url}/api/library")[1])
+        assert info["environments"] == ["sky", "map"] and info["environment_name"] == "studio-env.exr"
+        assert str(tmp_path) not in json.dumps(info["environments"])
+        sky = request(f"{url}/api/render-environment", {"z": [0.0] * 8, "env": "sky", "exposure": 1.0})
+        own = request(f"{url}/api/render-environment", {"z": [0.0] * 8, "env": "map", "exposure": 1.0})
+        assert sky[0] == own[0] == 200 and sky[1] != own[1]
+        status, payload, _ = request(f"{url}/api/render-environment", {"z": [0.0] * 8, "env": "map", "exposure": -1})
+        assert "exposure" in error_of(status, payload)

@@ -294,3 +294,15 @@ def test_explorer_cursor_decodes_the_inverse_transform(page: Any, studio_env: di
     page.click("#to-editor")
     wait_for_paint_after(page, count)
     assert np.allclose(page.evaluate("window.studio.editor.state.z"), shown, atol=1e-6)
+
+
+def test_sky_lighting_is_painted_from_the_server(page: Any) -> None:
+    from brdfcodec.studio.browser import canvas_pixels, paint_count, wait_for_paint_after
+
+    before = canvas_pixels(page, "editor-canvas")
+    count = paint_count(page)
+    page.select_option("#lighting", "sky")
+    wait_for_paint_after(page, count)
+    after = canvas_pixels(page, "editor-canvas")
+    assert np.abs(after.astype(int) - before.astype(int)).mean() > 2.0
+    assert after.max() > 0
