@@ -92,9 +92,10 @@ def test_studio_slider_to_paint(benchmark: Any, studio_page: Any) -> None:
     values = iter(np.tile(np.linspace(-2.5, 2.5, 11), 20))
     page.evaluate("window.studio.previews.editor.latencies = []")
     benchmark.pedantic(lambda: page.evaluate(STEP_JS, float(next(values))), rounds=ROUNDS, warmup_rounds=3)
-    latencies = np.asarray(page.evaluate("window.studio.previews.editor.latencies"))[3:]  # after the warm-up
-    decode = np.asarray(page.evaluate("window.studio.previews.editor.decodeMs"))[-ROUNDS:]
-    assert latencies.size == ROUNDS and np.isfinite(latencies).all()
+    # The timed rounds are the last ones (after the warm-up; a single call with --benchmark-disable).
+    latencies = np.asarray(page.evaluate("window.studio.previews.editor.latencies"))[-ROUNDS:]
+    decode = np.asarray(page.evaluate("window.studio.previews.editor.decodeMs"))[-latencies.size:]
+    assert latencies.size >= 1 and np.isfinite(latencies).all()
     stats = {"browser_median_ms": float(np.median(latencies)), "browser_p95_ms": float(np.percentile(latencies, 95)),
              "server_decode_median_ms": float(np.median(decode)), "rounds": int(latencies.size)}
     stats["summary"] = (f"from the browser: median {stats['browser_median_ms']:.1f} ms, "

@@ -11,6 +11,9 @@
 * :mod:`brdfcodec.studio.server` — the Starlette application (needs the
   ``studio`` extra: ``pip install "brdfcodec[studio]"``); the front-end in
   ``static/`` renders the preview in the browser from decoded kept slices.
+* :mod:`brdfcodec.studio.browser` — driving the studio in Debian's chromium
+  through Playwright (tests, benchmark); :mod:`brdfcodec.studio.screenshots`
+  — the docs' screenshots (``python -m brdfcodec.studio.screenshots -o docs``).
 
 Importing this package imports neither Starlette nor umap-learn.
 """
