@@ -24,6 +24,7 @@ from brdfcodec.cli import (
     info_command,
     model_command,
     render_command,
+    studio_command,
     train_command,
 )
 from brdfcodec.errors import BrdfcodecError
@@ -59,6 +60,7 @@ def build_parser() -> argparse.ArgumentParser:
         train_command,
         model_command,
         bench_command,
+        studio_command,
     ):
         module.register(subparsers)
     return parser

@@ -42,6 +42,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
                         help="light with an environment instead: the built-in sky or a lat-long EXR")
     parser.add_argument("--flat", action="store_true", help="a flat sample under a point light instead of a sphere")
     parser.add_argument("--traversal", action="store_true", help="a traversal sheet (rows: parameters, ±3σ)")
+    parser.add_argument("--umap-grid", type=int, metavar="N", help="the paper's UMAP figure of a library: the map "
+                        "with its materials and N×N sample points, and the N×N sheet rendered from them (.png)")
     parser.add_argument("--exposure", type=float, help="PNG exposure (default: automatic)")
     parser.add_argument("--compare", type=Path, metavar="SOURCE.binary",
                         help="also render this MERL file the same way and print ΔE ITP, ΔE 2000 and PSNR against it")
@@ -127,6 +129,10 @@ def run(args: argparse.Namespace) -> int:
     check_output_path(args.output, overwrite=args.force)
     if args.output.suffix.lower() not in (".png", ".exr"):
         raise ValueError(f"{args.output}: the output must be .png or .exr")
+    if args.umap_grid is not None:
+        from brdfcodec.studio.cli_support import run_umap_grid
+
+        return run_umap_grid(args)
     material, decoded = _load(args.input, args.material)
     start = time.perf_counter()
     if decoded is not None:
