@@ -593,7 +593,7 @@ class MaterialLibrary(Mapping[str, DecodedMaterial]):
     >>> from brdfcodec.examples import example_library
     >>> with bc.MaterialLibrary(example_library()) as library:
     ...     print(len(library), library.names[:2], library["gold-metallic-paint"].table(phi_d_bins=[90]).shape)
-    90 ['alum-bronze', 'alumina-oxide'] (3, 90, 90, 1)
+    90 ['alumina-oxide', 'aluminium'] (3, 90, 90, 1)
     """
 
     def __init__(self, path: str | os.PathLike[str], *, decoder: BrdfDecoder | None = None) -> None:
