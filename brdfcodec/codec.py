@@ -63,7 +63,7 @@ from brdfcodec.representation import (
     kept_slots_for_bins,
     network_channels_for_slots,
     network_input_from_table,
-    reflectance_from_stored,
+    reflectance_from_mapped,
     table_from_mapped,
     validate_phi_d_bins,
 )
@@ -543,7 +543,7 @@ class DecodedMaterial:
 
     @functools.cached_property
     def _reflectance(self) -> npt.NDArray[np.float32]:
-        table = reflectance_from_stored(self.table(masked="zero"))
+        table = _apply_mask(reflectance_from_mapped(self.mapped), None, "zero")  # no trip through stored units
         table.setflags(write=False)
         return table
 

@@ -42,6 +42,7 @@ def test_info_json(capsys: pytest.CaptureFixture[str], red_plastic_file: Path) -
     assert summary["reflectance_per_sr"]["red"]["max"] > summary["reflectance_per_sr"]["green"]["max"]
 
 
+@pytest.mark.slow  # > 10 s on 2 cores
 def test_analytic_then_info_then_dataset(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
     out_file = tmp_path / "gold.binary"
     code, out, err = run(capsys, "analytic", "gold", "-o", str(out_file))

@@ -27,6 +27,7 @@ def test_every_shipped_material_decodes_and_renders_finite_and_non_negative() ->
 
 
 @pytest.mark.shared
+@pytest.mark.slow  # > 10 s on 2 cores
 def test_shipped_materials_match_their_sources(nbrdf_zip: Path) -> None:
     """Decode some materials of the library, measure them against the proxy tables they were made from."""
     with MaterialLibrary(example_library()) as library:
