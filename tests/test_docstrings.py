@@ -6,6 +6,7 @@ import doctest
 import importlib
 import pkgutil
 
+import numpy as np
 import pytest
 
 import brdfcodec
@@ -25,8 +26,10 @@ def test_docstring_examples(name: str) -> None:
     module = importlib.import_module(name)
     finder = doctest.DocTestFinder(exclude_empty=True)
     runner = doctest.DocTestRunner(optionflags=doctest.ELLIPSIS | doctest.NORMALIZE_WHITESPACE)
-    for test in finder.find(module, name):  # each example sees its module's names
-        runner.run(test)
+    # NumPy's default printing, whatever an earlier test or library (legacy="1.13") left behind.
+    with np.printoptions(legacy=False, sign="-", floatmode="maxprec", precision=8, suppress=False, linewidth=75):
+        for test in finder.find(module, name):  # each example sees its module's names
+            runner.run(test)
     failed, attempted = runner.summarize(verbose=False)
     assert failed == 0, f"{failed} of {attempted} docstring examples of {name} failed (see the output above)"
 
