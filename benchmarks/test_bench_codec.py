@@ -26,7 +26,7 @@ def test_full_table_baseline_numpy_copy(benchmark, decoder: BrdfDecoder, record:
     """Writing the same number of bytes (a float32 table, 17.5 MB) with numpy."""
     benchmark.group = "decode-full"
     benchmark.extra_info["role"] = "baseline"
-    table = decoder.table(record)
+    table = decoder.decode(record)
     out = benchmark(np.copy, table)
     assert out.nbytes == 3 * 90 * 90 * 180 * 4
 
@@ -75,14 +75,14 @@ def test_batch_baseline_one_at_a_time(benchmark, decoder: BrdfDecoder) -> None:
     records = [LatentRecord(f"m{i}", np.full(8, i / _BATCH), np.ones(8)) for i in range(_BATCH)]
     benchmark.group = "decode-batch16"
     benchmark.extra_info["role"] = "baseline"
-    benchmark.pedantic(lambda: [decoder.table(r) for r in records], rounds=3, iterations=1)
+    benchmark.pedantic(lambda: [decoder.decode(r) for r in records], rounds=3, iterations=1)
 
 
 def test_batch_decode(benchmark, decoder: BrdfDecoder) -> None:
     records = [LatentRecord(f"m{i}", np.full(8, i / _BATCH), np.ones(8)) for i in range(_BATCH)]
     benchmark.group = "decode-batch16"
     benchmark.extra_info["role"] = "candidate"
-    tables = benchmark.pedantic(lambda: list(decoder.tables(records)), rounds=3, iterations=1)
+    tables = benchmark.pedantic(lambda: list(decoder.decode_many(records)), rounds=3, iterations=1)
     assert len(tables) == _BATCH
 
 

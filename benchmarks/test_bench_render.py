@@ -14,7 +14,7 @@ from brdfcodec.render import render_sphere
 @pytest.fixture(scope="module")
 def material() -> DecodedMaterial:
     decoded = DecodedMaterial(LatentRecord("bench", np.linspace(-1, 1, 8), np.ones(8)), BrdfDecoder())
-    decoded.physical()  # decode once: the render groups time rendering only
+    decoded.reflectance()  # decode once: the render groups time rendering only
     return decoded
 
 
@@ -47,6 +47,6 @@ def test_edit_then_decode(benchmark, material: DecodedMaterial) -> None:
 
     def edit_and_decode() -> np.ndarray:
         edited = interpolate(traverse(material.record, 3, [1.5])[0], other, 0.3)
-        return material.decoder.table(edited)
+        return material.decoder.decode(edited)
 
     benchmark(edit_and_decode)

@@ -1,11 +1,18 @@
 """brdfcodec: measured BRDFs as a tiny, editable β-VAE latent code.
 
-The light core (MERL I/O, coordinates, transforms, metrics) is importable
-from here; datasets (:mod:`brdfcodec.dataset`, needs h5py) and analytic or
-proxy sources live in their own modules. The codec (:mod:`brdfcodec.codec`,
-needs torch) is loaded on first use of ``compress``, ``decompress``,
-``BrdfEncoder``, ``BrdfDecoder`` or ``MaterialLibrary``, so that importing
-brdfcodec and reading ``.bvae`` headers stays fast.
+The light core is importable from here without torch: MERL I/O, the data
+spine of :mod:`brdfcodec.representation` (stored ↔ reflectance, the log
+mapping, kept slices, table ↔ network), lookup and metrics, and the
+``.bvae`` format. Datasets (:mod:`brdfcodec.dataset`, needs h5py) and
+analytic or proxy sources live in their own modules. The codec
+(:mod:`brdfcodec.codec`, needs torch) is loaded on first use of ``encode``,
+``decode``, ``compress``, ``decompress``, ``BrdfEncoder``, ``BrdfDecoder``
+or ``MaterialLibrary``, so that importing brdfcodec and reading ``.bvae``
+headers stays fast.
+
+>>> import brdfcodec as bc
+>>> bc.reflectance_from_stored([[1500.0], [1500.0], [1500.0]]).ravel().round(2).tolist()
+[1.0, 1.15, 1.66]
 """
 
 from typing import Any

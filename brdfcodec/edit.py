@@ -271,7 +271,8 @@ def fit_graft(
     record : LatentRecord
         Starting code, usually the encoder's code for the target.
     target_mapped, target_mask : array_like, shape (63, 90, 90)
-        The target's network input and validity mask (``dataset.material_arrays``).
+        The target's network input and validity mask
+        (:func:`brdfcodec.representation.network_input_from_table`).
     colour_dims : sequence of int, optional
         Default: the decoder's colour dimensions.
     optimise_code : bool, default True
@@ -282,6 +283,7 @@ def fit_graft(
     """
     dims = [int(d) for d in (decoder.colour_dims if colour_dims is None else colour_dims)]
     code, values, loss = _fit(decoder, record, target_mapped, target_mask, dims, optimise_code, steps, learning_rate)
-    assert values is not None
+    if values is None:  # _fit returns graft values whenever it is given graft dimensions
+        raise RuntimeError("graft fitting returned no grafted values")
     meta = {**record.meta, "edit": {"op": "fit-graft", "source": record.name, "l1_mapped": loss}}
     return GraftRecord(record.name, code, record.sigma, tuple(dims), values, meta)

@@ -198,10 +198,6 @@ def cosine_weighted_rmse(
     return ChannelErrors(overall, *(float(v) for v in per_channel))
 
 
-#: Former name of :class:`ChannelErrors`.
-ChannelError = ChannelErrors
-
-
 def error_report(
     reference: npt.ArrayLike, estimate: npt.ArrayLike, mask: npt.ArrayLike | None = None
 ) -> ErrorReport:

@@ -197,7 +197,7 @@ def load_physical(path: str | os.PathLike[str], material: str | None = None,
         if material is not None and kind == "merl":
             raise ValueError(f"{file}: a MERL file holds one material; 'material' applies to .bvae files")
         brdf = read_merl(file)
-        table = np.where(brdf.mask, brdf.physical(), -1.0).astype(np.float32)
+        table = np.where(brdf.mask, brdf.reflectance(), -1.0).astype(np.float32)
         return material or file.stem, table
     from brdfcodec.codec import MaterialLibrary
     from brdfcodec.mask import horizon_mask
@@ -210,7 +210,7 @@ def load_physical(path: str | os.PathLike[str], material: str | None = None,
         if material not in library:
             raise KeyError(f"{file}: no material named {material!r}")
         decoded = library[material]
-        physical = decoded.physical()
+        physical = decoded.reflectance()
         _DECODES["count"] += 1
         table = np.where(horizon_mask()[None], physical, np.float32(-1.0)).astype(np.float32)
     return material, table

@@ -32,6 +32,7 @@ __all__ = [
     "render_sphere",
     "render_sphere_environment",
     "sky_environment",
+    "traversal_sheet",
 ]
 
 LookupMode = Literal["nearest", "trilinear"]
@@ -53,11 +54,11 @@ def material_table(material: Any) -> MaterialTable:
     """A :class:`MaterialTable` from a decoded material, a MerlBRDF, or a physical array."""
     if isinstance(material, MaterialTable):
         return material
-    if hasattr(material, "physical") and hasattr(material, "record"):  # DecodedMaterial
+    if hasattr(material, "reflectance") and hasattr(material, "record"):  # DecodedMaterial
         mask = np.broadcast_to(horizon_mask(), TABLE_SHAPE)
-        return MaterialTable(material.physical(), mask)
-    if hasattr(material, "physical") and hasattr(material, "mask"):  # MerlBRDF
-        return MaterialTable(material.physical(), material.mask)
+        return MaterialTable(material.reflectance(), mask)
+    if hasattr(material, "reflectance") and hasattr(material, "mask"):  # MerlBRDF
+        return MaterialTable(material.reflectance(), material.mask)
     array = np.asarray(material)
     if array.shape != TABLE_SHAPE:
         raise TypeError(f"cannot render {type(material).__name__}: expected a material or a {TABLE_SHAPE} table")
@@ -246,3 +247,50 @@ def render_sphere_environment(
     image = np.zeros((size, size, 3), dtype=np.float32)
     image[inside] = np.maximum(radiance, 0)
     return image
+
+
+def traversal_sheet(
+    material: Any,
+    *,
+    size: int = 85,
+    light: Sequence[float] = (-1.0, 1.0, 1.0),
+    steps: Sequence[float] = (-3.0, -2.0, -1.0, 0.0, 1.0, 2.0, 3.0),
+) -> npt.NDArray[np.uint8]:
+    """A labelled sheet of spheres: one row per latent parameter, traversed over ``steps`` (prior σ).
+
+    Parameters
+    ----------
+    material : brdfcodec.codec.DecodedMaterial
+        A decoded material (its record and decoder are traversed).
+    size : int, default 85
+        Pixels per sphere.
+    light : (float, float, float)
+        Direction towards the light.
+    steps : sequence of float
+        Offsets of the traversed parameter, in prior σ; the middle column is the material itself when 0 is in it.
+
+    Returns
+    -------
+    ndarray of uint8, shape (H, W, 3)
+        sRGB, one exposure for the whole sheet (from the unedited spheres' column).
+    """
+    from brdfcodec.codec import DecodedMaterial
+    from brdfcodec.edit import parameter_vector, traverse
+    from brdfcodec.images import auto_exposure, compose_sheet, encode_srgb
+
+    record, decoder = material.record, material.decoder
+    steps = [float(s) for s in steps]
+    manifest = decoder.manifest
+    effects = manifest.parameters.get("dimensions", []) if manifest is not None else []
+    rows, labels = [], []
+    for dim in range(parameter_vector(record).size):
+        edited = traverse(record, dim, steps)
+        rows.append([render_sphere(DecodedMaterial(r, decoder), size=size, light=tuple(light)) for r in edited])
+        label = effects[dim]["label"] if dim < len(effects) else "grafted green"
+        labels.append(f"z{dim + 1}: {label}")
+    middle = len(steps) // 2
+    exposure = auto_exposure(np.concatenate([row[middle] for row in rows]))
+    tiles = [[encode_srgb(img, exposure=exposure) for img in row] for row in rows]
+    name = manifest.name if manifest is not None else "decoder in memory"
+    return compose_sheet(tiles, row_labels=labels, column_labels=[f"{s:+g}σ" for s in steps],
+                         title=f"{record.name}: latent traversal ({name})")

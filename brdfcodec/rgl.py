@@ -38,12 +38,13 @@ from typing import Any
 
 import numpy as np
 
-from brdfcodec.conventions import MERL_COLOR_SCALE, UNMEASURED_VALUE
+from brdfcodec.conventions import UNMEASURED_VALUE
 from brdfcodec.coords import directions_from_half_diff, grid_angles
 from brdfcodec.errors import OptionalDependencyError, SourceFormatError
 from brdfcodec.hashing import sha256_of_file
 from brdfcodec.mask import horizon_mask
 from brdfcodec.merl import MerlBRDF
+from brdfcodec.representation import stored_from_reflectance
 
 __all__ = [
     "RGL_SOURCE_KIND",
@@ -259,8 +260,7 @@ def read_rgl_bsdf(path: str | os.PathLike[str], *, name: str | None = None) -> M
     """
     header = read_rgl_header(path)
     check_supported(header)
-    physical = _evaluate_on_grid(header.path)
-    stored = physical / MERL_COLOR_SCALE[:, None, None, None]
+    stored = stored_from_reflectance(_evaluate_on_grid(header.path))
     stored = np.where(horizon_mask()[None], np.maximum(stored, 0.0), UNMEASURED_VALUE)
     if not np.isfinite(stored).all():
         raise SourceFormatError(header.path, "Mitsuba's measured plugin returned non-finite values on the MERL grid")

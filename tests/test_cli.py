@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from brdfcodec.analytic import ANALYTIC_PRESETS
 from brdfcodec.cli import main
 from brdfcodec.merl import read_merl
 
@@ -41,15 +42,19 @@ def test_info_json(capsys: pytest.CaptureFixture[str], red_plastic_file: Path) -
     assert summary["reflectance_per_sr"]["red"]["max"] > summary["reflectance_per_sr"]["green"]["max"]
 
 
+@pytest.mark.slow  # > 10 s on 2 cores
 def test_analytic_then_info_then_dataset(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
     out_file = tmp_path / "gold.binary"
     code, out, err = run(capsys, "analytic", "gold", "-o", str(out_file))
-    assert code == 0, err and out_file.exists()
+    assert code == 0, err
+    np.testing.assert_array_equal(read_merl(out_file).values, ANALYTIC_PRESETS["gold"].to_merl().values)
     code, _, err = run(capsys, "analytic", "gold", "-o", str(out_file))
     assert code == 1 and "already exists" in err and "--force" in err
     code, _, err = run(capsys, "analytic", "-o", str(tmp_path / "c.binary"), "--diffuse", "0.1,0.2,0.3",
                        "--roughness", "0.3")
     assert code == 0, err
+    custom = read_merl(tmp_path / "c.binary").reflectance()
+    np.testing.assert_allclose(custom[:, 60, 10, 90], np.array([0.1, 0.2, 0.3]) / np.pi, rtol=0.1)  # diffuse
     ds = tmp_path / "a.h5"
     code, out, err = run(capsys, "dataset", "build", "--analytic", "--materials", "gold,chrome", "--random", "1",
                          "-o", str(ds), "--quiet")

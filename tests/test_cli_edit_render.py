@@ -61,15 +61,22 @@ def test_edit_operations(capsys, library: Path, tmp_path: Path) -> None:
 def test_render_outputs(capsys, library: Path, tmp_path: Path) -> None:
     code, out, err = run(capsys, "render", str(library), "--material", "gold", "-o", str(tmp_path / "s.png"),
                          "--size", "48")
-    assert code == 0, err and "decode" in out
+    assert code == 0, err
+    assert "decode" in out
+    from PIL import Image
+
+    sphere = np.asarray(Image.open(tmp_path / "s.png"))
+    assert sphere.shape == (48, 48, 3) and sphere[24, 24].max() > 0 and sphere[0, 0].max() == 0
     code, _, err = run(capsys, "render", str(tmp_path / "gold.binary"), "-o", str(tmp_path / "s.exr"),
                        "--size", "32", "--flat")
     assert code == 0, err
+    from brdfcodec.exr import read_exr_rgb
+
+    [flat] = read_exr_rgb(tmp_path / "s.exr").values()
+    assert flat.shape == (32, 32, 3) and np.isfinite(flat).all() and flat.max() > 0
     code, _, err = run(capsys, "render", str(library), "--material", "red-plastic", "--traversal",
                        "-o", str(tmp_path / "sheet.png"), "--size", "96")
     assert code == 0, err
-    from PIL import Image
-
     sheet = np.asarray(Image.open(tmp_path / "sheet.png"))
     assert sheet.shape[0] > 8 * 32 and sheet.shape[1] > 7 * 32
     code, out, err = run(capsys, "render", str(library), "--material", "gold", "-o", str(tmp_path / "c.png"),

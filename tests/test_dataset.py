@@ -10,12 +10,12 @@ import numpy as np
 import pytest
 
 from brdfcodec.conventions import KEPT_PHI_D_SLICES
-from brdfcodec.dataset import DATASET_FORMAT_VERSION, BrdfDataset, build_dataset, material_arrays
+from brdfcodec.dataset import DATASET_FORMAT_VERSION, BrdfDataset, build_dataset
 from brdfcodec.errors import DatasetError, MerlFormatError, SourceFormatError
 from brdfcodec.merl import MerlBRDF, read_merl, write_merl
+from brdfcodec.representation import map_values, network_input_from_table
 from brdfcodec.sources import analytic_sources, merl_folder_sources, nbrdf_zip_sources
 from brdfcodec.split import split_materials
-from brdfcodec.transforms import map_values
 
 
 @pytest.fixture(scope="module")
@@ -48,7 +48,7 @@ def test_dataset_holds_inputs_masks_tables_and_provenance(merl_dataset: Path, me
         np.testing.assert_allclose(table.values[original.mask], original.values[original.mask], rtol=1e-6)
         np.testing.assert_array_equal(table.mask, original.mask)
         inputs, masks = dataset.inputs([index])[0], dataset.input_masks([index])[0]
-        expected_inputs, expected_masks = material_arrays(original)
+        expected_inputs, expected_masks = network_input_from_table(original.values)
         np.testing.assert_array_equal(inputs, expected_inputs)
         np.testing.assert_array_equal(masks, expected_masks)
         # Channel 21·c + s of the input is colour c at kept slice s, log-mapped.
@@ -145,8 +145,8 @@ def test_reader_rejects_foreign_and_future_files(tmp_path: Path, merl_dataset: P
         BrdfDataset(tmp_path / "missing.h5")
 
 
-def test_material_arrays_zero_invalid_entries(analytic_tables: dict[str, MerlBRDF]) -> None:
-    inputs, masks = material_arrays(analytic_tables["chrome"])
+def test_network_inputs_zero_invalid_entries(analytic_tables: dict[str, MerlBRDF]) -> None:
+    inputs, masks = network_input_from_table(analytic_tables["chrome"].values)
     assert inputs.dtype == np.float32 and masks.dtype == bool
     assert np.isfinite(inputs).all() and (inputs >= 0).all()
     assert (inputs[~masks] == 0).all()

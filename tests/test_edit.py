@@ -9,12 +9,11 @@ import pytest
 
 from brdfcodec.bvae_format import GraftRecord, LatentRecord, encode_bvae, parse_bvae
 from brdfcodec.codec import BrdfDecoder
-from brdfcodec.conventions import MERL_COLOR_SCALE
-from brdfcodec.dataset import material_arrays
 from brdfcodec.edit import fit_graft, graft, interpolate, mix_factors, parameter_vector, refine_code, traverse
 from brdfcodec.merl import MerlBRDF
 from brdfcodec.models.registry import default_model_folder
 from brdfcodec.parameters import colour_dims_of, measure_dimension_effects
+from brdfcodec.representation import network_input_from_table, reflectance_from_stored
 
 
 @pytest.fixture(scope="module")
@@ -31,7 +30,7 @@ def test_traverse_with_zero_step_reproduces_the_material(decoder: BrdfDecoder) -
     record = code(1)
     steps = traverse(record, 2, [-3.0, 0.0, 3.0])
     np.testing.assert_array_equal(steps[1].mu, record.mu)
-    np.testing.assert_array_equal(decoder.table(steps[1]), decoder.table(record))
+    np.testing.assert_array_equal(decoder.decode(steps[1]), decoder.decode(record))
     assert steps[0].mu[2] == pytest.approx(record.mu[2] - 3) and np.delete(steps[0].mu, 2) == pytest.approx(
         np.delete(record.mu, 2))
     absolute = traverse(record, 0, [1.25], unit="absolute")[0]
@@ -42,8 +41,8 @@ def test_traverse_with_zero_step_reproduces_the_material(decoder: BrdfDecoder) -
 
 def test_interpolation_ends_reproduce_the_materials(decoder: BrdfDecoder) -> None:
     a, b = code(1), code(2)
-    np.testing.assert_array_equal(decoder.table(interpolate(a, b, 0.0)), decoder.table(a))
-    np.testing.assert_array_equal(decoder.table(interpolate(a, b, 1.0)), decoder.table(b))
+    np.testing.assert_array_equal(decoder.decode(interpolate(a, b, 0.0)), decoder.decode(a))
+    np.testing.assert_array_equal(decoder.decode(interpolate(a, b, 1.0)), decoder.decode(b))
     np.testing.assert_allclose(interpolate(a, b, 0.25).mu, 0.75 * a.mu + 0.25 * b.mu, rtol=1e-6)
     mixed = mix_factors(a, b, [0, 7])
     np.testing.assert_array_equal(mixed.mu[[0, 7]], a.mu[[0, 7]])
@@ -62,32 +61,37 @@ def test_graft_edits_act_on_all_ten_parameters(decoder: BrdfDecoder) -> None:
     moved = traverse(g1, 9, [1.0])[0]
     np.testing.assert_allclose(moved.graft_values, [1.0, 0.0])
     back = parse_bvae(encode_bvae([moved], decoder.reference)).records[0]
-    np.testing.assert_array_equal(decoder.table(back), decoder.table(moved))
+    np.testing.assert_array_equal(decoder.decode(back), decoder.decode(moved))
 
 
 def test_graft_with_v2_equal_v1_gives_green_equal_red(decoder: BrdfDecoder) -> None:
     record = code(3)
     dims = (3, 4)
-    grafted = decoder.table(graft(record, record.mu[list(dims)], dims), masked="zero")
-    plain = decoder.table(record, masked="zero")
+    grafted = decoder.decode(graft(record, record.mu[list(dims)], dims), masked="zero")
+    plain = decoder.decode(record, masked="zero")
     np.testing.assert_array_equal(grafted[[0, 2]], plain[[0, 2]])
-    physical = grafted * MERL_COLOR_SCALE.astype(np.float32)[:, None, None, None]
-    np.testing.assert_allclose(physical[1], physical[0], rtol=1e-5, atol=1e-9)
+    reflectance = reflectance_from_stored(grafted)
+    np.testing.assert_allclose(reflectance[1], reflectance[0], rtol=1e-5, atol=1e-9)
 
 
-def test_fitting_never_makes_the_fit_worse(decoder: BrdfDecoder, analytic_tables: dict[str, MerlBRDF]) -> None:
-    inputs, mask = material_arrays(analytic_tables["red-plastic"])
+def test_fitting_brings_a_code_closer_to_the_target(analytic_tables: dict[str, MerlBRDF]) -> None:
+    decoder = BrdfDecoder(default_model_folder())
+    brdf = analytic_tables["red-plastic"]
+    inputs, mask = network_input_from_table(brdf.values, brdf.mask)
     start = code(4)
 
     def l1(mapped: np.ndarray) -> float:
         return float(np.abs(mapped - inputs)[mask].mean())
 
+    before = l1(decoder.mapped_record(start))  # 0.29 for this start
     refined = refine_code(decoder, start, inputs, mask, steps=15)
-    assert l1(decoder.mapped_record(refined)) <= l1(decoder.mapped_record(start)) + 1e-6
+    assert l1(decoder.mapped_record(refined)) < 0.8 * before  # 0.16 measured: Adam moves the code, not a no-op
     fitted = fit_graft(decoder, start, inputs, mask, colour_dims=(0, 1), steps=15)
     assert isinstance(fitted, GraftRecord) and fitted.graft_dims == (0, 1)
     assert np.isfinite(fitted.graft_values).all()
-    assert l1(decoder.mapped_record(fitted)) <= fitted.meta["edit"]["l1_mapped"] + 1e-4
+    after = l1(decoder.mapped_record(fitted))
+    assert after < 0.8 * before
+    assert after == pytest.approx(fitted.meta["edit"]["l1_mapped"], abs=1e-4)  # the reported loss is the real one
 
 
 def test_colour_dims_are_measured_and_shipped_with_the_default_model() -> None:

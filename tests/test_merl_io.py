@@ -80,8 +80,8 @@ def test_negative_values_are_unmeasured_not_data(tmp_path: Path, analytic_tables
     assert horizon_mask()[10, 10, 10]
     assert not brdf.mask[0, 10, 10, 10]
     assert brdf.mask[1, 10, 10, 10]
-    assert brdf.physical()[0, 10, 10, 10] == 0.0
-    assert (brdf.physical() >= 0).all()
+    assert brdf.reflectance()[0, 10, 10, 10] == 0.0
+    assert (brdf.reflectance() >= 0).all()
 
 
 def test_below_horizon_entries_are_invalid(analytic_tables: dict[str, MerlBRDF]) -> None:

@@ -9,7 +9,7 @@ from brdfcodec.conventions import MERL_COLOR_SCALE, TABLE_SHAPE
 from brdfcodec.mask import horizon_mask
 from brdfcodec.merl import MerlBRDF
 from brdfcodec.metrics import cosine_weighted_rmse, error_report, relae_linear, relae_mapped
-from brdfcodec.transforms import interpolate_slices, select_kept_slices
+from brdfcodec.representation import interpolate_slices, select_kept_slices
 
 
 def test_identical_tables_have_zero_error(analytic_tables: dict[str, MerlBRDF]) -> None:

@@ -74,7 +74,7 @@ def test_image_output(lambert: MerlBRDF, tmp_path: Path) -> None:
         write_image(tmp_path / "a.jpg", image)
 
 
-def test_image_error_metrics(lambert: MerlBRDF) -> None:
+def test_compare_images_metrics(lambert: MerlBRDF) -> None:
     reference = render_sphere(lambert, size=32)
     same = compare_images(reference, reference)
     assert same.delta_e_itp_mean == 0 and same.delta_e_2000_mean == 0 and same.psnr_db == float("inf")

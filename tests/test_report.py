@@ -23,6 +23,7 @@ def small_dataset(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return path
 
 
+@pytest.mark.slow  # > 10 s on 2 cores
 def test_report_records_and_files(small_dataset: Path, tmp_path: Path) -> None:
     from brdfcodec.dataset import BrdfDataset
 

@@ -17,7 +17,7 @@ from brdfcodec.errors import SourceFormatError
 from brdfcodec.mask import horizon_mask
 from brdfcodec.merl import MerlBRDF
 from brdfcodec.nbrdf import iter_nbrdf_zip, list_nbrdf_zip, read_nbrdf_fit
-from brdfcodec.transforms import map_values
+from brdfcodec.representation import map_values
 
 
 def test_presets_are_finite_valid_and_span_extremes(analytic_tables: dict[str, MerlBRDF]) -> None:
@@ -26,11 +26,11 @@ def test_presets_are_finite_valid_and_span_extremes(analytic_tables: dict[str, M
         assert np.isfinite(brdf.values).all(), name
         assert (brdf.values[:, ~horizon_mask()] == UNMEASURED_VALUE).all(), name
         assert (brdf.values[:, horizon_mask()] >= 0).all(), name
-        maxima[name] = float(brdf.physical().max())
+        maxima[name] = float(brdf.reflectance().max())
     assert maxima["chrome"] > 1e6  # a near-mirror with huge grazing values
     assert maxima["white-matte"] == pytest.approx(0.8 / np.pi)
     obsidian = analytic_tables["black-obsidian"]
-    assert np.median(obsidian.physical()[:, obsidian.mask[0]], axis=1).max() < 0.01  # near-black off the peak
+    assert np.median(obsidian.reflectance()[:, obsidian.mask[0]], axis=1).max() < 0.01  # near-black off the peak
 
 
 def test_lambert_is_constant_and_energy_conserving() -> None:
@@ -103,7 +103,7 @@ def test_constant_fit_tabulates_to_its_constant(tmp_path: Path) -> None:
     archive = make_archive(tmp_path, {"grey": constant_fit((0.2, 0.3, 0.4)), "dark": constant_fit((0, 0, 0))})
     assert list_nbrdf_zip(archive) == ["dark", "grey"]
     grey = next(iter_nbrdf_zip(archive, ["grey"])).to_merl()
-    physical = grey.physical()
+    physical = grey.reflectance()
     above = horizon_mask()
     expected = np.broadcast_to(np.array([0.2, 0.3, 0.4])[:, None], physical[:, above].shape)
     np.testing.assert_allclose(physical[:, above], expected, rtol=1e-6)
@@ -120,7 +120,7 @@ def test_fit_sees_half_and_difference_vectors_in_order(tmp_path: Path) -> None:
     path = tmp_path / "probe.h5"
     write_fit(path, layers)
     fit = read_nbrdf_fit(path)
-    table = fit.to_merl().physical()
+    table = fit.to_merl().reflectance()
     i_h, i_d, i_p = 40, 30, 0
     theta_h = (i_h / 90) ** 2 * np.pi / 2
     theta_d = i_d / 90 * np.pi / 2
@@ -131,7 +131,7 @@ def test_fit_sees_half_and_difference_vectors_in_order(tmp_path: Path) -> None:
 def test_negative_fit_outputs_are_clamped_to_zero(tmp_path: Path) -> None:
     archive = make_archive(tmp_path, {"under": constant_fit((-0.01, 0.1, 0.1))})
     brdf = next(iter_nbrdf_zip(archive)).to_merl()
-    assert (brdf.physical()[0] == 0).all()
+    assert (brdf.reflectance()[0] == 0).all()
     assert brdf.mask[0, horizon_mask()].all()
 
 
@@ -163,13 +163,13 @@ def test_real_proxy_materials_look_like_merl(nbrdf_zip: Path) -> None:
     names = list_nbrdf_zip(nbrdf_zip)
     assert len(names) == 90 and "green-acrylic" in names and "chrome" in names
     fits = {fit.name: fit.to_merl() for fit in iter_nbrdf_zip(nbrdf_zip, ["green-acrylic", "chrome"])}
-    green = fits["green-acrylic"].physical()
+    green = fits["green-acrylic"].reflectance()
     above = horizon_mask()
     median_rgb = np.median(green[:, above], axis=1)  # the diffuse colour, away from the white highlight
     assert median_rgb[1] > median_rgb[0] and median_rgb[1] > median_rgb[2]  # it is green
     chrome = fits["chrome"]
     assert np.isfinite(chrome.values).all()
-    assert chrome.physical().max() > 100  # a sharp specular peak
+    assert chrome.reflectance().max() > 100  # a sharp specular peak
     assert map_values(chrome.values)[chrome.mask].max() < 5.0  # inside the mapped domain
     assert (chrome.values[:, above] >= 0).all()
     assert MERL_COLOR_SCALE[1] == pytest.approx(1.15 / 1500)

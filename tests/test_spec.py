@@ -6,6 +6,7 @@ import re
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from brdfcodec import conventions
 from brdfcodec.dataset import DATASET_FORMAT, DATASET_FORMAT_VERSION
@@ -24,6 +25,16 @@ def test_version_matches() -> None:
     dataset_spec = (SPEC / "dataset-format.md").read_text(encoding="utf-8")
     assert f"Format version {DATASET_FORMAT_VERSION} " in dataset_spec
     assert f'`"{DATASET_FORMAT}"`' in dataset_spec
+
+
+@pytest.mark.parametrize("name", ["conventions.md", "model.md", "dataset-format.md"])
+def test_version_line_is_the_latest_change_log_entry(name: str) -> None:
+    """The version at the top of a spec is the newest one in its change log."""
+    text = (SPEC / name).read_text(encoding="utf-8")
+    top = re.search(r"^(?:Version|Format version) ([0-9.]+)", text, re.M)
+    log = re.findall(r"^- ([0-9.]+) \(", text.split("## Change log", 1)[-1], re.M)
+    assert top is not None and log, f"{name}: no version line or no change log"
+    assert top.group(1) == max(log, key=lambda v: tuple(int(p) for p in v.split("."))), name
 
 
 def test_kept_slices_match() -> None:

@@ -13,7 +13,7 @@ from brdfcodec.codec import BrdfDecoder, BrdfEncoder, measure
 from brdfcodec.conventions import KEPT_PHI_D_SLICES, MAPPED_MAX, MERL_COLOR_SCALE
 from brdfcodec.lookup import lookup
 from brdfcodec.merl import MerlBRDF
-from brdfcodec.transforms import map_values, table_from_network_output
+from brdfcodec.representation import map_values, table_from_network_output
 
 #: Stated bounds (spec/bvae-format.md §6): mapped RelAE of a reduced-precision decode against float32.
 REDUCED_PRECISION_BOUND = 0.01

@@ -54,6 +54,7 @@ def test_run_writes_log_checkpoints_and_summary(tiny_dataset: Path, tmp_path: Pa
         train(tiny_dataset, run, model_config=TINY_CONFIG, train_config=TINY_TRAIN, progress=False)
 
 
+@pytest.mark.slow  # > 10 s on 2 cores
 def test_resume_continues_exactly(tiny_dataset: Path, tmp_path: Path) -> None:
     straight = tmp_path / "straight"
     train(tiny_dataset, straight, model_config=TINY_CONFIG, train_config=TINY_TRAIN, progress=False)
@@ -99,6 +100,7 @@ def test_two_torchrun_processes_match_one(tiny_dataset: Path, tmp_path: Path) ->
         assert b["val_relae_mapped"] == pytest.approx(a["val_relae_mapped"], rel=1e-3)
 
 
+@pytest.mark.slow  # > 10 s on 2 cores
 def test_export_card_store_and_registry(tiny_dataset: Path, tmp_path: Path) -> None:
     from brdfcodec.models.registry import ModelNotFoundError, find_model, register_model_folder
     from brdfcodec.models.store import ModelChecksumError, load_model

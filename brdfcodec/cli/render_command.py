@@ -90,31 +90,10 @@ def _environment(spec: str) -> Any:
     return Environment.from_latlong(next(iter(parts.values())))
 
 
-def _traversal_sheet(decoded: Any, size: int, light: tuple[float, float, float]) -> np.ndarray:
-    from brdfcodec.codec import DecodedMaterial
-    from brdfcodec.edit import parameter_vector, traverse
-    from brdfcodec.images import auto_exposure, compose_sheet, encode_srgb
-    from brdfcodec.render import render_sphere
-
-    record, decoder = decoded.record, decoded.decoder
-    steps = [-3.0, -2.0, -1.0, 0.0, 1.0, 2.0, 3.0]
-    effects = decoder.manifest.parameters.get("dimensions", [])
-    rows, labels = [], []
-    for dim in range(parameter_vector(record).size):
-        edited = traverse(record, dim, steps)
-        rows.append([render_sphere(DecodedMaterial(r, decoder), size=size, light=light) for r in edited])
-        label = effects[dim]["label"] if dim < len(effects) else "grafted green"
-        labels.append(f"z{dim + 1}: {label}")
-    exposure = auto_exposure(np.concatenate([row[3] for row in rows]))
-    tiles = [[encode_srgb(img, exposure=exposure) for img in row] for row in rows]
-    return compose_sheet(tiles, row_labels=labels, column_labels=[f"{s:+g}σ" for s in steps],
-                         title=f"{record.name}: latent traversal ({decoder.manifest.name})")
-
-
 def run(args: argparse.Namespace) -> int:
     """Decode (if needed), render and write."""
     from brdfcodec.images import write_image, write_png
-    from brdfcodec.render import render_flat, render_sphere, render_sphere_environment
+    from brdfcodec.render import render_flat, render_sphere, render_sphere_environment, traversal_sheet
 
     if args.mitsuba is not None:
         from brdfcodec.mitsuba_scene import render_command
@@ -136,7 +115,7 @@ def run(args: argparse.Namespace) -> int:
     material, decoded = _load(args.input, args.material)
     start = time.perf_counter()
     if decoded is not None:
-        decoded.physical()  # decode now, so the timings below are apart
+        decoded.reflectance()  # decode now, so the timings below are apart
     decode_s = time.perf_counter() - start
     start = time.perf_counter()
     if args.traversal:
@@ -144,7 +123,8 @@ def run(args: argparse.Namespace) -> int:
             raise ValueError("--traversal needs a .bvae material (a latent code to traverse)")
         if args.output.suffix.lower() != ".png":
             raise ValueError("a traversal sheet is written as .png")
-        write_png(args.output, _traversal_sheet(decoded, max(32, args.size // 3), args.light), overwrite=args.force)
+        sheet = traversal_sheet(decoded, size=max(32, args.size // 3), light=args.light)
+        write_png(args.output, sheet, overwrite=args.force)
         print(f"wrote {args.output} (traversal sheet, {time.perf_counter() - start:.2f} s)")
         return 0
     environment = _environment(args.env) if args.env else None

@@ -16,7 +16,13 @@ from typing import Any
 import numpy as np
 
 from brdfcodec.conventions import TABLE_SHAPE
-from brdfcodec.transforms import interpolate_slices, select_kept_slices, table_from_network_output, unmap_values
+from brdfcodec.representation import (
+    interpolate_slices,
+    map_values,
+    select_kept_slices,
+    table_from_network_output,
+    unmap_values,
+)
 
 __all__ = ["Material", "OperatingPoint", "standard_points"]
 
@@ -109,8 +115,6 @@ class KeptSlices(OperatingPoint):
         return int(payload.nbytes)
 
     def decode(self, payload: np.ndarray) -> np.ndarray:
-        from brdfcodec.transforms import map_values
-
         return unmap_values(interpolate_slices(map_values(payload)))
 
 

@@ -31,7 +31,12 @@ from brdfcodec.representation.layout import (
     validate_phi_d_bins,
 )
 from brdfcodec.representation.mapping import LOG_RANGE, clamp_mapped, map_values, unmap_values
-from brdfcodec.representation.network_io import network_input_from_table, table_from_mapped, table_from_network_output
+from brdfcodec.representation.network_io import (
+    network_input_from_table,
+    reflectance_from_mapped,
+    table_from_mapped,
+    table_from_network_output,
+)
 from brdfcodec.representation.units import channel_scale, reflectance_from_stored, stored_from_reflectance
 
 __all__ = [
@@ -48,6 +53,7 @@ __all__ = [
     "network_channel",
     "network_channels_for_slots",
     "network_input_from_table",
+    "reflectance_from_mapped",
     "reflectance_from_stored",
     "select_kept_slices",
     "stored_from_reflectance",

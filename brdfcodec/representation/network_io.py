@@ -38,7 +38,7 @@ from brdfcodec.representation.layout import (
 )
 from brdfcodec.representation.mapping import LOG_RANGE, clamp_mapped, map_values
 
-__all__ = ["network_input_from_table", "table_from_mapped", "table_from_network_output"]
+__all__ = ["network_input_from_table", "reflectance_from_mapped", "table_from_mapped", "table_from_network_output"]
 
 
 def network_input_from_table(
@@ -85,6 +85,37 @@ def _unmapping_matrix(phi_d_bins: tuple[int, ...]) -> np.ndarray:
 _STORED_PER_EXPM1 = (EPSILON / MERL_COLOR_SCALE).astype(np.float32).reshape(N_CHANNELS, 1, 1, 1)
 
 
+def _interpolated_expm1(mapped: npt.ArrayLike, phi_d_bins: Sequence[int] | None) -> np.ndarray:
+    """expm1 of the mapped slices interpolated to the chosen bins times the log range: reflectance · S_c / ε."""
+    bins = validate_phi_d_bins(phi_d_bins)
+    array = np.asarray(mapped, dtype=np.float32)
+    if array.shape[-3:] != NETWORK_INPUT_SHAPE:
+        raise ValueError(f"mapped must have shape (..., {', '.join(map(str, NETWORK_INPUT_SHAPE))}), got {array.shape}")
+    kept = from_network_layout(array)  # (..., 3, 90, 90, 21)
+    table = np.matmul(kept, _unmapping_matrix(bins))
+    return np.expm1(table, out=table)
+
+
+def reflectance_from_mapped(
+    mapped: npt.ArrayLike, *, phi_d_bins: Sequence[int] | None = None
+) -> npt.NDArray[np.float32]:
+    """Reflectance (1/sr) from mapped slices in the mapped domain: :func:`table_from_mapped` without the colour scale.
+
+    The mapping is the same function of reflectance in every channel, so
+    reflectance is ``ε · expm1(·)`` directly; going through stored units would
+    divide by the colour scale and multiply it back.
+
+    Returns
+    -------
+    ndarray of float32, shape (..., 3, 90, 90, K)
+        Finite and ≥ 0; equal to ``reflectance_from_stored(table_from_mapped(mapped))``
+        up to float32 rounding.
+    """
+    table = _interpolated_expm1(mapped, phi_d_bins)
+    table *= np.float32(EPSILON)
+    return table
+
+
 def table_from_mapped(mapped: npt.ArrayLike, *, phi_d_bins: Sequence[int] | None = None) -> npt.NDArray[np.float32]:
     """Table (or chosen φd bins) in stored units from mapped slices already in the mapped domain.
 
@@ -109,13 +140,7 @@ def table_from_mapped(mapped: npt.ArrayLike, *, phi_d_bins: Sequence[int] | None
         it equals :func:`~brdfcodec.representation.mapping.unmap_values` of
         the decoder's slice up to float32 rounding of the log range.
     """
-    bins = validate_phi_d_bins(phi_d_bins)
-    array = np.asarray(mapped, dtype=np.float32)
-    if array.shape[-3:] != NETWORK_INPUT_SHAPE:
-        raise ValueError(f"mapped must have shape (..., {', '.join(map(str, NETWORK_INPUT_SHAPE))}), got {array.shape}")
-    kept = from_network_layout(array)  # (..., 3, 90, 90, 21)
-    table = np.matmul(kept, _unmapping_matrix(bins))
-    np.expm1(table, out=table)
+    table = _interpolated_expm1(mapped, phi_d_bins)
     table *= _STORED_PER_EXPM1
     return table
 

@@ -128,6 +128,176 @@ def _atomic_save(obj: Any, path: Path) -> None:
     os.replace(tmp, path)
 
 
+@dataclass
+class _TrainingData:
+    """What training reads from the dataset: inputs and masks of the training split, references for RelAE."""
+
+    inputs: torch.Tensor
+    masks: torch.Tensor
+    val_inputs: Any
+    reference: MappedReference | None
+    monitored_inputs: Any
+    train_reference: MappedReference | None
+    info: dict[str, Any]
+
+
+@dataclass
+class _Progress:
+    """Where a run stands: the next epoch, the best validation RelAE so far and its epoch, the optimiser step."""
+
+    first_epoch: int = 0
+    best: float = math.inf
+    best_epoch: int = -1
+    step: int = 0
+    evals_without_gain: int = 0
+
+
+def _run_info(dataset_path: str | os.PathLike[str], model_config: ModelConfig, train_config: TrainConfig,
+              world: _World) -> dict[str, Any]:
+    """The facts of a run written to ``run.json``."""
+    return {
+        "model_config": json.loads(model_config.to_json()),
+        "train_config": train_config.to_dict(),
+        "dataset": str(Path(dataset_path).resolve()),
+        "world_size": world.size,
+        "brdfcodec_version": __version__,
+        "torch_version": torch.__version__,
+    }
+
+
+def _check_run_folder(out: Path, run_info: dict[str, Any], resume: bool) -> None:
+    """Refuse a non-empty folder for a new run, or a resume with another trajectory."""
+    if resume:
+        stored = json.loads((out / "run.json").read_text())
+        for key in ("model_config", "train_config"):
+            if _trajectory(stored[key]) != _trajectory(run_info[key]):
+                raise ValueError(f"{out}: cannot resume with a different {key.replace('_', ' ')}")
+    elif out.exists() and any(out.iterdir()):
+        raise FileExistsError(f"{out}: run folder is not empty (use --resume to continue it)")
+
+
+def _load_training_data(dataset_path: str | os.PathLike[str], world: _World) -> _TrainingData:
+    """Inputs of the training split, and (on rank 0) the mapped references that RelAE is measured against."""
+    with BrdfDataset(dataset_path) as dataset:
+        train_rows = dataset.indices("train")
+        val_rows = dataset.indices("validation")
+        if not train_rows:
+            raise ValueError(f"{dataset_path}: no training materials")
+        inputs = torch.from_numpy(dataset.inputs(train_rows))
+        # Training RelAE is monitored on a fixed subset (every 4th material), without augmentation.
+        monitored = train_rows[::4]
+        return _TrainingData(
+            inputs=inputs,
+            masks=torch.from_numpy(dataset.input_masks(train_rows)),
+            val_inputs=dataset.inputs(val_rows),
+            reference=MappedReference(dataset, val_rows) if world.is_main and val_rows else None,
+            monitored_inputs=inputs[::4].numpy(),  # the rows of `monitored`, already in memory
+            train_reference=MappedReference(dataset, monitored) if world.is_main else None,
+            info={"source_kind": dataset.source_kind, "description": dataset.description,
+                  "train": [dataset.names[i] for i in train_rows],
+                  "validation": [dataset.names[i] for i in val_rows]},
+        )
+
+
+def _build_model(model_config: ModelConfig, train_config: TrainConfig, data: _TrainingData, world: _World,
+                 out: Path, resume: bool) -> tuple[BetaVAE, torch.optim.Optimizer, _Progress]:
+    """A fresh model (linear basis fitted) or the one of the checkpoint, with its optimiser and progress."""
+    torch.manual_seed(train_config.seed)
+    model = BetaVAE(model_config)
+    if model_config.linear_basis and not resume:
+        initialise_linear_basis(model, data.inputs)
+    model = model.to(world.device)
+    optimizer = torch.optim.Adam(model.parameters(), lr=train_config.learning_rate)
+    progress = _Progress()
+    if resume:
+        state = torch.load(out / CHECKPOINT, map_location=world.device, weights_only=False)
+        model.load_state_dict(state["model"])
+        optimizer.load_state_dict(state["optimizer"])
+        progress = _Progress(state["epoch"], state["best"], state["best_epoch"], state["step"])
+    return model, optimizer, progress
+
+
+def _train_epoch(model: BetaVAE, forward: torch.nn.Module, optimizer: torch.optim.Optimizer, data: _TrainingData,
+                 model_config: ModelConfig, train_config: TrainConfig, epoch: int, world: _World,
+                 progress: _Progress) -> dict[str, Any]:
+    """One epoch of optimisation; returns the epoch's log record (losses averaged over every rank)."""
+    epoch_start = time.perf_counter()
+    model.train()
+    n_train = len(data.inputs)
+    local = train_config.batch_size // world.size
+    steps_per_epoch = max(1, n_train // train_config.batch_size)
+    sums = torch.zeros(3, dtype=torch.float64)  # loss, recon, kl (sums over samples)
+    kl_dims = torch.zeros(model_config.latent_dim, dtype=torch.float64)
+    count = 0
+    for draw in _global_batches(n_train, train_config, epoch, model_config.latent_dim):
+        part = slice(world.rank * local, (world.rank + 1) * local)
+        rows, partner = draw["rows"][part], draw["partner"][part]
+        x = mix_physical(data.inputs[rows], data.inputs[partner], draw["weight"][part])
+        m = data.masks[rows] & data.masks[partner]
+        x = permute_colours(x, draw["permutation"][part]).to(world.device)
+        m = permute_colours(m, draw["permutation"][part]).to(world.device)
+        for group in optimizer.param_groups:
+            group["lr"] = _learning_rate(progress.step, steps_per_epoch, train_config)
+        recon, mu, logvar = forward(x, draw["noise"][part].to(world.device))
+        terms = beta_vae_loss(recon, x, m, mu, logvar, beta=train_config.beta, recon=train_config.recon)
+        optimizer.zero_grad(set_to_none=True)
+        terms.loss.backward()
+        optimizer.step()
+        progress.step += 1
+        n = len(rows)
+        sums += torch.tensor([terms.loss.item(), terms.recon.item(), terms.kl.item()], dtype=torch.float64) * n
+        kl_dims += kl_per_dimension(mu.detach(), logvar.detach()).sum(0).double().cpu()
+        count += n
+    totals = torch.cat([sums, kl_dims, torch.tensor([count], dtype=torch.float64)])
+    if world.size > 1:
+        dist.all_reduce(totals)
+    count_all = totals[-1].item()
+    return {
+        "epoch": epoch + 1,
+        "lr": optimizer.param_groups[0]["lr"],
+        "loss": totals[0].item() / count_all,
+        "recon": totals[1].item() / count_all,
+        "kl": totals[2].item() / count_all,
+        "kl_per_dim": [v / count_all for v in totals[3:-1].tolist()],
+        "seconds": time.perf_counter() - epoch_start,
+    }
+
+
+def _evaluate(model: BetaVAE, data: _TrainingData, world: _World) -> dict[str, float]:
+    """Validation (and monitored training) mapped RelAE of ``decoder(μ(x))``."""
+    if data.reference is None:
+        return {}
+    errors = data.reference.relae(reconstruct_mapped(model, data.val_inputs, device=world.device))
+    record = {"val_relae_mapped": float(errors.mean()), "val_relae_mapped_max": float(errors.max())}
+    if data.train_reference is not None:
+        train_errors = data.train_reference.relae(reconstruct_mapped(model, data.monitored_inputs, device=world.device))
+        record["train_relae_mapped"] = float(train_errors.mean())
+    return record
+
+
+def _keep_if_best(model: BetaVAE, model_config: ModelConfig, record: dict[str, Any], progress: _Progress,
+                  out: Path) -> None:
+    """Save ``best.pt`` when the validation RelAE improved; count evaluations without gain otherwise."""
+    if record["val_relae_mapped"] < progress.best:
+        progress.best, progress.best_epoch = record["val_relae_mapped"], record["epoch"]
+        _atomic_save({"model": model.state_dict(), "epoch": record["epoch"], "model_config": model_config.to_json()},
+                     out / BEST)
+        progress.evals_without_gain = 0
+    else:
+        progress.evals_without_gain += 1
+
+
+def _stop_reason(train_config: TrainConfig, progress: _Progress, done: int, elapsed: float) -> str | None:
+    """Why to stop after epoch ``done`` (early stopping, time limit), or None to go on."""
+    stop = None
+    if train_config.patience and progress.evals_without_gain >= train_config.patience:
+        stop = "early stopping"
+    out_of_time = train_config.time_limit_s is not None and elapsed >= train_config.time_limit_s
+    if out_of_time and done < train_config.epochs:
+        stop = "time limit"
+    return stop
+
+
 def train(
     dataset_path: str | os.PathLike[str],
     run_dir: str | os.PathLike[str],
@@ -161,146 +331,51 @@ def train(
     out = Path(run_dir)
     if train_config.batch_size % world.size:
         raise ValueError(f"batch_size {train_config.batch_size} is not divisible by {world.size} processes")
-    run_info = {
-        "model_config": json.loads(model_config.to_json()),
-        "train_config": train_config.to_dict(),
-        "dataset": str(Path(dataset_path).resolve()),
-        "world_size": world.size,
-        "brdfcodec_version": __version__,
-        "torch_version": torch.__version__,
-    }
-    if resume:
-        stored = json.loads((out / "run.json").read_text())
-        for key in ("model_config", "train_config"):
-            if _trajectory(stored[key]) != _trajectory(run_info[key]):
-                raise ValueError(f"{out}: cannot resume with a different {key.replace('_', ' ')}")
-    elif out.exists() and any(out.iterdir()):
-        raise FileExistsError(f"{out}: run folder is not empty (use --resume to continue it)")
-
-    with BrdfDataset(dataset_path) as dataset:
-        train_rows = dataset.indices("train")
-        val_rows = dataset.indices("validation")
-        if not train_rows:
-            raise ValueError(f"{dataset_path}: no training materials")
-        inputs = torch.from_numpy(dataset.inputs(train_rows))
-        masks = torch.from_numpy(dataset.input_masks(train_rows))
-        val_inputs = dataset.inputs(val_rows)
-        reference = MappedReference(dataset, val_rows) if world.is_main and val_rows else None
-        # Training RelAE is monitored on a fixed subset (every 4th material), without augmentation.
-        monitored = train_rows[::4]
-        train_reference = MappedReference(dataset, monitored) if world.is_main else None
-        monitored_inputs = inputs[::4].numpy()  # the rows of `monitored`, already in memory
-        data_info = {"source_kind": dataset.source_kind, "description": dataset.description,
-                     "train": [dataset.names[i] for i in train_rows],
-                     "validation": [dataset.names[i] for i in val_rows]}
-    run_info["data"] = data_info
-
-    torch.manual_seed(train_config.seed)
-    model = BetaVAE(model_config)
-    if model_config.linear_basis and not resume:
-        initialise_linear_basis(model, inputs)
-    model = model.to(world.device)
-    optimizer = torch.optim.Adam(model.parameters(), lr=train_config.learning_rate)
-    first_epoch, best, best_epoch, step = 0, math.inf, -1, 0
-    if resume:
-        state = torch.load(out / CHECKPOINT, map_location=world.device, weights_only=False)
-        model.load_state_dict(state["model"])
-        optimizer.load_state_dict(state["optimizer"])
-        first_epoch, best, best_epoch, step = state["epoch"], state["best"], state["best_epoch"], state["step"]
-    elif world.is_main:
+    run_info = _run_info(dataset_path, model_config, train_config, world)
+    _check_run_folder(out, run_info, resume)
+    data = _load_training_data(dataset_path, world)
+    run_info["data"] = data.info
+    model, optimizer, state = _build_model(model_config, train_config, data, world, out, resume)
+    if world.is_main and not resume:
         out.mkdir(parents=True, exist_ok=True)
         (out / "run.json").write_text(json.dumps(run_info, indent=2))
     ddp = DistributedDataParallel(model) if world.size > 1 else None
     forward = ddp if ddp is not None else model
 
-    local = train_config.batch_size // world.size
-    steps_per_epoch = max(1, len(train_rows) // train_config.batch_size)
+    first_epoch = state.first_epoch
     stop_reason = "completed"
-    evals_without_gain = 0
     bar = tqdm(range(first_epoch, train_config.epochs), initial=first_epoch, total=train_config.epochs,
                desc="epochs", unit="ep", disable=not (progress and world.is_main))
     epoch = first_epoch
     for epoch in bar:
-        epoch_start = time.perf_counter()
-        model.train()
-        sums = torch.zeros(3, dtype=torch.float64)  # loss, recon, kl (sums over samples)
-        kl_dims = torch.zeros(model_config.latent_dim, dtype=torch.float64)
-        count = 0
-        for draw in _global_batches(len(train_rows), train_config, epoch, model_config.latent_dim):
-            part = slice(world.rank * local, (world.rank + 1) * local)
-            rows, partner = draw["rows"][part], draw["partner"][part]
-            x = mix_physical(inputs[rows], inputs[partner], draw["weight"][part])
-            m = masks[rows] & masks[partner]
-            x = permute_colours(x, draw["permutation"][part]).to(world.device)
-            m = permute_colours(m, draw["permutation"][part]).to(world.device)
-            for group in optimizer.param_groups:
-                group["lr"] = _learning_rate(step, steps_per_epoch, train_config)
-            recon, mu, logvar = forward(x, draw["noise"][part].to(world.device))
-            terms = beta_vae_loss(recon, x, m, mu, logvar, beta=train_config.beta, recon=train_config.recon)
-            optimizer.zero_grad(set_to_none=True)
-            terms.loss.backward()
-            optimizer.step()
-            step += 1
-            n = len(rows)
-            sums += torch.tensor([terms.loss.item(), terms.recon.item(), terms.kl.item()], dtype=torch.float64) * n
-            kl_dims += kl_per_dimension(mu.detach(), logvar.detach()).sum(0).double().cpu()
-            count += n
-        totals = torch.cat([sums, kl_dims, torch.tensor([count], dtype=torch.float64)])
-        if world.size > 1:
-            dist.all_reduce(totals)
-        count_all = totals[-1].item()
-        record: dict[str, Any] = {
-            "epoch": epoch + 1,
-            "lr": optimizer.param_groups[0]["lr"],
-            "loss": totals[0].item() / count_all,
-            "recon": totals[1].item() / count_all,
-            "kl": totals[2].item() / count_all,
-            "kl_per_dim": [v / count_all for v in totals[3:-1].tolist()],
-            "seconds": time.perf_counter() - epoch_start,
-        }
+        record = _train_epoch(model, forward, optimizer, data, model_config, train_config, epoch, world, state)
         done = epoch + 1
-        evaluate = reference is not None and (done % train_config.eval_every == 0 or done == train_config.epochs)
-        if evaluate and reference is not None:
-            errors = reference.relae(reconstruct_mapped(model, val_inputs, device=world.device))
-            record["val_relae_mapped"] = float(errors.mean())
-            record["val_relae_mapped_max"] = float(errors.max())
-            if train_reference is not None:
-                train_errors = train_reference.relae(reconstruct_mapped(model, monitored_inputs, device=world.device))
-                record["train_relae_mapped"] = float(train_errors.mean())
-            if record["val_relae_mapped"] < best:
-                best, best_epoch = record["val_relae_mapped"], done
-                _atomic_save({"model": model.state_dict(), "epoch": done, "model_config": model_config.to_json()},
-                             out / BEST)
-                evals_without_gain = 0
-            else:
-                evals_without_gain += 1
-        elapsed = time.perf_counter() - start_time
-        stop = None
-        if train_config.patience and evals_without_gain >= train_config.patience:
-            stop = "early stopping"
-        out_of_time = train_config.time_limit_s is not None and elapsed >= train_config.time_limit_s
-        if out_of_time and done < train_config.epochs:
-            stop = "time limit"
+        if data.reference is not None and (done % train_config.eval_every == 0 or done == train_config.epochs):
+            record.update(_evaluate(model, data, world))
+            _keep_if_best(model, model_config, record, state, out)
+        stop = _stop_reason(train_config, state, done, time.perf_counter() - start_time)
         stop_flag = torch.tensor([1.0 if stop else 0.0])
         if world.size > 1:
             dist.broadcast(stop_flag, 0)
         if world.is_main:
             with open(out / LOG, "a", encoding="utf-8") as log:
                 log.write(json.dumps(record) + "\n")
-            bar.set_postfix(loss=f"{record['loss']:.4g}", val=f"{best:.4f}", refresh=False)
+            bar.set_postfix(loss=f"{record['loss']:.4g}", val=f"{state.best:.4f}", refresh=False)
             if done % train_config.checkpoint_every == 0 or stop_flag.item() or done == train_config.epochs:
                 _atomic_save({"model": model.state_dict(), "optimizer": optimizer.state_dict(), "epoch": done,
-                              "best": best, "best_epoch": best_epoch, "step": step}, out / CHECKPOINT)
+                              "best": state.best, "best_epoch": state.best_epoch, "step": state.step},
+                             out / CHECKPOINT)
         if stop_flag.item():
             stop_reason = stop or "stopped by rank 0"
             break
     bar.close()
     seconds = time.perf_counter() - start_time
-    result = TrainResult(out, epoch + 1 if train_config.epochs > first_epoch else first_epoch, best_epoch,
-                         best, stop_reason, seconds)
+    result = TrainResult(out, epoch + 1 if train_config.epochs > first_epoch else first_epoch, state.best_epoch,
+                         state.best, stop_reason, seconds)
     if world.is_main:
-        summary = {"epochs_done": result.epochs_done, "best_epoch": best_epoch, "best_validation_relae_mapped": best,
-                   "stop_reason": stop_reason, "seconds_this_session": seconds}
+        summary = {"epochs_done": result.epochs_done, "best_epoch": state.best_epoch,
+                   "best_validation_relae_mapped": state.best, "stop_reason": stop_reason,
+                   "seconds_this_session": seconds}
         (out / "summary.json").write_text(json.dumps(summary, indent=2))
     if world.size > 1:
         with contextlib.suppress(Exception):
