@@ -99,6 +99,16 @@ def _apply_mask(table: np.ndarray, bins: Sequence[int] | None, masked: MaskedEnt
     return table
 
 
+def _with_layers(record: Record, mapped: np.ndarray) -> np.ndarray:
+    """Issue 14 hook: a layered record's decode is the base decode plus its detail layer (before interpolation)."""
+    if getattr(record, "detail", None) is None:
+        return mapped
+    from brdfcodec.layers.detail import decode_detail
+
+    mapped += decode_detail(record.detail).reshape(mapped.shape)  # type: ignore[union-attr]
+    return mapped
+
+
 class BrdfDecoder:
     """A loaded decoder: latent codes to mapped slices and tables.
 
@@ -212,6 +222,10 @@ class BrdfDecoder:
         else:
             channels = [c * N_KEPT_SLICES + s for c in range(3) for s in slots]
             out[channels] = self.decode_channels(record.mu, channels)
+            if getattr(record, "detail", None) is not None:  # --- issue 14: detail layer, only the slots needed
+                from brdfcodec.layers.detail import decode_detail
+
+                out[channels] += decode_detail(record.detail, slots).reshape(len(channels), *out.shape[1:])
         return out
 
     def mapped_record(self, record: Record) -> npt.NDArray[np.float32]:
@@ -221,7 +235,7 @@ class BrdfDecoder:
             out = self.decode_mapped(record.mu)
             out[_GREEN] = self.decode_mapped(record.second_code())[_RED]
             return out
-        return self.decode_mapped(record.mu)
+        return _with_layers(record, self.decode_mapped(record.mu))
 
     def table(
         self,
@@ -261,7 +275,10 @@ class BrdfDecoder:
             codes = [r.mu for r in chunk if isinstance(r, LatentRecord)]
             batch = iter(self.decode_mapped(np.stack(codes)) if codes else ())
             for record in chunk:  # grafts need two codes each: decoded on their own
-                mapped = next(batch) if isinstance(record, LatentRecord) else self.mapped_record(record)
+                if isinstance(record, LatentRecord):
+                    mapped = _with_layers(record, next(batch))
+                else:
+                    mapped = self.mapped_record(record)
                 yield _apply_mask(table_from_network_output(mapped), None, masked)
 
     def _check_record(self, record: Record) -> None:
@@ -277,15 +294,65 @@ class BrdfEncoder:
     model : str, os.PathLike, ModelManifest or None
         As for :class:`BrdfDecoder`.
     device : str or torch.device, default "cpu"
+    effort : int, default 1
+        Latent refinement at encode time, 0 to 3 (0: the encoder's μ; see
+        :mod:`brdfcodec.layers.refine`). 1 keeps one MERL file under about 2 s on 2 cores.
+    bytes : int, optional
+        Rate control: the largest record payload per material (base + detail layer).
+    max_relae : float, optional
+        Rate control: the smallest record whose decoded table has at most this RelAE.
+    metric : {"mapped", "linear"}, default "mapped"
+        RelAE used by ``max_relae``.
+    detail_step : float, optional
+        A fixed detail-layer quantisation step (mapped units) instead of a target.
+    latent_dtype : {"float32", "float16"}, default "float32"
+        How the file will store latents (counts toward ``bytes``).
     """
 
-    def __init__(self, model: ModelSpec = None, *, device: str | torch.device = "cpu") -> None:
+    def __init__(
+        self,
+        model: ModelSpec = None,
+        *,
+        device: str | torch.device = "cpu",
+        effort: int = 1,
+        bytes: int | None = None,  # noqa: A002 - the CLI's --bytes
+        max_relae: float | None = None,
+        metric: Literal["mapped", "linear"] = "mapped",
+        detail_step: float | None = None,
+        latent_dtype: LatentDtype = "float32",
+    ) -> None:
+        from brdfcodec.layers.encoding import EncodeOptions
+
+        self.options = EncodeOptions(
+            effort=effort, bytes_budget=bytes, max_relae=max_relae, metric=metric, detail_step=detail_step,
+            latent_itemsize=2 if latent_dtype == "float16" else 4,
+        )
         manifest = resolve_model(model)
         network, _, self.manifest = load_model(manifest.folder, parts=("encoder",), device=str(device))
         assert network is not None
         self.network = network
         self.device = torch.device(device)
         self.reference = DecoderReference(self.manifest.decoder_sha256, self.manifest.name)
+
+    @functools.cached_property
+    def decoder(self) -> BrdfDecoder:
+        """The model's decoder (loaded on first use: refinement and layers need it)."""
+        return BrdfDecoder(self.manifest, device=self.device)
+
+    def encode_arrays(
+        self, names: Sequence[str], inputs: np.ndarray, masks: np.ndarray, sources: Sequence[MerlBRDF | None]
+    ) -> list[LatentRecord]:
+        """Records of materials given as network inputs ``(B, 63, 90, 90)`` and masks, with effort and rate control.
+
+        ``sources`` (tables) are needed for ``max_relae``; otherwise they only add their SHA-256 to ``meta``.
+        """
+        mu, sigma = self.posterior_from_inputs(inputs)
+        records = self.make_records(names, mu, sigma, sources)
+        if self.options.effort == 0 and not self.options.layered:
+            return records
+        from brdfcodec.layers.encoding import layer_records
+
+        return layer_records(records, self.decoder, inputs, masks, sources, self.options)
 
     def posterior_from_inputs(self, inputs: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray]:
         """Posterior of network inputs ``(B, 63, 90, 90)`` (mapped, masked entries 0): mean and std, float32."""
@@ -316,10 +383,17 @@ class BrdfEncoder:
     def encode_many(
         self, brdfs: Sequence[MerlBRDF], *, names: Sequence[str] | None = None, batch_size: int = 8
     ) -> list[LatentRecord]:
-        """Records of many materials, encoded in batches."""
-        mu, sigma = self.posterior(brdfs, batch_size=batch_size)
+        """Records of many materials, encoded in batches (with the encoder's effort and rate options)."""
         labels = list(names) if names is not None else [b.name or f"material-{i}" for i, b in enumerate(brdfs)]
-        return self.make_records(labels, mu, sigma, brdfs)
+        records: list[LatentRecord] = []
+        for start in range(0, len(brdfs), batch_size):
+            chunk = brdfs[start : start + batch_size]
+            arrays = [material_arrays(b) for b in chunk]
+            records += self.encode_arrays(
+                labels[start : start + batch_size], np.stack([a[0] for a in arrays]), np.stack([a[1] for a in arrays]),
+                list(chunk),
+            )
+        return records
 
     def make_records(
         self, names: Sequence[str], mu: np.ndarray, sigma: np.ndarray, sources: Sequence[MerlBRDF | None]
@@ -344,6 +418,8 @@ def measure(record: Record, decoder: BrdfDecoder, source: MerlBRDF) -> LatentRec
     }
     if isinstance(record, GraftRecord):
         return GraftRecord(record.name, record.mu, record.sigma, record.graft_dims, record.graft_values, meta)
+    if getattr(record, "detail", None) is not None:  # issue 14: layered record
+        return type(record)(record.name, record.mu, record.sigma, meta, detail=record.detail)  # type: ignore[call-arg]
     return LatentRecord(record.name, record.mu, record.sigma, meta)
 
 
@@ -495,6 +571,10 @@ def compress(
     latent_dtype: LatentDtype = "float32",
     measure_error: bool = True,
     overwrite: bool = False,
+    effort: int = 1,
+    bytes: int | None = None,  # noqa: A002 - the CLI's --bytes
+    max_relae: float | None = None,
+    metric: Literal["mapped", "linear"] = "mapped",
 ) -> list[Record]:
     """Encode MERL tables (objects or file paths) and optionally write them as one ``.bvae`` file.
 
@@ -508,6 +588,8 @@ def compress(
     measure_error : bool, default True
         Decode each record and store its RelAE against the source in ``meta``.
     overwrite : bool, default False
+    effort, bytes, max_relae, metric
+        Refinement and rate control, as for :class:`BrdfEncoder`.
 
     Returns
     -------
@@ -515,11 +597,12 @@ def compress(
     """
     items = [sources] if isinstance(sources, MerlBRDF | str | os.PathLike) else list(sources)
     brdfs = _as_brdfs(items)
-    encoder = BrdfEncoder(model)
+    encoder = BrdfEncoder(
+        model, effort=effort, bytes=bytes, max_relae=max_relae, metric=metric, latent_dtype=latent_dtype
+    )
     records: list[Record] = list(encoder.encode_many(brdfs))
     if measure_error:
-        decoder = BrdfDecoder(encoder.manifest)
-        records = [measure(r, decoder, b) for r, b in zip(records, brdfs, strict=True)]
+        records = [measure(r, encoder.decoder, b) for r, b in zip(records, brdfs, strict=True)]
     if output is not None:
         write_bvae(output, records, encoder.reference, latent_dtype=latent_dtype, overwrite=overwrite)
     return records

@@ -21,6 +21,7 @@ __all__ = [
     "FileFormatError",
     "MerlFormatError",
     "NonFiniteValueError",
+    "RateTargetError",
     "SourceFormatError",
     "UnsupportedVersionError",
 ]
@@ -81,3 +82,7 @@ class DecoderNotFoundError(BrdfcodecError):
 
 class DecoderMismatchError(BrdfcodecError):
     """A decoder other than the one a ``.bvae`` file refers to was offered for decoding it."""
+
+
+class RateTargetError(BrdfcodecError, ValueError):
+    """A size budget or error target that no layered record of a material can meet (issue 14 rate control)."""

@@ -45,6 +45,16 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     parser.add_argument("--no-measure", action="store_true", help="skip decoding to measure RelAE")
     parser.add_argument("--batch-size", type=int, default=8, help="materials encoded at once (default 8)")
     parser.add_argument("--force", action="store_true", help="replace an existing output file")
+    # --- issue 14: refinement and rate control (brdfcodec.layers)
+    parser.add_argument("--effort", type=int, choices=(0, 1, 2, 3), default=1,
+                        help="latent refinement at encode time: 0 (encoder only) to 3 (slowest); default 1")
+    target = parser.add_mutually_exclusive_group()
+    target.add_argument("--bytes", type=int, metavar="N",
+                        help="largest quality within N bytes of record payload per material (adds a detail layer)")
+    target.add_argument("--max-relae", type=float, metavar="X",
+                        help="smallest record whose measured RelAE on its material is at most X (adds a detail layer)")
+    parser.add_argument("--metric", choices=("mapped", "linear"), default="mapped",
+                        help="RelAE used by --max-relae (default mapped)")
     parser.set_defaults(handler=run)
 
 
@@ -98,9 +108,19 @@ def collect_items(inputs: list[Path], split: str | None) -> list[_Item]:
     return items
 
 
+def _input_mask(brdf: MerlBRDF | None) -> np.ndarray:
+    """Valid entries of a material's network input: from its table, else the horizon alone."""
+    if brdf is not None:
+        return material_arrays(brdf)[1]
+    from brdfcodec.mask import kept_slice_horizon_mask
+    from brdfcodec.transforms import network_input
+
+    return network_input(np.repeat(kept_slice_horizon_mask()[None], 3, axis=0))
+
+
 def run(args: argparse.Namespace) -> int:
     """Encode every input, write the file, print per-material RelAE and sizes."""
-    from brdfcodec.codec import BrdfDecoder, BrdfEncoder, measure
+    from brdfcodec.codec import BrdfEncoder, measure
 
     if args.batch_size < 1:
         raise ValueError("--batch-size must be at least 1")
@@ -108,19 +128,25 @@ def run(args: argparse.Namespace) -> int:
     if args.output.suffix != ".bvae":
         raise ValueError(f"{args.output}: the output must end in .bvae")
     items = collect_items(args.inputs, args.split)
-    encoder = BrdfEncoder(args.model)
-    decoder = None if args.no_measure else BrdfDecoder(encoder.manifest)
+    dtype = "float16" if args.float16 else "float32"
+    if args.bytes is not None and args.bytes < 1:
+        raise ValueError("--bytes must be a positive number of bytes")
+    encoder = BrdfEncoder(
+        args.model, effort=args.effort, bytes=args.bytes, max_relae=args.max_relae, metric=args.metric,
+        latent_dtype=dtype,
+    )
+    decoder = None if args.no_measure else encoder.decoder
     records: list[Record] = []
     lines: list[str] = []
     with tqdm(total=len(items), desc="compress", unit="material", disable=len(items) < 2 or None) as bar:
         for start in range(0, len(items), args.batch_size):
             chunk = items[start : start + args.batch_size]
             loaded = [item.load() for item in chunk]
-            mu, sigma = encoder.posterior_from_inputs(np.stack([inputs for _, inputs in loaded]))
             sources = [brdf for brdf, _ in loaded]
-            for item, brdf, record in zip(
-                chunk, sources, encoder.make_records([i.name for i in chunk], mu, sigma, sources), strict=True
-            ):
+            inputs = np.stack([x for _, x in loaded])
+            masks = np.stack([_input_mask(brdf) for brdf in sources])
+            encoded = encoder.encode_arrays([i.name for i in chunk], inputs, masks, sources)
+            for item, brdf, record in zip(chunk, sources, encoded, strict=True):
                 if decoder is not None and brdf is not None:
                     record = measure(record, decoder, brdf)
                     relae = record.meta["relae"]
@@ -130,7 +156,6 @@ def run(args: argparse.Namespace) -> int:
                     lines.append(f"  {item.name:<32} (RelAE not measured: {why})")
                 records.append(record)
             bar.update(len(chunk))
-    dtype = "float16" if args.float16 else "float32"
     size = write_bvae(args.output, records, encoder.reference, latent_dtype=dtype, overwrite=args.force)
     print("\n".join(lines))
     measured = [r.meta["relae"]["mapped"] for r in records if "relae" in r.meta]
