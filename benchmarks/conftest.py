@@ -30,6 +30,8 @@ TARGETS = {
     "decode-query": 1.5,  # 20,000 eval(wi, wo) on a decoded material vs on the original MERL table
     "render-sphere-256": 8.0,  # a 256² sphere from a decoded material vs decoding the material once
     "edit-and-decode": 1.2,  # traversal + interpolation + decode vs decode alone
+    "decode-layered": 1.5,  # a layered record (base + 16 KB detail layer) vs its base alone (issue 14)
+    "encode-effort": 4.0,  # read + encode at the default effort (1: refinement) vs effort 0 (issue 14)
 }
 
 #: Largest acceptable candidate median, in seconds, on 2 CPU cores (issue 4 targets).
@@ -37,6 +39,7 @@ ABSOLUTE_TARGETS = {
     "decode-full": 0.050,
     "decode-slice": 0.010,
     "render-sphere-256": 0.5,  # "a fraction of a second" (issue 5)
+    "encode-effort": 2.0,  # `bvae compress` of one MERL file at the default effort, without process start (issue 14)
 }
 
 

@@ -185,9 +185,11 @@ def decode_detail(layer: DetailLayer, slots: Sequence[int] | None = None) -> npt
     chosen = list(range(N_KEPT_SLICES)) if slots is None else [int(s) for s in slots]
     if not chosen or min(chosen) < 0 or max(chosen) >= N_KEPT_SLICES:
         raise ValueError(f"slots must be kept-slice positions in [0, {N_KEPT_SLICES}), got {slots}")
-    c = decoded_integers(layer) * np.float32(layer.step)
+    q = decoded_integers(layer).reshape(N_CHANNELS * N_KEPT_SLICES, *_SHAPE[2:])  # (63, 90, 90) coefficients
     f32 = np.float32
-    c = np.einsum("ed,afge->afgd", _dct_matrix(_SHAPE[3]).astype(f32), c, optimize=True)
-    c = np.einsum("gh,afgd->afhd", _dct_matrix(_SHAPE[2]).astype(f32), c, optimize=True)
-    c = np.einsum("fs,afhd->ashd", _dct_matrix(_SHAPE[1])[:, chosen].astype(f32), c, optimize=True)
-    return np.einsum("ac,ashd->cshd", COLOUR_MATRIX.astype(f32), c, optimize=True)
+    x = np.matmul(q, _dct_matrix(_SHAPE[3]).astype(f32))  # inverse along θd
+    x = np.matmul(_dct_matrix(_SHAPE[2]).T.astype(f32), x)  # inverse along θh
+    # Colour and slice inverses (and the step) in one (3·n, 63) matrix: out[c, s] = Σ_a,f A[a, c] C[f, s] x[a, f].
+    mix = np.einsum("ac,fs->csaf", COLOUR_MATRIX, _dct_matrix(_SHAPE[1])[:, chosen]) * layer.step
+    out = mix.reshape(N_CHANNELS * len(chosen), -1).astype(f32) @ x.reshape(len(x), -1)
+    return out.reshape(N_CHANNELS, len(chosen), *_SHAPE[2:])

@@ -11,10 +11,12 @@ picks the detail layer's quantisation step from a fixed ladder
   RelAE (mapped or linear, full table, valid entries) of at most X — the
   smallest file that meets X; a base-only record when the base meets X.
 
-Both searches bisect the ladder (size falls and error rises with the step)
-and then return the best of every rung actually tried, so the answer is the
-smallest tried file that meets the target even where the curve is not
-monotonic. The achieved RelAE is measured on the returned record.
+Both searches bisect the ladder (size falls and error rises with the step),
+then bisect the step in log space between the two rungs that bracket the
+target (3 rounds for a budget, 2 for an error target), and return the best
+of every step actually tried, so the answer is the smallest tried file that
+meets the target even where the curve is not monotonic. The achieved RelAE
+is measured on the returned record.
 """
 
 from __future__ import annotations
@@ -39,6 +41,8 @@ __all__ = ["STEP_LADDER", "Metric", "RateResult", "encode_layers", "layered_mapp
 Metric = Literal["mapped", "linear"]
 #: Quantisation steps tried, coarsest first (mapped units): 16 · 2^(−i/2), i = 0 … 28.
 STEP_LADDER: Final = tuple(float(16.0 * 2.0 ** (-i / 2)) for i in range(29))
+#: Log-space halvings of the step between the two rungs that bracket a target.
+_REFINE_ROUNDS: Final = 3
 
 
 @dataclass(frozen=True)
@@ -144,6 +148,15 @@ def encode_layers(
                 lo = mid
             else:
                 hi = mid
+        if lo > 0 and hi < len(candidates):  # between two rungs: a few halvings of the step ratio, in log space
+            fine, coarse = candidates[hi], candidates[lo]
+            for _ in range(_REFINE_ROUNDS):
+                mid_step = float(np.sqrt(fine * coarse))  # type: ignore[operator]
+                tried.append((mid_step, size(mid_step), None))
+                if size(mid_step) <= bytes_budget:
+                    coarse = mid_step
+                else:
+                    fine = mid_step
         # Among the fitting candidates, the lowest kept-slice L1 error (a very coarse layer can be worse than none).
         weights = np.asarray(masks, dtype=np.float32)
         target = np.asarray(inputs, dtype=np.float32)
@@ -169,12 +182,22 @@ def encode_layers(
             errors[s] = (report.relae_mapped if metric == "mapped" else report.relae_linear).overall
         return errors[s]
 
-    meets = _bisect(lambda s: error(s) <= max_relae, tried, size, error)
-    if meets is False:
+    bracket = _bisect(lambda s: error(s) <= max_relae, tried, size, error)
+    if bracket is None:
         best = min(errors.values())
         raise RateTargetError(
             f"{base.name}: RelAE ({metric}) {max_relae} is not reachable; the finest step reaches {best:.4g}"
         )
+    failing, meeting = bracket
+    if failing is not None and meeting is not None:  # between two rungs: look for a coarser step that still meets X
+        for _ in range(_REFINE_ROUNDS - 1):
+            mid_step = float(np.sqrt(failing * meeting))
+            ok = error(mid_step) <= max_relae
+            tried.append((mid_step, size(mid_step), error(mid_step)))
+            if ok:
+                meeting = mid_step
+            else:
+                failing = mid_step
     candidates = [s for s in errors if errors[s] <= max_relae]
     chosen = min(candidates, key=size)
     return RateResult(record_of(chosen), size(chosen), tried)
@@ -185,10 +208,12 @@ def _bisect(
     tried: list[tuple[float | None, int, float | None]],
     size: Callable[[float | None], int],
     error: Callable[[float | None], float] | None,
-) -> float | None | bool:
-    """The coarsest candidate (base only, then the ladder from coarse to fine) for which ``ok`` holds.
+) -> tuple[float | None, float | None] | None:
+    """Bracket the coarsest candidate (base only, then the ladder from coarse to fine) for which ``ok`` holds.
 
-    Returns False when even the finest rung fails. ``ok`` is assumed to hold from some rung on.
+    Returns ``(last failing, first passing)`` — ``(None, None)`` when the base
+    passes — or None when even the finest rung fails. ``ok`` is assumed to
+    hold from some rung on.
     """
     candidates: list[float | None] = [None, *STEP_LADDER]
 
@@ -198,14 +223,14 @@ def _bisect(
         return result
 
     if check(0):
-        return None
+        return None, None
     lo, hi = 0, len(candidates) - 1  # ok(lo) false
     if not check(hi):
-        return False
+        return None
     while hi - lo > 1:
         mid = (lo + hi) // 2
         if check(mid):
             hi = mid
         else:
             lo = mid
-    return candidates[hi]
+    return candidates[lo], candidates[hi]
