@@ -133,6 +133,7 @@ def test_fuzz_mutations_of_a_layered_file(changes: list[tuple[int, int]]) -> Non
         pass
 
 
+@pytest.mark.slow
 def test_rate_control_meets_budgets_and_targets(analytic_tables) -> None:
     from brdfcodec.codec import BrdfEncoder, measure
 
@@ -182,3 +183,25 @@ def test_layered_decode_adds_the_layer_and_partial_decode_matches(analytic_table
     np.testing.assert_allclose(part, full[..., [4, 100]], rtol=1e-4, atol=1e-4)
     batched = next(decoder.tables([record], masked="zero"))
     np.testing.assert_allclose(batched, full, rtol=1e-5, atol=1e-5)
+
+
+@pytest.mark.slow
+def test_cli_rate_control_flags(red_plastic_file, tmp_path, capsys) -> None:
+    from brdfcodec.bvae_format import read_bvae
+    from brdfcodec.cli import main
+
+    out = tmp_path / "m.bvae"
+    assert main(["compress", str(red_plastic_file), "-o", str(out), "--bytes", "3000", "--float16",
+                 "--effort", "0"]) == 0
+    record = read_bvae(out).records[0]
+    assert isinstance(record, LayeredRecord) and record.meta["rate"]["payload_bytes"] <= 3000
+    assert record.meta["effort"] == 0
+    assert main(["compress", str(red_plastic_file), "-o", str(out), "--force", "--max-relae", "0.03",
+                 "--metric", "linear", "--effort", "0"]) == 0
+    assert read_bvae(out).records[0].meta["relae"]["linear"] <= 0.03
+    capsys.readouterr()
+    bad = tmp_path / "bad.bvae"
+    assert main(["compress", str(red_plastic_file), "-o", str(bad), "--bytes", "10"]) == 1
+    assert "below the base record" in capsys.readouterr().err and not bad.exists()
+    assert main(["compress", str(red_plastic_file), "-o", str(bad), "--bytes", "100", "--max-relae", "0.1"]) == 2
+    assert main(["compress", str(red_plastic_file), "-o", str(bad), "--effort", "7"]) == 2
