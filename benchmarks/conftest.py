@@ -34,6 +34,8 @@ TARGETS = {
     "mitsuba-vs-scalar": 1 / 50,  # the same render in llvm_ad_rgb vs the scalar_rgb plug-in (scaled from 32², 4 spp)
     "rgl-tabulate": 4.0,  # an RGL .bsdf through Mitsuba's measured plugin vs an NBRDF proxy fit, same MERL grid
     "studio-slider-to-paint": 1.5,  # browser: slider input → painted preview vs a server-side render before transfer
+    "decode-layered": 1.5,  # a layered record (base + 16 KB detail layer) vs its base alone (issue 14)
+    "encode-effort": 4.0,  # read + encode at the default effort (1: refinement) vs effort 0 (issue 14)
 }
 
 #: Largest acceptable candidate median, in seconds, on 2 CPU cores (issue 4 targets).
@@ -43,6 +45,7 @@ ABSOLUTE_TARGETS = {
     "render-sphere-256": 0.5,  # "a fraction of a second" (issue 5)
     "rgl-tabulate": 10.0,  # one RGL file on the MERL grid (issue 12)
     "studio-slider-to-paint": 0.100,  # median slider input → painted 256² preview (issue 10)
+    "encode-effort": 2.0,  # `bvae compress` of one MERL file at the default effort, without process start (issue 14)
 }
 
 

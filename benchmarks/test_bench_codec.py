@@ -60,8 +60,8 @@ def test_encode_baseline_read(benchmark, merl_file: Path) -> None:
 
 
 def test_encode_from_merl_file(benchmark, merl_file: Path) -> None:
-    """Read, map, select slices, run the encoder."""
-    encoder = BrdfEncoder()
+    """Read, map, select slices, run the encoder (effort 0: the network alone)."""
+    encoder = BrdfEncoder(effort=0)
     benchmark.group = "encode"
     benchmark.extra_info["role"] = "candidate"
     record = benchmark(lambda: encoder.encode(read_merl(merl_file)))
@@ -115,3 +115,46 @@ def test_query_decoded_material(benchmark, decoder: BrdfDecoder, record: LatentR
     benchmark.extra_info["role"] = "candidate"
     values = benchmark(material.eval, *directions)
     assert values.shape == (_QUERIES, 3) and np.isfinite(values).all()
+
+
+# --- issue 14: layered decoding and refinement effort
+
+
+@pytest.fixture(scope="module")
+def layered_record(merl_file: Path):
+    from brdfcodec.layers.record import LayeredRecord
+
+    record = BrdfEncoder(effort=0, bytes=16384).encode(read_merl(merl_file), name="layered")
+    assert isinstance(record, LayeredRecord)
+    return record
+
+
+def test_layered_baseline_base_only(benchmark, decoder: BrdfDecoder, layered_record) -> None:
+    benchmark.group = "decode-layered"
+    benchmark.extra_info["role"] = "baseline"
+    benchmark(decoder.table, layered_record.base())
+
+
+def test_layered_decode(benchmark, decoder: BrdfDecoder, layered_record) -> None:
+    """Base decode plus the detail layer (zstandard, inverse DCT), then interpolation and unmapping."""
+    benchmark.group = "decode-layered"
+    benchmark.extra_info["role"] = "candidate"
+    table = benchmark(decoder.table, layered_record)
+    assert table.shape == (3, 90, 90, 180)
+
+
+def test_encode_effort_baseline_effort0(benchmark, merl_file: Path) -> None:
+    encoder = BrdfEncoder(effort=0)
+    benchmark.group = "encode-effort"
+    benchmark.extra_info["role"] = "baseline"
+    benchmark.pedantic(lambda: encoder.encode(read_merl(merl_file)), rounds=3, iterations=1)
+
+
+def test_encode_default_effort(benchmark, merl_file: Path) -> None:
+    """Read and encode at the default effort (what `bvae compress` does per file, after start-up)."""
+    encoder = BrdfEncoder()
+    encoder.decoder  # loaded once, as by the CLI before its first file  # noqa: B018
+    benchmark.group = "encode-effort"
+    benchmark.extra_info["role"] = "candidate"
+    record = benchmark.pedantic(lambda: encoder.encode(read_merl(merl_file)), rounds=3, iterations=1)
+    assert record.meta["effort"] == 1

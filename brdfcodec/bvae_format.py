@@ -63,7 +63,8 @@ MAGIC = b"\x89BVAE\r\n\x1a"
 #: Major version written and read; a file of another major version is refused.
 FORMAT_MAJOR = 1
 #: Minor version written; readers accept any minor version of their major version.
-FORMAT_MINOR = 0
+#: 1.1 added the "layered" record kind (issue 14); a 1.0 reader refuses it by its kind.
+FORMAT_MINOR = 1
 #: Largest stored header, in bytes (compressed size when compressed).
 MAX_HEADER_BYTES = 1 << 20
 #: Largest decompressed header, in bytes.
@@ -86,7 +87,7 @@ _ZSTD_LEVEL = 19
 LatentDtype = Literal["float32", "float16"]
 _DTYPES: dict[str, np.dtype] = {"float32": np.dtype("<f4"), "float16": np.dtype("<f2")}
 _SHA256 = re.compile(r"^[0-9a-f]{64}$")
-_RECORD_KINDS = ("latent", "graft")
+_RECORD_KINDS = ("latent", "graft", "layered")  # "layered": brdfcodec.layers.record
 
 
 @dataclass(frozen=True)
@@ -240,6 +241,7 @@ class RecordEntry:
     crc32: int
     meta: Mapping[str, Any]
     graft_dims: tuple[int, ...] = ()
+    layers: Mapping[str, Any] | None = None  # kind "layered" only (brdfcodec.layers.record)
 
 
 @dataclass(frozen=True)
@@ -363,6 +365,12 @@ def encode_bvae(
         if latent_dtype == "float16" and np.abs(values).max() > np.finfo(np.float16).max:
             raise ValueError(f"{record.name}: latent values exceed the float16 range; store them as float32")
         payload = values.astype(dtype).tobytes()
+        # --- layered records (issue 14, brdfcodec.layers): layer bytes follow mu and sigma
+        if record.kind == "layered":
+            from brdfcodec.layers.record import layers_entry
+
+            payload += record.layer_bytes()  # type: ignore[union-attr]
+        # ---
         entry: dict[str, Any] = {
             "name": record.name,
             "kind": record.kind,
@@ -372,6 +380,8 @@ def encode_bvae(
         }
         if isinstance(record, GraftRecord):
             entry["graft_dims"] = list(record.graft_dims)
+        if record.kind == "layered":
+            entry["layers"] = layers_entry(record)  # type: ignore[arg-type]
         if record.meta:
             entry["meta"] = dict(record.meta)
         payloads.append(payload)
@@ -557,11 +567,22 @@ def _parse_header(path: str, header: dict[str, Any], preamble_fields: tuple[int,
         if start != offset:
             raise _fail(path, f"{where} ({entry_name}) starts at {start}, expected {offset} (records are contiguous)")
         expected = _payload_length(kind, latent_dim, len(graft_dims), itemsize)
+        layers = None
+        if kind == "layered":  # --- layered records (issue 14): validated by brdfcodec.layers.record
+            from brdfcodec.layers.record import UnsupportedLayerError, layers_length
+
+            layers = raw.get("layers")
+            try:
+                expected += layers_length(layers, f"{where} ({entry_name})")
+            except UnsupportedLayerError as error:
+                raise UnsupportedVersionError(path, str(error)) from None
+            except ValueError as error:
+                raise _fail(path, str(error)) from None
         if length != expected:
             raise _fail(path, f"{where} ({entry_name}) has length {length}, expected {expected} for kind {kind!r}")
         if not 0 <= crc <= 0xFFFFFFFF:
             raise _fail(path, f"{where} ({entry_name}) has an invalid crc32")
-        entries.append(RecordEntry(entry_name, kind, start, length, crc, meta, graft_dims))
+        entries.append(RecordEntry(entry_name, kind, start, length, crc, meta, graft_dims, layers))
         offset += length
     records_offset = PREAMBLE_SIZE + header_length
     expected_size = records_offset + offset
@@ -607,9 +628,16 @@ def _decode_record(path: str, header: BvaeHeader, entry: RecordEntry, payload: b
         raise BvaeChecksumError(
             path, f"record {entry.name!r}: CRC-32 mismatch, the file is corrupt (re-create or re-download it)"
         )
-    values = np.frombuffer(payload, dtype=_DTYPES[header.latent_dtype]).astype(np.float32)
     d = header.latent_dim
+    n_latent = _payload_length(entry.kind, d, len(entry.graft_dims), _DTYPES[header.latent_dtype].itemsize)
+    values = np.frombuffer(payload[:n_latent], dtype=_DTYPES[header.latent_dtype]).astype(np.float32)
     try:
+        if entry.kind == "layered":  # --- layered records (issue 14)
+            from brdfcodec.layers.record import layered_from_payload
+
+            assert entry.layers is not None
+            tail = payload[n_latent:]
+            return layered_from_payload(entry.name, values[:d], values[d:], entry.layers, tail, entry.meta)
         if entry.kind == "graft":
             return GraftRecord(entry.name, values[:d], values[d : 2 * d], entry.graft_dims, values[2 * d :], entry.meta)
         return LatentRecord(entry.name, values[:d], values[d:], entry.meta)

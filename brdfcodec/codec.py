@@ -52,7 +52,7 @@ from brdfcodec.bvae_format import (
 from brdfcodec.conventions import N_KEPT_SLICES, NETWORK_INPUT_SHAPE, UNMEASURED_VALUE
 from brdfcodec.errors import DecoderMismatchError
 from brdfcodec.inputs import read_measured
-from brdfcodec.mask import horizon_mask
+from brdfcodec.mask import horizon_mask, kept_slice_horizon_mask
 from brdfcodec.merl import MerlBRDF
 from brdfcodec.metrics import error_report
 from brdfcodec.models.registry import default_model_folder, find_model
@@ -66,6 +66,7 @@ from brdfcodec.representation import (
     network_input_from_table,
     reflectance_from_mapped,
     table_from_mapped,
+    to_network_layout,
     validate_phi_d_bins,
 )
 
@@ -138,6 +139,16 @@ class _EvalMode:
 
     def __exit__(self, *exc: object) -> None:
         self.module.train(self.was_training)
+
+
+def _with_layers(record: Record, mapped: np.ndarray) -> np.ndarray:
+    """Issue 14 hook: a layered record's decode is the base decode plus its detail layer (before interpolation)."""
+    if getattr(record, "detail", None) is None:
+        return mapped
+    from brdfcodec.layers.detail import decode_detail
+
+    mapped += decode_detail(record.detail).reshape(mapped.shape)  # type: ignore[union-attr]
+    return clamp_mapped(mapped, out=mapped)  # base + detail, then the one clamp (spec §4.3, §6)
 
 
 class BrdfDecoder:
@@ -297,6 +308,11 @@ class BrdfDecoder:
         else:
             channels = network_channels_for_slots(slots)
             out[channels] = self.decode_channels(record.mu, channels)
+            if getattr(record, "detail", None) is not None:  # --- issue 14: detail layer, only the slots needed
+                from brdfcodec.layers.detail import decode_detail
+
+                out[channels] += decode_detail(record.detail, slots).reshape(len(channels), *out.shape[1:])
+                clamp_mapped(out, out=out)  # base + detail, then the one clamp (spec §4.3, §6)
         return out
 
     def mapped_record(self, record: Record) -> npt.NDArray[np.float32]:
@@ -306,7 +322,7 @@ class BrdfDecoder:
             out = self.decode_mapped(record.mu)
             out[GREEN_BLOCK] = self.decode_mapped(record.second_code())[RED_BLOCK]
             return out
-        return self.decode_mapped(record.mu)
+        return _with_layers(record, self.decode_mapped(record.mu))
 
     def decode(
         self,
@@ -351,7 +367,10 @@ class BrdfDecoder:
             codes = [r.mu for r in chunk if isinstance(r, LatentRecord)]
             batch = iter(self.decode_mapped(np.stack(codes), batch_size=batch_size) if codes else ())
             for record in chunk:  # grafts need two codes each: decoded on their own
-                mapped = next(batch) if isinstance(record, LatentRecord) else self.mapped_record(record)
+                if isinstance(record, LatentRecord):
+                    mapped = _with_layers(record, next(batch))
+                else:
+                    mapped = self.mapped_record(record)
                 yield _apply_mask(table_from_mapped(mapped), None, masked)
 
     #: Former name of :meth:`decode_many`.
@@ -373,11 +392,24 @@ class MaterialInput:
         :func:`~brdfcodec.representation.network_input_from_table` of the table.
     source : MerlBRDF or None
         The table, for measuring the error and the source hash; None if not at hand.
+    mask : ndarray of bool, shape (63, 90, 90), or None
+        Valid input entries (refinement and rate control measure over them);
+        by default the source's, or every entry above the horizon.
     """
 
     name: str
     inputs: np.ndarray
     source: MerlBRDF | None = None
+    mask: np.ndarray | None = None
+
+    def input_mask(self) -> np.ndarray:
+        """Valid entries of :attr:`inputs`, shape (63, 90, 90)."""
+        if self.mask is not None:
+            return self.mask
+        if self.source is not None:
+            return network_input_from_table(self.source.values, self.source.mask)[1]
+        above = to_network_layout(np.broadcast_to(kept_slice_horizon_mask(), (3, *kept_slice_horizon_mask().shape)))
+        return np.broadcast_to(above, self.inputs.shape)
 
 
 class BrdfEncoder:
@@ -388,11 +420,41 @@ class BrdfEncoder:
     model : str, os.PathLike, ModelManifest or None
         As for :class:`BrdfDecoder`.
     device : str or torch.device, default "cpu"
+    effort : int, default 1
+        Latent refinement at encode time, 0 to 3 (0: the encoder's μ; see
+        :mod:`brdfcodec.layers.refine`). 1 keeps one MERL file under about 2 s on 2 cores.
+    bytes : int, optional
+        Rate control: the largest record payload per material (base + detail layer).
+    max_relae : float, optional
+        Rate control: the smallest record whose decoded table has at most this RelAE.
+    metric : {"mapped", "linear"}, default "mapped"
+        RelAE used by ``max_relae``.
+    detail_step : float, optional
+        A fixed detail-layer quantisation step (mapped units) instead of a target.
+    latent_dtype : {"float32", "float16"}, default "float32"
+        How the file will store latents (counts toward ``bytes``).
     """
 
     manifest: ModelManifest | None
 
-    def __init__(self, model: ModelSpec = None, *, device: str | torch.device = "cpu") -> None:
+    def __init__(
+        self,
+        model: ModelSpec = None,
+        *,
+        device: str | torch.device = "cpu",
+        effort: int = 1,
+        bytes: int | None = None,  # noqa: A002 - the CLI's --bytes
+        max_relae: float | None = None,
+        metric: Literal["mapped", "linear"] = "mapped",
+        detail_step: float | None = None,
+        latent_dtype: LatentDtype = "float32",
+    ) -> None:
+        from brdfcodec.layers.encoding import EncodeOptions
+
+        self.options = EncodeOptions(
+            effort=effort, bytes_budget=bytes, max_relae=max_relae, metric=metric, detail_step=detail_step,
+            latent_itemsize=2 if latent_dtype == "float16" else 4,
+        )
         manifest = resolve_model(model)
         network, _, loaded = load_model(manifest.folder, parts=("encoder",), device=str(device))
         if network is None:  # load_model returns the parts asked for
@@ -411,9 +473,34 @@ class BrdfEncoder:
 
         The network is put in evaluation mode while it runs and given back in the mode it had.
         """
+        from brdfcodec.layers.encoding import EncodeOptions
+
         encoder = cls.__new__(cls)
+        encoder.options = EncodeOptions(effort=0)  # the network's own posterior: what training measures
         encoder._setup(network, device, None)
         return encoder
+
+    @functools.cached_property
+    def decoder(self) -> BrdfDecoder:
+        """The model's decoder (loaded on first use: refinement and layers need it)."""
+        if self.manifest is None:
+            raise ValueError("an encoder wrapped with from_network has no model folder to load a decoder from")
+        return BrdfDecoder(self.manifest, device=self.device)
+
+    def encode_arrays(
+        self, names: Sequence[str], inputs: np.ndarray, masks: np.ndarray, sources: Sequence[MerlBRDF | None]
+    ) -> list[LatentRecord]:
+        """Records of materials given as network inputs ``(B, 63, 90, 90)`` and masks, with effort and rate control.
+
+        ``sources`` (tables) are needed for ``max_relae``; otherwise they only add their SHA-256 to ``meta``.
+        """
+        mu, sigma = self.posterior_from_inputs(inputs, batch_size=max(len(inputs), 1))
+        records = self.make_records(names, mu, sigma, sources)
+        if self.options.effort == 0 and not self.options.layered:
+            return records
+        from brdfcodec.layers.encoding import layer_records
+
+        return layer_records(records, self.decoder, inputs, masks, sources, self.options)
 
     def posterior_from_inputs(
         self, inputs: npt.ArrayLike, *, batch_size: int = 8, log_variance: bool = False
@@ -472,10 +559,17 @@ class BrdfEncoder:
     def encode_many(
         self, brdfs: Sequence[MerlBRDF], *, names: Sequence[str] | None = None, batch_size: int = 8
     ) -> list[LatentRecord]:
-        """Records of many materials, encoded in batches."""
-        mu, sigma = self.posterior(brdfs, batch_size=batch_size)
+        """Records of many materials, encoded in batches (with the encoder's effort and rate options)."""
         labels = list(names) if names is not None else [b.name or f"material-{i}" for i, b in enumerate(brdfs)]
-        return self.make_records(labels, mu, sigma, brdfs)
+        records: list[LatentRecord] = []
+        for start in range(0, len(brdfs), batch_size):
+            chunk = brdfs[start : start + batch_size]
+            arrays = [network_input_from_table(b.values, b.mask) for b in chunk]
+            records += self.encode_arrays(
+                labels[start : start + batch_size], np.stack([a[0] for a in arrays]), np.stack([a[1] for a in arrays]),
+                list(chunk),
+            )
+        return records
 
     def make_records(
         self, names: Sequence[str], mu: np.ndarray, sigma: np.ndarray, sources: Sequence[MerlBRDF | None]
@@ -503,6 +597,8 @@ def measure(record: Record, decoder: BrdfDecoder, source: MerlBRDF) -> LatentRec
     }
     if isinstance(record, GraftRecord):
         return GraftRecord(record.name, record.mu, record.sigma, record.graft_dims, record.graft_values, meta)
+    if getattr(record, "detail", None) is not None:  # issue 14: layered record
+        return type(record)(record.name, record.mu, record.sigma, meta, detail=record.detail)  # type: ignore[call-arg]
     return LatentRecord(record.name, record.mu, record.sigma, meta)
 
 
@@ -685,10 +781,11 @@ EncodeSource = MerlBRDF | MaterialInput | str | os.PathLike[str]
 
 def _as_input(source: EncodeSource, index: int, name: str | None) -> MaterialInput:
     if isinstance(source, MaterialInput):
-        return source if name is None else MaterialInput(name, source.inputs, source.source)
+        return source if name is None else MaterialInput(name, source.inputs, source.source, source.mask)
     brdf = source if isinstance(source, MerlBRDF) else read_measured(source)
     label = name or brdf.name or f"material-{index}"
-    return MaterialInput(label, network_input_from_table(brdf.values, brdf.mask)[0], brdf)
+    inputs, mask = network_input_from_table(brdf.values, brdf.mask)
+    return MaterialInput(label, inputs, brdf, mask)
 
 
 def encode_records(
@@ -729,15 +826,19 @@ def encode_records(
         raise ValueError(f"batch_size must be at least 1, got {batch_size}")
     encoder = encoder if encoder is not None else BrdfEncoder()
     if measure_error and decoder is None:
-        decoder = BrdfDecoder(encoder.manifest)
+        decoder = encoder.decoder
     labels = iter(names) if names is not None else itertools.repeat(None)
     records: list[Record] = []
     numbered = enumerate(sources)
     while chunk := list(itertools.islice(numbered, batch_size)):
         items = [_as_input(source, index, next(labels)) for index, source in chunk]
-        mu, sigma = encoder.posterior_from_inputs(np.stack([item.inputs for item in items]), batch_size=batch_size)
         sources_of = [item.source for item in items]
-        batch: list[Record] = list(encoder.make_records([item.name for item in items], mu, sigma, sources_of))
+        batch: list[Record] = list(encoder.encode_arrays(
+            [item.name for item in items],
+            np.stack([item.inputs for item in items]),
+            np.stack([item.input_mask() for item in items]),
+            sources_of,
+        ))
         if measure_error and decoder is not None:
             batch = [r if s is None else measure(r, decoder, s) for r, s in zip(batch, sources_of, strict=True)]
         records += batch
@@ -754,6 +855,10 @@ def encode(
     latent_dtype: LatentDtype = "float32",
     measure_error: bool = True,
     batch_size: int = 8,
+    effort: int = 1,
+    bytes: int | None = None,  # noqa: A002 - the CLI's --bytes
+    max_relae: float | None = None,
+    metric: Literal["mapped", "linear"] = "mapped",
 ) -> bytes:
     """Encode MERL tables into the bytes of one ``.bvae`` file (one material, or a library of many).
 
@@ -770,6 +875,8 @@ def encode(
     measure_error : bool, default True
         Store each record's RelAE against its source in ``meta["relae"]``.
     batch_size : int, default 8
+    effort, bytes, max_relae, metric
+        Encode-time refinement and rate control, as for :class:`BrdfEncoder`.
 
     Returns
     -------
@@ -782,12 +889,14 @@ def encode(
     >>> from brdfcodec.analytic import ANALYTIC_PRESETS
     >>> data = bc.encode([ANALYTIC_PRESETS["gold"].to_merl()], measure_error=False)
     >>> data[1:5], len(data)   # one material: a header naming the decoder, then 64 bytes of latents
-    (b'BVAE', 421)
+    (b'BVAE', 426)
     >>> bc.decode(data)["gold"].table(phi_d_bins=[0]).shape
     (3, 90, 90, 1)
     """
     items = [sources] if isinstance(sources, MerlBRDF | MaterialInput | str | os.PathLike) else sources
-    encoder = BrdfEncoder(model)
+    encoder = BrdfEncoder(
+        model, effort=effort, bytes=bytes, max_relae=max_relae, metric=metric, latent_dtype=latent_dtype
+    )
     records = encode_records(items, names=names, encoder=encoder, measure_error=measure_error, batch_size=batch_size)
     if encoder.reference is None:  # loaded from a model folder, so it has one
         raise RuntimeError("the encoder has no decoder reference")
@@ -825,8 +934,12 @@ def compress(
     latent_dtype: LatentDtype = "float32",
     measure_error: bool = True,
     overwrite: bool = False,
+    effort: int = 1,
+    bytes: int | None = None,  # noqa: A002 - the CLI's --bytes
+    max_relae: float | None = None,
+    metric: Literal["mapped", "linear"] = "mapped",
 ) -> int:
-    """Write :func:`encode` of the sources to a ``.bvae`` file, atomically.
+    """Write :func:`encode` of the sources to a ``.bvae`` file, atomically (options as for :func:`encode`).
 
     Returns
     -------
@@ -834,7 +947,10 @@ def compress(
         Bytes written.
     """
     check_output_path(output, overwrite=overwrite)  # before the work, not after
-    data = encode(sources, names=names, model=model, latent_dtype=latent_dtype, measure_error=measure_error)
+    data = encode(
+        sources, names=names, model=model, latent_dtype=latent_dtype, measure_error=measure_error,
+        effort=effort, bytes=bytes, max_relae=max_relae, metric=metric,
+    )
     with atomic_output(output, overwrite=overwrite) as tmp:
         Path(tmp).write_bytes(data)
     return len(data)

@@ -89,7 +89,10 @@ def traverse(
 def _check_compatible(a: Record, b: Record) -> None:
     if a.latent_dim != b.latent_dim:
         raise ValueError(f"{a.name} and {b.name} have different latent dimensions")
-    if type(a) is not type(b) or (isinstance(a, GraftRecord) and a.graft_dims != b.graft_dims):  # type: ignore[union-attr]
+    # A layered record (issue 14) is a latent record here: edits act on its base and drop its layers.
+    if isinstance(a, GraftRecord) is not isinstance(b, GraftRecord) or (
+        isinstance(a, GraftRecord) and a.graft_dims != b.graft_dims  # type: ignore[union-attr]
+    ):
         raise ValueError(
             f"{a.name} ({a.kind}) and {b.name} ({b.kind}) are not the same kind of material; both must be plain "
             "latent records, or grafts over the same dimensions"

@@ -24,6 +24,7 @@ __all__ = [
     "ModelNotFoundError",
     "NonFiniteValueError",
     "OptionalDependencyError",
+    "RateTargetError",
     "SourceFormatError",
     "UnsupportedVersionError",
 ]
@@ -94,3 +95,5 @@ class ModelChecksumError(BrdfcodecError):
     """A weight file's SHA-256 differs from its manifest: the file is corrupt or not the named model."""
 class OptionalDependencyError(BrdfcodecError, ImportError):
     """An optional extra this operation needs is not installed; the message names the pip command."""
+class RateTargetError(BrdfcodecError, ValueError):
+    """A size budget or error target that no layered record of a material can meet (issue 14 rate control)."""

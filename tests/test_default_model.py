@@ -56,7 +56,7 @@ def test_every_latent_dimension_changes_the_material(default_model) -> None:  # 
 @pytest.mark.shared
 def test_card_numbers_are_reproduced(nbrdf_zip: Path) -> None:
     """Re-measure some validation materials (and green-acrylic) from the proxy archive; compare with the card."""
-    encoder, decoder = BrdfEncoder(), BrdfDecoder()
+    encoder, decoder = BrdfEncoder(effort=0), BrdfDecoder()  # the card measures the network's own posterior mean
     card = {row["name"]: row for row in encoder.manifest.info["errors"]}
     names = encoder.manifest.info["data"]["validation"][:4] + ["green-acrylic"]
     for source in nbrdf_zip_sources(nbrdf_zip, names):

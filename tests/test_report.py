@@ -49,9 +49,33 @@ def test_report_records_and_files(small_dataset: Path, tmp_path: Path) -> None:
         assert np.isfinite(stats["delta_e_itp"]["mean"]) and np.isfinite(stats["log_domain_mae"]["mean"])
     written = write_report(tmp_path / "out", list(records.values()), rows)
     assert {p.name for p in written} == {"report.jsonl", "materials.jsonl", "report.md", "relae_vs_decode_time.png",
-                                         "relae_vs_bytes.png"}
+                                         "relae_vs_bytes.png", "rd_relae_mapped.png", "rd_relae_linear.png",
+                                         "rd_delta_e_itp.png"}
     lines = (tmp_path / "out" / "report.jsonl").read_text().splitlines()
     assert [json.loads(line)["name"] for line in lines] == list(records)
     table = (tmp_path / "out" / "report.md").read_text()
     assert "analytic test materials" in table and table.count("\n| ") >= 6
     assert (tmp_path / "out" / "relae_vs_bytes.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_rate_distortion_points_are_held_out_only_and_meet_their_budgets(small_dataset: Path, tmp_path: Path) -> None:
+    from brdfcodec.baselines.pca import fit_pca
+    from brdfcodec.dataset import BrdfDataset
+    from brdfcodec.layers.points import DctSlices, LayeredBvae, PcaPacked, ZstdSlices
+    from brdfcodec.layers.rd_report import rd_markdown
+
+    with BrdfDataset(small_dataset) as dataset:
+        train_inputs = dataset.inputs(dataset.indices("train"))
+        held = len(dataset.indices("validation"))
+    basis = fit_pca(train_inputs, 2)
+    points = [LayeredBvae(bytes_budget=2048), PcaPacked(basis, 2, "int8"), PcaPacked(basis, 2, "float16"),
+              ZstdSlices(0.05), DctSlices(0.5)]
+    points, rows, data = evaluate_dataset(small_dataset, points=points, progress=False)
+    assert len(rows) == len(points) * held and all(r["split"] == "validation" for r in rows)
+    records = {r["name"]: r for r in summarise(points, rows, data)}
+    assert records["pca-2-int8"]["bytes_per_material"] == 4 and records["pca-2-float16"]["bytes_per_material"] == 4
+    layered = records["bvae-layered@2KB"]
+    assert 32 < layered["bytes_per_material"] <= 2048 and layered["family"] == "bvae-layered"
+    assert "train" not in layered["errors"]
+    text = rd_markdown(list(records.values()))
+    assert "| 1 KB |" in text and "bvae-layered@2KB" in text

@@ -49,6 +49,16 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     parser.add_argument("--no-measure", action="store_true", help="skip decoding to measure RelAE")
     parser.add_argument("--batch-size", type=int, default=8, help="materials encoded at once (default 8)")
     parser.add_argument("--force", action="store_true", help="replace an existing output file")
+    # --- issue 14: refinement and rate control (brdfcodec.layers)
+    parser.add_argument("--effort", type=int, choices=(0, 1, 2, 3), default=1,
+                        help="latent refinement at encode time: 0 (encoder only) to 3 (slowest); default 1")
+    target = parser.add_mutually_exclusive_group()
+    target.add_argument("--bytes", type=int, metavar="N",
+                        help="largest quality within N bytes of record payload per material (adds a detail layer)")
+    target.add_argument("--max-relae", type=float, metavar="X",
+                        help="smallest record whose measured RelAE on its material is at most X (adds a detail layer)")
+    parser.add_argument("--metric", choices=("mapped", "linear"), default="mapped",
+                        help="RelAE used by --max-relae (default mapped)")
     parser.set_defaults(handler=run)
 
 
@@ -59,7 +69,8 @@ def _measured_item(path: Path) -> _Item:
         from brdfcodec.codec import MaterialInput
 
         brdf = read_measured(path, name=name)
-        return MaterialInput(name, network_input_from_table(brdf.values, brdf.mask)[0], brdf)
+        inputs, mask = network_input_from_table(brdf.values, brdf.mask)
+        return MaterialInput(name, inputs, brdf, mask)
 
     return _Item(name, str(path), load)
 
@@ -79,7 +90,7 @@ def _dataset_items(path: Path, split: str | None) -> Iterator[_Item]:
 
             with BrdfDataset(path) as dataset:
                 table = dataset.table(index) if has_tables else None
-                return MaterialInput(name, dataset.inputs([index])[0], table)
+                return MaterialInput(name, dataset.inputs([index])[0], table, dataset.input_masks([index])[0])
 
         yield _Item(name, f"{path}[{name}]", load)
 
@@ -118,7 +129,13 @@ def run(args: argparse.Namespace) -> int:
     if args.output.suffix != ".bvae":
         raise ValueError(f"{args.output}: the output must end in .bvae")
     items = collect_items(args.inputs, args.split)
-    encoder = BrdfEncoder(args.model)
+    dtype = "float16" if args.float16 else "float32"
+    if args.bytes is not None and args.bytes < 1:
+        raise ValueError("--bytes must be a positive number of bytes")
+    encoder = BrdfEncoder(
+        args.model, effort=args.effort, bytes=args.bytes, max_relae=args.max_relae, metric=args.metric,
+        latent_dtype=dtype,
+    )
     with tqdm(total=len(items), desc="compress", unit="material", disable=len(items) < 2 or None) as bar:
         records: list[Record] = encode_records(
             (item.load() for item in items),
@@ -135,7 +152,6 @@ def run(args: argparse.Namespace) -> int:
         else:
             why = "--no-measure" if args.no_measure else "no source table"
             lines.append(f"  {record.name:<32} (RelAE not measured: {why})")
-    dtype = "float16" if args.float16 else "float32"
     if encoder.reference is None:  # loaded from a model folder, so it has one
         raise RuntimeError("the encoder has no decoder reference")
     size = write_bvae(args.output, records, encoder.reference, latent_dtype=dtype, overwrite=args.force)

@@ -120,6 +120,8 @@ def evaluate_dataset(
             reference_image = _render(material.values, material.mask)
             mapped_reference = map_values(material.values)  # once per material, shared by every point
             for point in points:
+                if material.split == "train" and getattr(point, "held_out_only", False):  # issue 14 RD points
+                    continue
                 rows.append({"point": point.name, **_measure(point, material, mapped_reference, reference_image)})
     return list(points), rows, data
 
@@ -158,6 +160,8 @@ def summarise(
             }
         records.append({
             "name": point.name,
+            "family": getattr(point, "family", point.name),  # issue 14: one rate–distortion curve per family
+            "held_out_only": getattr(point, "held_out_only", False),
             "description": point.description,
             "lossless": point.lossless,
             "data": data,

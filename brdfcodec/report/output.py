@@ -99,14 +99,18 @@ def write_report(folder: str | os.PathLike[str], records: Sequence[dict[str, Any
         with atomic_output(out / name, overwrite=True) as tmp:
             tmp.write_text("".join(json.dumps(item, sort_keys=True) + "\n" for item in items), encoding="utf-8")
         written.append(out / name)
+    from brdfcodec.layers.rd_report import rd_markdown, write_rd_plots  # issue 14: rate–distortion section
+
     with atomic_output(out / "report.md", overwrite=True) as tmp:
-        tmp.write_text(markdown_table(records), encoding="utf-8")
+        tmp.write_text(markdown_table(records) + rd_markdown(records), encoding="utf-8")
     written.append(out / "report.md")
+    written += write_rd_plots(records, out)
+    overview = [r for r in records if not r.get("held_out_only")] or list(records)
     data = records[0]["data"]["description"]
     for key, label, file in (
         ("decode_ms_median", "decode time per material (ms, median)", "relae_vs_decode_time.png"),
         ("bytes_per_material", "bytes per material", "relae_vs_bytes.png"),
     ):
-        _plot(records, key, label, out / file, f"{data}: RelAE against {label.split(' (')[0]}")
+        _plot(overview, key, label, out / file, f"{data}: RelAE against {label.split(' (')[0]}")
         written.append(out / file)
     return written

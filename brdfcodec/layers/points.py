@@ -1,0 +1,199 @@
+"""Rate–distortion operating points of the report (issue 14): layered brdfcodec and fairly packed baselines.
+
+Every point here is evaluated on the held-out materials only
+(``held_out_only``): the question it answers is "at N bytes per material,
+which codec is better on materials it has not seen". Points of one family
+(``family``) form one curve of the rate–distortion plots.
+
+- ``bvae-layered@N``: the shipped β-VAE, float16 latents, effort 1, a detail
+  layer chosen by rate control within N bytes of record payload;
+- ``bvae-max-relae-X``: the same with ``--max-relae X`` (the smallest tried
+  record meeting X on each material);
+- ``pca-k-float16`` / ``pca-k-int8``: PCA of the mapped kept slices (basis of
+  the training split), coefficients as float16, or as int8 with one float16
+  scale per material (k + 2 bytes);
+- ``zstd-slices@Δ``: the mapped kept slices quantised at step Δ, int16,
+  zstandard level 19 (the plain "quantise and zip" codec);
+- ``dct-slices@Δ``: the detail layer's own coder (colour decorrelation, 3-D
+  DCT, step Δ, zstandard) on the kept slices with no β-VAE base: the
+  ablation that says what the base is worth.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from brdfcodec.conventions import MAPPED_MAX
+from brdfcodec.merl import MerlBRDF
+from brdfcodec.report.points import Material, OperatingPoint
+from brdfcodec.transforms import table_from_network_output
+
+__all__ = ["rate_distortion_points"]
+
+#: Payload budgets of the layered points, bytes per material.
+LAYERED_BUDGETS = (32, 64, 128, 256, 1024, 4096, 16384, 65536, 262144)
+
+
+def _size_label(n: int) -> str:
+    return f"{n // 1024}KB" if n >= 1024 and n % 1024 == 0 else f"{n}B"
+
+
+class LayeredBvae(OperatingPoint):
+    """The shipped β-VAE with refinement and a rate-controlled detail layer (float16 latents)."""
+
+    held_out_only = True
+    family = "bvae-layered"
+
+    def __init__(self, *, bytes_budget: int | None = None, max_relae: float | None = None, model: Any = None) -> None:
+        from brdfcodec.codec import BrdfEncoder
+
+        self.encoder = BrdfEncoder(model, effort=1, bytes=bytes_budget, max_relae=max_relae, latent_dtype="float16")
+        self.decoder = self.encoder.decoder
+        if bytes_budget is not None:
+            self.name = f"bvae-layered@{_size_label(bytes_budget)}"
+            self.description = f"β-VAE (effort 1, float16) + detail layer, at most {bytes_budget} B of payload"
+        else:
+            self.family = f"bvae-max-relae-{max_relae:g}"
+            self.name = self.family
+            self.description = (
+                f"β-VAE (effort 1, float16) + detail layer, smallest tried record with RelAE ≤ {max_relae}"
+            )
+
+    def shared_bytes(self) -> int:
+        return int((self.decoder.manifest.folder / "decoder.safetensors").stat().st_size)
+
+    def encode(self, material: Material) -> bytes:
+        from brdfcodec.bvae_format import encode_bvae
+
+        source = MerlBRDF(np.where(material.mask, material.values, -1.0), name=material.name)
+        record = self.encoder.encode_arrays(
+            [material.name], material.inputs[None], _input_mask(material)[None], [source]
+        )[0]
+        return encode_bvae([record], self.decoder.reference, latent_dtype="float16")
+
+    def payload_bytes(self, payload: bytes) -> int:
+        from brdfcodec.bvae_format import parse_bvae
+
+        return parse_bvae(payload).header.entries[0].length
+
+    def decode(self, payload: bytes) -> np.ndarray:
+        from brdfcodec.bvae_format import parse_bvae
+
+        return self.decoder.table(parse_bvae(payload).records[0], masked="keep").astype(np.float64)
+
+
+def _input_mask(material: Material) -> np.ndarray:
+    from brdfcodec.transforms import network_input, select_kept_slices
+
+    return network_input(select_kept_slices(material.mask))
+
+
+class PcaPacked(OperatingPoint):
+    """PCA-k of the mapped kept slices with float16 or int8 (+ a float16 scale) coefficients."""
+
+    held_out_only = True
+
+    def __init__(self, basis: Any, k: int, storage: str) -> None:
+        self.basis, self.k, self.storage = basis, k, storage
+        self.family = f"pca-{storage}"
+        self.name = f"pca-{k}-{storage}"
+        self.description = f"PCA of mapped kept slices, {k} coefficients as {storage}" + (
+            " with one float16 scale per material" if storage == "int8" else ""
+        )
+
+    def shared_bytes(self) -> int:
+        return int(self.basis.mean.nbytes + self.basis.components[: self.k].nbytes)
+
+    def encode(self, material: Material) -> bytes:
+        c = (material.inputs.reshape(-1) - self.basis.mean) @ self.basis.components[: self.k].T
+        if self.storage == "float16":
+            return c.astype("<f2").tobytes()
+        scale = np.float16(max(float(np.abs(c).max()), 1e-6) / 127.0)
+        q = np.clip(np.rint(c / np.float32(scale)), -127, 127).astype(np.int8)
+        return scale.tobytes() + q.tobytes()
+
+    def payload_bytes(self, payload: bytes) -> int:
+        return len(payload)
+
+    def decode(self, payload: bytes) -> np.ndarray:
+        if self.storage == "float16":
+            c = np.frombuffer(payload, dtype="<f2").astype(np.float32)
+        else:
+            scale = np.frombuffer(payload[:2], dtype="<f2").astype(np.float32)[0]
+            c = np.frombuffer(payload[2:], dtype=np.int8).astype(np.float32) * scale
+        mapped = np.clip(c @ self.basis.components[: self.k] + self.basis.mean, 0.0, MAPPED_MAX)
+        return table_from_network_output(mapped.reshape(63, 90, 90)).astype(np.float64)
+
+
+class ZstdSlices(OperatingPoint):
+    """Mapped kept slices quantised at step Δ (int16) and packed with zstandard (level 19)."""
+
+    held_out_only = True
+    family = "zstd-slices"
+
+    def __init__(self, step: float) -> None:
+        self.step = step
+        self.name = f"zstd-slices@{step:g}"
+        self.description = f"mapped kept slices, step {step:g}, int16, zstandard level 19"
+
+    def encode(self, material: Material) -> bytes:
+        import zstandard
+
+        q = np.rint(material.inputs / self.step).astype("<i2")
+        return zstandard.ZstdCompressor(level=19).compress(q.tobytes())
+
+    def payload_bytes(self, payload: bytes) -> int:
+        return len(payload)
+
+    def decode(self, payload: bytes) -> np.ndarray:
+        import zstandard
+
+        q = np.frombuffer(zstandard.ZstdDecompressor().decompress(payload), dtype="<i2")
+        return table_from_network_output((q * np.float32(self.step)).reshape(63, 90, 90)).astype(np.float64)
+
+
+class DctSlices(OperatingPoint):
+    """The detail layer's coder on the kept slices themselves (no β-VAE base): the ablation."""
+
+    held_out_only = True
+    family = "dct-slices"
+
+    def __init__(self, step: float) -> None:
+        self.step = step
+        self.name = f"dct-slices@{step:g}"
+        self.description = f"colour + 3-D DCT of the mapped kept slices, step {step:g}, zstandard (no β-VAE)"
+
+    def encode(self, material: Material) -> bytes:
+        from brdfcodec.layers.detail import encode_detail
+
+        return encode_detail(material.inputs, self.step).data
+
+    def payload_bytes(self, payload: bytes) -> int:
+        return len(payload)
+
+    def decode(self, payload: bytes) -> np.ndarray:
+        from brdfcodec.layers.detail import DetailLayer, decode_detail
+
+        dtype = "int16"
+        try:
+            mapped = decode_detail(DetailLayer(float(self.step), dtype, payload))
+        except ValueError:
+            mapped = decode_detail(DetailLayer(float(self.step), "int32", payload))
+        return table_from_network_output(mapped.reshape(63, 90, 90)).astype(np.float64)
+
+
+def rate_distortion_points(train_inputs: np.ndarray, model: Any = None) -> list[OperatingPoint]:
+    """The report's rate–distortion points (held-out materials only)."""
+    from brdfcodec.baselines.pca import fit_pca
+
+    points: list[OperatingPoint] = [LayeredBvae(bytes_budget=n, model=model) for n in LAYERED_BUDGETS]
+    points.append(LayeredBvae(max_relae=0.02, model=model))
+    basis = fit_pca(train_inputs, min(75, len(train_inputs)))
+    sizes = [k for k in (8, 16, 32, 64, 75) if k <= basis.n_components]
+    points += [PcaPacked(basis, k, "float16") for k in sizes]
+    points += [PcaPacked(basis, k, "int8") for k in sizes]
+    points += [ZstdSlices(step) for step in (0.004, 0.016, 0.064, 0.25, 1.0)]
+    points += [DctSlices(step) for step in (0.01, 0.04, 0.16, 0.64, 2.56, 10.24)]
+    return points

@@ -1,0 +1,207 @@
+"""Issue 14: refinement, the detail layer, layered records in the format, rate control, edits on layered records."""
+
+from __future__ import annotations
+
+import json
+import struct
+import zlib
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from brdfcodec.bvae_format import DecoderReference, LatentRecord, encode_bvae, parse_bvae
+from brdfcodec.conventions import NETWORK_INPUT_SHAPE
+from brdfcodec.errors import BvaeFormatError, RateTargetError, UnsupportedVersionError
+from brdfcodec.layers.detail import DetailLayer, decode_detail, encode_detail
+from brdfcodec.layers.record import LayeredRecord
+
+DECODER = DecoderReference("ab" * 32, "test-decoder")
+
+
+def smooth_residual(seed: int = 0) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    h = np.linspace(0, 1, 90)
+    field = np.sin(3 * h[:, None] + rng.normal()) * np.cos(2 * h[None, :]) * 0.2
+    return (field[None] * rng.normal(1, 0.3, size=(63, 1, 1))).astype(np.float32) + rng.normal(
+        0, 0.01, NETWORK_INPUT_SHAPE
+    ).astype(np.float32)
+
+
+def layered(step: float = 0.05, name: str = "layered-0") -> LayeredRecord:
+    rng = np.random.default_rng(1)
+    return LayeredRecord(name, rng.normal(size=8), np.full(8, 0.1), {"effort": 1},
+                         detail=encode_detail(smooth_residual(), step))
+
+
+@pytest.mark.parametrize("step", [0.01, 0.1, 1.0])
+def test_detail_error_is_bounded_by_the_step(step: float) -> None:
+    residual = smooth_residual()
+    layer = encode_detail(residual, step)
+    decoded = decode_detail(layer).reshape(NETWORK_INPUT_SHAPE)
+    rms = float(np.sqrt(np.mean((decoded - residual) ** 2)))
+    assert rms <= step / np.sqrt(12) * 1.05  # orthonormal transforms: the quantisation noise, no more
+    assert layer.nbytes < residual.nbytes
+
+
+def test_detail_sizes_fall_as_the_step_grows() -> None:
+    residual = smooth_residual()
+    sizes = [encode_detail(residual, s).nbytes for s in (0.005, 0.05, 0.5)]
+    assert sizes[0] > sizes[1] > sizes[2]
+
+
+def test_partial_detail_equals_the_same_slots_of_the_full_one() -> None:
+    layer = encode_detail(smooth_residual(), 0.02)
+    full = decode_detail(layer)
+    np.testing.assert_allclose(decode_detail(layer, [0, 7, 20]), full[:, [0, 7, 20]], atol=1e-5)
+
+
+def test_large_residuals_switch_to_int32() -> None:
+    assert encode_detail(smooth_residual() * 40, 1e-4).dtype == "int32"
+
+
+@pytest.mark.parametrize("dtype", ["float32", "float16"])
+def test_layered_records_round_trip_with_plain_ones(dtype: str) -> None:
+    plain = LatentRecord("plain", np.zeros(8), np.ones(8))
+    record = layered()
+    data = encode_bvae([plain, record], DECODER, latent_dtype=dtype)  # type: ignore[arg-type]
+    library = parse_bvae(data)
+    assert library.header.minor == 1
+    back = library.record("layered-0")
+    assert isinstance(back, LayeredRecord) and back.detail == record.detail
+    assert library.header.entries[1].length == 2 * 8 * (2 if dtype == "float16" else 4) + record.detail.nbytes
+    assert type(library.record("plain")) is LatentRecord
+
+
+def _rewrap(data: bytes, edit) -> bytes:
+    magic, major, minor, flags, length, _ = struct.unpack_from("<8sHHIII", data, 0)
+    header = edit(json.loads(data[24 : 24 + length]))
+    stored = json.dumps(header).encode()
+    head = struct.pack("<8sHHII", magic, major, minor, flags, len(stored))
+    return head + struct.pack("<I", zlib.crc32(head + stored)) + stored + data[24 + length :]
+
+
+def test_unknown_layers_and_transforms_are_unsupported_and_bad_fields_malformed() -> None:
+    data = encode_bvae([layered()], DECODER, compress_header=False)
+
+    def with_detail(**changes):
+        def edit(header: dict) -> dict:
+            header["records"][0]["layers"]["detail"].update(changes)
+            return header
+        return edit
+
+    def extra_layer(header: dict) -> dict:
+        header["records"][0]["layers"]["basis"] = {"k": 4}
+        return header
+
+    with pytest.raises(UnsupportedVersionError, match="basis"):
+        parse_bvae(_rewrap(data, extra_layer))
+    with pytest.raises(UnsupportedVersionError, match="wavelet"):
+        parse_bvae(_rewrap(data, with_detail(transform="wavelet")))
+    for bad in ({"step": -1.0}, {"step": "x"}, {"dtype": "int8"}, {"length": 0}, {"length": True}):
+        with pytest.raises(BvaeFormatError):
+            parse_bvae(_rewrap(data, with_detail(**bad)))
+
+    def no_layers(header: dict) -> dict:
+        del header["records"][0]["layers"]
+        return header
+
+    with pytest.raises(BvaeFormatError, match="layers"):
+        parse_bvae(_rewrap(data, no_layers))
+
+
+def test_a_layer_that_is_not_the_declared_frame_is_refused() -> None:
+    record = layered()
+    bogus = LayeredRecord("x", record.mu, record.sigma, detail=DetailLayer(0.05, "int16", b"not zstd at all"))
+    with pytest.raises(BvaeFormatError, match="zstandard"):
+        parse_bvae(encode_bvae([bogus], DECODER))
+
+
+_VALID = encode_bvae([layered(0.5)], DECODER)
+
+
+@settings(max_examples=150, suppress_health_check=[HealthCheck.too_slow], deadline=None)
+@given(st.lists(st.tuples(st.integers(0, len(_VALID) - 1), st.integers(1, 255)), min_size=1, max_size=6))
+def test_fuzz_mutations_of_a_layered_file(changes: list[tuple[int, int]]) -> None:
+    data = bytearray(_VALID)
+    for position, xor in changes:
+        data[position] ^= xor
+    try:
+        parse_bvae(bytes(data))
+    except BvaeFormatError:
+        pass
+
+
+@pytest.mark.slow
+def test_rate_control_meets_budgets_and_targets(analytic_tables) -> None:
+    from brdfcodec.codec import BrdfEncoder, measure
+
+    brdf = next(iter(analytic_tables.values()))
+    for budget in (64, 2000, 20000):
+        encoder = BrdfEncoder(effort=0, bytes=budget)
+        record = encoder.encode(brdf, name="m")
+        stored = parse_bvae(encode_bvae([record], encoder.reference)).header.entries[0].length
+        assert stored == record.meta["rate"]["payload_bytes"] <= budget
+    encoder = BrdfEncoder(effort=0, max_relae=0.02)
+    record = measure(encoder.encode(brdf, name="m"), encoder.decoder, brdf)
+    assert record.meta["relae"]["mapped"] <= 0.02
+    with pytest.raises(RateTargetError):
+        BrdfEncoder(effort=0, bytes=16).encode(brdf)
+
+
+def test_refinement_never_worsens_and_edits_drop_the_layers(analytic_tables) -> None:
+    from brdfcodec.codec import BrdfEncoder, measure
+    from brdfcodec.edit import interpolate, traverse
+
+    brdf = next(iter(analytic_tables.values()))
+    errors = []
+    for effort in (0, 1):
+        encoder = BrdfEncoder(effort=effort)
+        errors.append(measure(encoder.encode(brdf, name="m"), encoder.decoder, brdf).meta["relae"]["mapped"])
+    assert errors[1] <= errors[0] + 1e-6
+    encoder = BrdfEncoder(effort=0, bytes=4000)
+    record = encoder.encode(brdf, name="m")
+    assert isinstance(record, LayeredRecord)
+    edited = traverse(record, 0, [0.5])[0]
+    assert type(edited) is LatentRecord
+    mixed = interpolate(record, LatentRecord("b", np.zeros(8), np.ones(8)), 0.5)
+    assert type(mixed) is LatentRecord
+
+
+def test_layered_decode_adds_the_layer_and_partial_decode_matches(analytic_tables) -> None:
+    from brdfcodec.codec import BrdfEncoder
+
+    brdf = next(iter(analytic_tables.values()))
+    encoder = BrdfEncoder(effort=0, bytes=20000)
+    record = encoder.encode(brdf, name="m")
+    decoder = encoder.decoder
+    full = decoder.table(record, masked="zero")
+    base = decoder.table(record.base(), masked="zero")
+    assert not np.allclose(full, base)
+    part = decoder.table(record, phi_d_bins=[4, 100], masked="zero")
+    np.testing.assert_allclose(part, full[..., [4, 100]], rtol=1e-4, atol=1e-4)
+    batched = next(decoder.tables([record], masked="zero"))
+    np.testing.assert_allclose(batched, full, rtol=1e-5, atol=1e-5)
+
+
+@pytest.mark.slow
+def test_cli_rate_control_flags(red_plastic_file, tmp_path, capsys) -> None:
+    from brdfcodec.bvae_format import read_bvae
+    from brdfcodec.cli import main
+
+    out = tmp_path / "m.bvae"
+    assert main(["compress", str(red_plastic_file), "-o", str(out), "--bytes", "3000", "--float16",
+                 "--effort", "0"]) == 0
+    record = read_bvae(out).records[0]
+    assert isinstance(record, LayeredRecord) and record.meta["rate"]["payload_bytes"] <= 3000
+    assert record.meta["effort"] == 0
+    assert main(["compress", str(red_plastic_file), "-o", str(out), "--force", "--max-relae", "0.03",
+                 "--metric", "linear", "--effort", "0"]) == 0
+    assert read_bvae(out).records[0].meta["relae"]["linear"] <= 0.03
+    capsys.readouterr()
+    bad = tmp_path / "bad.bvae"
+    assert main(["compress", str(red_plastic_file), "-o", str(bad), "--bytes", "10"]) == 1
+    assert "below the base record" in capsys.readouterr().err and not bad.exists()
+    assert main(["compress", str(red_plastic_file), "-o", str(bad), "--bytes", "100", "--max-relae", "0.1"]) == 2
+    assert main(["compress", str(red_plastic_file), "-o", str(bad), "--effort", "7"]) == 2
