@@ -6,6 +6,7 @@ import argparse
 from pathlib import Path
 
 from brdfcodec.bvae_format import read_bvae, write_bvae
+from brdfcodec.cli.usage import UsageError
 
 __all__ = ["register"]
 
@@ -28,10 +29,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
 def run(args: argparse.Namespace) -> int:
     """Copy the chosen records in the order given."""
     if args.output.resolve() == args.input.resolve():
-        raise ValueError(f"{args.output}: the output must not be the input")
+        raise UsageError(f"{args.output}: the output must not be the input")
     library = read_bvae(args.input)
     if len(set(args.material)) != len(args.material):
-        raise ValueError("a material is named twice")
+        raise UsageError("a material is named twice")
     records = [library.record(name) for name in args.material]
     size = write_bvae(
         args.output, records, library.header.decoder, latent_dtype=library.header.latent_dtype, overwrite=args.force
