@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import functools
 import os
+import warnings
 from collections.abc import Iterable, Iterator, Sequence
 from pathlib import Path
 from typing import Literal
@@ -33,15 +34,15 @@ from brdfcodec.bvae_format import (
     Record,
     write_bvae,
 )
-from brdfcodec.conventions import MERL_COLOR_SCALE, N_KEPT_SLICES, NETWORK_INPUT_SHAPE, UNMEASURED_VALUE
+from brdfcodec.conventions import MAPPED_MAX, MERL_COLOR_SCALE, N_KEPT_SLICES, NETWORK_INPUT_SHAPE, UNMEASURED_VALUE
 from brdfcodec.dataset import material_arrays
-from brdfcodec.errors import DecoderMismatchError
+from brdfcodec.errors import DecoderMismatchError, LatentDimensionError, UnmeasuredMaterialError
 from brdfcodec.mask import horizon_mask
 from brdfcodec.merl import MerlBRDF, read_merl
 from brdfcodec.metrics import error_report
 from brdfcodec.models.registry import default_model_folder, find_model
 from brdfcodec.models.store import ModelManifest, load_manifest, load_model
-from brdfcodec.transforms import kept_slots_for_bins, table_from_network_output
+from brdfcodec.transforms import kept_slots_for_bins, table_from_network_output, unmap_values
 
 __all__ = [
     "BrdfDecoder",
@@ -51,6 +52,7 @@ __all__ = [
     "MaterialLibrary",
     "compress",
     "decompress",
+    "prepare_source",
     "resolve_model",
 ]
 
@@ -78,6 +80,53 @@ def resolve_model(model: ModelSpec) -> ModelManifest:
     if len(text) == 64 and all(c in "0123456789abcdef" for c in text.lower()) and not Path(text).exists():
         return find_model(text)
     return load_manifest(text)
+
+
+class ClampWarning(UserWarning):
+    """A source table held values beyond the range the codec represents; they were clamped (the message says how many)."""
+
+
+def _stored_limit() -> np.ndarray:
+    """Largest stored value per channel the codec represents: the inverse mapping of ``MAPPED_MAX``."""
+    return unmap_values(np.full(3, MAPPED_MAX, dtype=np.float64))
+
+
+def prepare_source(brdf: MerlBRDF, *, warn: bool = True) -> MerlBRDF:
+    """A table ready for encoding and measuring: refused if nothing is measured, clamped to the codec's range.
+
+    A black table (all 0) is a valid material and passes unchanged. Stored
+    values whose mapping exceeds ``MAPPED_MAX`` (about 1.05e8 /sr of
+    reflectance) are clamped to that value, with a :class:`ClampWarning`
+    saying how many entries and by how much; the table's SHA-256 stays that
+    of its source.
+
+    Raises
+    ------
+    UnmeasuredMaterialError
+        No entry above the horizon is measured (all negative).
+    """
+    where = os.fspath(brdf.path) if brdf.path is not None else (brdf.name or "<table>")
+    if not brdf.mask.any():
+        raise UnmeasuredMaterialError(
+            where, "no measured entry above the horizon (every value is negative, MERL's 'unmeasured'): "
+            "there is nothing to compress"
+        )
+    limit = _stored_limit().reshape(3, 1, 1, 1)
+    over = brdf.values > limit  # below-horizon entries too: nothing downstream may overflow
+    if not over.any():
+        return brdf
+    count = int(np.count_nonzero(over & brdf.mask))
+    if warn and count:
+        largest = float((brdf.values / limit)[over & brdf.mask].max())
+        warnings.warn(
+            f"{where}: {count} of {int(np.count_nonzero(brdf.mask))} measured entries exceed the largest value "
+            f"the codec represents (mapped {MAPPED_MAX:g}, about 1.05e8 /sr), by up to {largest:.3g}x; "
+            "they were clamped to it",
+            ClampWarning,
+            stacklevel=2,
+        )
+    clamped = np.where(over, np.broadcast_to(limit, brdf.values.shape), brdf.values)
+    return MerlBRDF(clamped, name=brdf.name, path=brdf.path, _file_sha256=brdf.sha256)
 
 
 @functools.cache
@@ -153,6 +202,8 @@ class BrdfDecoder:
         ------
         DecoderMismatchError
             Names both hashes and says how to get the right model.
+        LatentDimensionError
+            The file's ``latent_dim`` is not the decoder's.
         """
         if header.decoder.sha256 != self.reference.sha256:
             where = f"{os.fspath(path)}: " if path else ""
@@ -160,6 +211,12 @@ class BrdfDecoder:
                 f"{where}the file needs decoder {header.decoder.sha256} ({header.decoder.name}), but this decoder is "
                 f"{self.reference.sha256} ({self.reference.name}); open it with BrdfDecoder.for_header, or register "
                 "the model folder that made it"
+            )
+        if header.latent_dim != self.latent_dim:
+            raise LatentDimensionError(
+                path or "<bvae>",
+                f"declares latent_dim {header.latent_dim}, but its decoder {header.decoder.name} "
+                f"({header.decoder.sha256[:12]}…) has {self.latent_dim}: the file is inconsistent",
             )
 
     def decode_mapped(self, codes: npt.ArrayLike, *, batch_size: int = 16) -> npt.NDArray[np.float32]:
@@ -303,7 +360,7 @@ class BrdfEncoder:
         mus, sigmas = [], []
         for start in range(0, len(brdfs), batch_size):
             mu, sigma = self.posterior_from_inputs(
-                np.stack([material_arrays(b)[0] for b in brdfs[start : start + batch_size]])
+                np.stack([material_arrays(prepare_source(b))[0] for b in brdfs[start : start + batch_size]])
             )
             mus.append(mu)
             sigmas.append(sigma)
@@ -335,13 +392,24 @@ class BrdfEncoder:
 
 
 def measure(record: Record, decoder: BrdfDecoder, source: MerlBRDF) -> LatentRecord | GraftRecord:
-    """The record with ``meta["relae"]`` set to the mapped and linear RelAE of its decode against ``source``."""
+    """The record with ``meta["relae"]`` set to the RelAE of its decode against ``source`` (and its SHA-256).
+
+    The RelAE (mapped and linear) is measured against the source as
+    :func:`prepare_source` gives it. A material that reflects nothing (all
+    0) has no RelAE (0/0): ``relae`` is then left out, with a warning.
+    """
+    source = prepare_source(source, warn=False)
     estimate = decoder.table(record, masked="keep").astype(np.float64)
     report = error_report(source.values, estimate, source.mask)
-    meta = {
-        **record.meta,
-        "relae": {"mapped": report.relae_mapped.overall, "linear": report.relae_linear.overall},
-    }
+    meta = {key: value for key, value in record.meta.items() if key != "relae"}
+    meta["source_sha256"] = source.sha256
+    relae = {"mapped": report.relae_mapped.overall, "linear": report.relae_linear.overall}
+    if all(np.isfinite(v) for v in relae.values()):
+        meta["relae"] = relae
+    else:
+        where = os.fspath(source.path) if source.path is not None else (source.name or record.name)
+        warnings.warn(f"{where}: RelAE is undefined for a material that reflects nothing (black); not stored",
+                      stacklevel=2)
     if isinstance(record, GraftRecord):
         return GraftRecord(record.name, record.mu, record.sigma, record.graft_dims, record.graft_values, meta)
     return LatentRecord(record.name, record.mu, record.sigma, meta)
@@ -514,7 +582,7 @@ def compress(
     list of LatentRecord
     """
     items = [sources] if isinstance(sources, MerlBRDF | str | os.PathLike) else list(sources)
-    brdfs = _as_brdfs(items)
+    brdfs = [prepare_source(b) for b in _as_brdfs(items)]
     encoder = BrdfEncoder(model)
     records: list[Record] = list(encoder.encode_many(brdfs))
     if measure_error:

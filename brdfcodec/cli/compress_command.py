@@ -50,7 +50,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
 
 def _merl_item(path: Path) -> _Item:
     def load() -> tuple[MerlBRDF | None, np.ndarray]:
-        brdf = read_merl(path)
+        from brdfcodec.codec import prepare_source
+
+        brdf = prepare_source(read_merl(path))  # nothing measured: an error; beyond range: clamped, with a warning
         return brdf, material_arrays(brdf)[0]
 
     return _Item(path.stem, str(path), load)
@@ -123,8 +125,11 @@ def run(args: argparse.Namespace) -> int:
             ):
                 if decoder is not None and brdf is not None:
                     record = measure(record, decoder, brdf)
-                    relae = record.meta["relae"]
-                    lines.append(f"  {item.name:<32} RelAE mapped {relae['mapped']:.4f}  linear {relae['linear']:.4f}")
+                    relae = record.meta.get("relae")
+                    lines.append(
+                        f"  {item.name:<32} RelAE mapped {relae['mapped']:.4f}  linear {relae['linear']:.4f}"
+                        if relae else f"  {item.name:<32} (RelAE undefined: the material reflects nothing)"
+                    )
                 else:
                     why = "--no-measure" if decoder is None else "no source table"
                     lines.append(f"  {item.name:<32} (RelAE not measured: {why})")

@@ -29,6 +29,7 @@ import contextlib
 import os
 import signal
 import sys
+import warnings
 from collections.abc import Iterator, Sequence
 
 from brdfcodec.cli import (
@@ -110,6 +111,14 @@ def _terminate_cleanly() -> Iterator[None]:
         signal.signal(signal.SIGTERM, previous)
 
 
+def _one_line_warning(command: str) -> object:
+    """A ``warnings.showwarning`` that prints ``bvae COMMAND: warning: MESSAGE`` (no source line)."""
+    def show(message: Warning | str, category: type[Warning], *args: object, **kwargs: object) -> None:
+        print(f"bvae {command}: warning: {message}", file=sys.stderr)
+
+    return show
+
+
 def _silence_stdout() -> None:
     """After a broken pipe: point stdout at /dev/null so the interpreter's final flush stays quiet."""
     with contextlib.suppress(OSError, ValueError, AttributeError):
@@ -160,7 +169,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     if argv is None:  # a real command-line run, not a call from Python: size torch's thread pool
         configure_threads()
     try:
-        with _terminate_cleanly():
+        with _terminate_cleanly(), warnings.catch_warnings():
+            warnings.showwarning = _one_line_warning(args.command)
             code = int(args.handler(args))
             sys.stdout.flush()  # a closed pipe shows here, not in the interpreter's exit
             return code
