@@ -37,7 +37,8 @@ def _problem(name: str) -> str | None:
     """Why ``name`` is not a valid material name, or None if it is."""
     if not 1 <= len(name) <= MAX_NAME_LENGTH:
         return f"must be 1 to {MAX_NAME_LENGTH} characters long, has {len(name)}"
-    for char in name:
+    plain_ascii = name.isascii() and name.isprintable()  # the common case: no control character, no surrogate
+    for char in name if not plain_ascii else FORBIDDEN_CHARACTERS.intersection(name):
         category = unicodedata.category(char)
         if category == "Cs":
             return f"holds a lone surrogate U+{ord(char):04X} (not a Unicode character)"
@@ -51,7 +52,7 @@ def _problem(name: str) -> str | None:
         return "starts or ends with white space"
     if name.endswith("."):
         return "ends with '.'"
-    if unicodedata.normalize("NFC", name) != name:
+    if not plain_ascii and unicodedata.normalize("NFC", name) != name:
         return "is not in Unicode normalisation form NFC"
     if name.split(".", 1)[0].rstrip().upper() in _WINDOWS_DEVICES:
         return "is a reserved device name on Windows (CON, PRN, AUX, NUL, COM0-9, LPT0-9)"
