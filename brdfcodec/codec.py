@@ -36,7 +36,12 @@ from brdfcodec.bvae_format import (
 )
 from brdfcodec.conventions import MAPPED_MAX, MERL_COLOR_SCALE, N_KEPT_SLICES, NETWORK_INPUT_SHAPE, UNMEASURED_VALUE
 from brdfcodec.dataset import material_arrays
-from brdfcodec.errors import DecoderMismatchError, LatentDimensionError, UnmeasuredMaterialError
+from brdfcodec.errors import (
+    DecoderMismatchError,
+    DecoderNotFoundError,
+    LatentDimensionError,
+    UnmeasuredMaterialError,
+)
 from brdfcodec.mask import horizon_mask
 from brdfcodec.merl import MerlBRDF, read_merl
 from brdfcodec.metrics import error_report
@@ -501,7 +506,10 @@ class MaterialLibrary:
         self._reader = BvaeReader(path)
         try:
             self.header = self._reader.header
-            self.decoder = decoder if decoder is not None else BrdfDecoder.for_header(self.header)
+            try:
+                self.decoder = decoder if decoder is not None else BrdfDecoder.for_header(self.header)
+            except DecoderNotFoundError as error:
+                raise DecoderNotFoundError(f"{os.fspath(path)}: {error}") from None
             self.decoder.check(self.header, path)
         except BaseException:
             self._reader.close()

@@ -66,7 +66,7 @@ def run(args: argparse.Namespace) -> int:
     with MaterialLibrary(args.input) as library:
         names = args.material or library.names
         for name in names:
-            library.header.entry(name)  # unknown names fail before anything is written
+            library.record(name)  # unknown names and corrupt records fail before anything is written
         single = len(names) == 1 and (args.material is not None or len(library) == 1)
         if single:
             table_format_of(args.output)
