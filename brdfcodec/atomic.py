@@ -40,7 +40,9 @@ def check_output_path(path: str | os.PathLike[str], *, overwrite: bool) -> Path:
     if target.is_dir():
         raise IsADirectoryError(f"{target}: is a directory, expected a file name to write")
     if target.exists() and not overwrite:
-        raise FileExistsError(errno.EEXIST, "already exists (pass overwrite=True, or --force, to replace it)", str(target))
+        raise FileExistsError(
+            errno.EEXIST, "already exists (pass overwrite=True, or --force, to replace it)", str(target)
+        )
     parent = target.parent if str(target.parent) else Path(".")
     if not parent.is_dir():
         raise FileNotFoundError(f"{target}: folder {parent} does not exist")

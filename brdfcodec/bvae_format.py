@@ -38,7 +38,8 @@ import numpy.typing as npt
 
 from brdfcodec.atomic import atomic_output
 from brdfcodec.errors import BvaeChecksumError, BvaeFormatError, UnsupportedVersionError
-from brdfcodec.material_names import MAX_NAME_LENGTH, check_material_name, name_collision_key
+from brdfcodec.material_names import MAX_NAME_LENGTH as MAX_NAME_LENGTH  # re-exported
+from brdfcodec.material_names import check_material_name, name_collision_key
 from brdfcodec.version import __version__
 
 __all__ = [

@@ -88,7 +88,8 @@ def resolve_model(model: ModelSpec) -> ModelManifest:
 
 
 class ClampWarning(UserWarning):
-    """A source table held values beyond the range the codec represents; they were clamped (the message says how many)."""
+    """A source table held values beyond the range the codec represents; they were clamped (the message says how
+    many)."""
 
 
 def _stored_limit() -> np.ndarray:
