@@ -27,9 +27,11 @@ from brdfcodec.errors import (
     DecoderMismatchError,
     DecoderNotFoundError,
     FileFormatError,
+    LatentDimensionError,
     MerlFormatError,
     NonFiniteValueError,
     SourceFormatError,
+    UnmeasuredMaterialError,
     UnsupportedVersionError,
 )
 from brdfcodec.genuine import genuine_merl_name
@@ -61,6 +63,7 @@ __all__ = [
     "DecoderNotFoundError",
     "DecoderReference",
     "GraftRecord",
+    "LatentDimensionError",
     "LatentRecord",
     "MaterialLibrary",
     "UnsupportedVersionError",
@@ -76,6 +79,7 @@ __all__ = [
     "MerlFormatError",
     "NonFiniteValueError",
     "SourceFormatError",
+    "UnmeasuredMaterialError",
     "__version__",
     "cosine_weighted_rmse",
     "error_report",
