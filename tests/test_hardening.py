@@ -350,3 +350,12 @@ def test_existing_files_still_read() -> None:
     library = parse_bvae(Path(example_library()).read_bytes())
     assert (library.header.major, library.header.minor) == (1, 0) and len(library.records) == 90
     assert os.fspath(example_library()).endswith(".bvae")
+
+
+def test_spec_states_the_bounds_the_reader_uses() -> None:
+    from brdfcodec.bvae_format import MAX_HEADER_CONTAINERS, MAX_HEADER_DEPTH, MAX_JSON_INTEGER
+
+    text = (Path(__file__).resolve().parents[1] / "spec" / "bvae-format.md").read_text(encoding="utf-8")
+    assert f"at most **{MAX_HEADER_CONTAINERS:,}** objects and arrays" in text
+    assert f"at most **{MAX_HEADER_DEPTH}** levels of nesting" in text
+    assert MAX_JSON_INTEGER == 2**53 - 1 and "±(2⁵³ − 1)" in text

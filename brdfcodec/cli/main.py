@@ -16,8 +16,7 @@ line naming the file and the problem; nothing prints a traceback unless
 ====  ==========================================================
 
 Threads: torch's intra-op thread pool is sized for one process per machine,
-so several ``bvae`` processes on a small machine oversubscribe it (small
-decodes got 25× slower with two processes on 2 cores). ``bvae`` therefore
+so several ``bvae`` processes on a small machine oversubscribe it. ``bvae`` therefore
 uses half the cores (at least 1, at most 8) unless ``BVAE_NUM_THREADS`` or
 ``OMP_NUM_THREADS`` says otherwise.
 """
