@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import errno
 import os
 import tempfile
 from collections.abc import Iterator
@@ -39,7 +40,9 @@ def check_output_path(path: str | os.PathLike[str], *, overwrite: bool) -> Path:
     if target.is_dir():
         raise IsADirectoryError(f"{target}: is a directory, expected a file name to write")
     if target.exists() and not overwrite:
-        raise FileExistsError(f"{target}: already exists (pass overwrite=True, or --force, to replace it)")
+        raise FileExistsError(
+            errno.EEXIST, "already exists (pass overwrite=True, or --force, to replace it)", str(target)
+        )
     parent = target.parent if str(target.parent) else Path(".")
     if not parent.is_dir():
         raise FileNotFoundError(f"{target}: folder {parent} does not exist")
@@ -52,13 +55,47 @@ def _current_umask() -> int:
     return mask
 
 
+def _publish(tmp: Path, target: Path, *, overwrite: bool) -> None:
+    """Move the finished temporary file to ``target``; without ``overwrite``, atomically only if absent."""
+    if overwrite:
+        os.replace(tmp, target)
+        return
+    try:
+        os.link(tmp, target)  # fails if target exists: create-if-absent, no window between check and rename
+    except FileExistsError:
+        raise FileExistsError(
+            errno.EEXIST, "already exists (pass overwrite=True, or --force, to replace it)", str(target)
+        ) from None
+    except OSError:  # no hard links here (some network and FAT file systems): reserve the name exclusively
+        try:
+            fd = os.open(target, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
+        except FileExistsError:
+            raise FileExistsError(
+                errno.EEXIST, "already exists (pass overwrite=True, or --force, to replace it)", str(target)
+            ) from None
+        os.close(fd)
+        os.replace(tmp, target)
+        return
+    tmp.unlink()
+
+
+def _name_target(error: OSError, tmp: Path, target: Path) -> None:
+    """Errors about the temporary file name the output the caller asked for instead."""
+    if error.filename is not None and os.fspath(error.filename) == os.fspath(tmp):
+        error.filename = os.fspath(target)
+
+
 @contextlib.contextmanager
 def atomic_output(path: str | os.PathLike[str], *, overwrite: bool = False) -> Iterator[Path]:
     """Yield a temporary path that becomes ``path`` only if the block succeeds.
 
-    The temporary file lives in the target's folder, so the final
-    :func:`os.replace` is atomic on POSIX and Windows. On any exception the
-    temporary file is removed and the target is left untouched.
+    The temporary file lives in the target's folder, so the final rename is
+    atomic on POSIX and Windows. Without ``overwrite`` the file appears only
+    if no file of that name exists at that moment (a hard link, which fails
+    on an existing name), so two writers racing for one name cannot both
+    succeed. On any exception (``KeyboardInterrupt`` and the ``bvae`` CLI's
+    SIGTERM included) the temporary file is removed and the target is left
+    untouched; errors about the temporary file name ``path``.
 
     Parameters
     ----------
@@ -71,18 +108,26 @@ def atomic_output(path: str | os.PathLike[str], *, overwrite: bool = False) -> I
     ------
     pathlib.Path
         Where the caller writes the content.
+
+    Raises
+    ------
+    FileExistsError
+        ``path`` exists (before or after the block) and ``overwrite`` is false.
     """
     target = check_output_path(path, overwrite=overwrite)
-    fd, tmp_name = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".part", dir=target.parent)
+    try:
+        fd, tmp_name = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".part", dir=target.parent)
+    except OSError as error:
+        raise type(error)(error.errno, error.strerror, os.fspath(target)) from None
     os.close(fd)
     tmp = Path(tmp_name)
     try:
         yield tmp
         os.chmod(tmp, 0o666 & ~_current_umask())
-        if target.exists() and not overwrite:  # appeared while we were writing
-            raise FileExistsError(f"{target}: already exists (pass overwrite=True, or --force, to replace it)")
-        os.replace(tmp, target)
-    except BaseException:
+        _publish(tmp, target, overwrite=overwrite)
+    except BaseException as error:
         with contextlib.suppress(FileNotFoundError):
             tmp.unlink()
+        if isinstance(error, OSError):
+            _name_target(error, tmp, target)
         raise

@@ -20,8 +20,10 @@ material of a library by reading the preamble, the header and that record.
 
 from __future__ import annotations
 
+import functools
 import io
 import json
+import math
 import os
 import re
 import struct
@@ -36,6 +38,8 @@ import numpy.typing as npt
 
 from brdfcodec.atomic import atomic_output
 from brdfcodec.errors import BvaeChecksumError, BvaeFormatError, UnsupportedVersionError
+from brdfcodec.material_names import MAX_NAME_LENGTH as MAX_NAME_LENGTH  # re-exported
+from brdfcodec.material_names import check_material_name, name_collision_key
 from brdfcodec.version import __version__
 
 __all__ = [
@@ -73,8 +77,12 @@ MAX_HEADER_JSON_BYTES = 16 << 20
 MAX_RECORDS = 65536
 #: Largest latent dimension a file may declare.
 MAX_LATENT_DIM = 1024
-#: Longest material name, in characters.
-MAX_NAME_LENGTH = 255
+#: Most JSON objects and arrays (nested ones included) a header may hold: bounds the work of parsing.
+MAX_HEADER_CONTAINERS = 1 << 19
+#: Deepest nesting of JSON objects and arrays in a header.
+MAX_HEADER_DEPTH = 64
+#: Largest magnitude of a JSON integer in a header (I-JSON, RFC 7493: exact in binary64).
+MAX_JSON_INTEGER = (1 << 53) - 1
 
 FLAG_HEADER_ZSTD = 1 << 0
 KNOWN_FLAGS = FLAG_HEADER_ZSTD
@@ -83,6 +91,9 @@ _PREAMBLE = struct.Struct("<8sHHIII")
 PREAMBLE_SIZE = _PREAMBLE.size  # 24
 _CRC_COVERED_PREAMBLE = PREAMBLE_SIZE - 4
 _ZSTD_LEVEL = 19
+#: Headers longer than this (in JSON bytes) are compressed at a faster level (§3.1): level 19 runs at ~0.3 MB/s.
+_ZSTD_FAST_ABOVE = 1 << 20
+_ZSTD_FAST_LEVEL = 3
 
 LatentDtype = Literal["float32", "float16"]
 _DTYPES: dict[str, np.dtype] = {"float32": np.dtype("<f4"), "float16": np.dtype("<f2")}
@@ -121,11 +132,30 @@ def _as_latent(values: npt.ArrayLike, label: str) -> np.ndarray:
 
 
 def _check_name(name: object) -> str:
-    if not isinstance(name, str) or not 1 <= len(name) <= MAX_NAME_LENGTH:
-        raise ValueError(f"a material name must be a string of 1 to {MAX_NAME_LENGTH} characters, got {name!r}")
-    if any(ord(c) < 32 or ord(c) == 127 for c in name):
-        raise ValueError(f"a material name must not hold control characters, got {name!r}")
-    return name
+    return check_material_name(name)
+
+
+def _is_number(value: object) -> bool:
+    return isinstance(value, int | float) and not isinstance(value, bool)
+
+
+def _meta_problem(meta: Mapping[str, Any]) -> str | None:
+    """Why a record's ``meta`` breaks the types of §5, or None (other keys are free JSON)."""
+    for key in ("source_sha256", "encoder_sha256"):
+        if key in meta and not (isinstance(meta[key], str) and _SHA256.match(meta[key])):
+            return f"meta field {key!r} must be 64 lower-case hex digits, got {meta[key]!r}"
+    if "relae" in meta:
+        relae = meta["relae"]
+        if not isinstance(relae, Mapping):
+            return f"meta field 'relae' must be an object, got {type(relae).__name__}"
+        for part in ("mapped", "linear"):
+            if part in relae and not (_is_number(relae[part]) and math.isfinite(relae[part]) and relae[part] >= 0):
+                return f"meta field 'relae.{part}' must be a finite number >= 0, got {relae[part]!r}"
+    if "edit" in meta:
+        edit = meta["edit"]
+        if not isinstance(edit, Mapping) or not isinstance(edit.get("op"), str):
+            return "meta field 'edit' must be an object with a string 'op'"
+    return None
 
 
 @dataclass(frozen=True)
@@ -162,6 +192,11 @@ class LatentRecord:
             raise ValueError(f"latent dimension must be 1 to {MAX_LATENT_DIM}, got {self.mu.size}")
         if not (self.sigma > 0).all():
             raise ValueError(f"sigma must be > 0, got {self.sigma}")
+        if not isinstance(self.meta, Mapping):
+            raise ValueError(f"meta must be a mapping, got {type(self.meta).__name__}")
+        problem = _meta_problem(self.meta)
+        if problem is not None:
+            raise ValueError(f"{self.name}: {problem}")
         object.__setattr__(self, "meta", dict(self.meta))
 
     @property
@@ -286,12 +321,18 @@ class BvaeHeader:
         """Material names in file order."""
         return [entry.name for entry in self.entries]
 
+    @functools.cached_property
+    def positions(self) -> Mapping[str, int]:
+        """Position of each material in the index, by name (built once: lookups are O(1))."""
+        return {entry.name: i for i, entry in enumerate(self.entries)}
+
     def entry(self, name: str) -> RecordEntry:
         """Index entry of a material; ``KeyError`` naming the available ones if absent."""
-        for entry in self.entries:
-            if entry.name == name:
-                return entry
-        raise KeyError(f"no material {name!r} in the file; it holds: {', '.join(self.names)}")
+        position = self.positions.get(name)
+        if position is None:
+            shown = ", ".join(self.names[:20]) + (", …" if len(self.entries) > 20 else "")
+            raise KeyError(f"no material {name!r} in the file; it holds: {shown}")
+        return self.entries[position]
 
 
 @dataclass(frozen=True)
@@ -304,10 +345,97 @@ class BvaeLibrary:
     def record(self, name: str) -> Record:
         """The record of a material (``KeyError`` naming the available ones if absent)."""
         self.header.entry(name)  # a descriptive KeyError if absent
-        return self.records[self.header.names.index(name)]
+        return self.records[self.header.positions[name]]
 
 
 # --------------------------------------------------------------------------- writing
+
+
+def canonical_json(value: Any) -> bytes:
+    """The canonical UTF-8 JSON text of a header (§3.1): sorted keys, no white space, shortest numbers.
+
+    Raises
+    ------
+    ValueError
+        The value holds something JSON cannot carry in a ``.bvae`` header:
+        NaN or infinity, an integer beyond ±(2⁵³ − 1), a lone surrogate, a
+        duplicate key after conversion to text, or a non-JSON type.
+    """
+    try:
+        text = json.dumps(value, sort_keys=True, separators=(",", ":"), ensure_ascii=False, allow_nan=False)
+        data = text.encode("utf-8")
+    except (TypeError, ValueError, UnicodeEncodeError, RecursionError) as error:
+        raise ValueError(f"record metadata must be JSON values (finite numbers, valid Unicode): {error}") from None
+    outside_strings = _check_json_structure(data, ValueError)  # keys are unique: they come from dicts
+    for match in _LONG_INTEGER.finditer(outside_strings):
+        if abs(int(match.group())) > MAX_JSON_INTEGER:
+            raise ValueError(f"record metadata holds the integer {match.group()[:40].decode()}, beyond ±(2^53 - 1)")
+    return data
+
+
+def _check_json_structure(data: bytes, fail: Any) -> bytes:
+    """The bounds of §3 on JSON objects and arrays (their number, their nesting); returns the text without strings."""
+    # Outside strings, brackets are exactly the containers: count them and their nesting before parsing.
+    outside_strings = _JSON_STRING.sub(b'""', data)
+    structure = np.frombuffer(outside_strings, dtype=np.uint8)
+    opens = (structure == ord("{")) | (structure == ord("["))
+    containers = int(np.count_nonzero(opens))
+    if containers > MAX_HEADER_CONTAINERS:
+        raise fail(f"header holds {containers} JSON objects and arrays, more than {MAX_HEADER_CONTAINERS}")
+    closes = (structure == ord("}")) | (structure == ord("]"))
+    depth = int(np.cumsum(opens.astype(np.int64) - closes).max(initial=0))
+    if depth > MAX_HEADER_DEPTH:
+        raise fail(f"header JSON is nested {depth} levels deep, more than {MAX_HEADER_DEPTH}")
+    return outside_strings
+
+
+def _check_json_text(data: bytes, fail: Any) -> Any:
+    """Parse header JSON under the rules and bounds of §3 (raises ``fail(message)`` on any breach)."""
+    _check_json_structure(data, fail)
+    try:
+        value = json.loads(
+            data.decode("utf-8"),
+            parse_constant=_reject_constant,
+            parse_float=_finite_float,
+            parse_int=_exact_int,
+            object_pairs_hook=_unique_keys,
+        )
+    except (UnicodeDecodeError, ValueError, RecursionError) as error:
+        raise fail(f"header is not valid UTF-8 JSON ({error})") from None
+    try:  # lone surrogates ("\ud800") are valid JSON escapes but not Unicode text
+        json.dumps(value, ensure_ascii=False).encode("utf-8")
+    except UnicodeEncodeError:
+        raise fail("header holds a lone surrogate escape (not Unicode text)") from None
+    return value
+
+
+#: An integer token of 16 digits or more (2^53 has 16): the only ones that can exceed ±(2^53 - 1).
+_LONG_INTEGER = re.compile(rb"(?<![0-9.eE+-])-?[0-9]{16,}(?![0-9.eE])")
+#: A JSON string (with escapes): its content is removed before counting brackets.
+_JSON_STRING = re.compile(rb'"(?:[^"\\]|\\.)*"', re.S)
+
+
+def _finite_float(text: str) -> float:
+    value = float(text)
+    if not math.isfinite(value):
+        raise ValueError(f"number {text[:40]} overflows binary64 (infinity is not allowed)")
+    return value
+
+
+def _exact_int(text: str) -> int:
+    value = int(text)
+    if abs(value) > MAX_JSON_INTEGER:
+        raise ValueError(f"integer {text[:40]} exceeds ±(2^53 - 1)")
+    return value
+
+
+def _unique_keys(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
+    result = dict(pairs)
+    if len(result) != len(pairs):
+        keys = [k for k, _ in pairs]
+        repeated = sorted({k for k in keys if keys.count(k) > 1})
+        raise ValueError(f"duplicate key {repeated[0]!r} in a JSON object")
+    return result
 
 
 def _payload_length(kind: str, latent_dim: int, n_graft: int, itemsize: int) -> int:
@@ -349,10 +477,14 @@ def encode_bvae(
         raise ValueError("a .bvae file needs at least one record")
     if len(records) > MAX_RECORDS:
         raise ValueError(f"a .bvae file holds at most {MAX_RECORDS} records, got {len(records)}")
-    names = [r.name for r in records]
-    duplicates = sorted({n for n in names if names.count(n) > 1})
-    if duplicates:
-        raise ValueError(f"material names must be unique in a file; repeated: {', '.join(duplicates)}")
+    seen: dict[str, str] = {}
+    for record in records:
+        key = name_collision_key(record.name)
+        if key in seen:
+            raise ValueError(
+                f"material names must be unique in a file, also ignoring case: {seen[key]!r} and {record.name!r}"
+            )
+        seen[key] = record.name
     latent_dim = records[0].latent_dim
     if any(r.latent_dim != latent_dim for r in records):
         raise ValueError("all records of a file must have the same latent dimension")
@@ -395,18 +527,15 @@ def encode_bvae(
         "latent_dtype": latent_dtype,
         "records": index,
     }
-    try:
-        text = json.dumps(header, sort_keys=True, separators=(",", ":"), ensure_ascii=False, allow_nan=False)
-    except (TypeError, ValueError) as error:
-        raise ValueError(f"record metadata must be JSON-serialisable finite values: {error}") from None
-    stored = text.encode("utf-8")
+    stored = canonical_json(header)
     if len(stored) > MAX_HEADER_JSON_BYTES:
         raise ValueError(f"header of {len(stored)} bytes exceeds {MAX_HEADER_JSON_BYTES}; split the library")
     flags = 0
     if compress_header is not False:
         import zstandard
 
-        packed = zstandard.ZstdCompressor(level=_ZSTD_LEVEL, write_content_size=True).compress(stored)
+        level = _ZSTD_LEVEL if len(stored) <= _ZSTD_FAST_ABOVE else _ZSTD_FAST_LEVEL
+        packed = zstandard.ZstdCompressor(level=level, write_content_size=True).compress(stored)
         if compress_header or len(packed) < len(stored):
             stored, flags = packed, FLAG_HEADER_ZSTD
     if len(stored) > MAX_HEADER_BYTES:
@@ -460,10 +589,6 @@ def _parse_preamble(path: str, preamble: bytes, file_size: int) -> tuple[int, in
             path, f"format version {major}.{minor} is not supported by this reader (version {FORMAT_MAJOR}.x); "
             "upgrade brdfcodec, or re-create the file with this version"
         )
-    if flags & ~KNOWN_FLAGS:
-        raise UnsupportedVersionError(
-            path, f"flag bits 0x{flags & ~KNOWN_FLAGS:08x} name features this reader does not know; upgrade brdfcodec"
-        )
     if header_length > MAX_HEADER_BYTES:
         raise _fail(path, f"header length {header_length} exceeds the maximum of {MAX_HEADER_BYTES} bytes")
     if PREAMBLE_SIZE + header_length > file_size:
@@ -472,24 +597,33 @@ def _parse_preamble(path: str, preamble: bytes, file_size: int) -> tuple[int, in
     return major, minor, flags, header_length, crc
 
 
+def _decompress_header(path: str, stored: bytes) -> bytes:
+    """The one zstandard frame of a compressed header (§3): declared size within the limit, nothing after it."""
+    import zstandard
+
+    try:
+        params = zstandard.get_frame_parameters(stored)
+        if params.content_size <= 0 or params.content_size > MAX_HEADER_JSON_BYTES:
+            raise _fail(path, "compressed header does not declare a content size within the limit")
+        raw = zstandard.ZstdDecompressor().decompress(stored, max_output_size=MAX_HEADER_JSON_BYTES)
+        stream = zstandard.ZstdDecompressor().decompressobj()
+        stream.decompress(stored)  # bounded: the frame just decompressed within the limit
+    except zstandard.ZstdError as error:
+        raise _fail(path, f"compressed header cannot be decompressed ({error})") from None
+    if stream.unused_data:
+        raise _fail(path, f"{len(stream.unused_data)} bytes after the compressed header's zstandard frame")
+    return raw
+
+
 def _header_json(path: str, preamble: bytes, stored: bytes, flags: int, crc: int) -> dict[str, Any]:
     if zlib.crc32(stored, zlib.crc32(preamble[:_CRC_COVERED_PREAMBLE])) != crc:
         raise BvaeChecksumError(path, "header CRC-32 mismatch: the file is corrupt (re-create or re-download it)")
-    raw = stored
-    if flags & FLAG_HEADER_ZSTD:
-        import zstandard
-
-        try:
-            params = zstandard.get_frame_parameters(stored)
-            if params.content_size <= 0 or params.content_size > MAX_HEADER_JSON_BYTES:
-                raise _fail(path, "compressed header does not declare a content size within the limit")
-            raw = zstandard.ZstdDecompressor().decompress(stored, max_output_size=MAX_HEADER_JSON_BYTES)
-        except zstandard.ZstdError as error:
-            raise _fail(path, f"compressed header cannot be decompressed ({error})") from None
-    try:
-        header = json.loads(raw.decode("utf-8"), parse_constant=_reject_constant)
-    except (UnicodeDecodeError, ValueError, RecursionError) as error:
-        raise _fail(path, f"header is not valid UTF-8 JSON ({error})") from None
+    if flags & ~KNOWN_FLAGS:  # after the CRC: a flipped bit is corruption, a set bit under a good CRC a new feature
+        raise UnsupportedVersionError(
+            path, f"flag bits 0x{flags & ~KNOWN_FLAGS:08x} name features this reader does not know; upgrade brdfcodec"
+        )
+    raw = _decompress_header(path, stored) if flags & FLAG_HEADER_ZSTD else stored
+    header = _check_json_text(raw, lambda problem: _fail(path, problem))
     if not isinstance(header, dict):
         raise _fail(path, "header is not a JSON object")
     return header
@@ -527,8 +661,11 @@ def _parse_header(path: str, header: dict[str, Any], preamble_fields: tuple[int,
     if not 1 <= len(raw_entries) <= MAX_RECORDS:
         raise _fail(path, f"record count {len(raw_entries)} is outside [1, {MAX_RECORDS}]")
     itemsize = _DTYPES[latent_dtype].itemsize
+    created_by = header.get("created_by", "")
+    if not isinstance(created_by, str):
+        raise _fail(path, f"header field 'created_by' must be a string, got {type(created_by).__name__}")
     entries: list[RecordEntry] = []
-    seen: set[str] = set()
+    seen: dict[str, str] = {}
     offset = 0
     for i, raw in enumerate(raw_entries):
         where = f"record {i}"
@@ -539,9 +676,11 @@ def _parse_header(path: str, header: dict[str, Any], preamble_fields: tuple[int,
             _check_name(entry_name)
         except ValueError as error:
             raise _fail(path, f"{where}: {error}") from None
-        if entry_name in seen:
-            raise _fail(path, f"material name {entry_name!r} appears twice")
-        seen.add(entry_name)
+        key = name_collision_key(entry_name)
+        if key in seen:
+            twin = "" if seen[key] == entry_name else f" (as {seen[key]!r}: names differ only in case)"
+            raise _fail(path, f"material name {entry_name!r} appears twice{twin}")
+        seen[key] = entry_name
         kind = _require(path, raw, "kind", str, where)
         if kind not in _RECORD_KINDS:
             raise UnsupportedVersionError(
@@ -558,12 +697,17 @@ def _parse_header(path: str, header: dict[str, Any], preamble_fields: tuple[int,
             ):
                 raise _fail(path, f"{where} ({entry_name}) has invalid graft_dims {dims!r}")
             graft_dims = tuple(dims)
+        elif "graft_dims" in raw:
+            raise _fail(path, f"{where} ({entry_name}) of kind {kind!r} has graft_dims (only graft records do)")
         start = _require(path, raw, "offset", int, where)
         length = _require(path, raw, "length", int, where)
         crc = _require(path, raw, "crc32", int, where)
         meta = raw.get("meta", {})
         if not isinstance(meta, dict):
             raise _fail(path, f"{where} ({entry_name}) field 'meta' is not a JSON object")
+        problem = _meta_problem(meta)
+        if problem is not None:
+            raise _fail(path, f"{where} ({entry_name}): {problem}")
         if start != offset:
             raise _fail(path, f"{where} ({entry_name}) starts at {start}, expected {offset} (records are contiguous)")
         expected = _payload_length(kind, latent_dim, len(graft_dims), itemsize)
@@ -590,7 +734,6 @@ def _parse_header(path: str, header: dict[str, Any], preamble_fields: tuple[int,
         raise _fail(path, f"truncated: the records need {expected_size} bytes, the file has {file_size}")
     if file_size > expected_size:
         raise _fail(path, f"{file_size - expected_size} trailing bytes after the last record")
-    created_by = header.get("created_by", "")
     return BvaeHeader(
         major=major,
         minor=minor,
@@ -599,7 +742,7 @@ def _parse_header(path: str, header: dict[str, Any], preamble_fields: tuple[int,
         latent_dim=latent_dim,
         latent_dtype=latent_dtype,  # type: ignore[arg-type]
         entries=tuple(entries),
-        created_by=created_by if isinstance(created_by, str) else "",
+        created_by=created_by,
         header_bytes=header_length,
         records_offset=records_offset,
         file_size=file_size,

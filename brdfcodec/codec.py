@@ -28,8 +28,9 @@ from __future__ import annotations
 import functools
 import itertools
 import os
+import warnings
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Literal
 
@@ -49,8 +50,13 @@ from brdfcodec.bvae_format import (
     encode_bvae,
     parse_bvae,
 )
-from brdfcodec.conventions import N_KEPT_SLICES, NETWORK_INPUT_SHAPE, UNMEASURED_VALUE
-from brdfcodec.errors import DecoderMismatchError
+from brdfcodec.conventions import MAPPED_MAX, N_KEPT_SLICES, NETWORK_INPUT_SHAPE, UNMEASURED_VALUE
+from brdfcodec.errors import (
+    DecoderMismatchError,
+    DecoderNotFoundError,
+    LatentDimensionError,
+    UnmeasuredMaterialError,
+)
 from brdfcodec.inputs import read_measured
 from brdfcodec.mask import horizon_mask, kept_slice_horizon_mask
 from brdfcodec.merl import MerlBRDF
@@ -67,6 +73,7 @@ from brdfcodec.representation import (
     reflectance_from_mapped,
     table_from_mapped,
     to_network_layout,
+    unmap_values,
     validate_phi_d_bins,
 )
 
@@ -83,6 +90,7 @@ __all__ = [
     "encode",
     "encode_records",
     "measure",
+    "prepare_source",
     "resolve_model",
 ]
 
@@ -106,6 +114,54 @@ def resolve_model(model: ModelSpec) -> ModelManifest:
     if len(text) == 64 and all(c in "0123456789abcdef" for c in text.lower()) and not Path(text).exists():
         return find_model(text)
     return load_manifest(text)
+
+
+class ClampWarning(UserWarning):
+    """A source table held values beyond the range the codec represents; they were clamped (the message says how
+    many)."""
+
+
+def _stored_limit() -> np.ndarray:
+    """Largest stored value per channel the codec represents: the inverse mapping of ``MAPPED_MAX``."""
+    return unmap_values(np.full(3, MAPPED_MAX, dtype=np.float64))
+
+
+def prepare_source(brdf: MerlBRDF, *, warn: bool = True) -> MerlBRDF:
+    """A table ready for encoding and measuring: refused if nothing is measured, clamped to the codec's range.
+
+    A black table (all 0) is a valid material and passes unchanged. Stored
+    values whose mapping exceeds ``MAPPED_MAX`` (about 1.05e8 /sr of
+    reflectance) are clamped to that value, with a :class:`ClampWarning`
+    saying how many entries and by how much; the table's SHA-256 stays that
+    of its source.
+
+    Raises
+    ------
+    UnmeasuredMaterialError
+        No entry above the horizon is measured (all negative).
+    """
+    where = os.fspath(brdf.path) if brdf.path is not None else (brdf.name or "<table>")
+    if not brdf.mask.any():
+        raise UnmeasuredMaterialError(
+            where, "no measured entry above the horizon (every value is negative, MERL's 'unmeasured'): "
+            "there is nothing to compress"
+        )
+    limit = _stored_limit().reshape(3, 1, 1, 1)
+    over = brdf.values > limit  # below-horizon entries too: nothing downstream may overflow
+    if not over.any():
+        return brdf
+    count = int(np.count_nonzero(over & brdf.mask))
+    if warn and count:
+        largest = float((brdf.values / limit)[over & brdf.mask].max())
+        warnings.warn(
+            f"{where}: {count} of {int(np.count_nonzero(brdf.mask))} measured entries exceed the largest value "
+            f"the codec represents (mapped {MAPPED_MAX:g}, about 1.05e8 /sr), by up to {largest:.3g}x; "
+            "they were clamped to it",
+            ClampWarning,
+            stacklevel=2,
+        )
+    clamped = np.where(over, np.broadcast_to(limit, brdf.values.shape), brdf.values)
+    return replace(brdf, values=clamped, _file_sha256=brdf.sha256)  # provenance kept: name, path, source
 
 
 @functools.cache
@@ -148,7 +204,7 @@ def _with_layers(record: Record, mapped: np.ndarray) -> np.ndarray:
     from brdfcodec.layers.detail import decode_detail
 
     mapped += decode_detail(record.detail).reshape(mapped.shape)  # type: ignore[union-attr]
-    return clamp_mapped(mapped, out=mapped)  # base + detail, then the one clamp (spec §4.3, §6)
+    return clamp_mapped(mapped, out=mapped)  # base + detail, then the one clamp (spec §4.4, §6)
 
 
 class BrdfDecoder:
@@ -237,6 +293,8 @@ class BrdfDecoder:
         ------
         DecoderMismatchError
             Names both hashes and says how to get the right model.
+        LatentDimensionError
+            The file's ``latent_dim`` is not the decoder's.
         """
         mine = self.reference
         if mine is None or header.decoder.sha256 != mine.sha256:
@@ -245,6 +303,12 @@ class BrdfDecoder:
             raise DecoderMismatchError(
                 f"{where}the file needs decoder {header.decoder.sha256} ({header.decoder.name}), but this decoder is "
                 f"{own}; open it with BrdfDecoder.for_header, or register the model folder that made it"
+            )
+        if header.latent_dim != self.latent_dim:
+            raise LatentDimensionError(
+                path or "<bvae>",
+                f"declares latent_dim {header.latent_dim}, but its decoder {header.decoder.name} "
+                f"({header.decoder.sha256[:12]}…) has {self.latent_dim}: the file is inconsistent",
             )
 
     def _codes(self, codes: npt.ArrayLike) -> tuple[np.ndarray, bool]:
@@ -312,7 +376,7 @@ class BrdfDecoder:
                 from brdfcodec.layers.detail import decode_detail
 
                 out[channels] += decode_detail(record.detail, slots).reshape(len(channels), *out.shape[1:])
-                clamp_mapped(out, out=out)  # base + detail, then the one clamp (spec §4.3, §6)
+                clamp_mapped(out, out=out)  # base + detail, then the one clamp (spec §4.4, §6)
         return out
 
     def mapped_record(self, record: Record) -> npt.NDArray[np.float32]:
@@ -545,7 +609,7 @@ class BrdfEncoder:
         """Posterior mean and standard deviation, each of shape (len(brdfs), latent_dim), float32."""
         mus, sigmas = [], []
         for start in range(0, len(brdfs), batch_size):
-            chunk = brdfs[start : start + batch_size]
+            chunk = [prepare_source(b) for b in brdfs[start : start + batch_size]]
             inputs = np.stack([network_input_from_table(b.values, b.mask)[0] for b in chunk])
             mu, sigma = self.posterior_from_inputs(inputs, batch_size=batch_size)
             mus.append(mu)
@@ -563,7 +627,7 @@ class BrdfEncoder:
         labels = list(names) if names is not None else [b.name or f"material-{i}" for i, b in enumerate(brdfs)]
         records: list[LatentRecord] = []
         for start in range(0, len(brdfs), batch_size):
-            chunk = brdfs[start : start + batch_size]
+            chunk = [prepare_source(b) for b in brdfs[start : start + batch_size]]
             arrays = [network_input_from_table(b.values, b.mask) for b in chunk]
             records += self.encode_arrays(
                 labels[start : start + batch_size], np.stack([a[0] for a in arrays]), np.stack([a[1] for a in arrays]),
@@ -588,13 +652,24 @@ class BrdfEncoder:
 
 
 def measure(record: Record, decoder: BrdfDecoder, source: MerlBRDF) -> LatentRecord | GraftRecord:
-    """The record with ``meta["relae"]`` set to the mapped and linear RelAE of its decode against ``source``."""
+    """The record with ``meta["relae"]`` set to the RelAE of its decode against ``source`` (and its SHA-256).
+
+    The RelAE (mapped and linear) is measured against the source as
+    :func:`prepare_source` gives it. A material that reflects nothing (all
+    0) has no RelAE (0/0): ``relae`` is then left out, with a warning.
+    """
+    source = prepare_source(source, warn=False)
     estimate = decoder.decode(record, masked="keep").astype(np.float64)
     report = error_report(source.values, estimate, source.mask)
-    meta = {
-        **record.meta,
-        "relae": {"mapped": report.relae_mapped.overall, "linear": report.relae_linear.overall},
-    }
+    meta = {key: value for key, value in record.meta.items() if key != "relae"}
+    meta["source_sha256"] = source.source_sha256 or source.sha256
+    relae = {"mapped": report.relae_mapped.overall, "linear": report.relae_linear.overall}
+    if all(np.isfinite(v) for v in relae.values()):
+        meta["relae"] = relae
+    else:
+        where = os.fspath(source.path) if source.path is not None else (source.name or record.name)
+        warnings.warn(f"{where}: RelAE is undefined for a material that reflects nothing (black); not stored",
+                      stacklevel=2)
     if isinstance(record, GraftRecord):
         return GraftRecord(record.name, record.mu, record.sigma, record.graft_dims, record.graft_values, meta)
     if getattr(record, "detail", None) is not None:  # issue 14: layered record
@@ -716,7 +791,10 @@ class MaterialLibrary(Mapping[str, DecodedMaterial]):
         self.header = header
         self._read = read
         self._close = close
-        self.decoder = decoder if decoder is not None else BrdfDecoder.for_header(header)
+        try:
+            self.decoder = decoder if decoder is not None else BrdfDecoder.for_header(header)
+        except DecoderNotFoundError as error:  # say which file needs the missing decoder
+            raise type(error)(f"{os.fspath(where)}: {error}") from None
         self.decoder.check(header, where)
         self._materials: dict[str, DecodedMaterial] = {}
 
@@ -782,7 +860,7 @@ EncodeSource = MerlBRDF | MaterialInput | str | os.PathLike[str]
 def _as_input(source: EncodeSource, index: int, name: str | None) -> MaterialInput:
     if isinstance(source, MaterialInput):
         return source if name is None else MaterialInput(name, source.inputs, source.source, source.mask)
-    brdf = source if isinstance(source, MerlBRDF) else read_measured(source)
+    brdf = prepare_source(source if isinstance(source, MerlBRDF) else read_measured(source))
     label = name or brdf.name or f"material-{index}"
     inputs, mask = network_input_from_table(brdf.values, brdf.mask)
     return MaterialInput(label, inputs, brdf, mask)

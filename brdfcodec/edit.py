@@ -5,6 +5,15 @@ Every edit returns a record (:class:`~brdfcodec.bvae_format.LatentRecord` or
 ``.bvae`` file and decoded like any other. A graft record has D + k
 parameters (its code and the k grafted colour values); edits act on all of
 them, so interpolating two grafted materials also interpolates their green.
+
+Edited records carry provenance, not measurements (``spec/bvae-format.md``
+§5.1): ``meta`` holds only ``edit`` (the operation and its operands, with
+parameters numbered from 1 as on the command line and in the model card);
+the source's RelAE and checksum are not copied, since they describe another
+material. ``sigma`` follows ``mu``: copied by traversal and grafting, taken
+per parameter with it by per-factor mixing, and interpolated geometrically
+(so it stays > 0 for any t) by interpolation. Python arguments such as
+``dim`` stay 0-based, as in NumPy.
 """
 
 from __future__ import annotations
@@ -37,14 +46,25 @@ def parameter_vector(record: Record) -> np.ndarray:
     return record.mu.copy()
 
 
-def with_parameters(record: Record, values: npt.ArrayLike, *, name: str, edit: dict[str, Any]) -> Record:
-    """A record like ``record`` with new parameter values (same kind and graft dims), ``meta["edit"]`` set."""
+def with_parameters(
+    record: Record,
+    values: npt.ArrayLike,
+    *,
+    name: str,
+    edit: dict[str, Any],
+    sigma: npt.ArrayLike | None = None,
+) -> Record:
+    """A record like ``record`` with new parameter values (same kind and graft dims), ``meta["edit"]`` set.
+
+    ``sigma`` (shape (latent_dim,)) defaults to the record's.
+    """
     values = np.asarray(values, dtype=np.float32)
     meta = {"edit": edit}
     d = record.latent_dim
+    spread = record.sigma if sigma is None else np.asarray(sigma, dtype=np.float32)
     if isinstance(record, GraftRecord):
-        return GraftRecord(name, values[:d], record.sigma, record.graft_dims, values[d:], meta)
-    return LatentRecord(name, values, record.sigma, meta)
+        return GraftRecord(name, values[:d], spread, record.graft_dims, values[d:], meta)
+    return LatentRecord(name, values, spread, meta)
 
 
 def traverse(
@@ -81,7 +101,7 @@ def traverse(
     for value in values:
         new = params.copy()
         new[dim] = params[dim] + value if unit == "sigma" else value
-        edit = {"op": "traverse", "source": record.name, "dim": dim, "value": float(value), "unit": unit}
+        edit = {"op": "traverse", "source": record.name, "parameter": dim + 1, "value": float(value), "unit": unit}
         out.append(with_parameters(record, new, name=f"{base}.z{dim + 1}{value:+g}", edit=edit))
     return out
 
@@ -104,8 +124,8 @@ def interpolate(a: Record, b: Record, t: float, *, name: str | None = None) -> R
     _check_compatible(a, b)
     pa, pb = parameter_vector(a), parameter_vector(b)
     values = pa if t == 0 else pb if t == 1 else (1 - t) * pa + t * pb
-    sigma_source = a if t < 0.5 else b
-    return with_parameters(sigma_source, values, name=name or f"{a.name}~{b.name}@{t:g}",
+    sigma = a.sigma if t == 0 else b.sigma if t == 1 else np.exp((1 - t) * np.log(a.sigma) + t * np.log(b.sigma))
+    return with_parameters(a, values, name=name or f"{a.name}~{b.name}@{t:g}", sigma=sigma,
                            edit={"op": "interpolate", "a": a.name, "b": b.name, "t": float(t)})
 
 
@@ -118,8 +138,11 @@ def mix_factors(a: Record, b: Record, dims_from_a: Sequence[int], *, name: str |
         raise ValueError(f"dims_from_a must lie in [0, {pa.size}), got {list(dims_from_a)}")
     values = pb.copy()
     values[chosen] = pa[chosen]
-    return with_parameters(b, values, name=name or f"{a.name}+{b.name}",
-                           edit={"op": "mix", "a": a.name, "b": b.name, "dims_from_a": chosen})
+    sigma = b.sigma.copy()
+    latent_chosen = [d for d in chosen if d < sigma.size]
+    sigma[latent_chosen] = a.sigma[latent_chosen]
+    return with_parameters(b, values, name=name or f"{a.name}+{b.name}", sigma=sigma,
+                           edit={"op": "mix", "a": a.name, "b": b.name, "parameters_from_a": [d + 1 for d in chosen]})
 
 
 def graft(
@@ -145,7 +168,7 @@ def graft(
         record.sigma,
         tuple(int(d) for d in colour_dims),
         np.asarray(graft_values, dtype=np.float32).reshape(-1),
-        {**record.meta, "edit": {"op": "graft", "source": record.name}},
+        {"edit": {"op": "graft", "source": record.name}},
     )
 
 
@@ -247,7 +270,7 @@ def refine_code(
     """
     code, _, loss = _fit(decoder, record, target_mapped, target_mask, None, True, steps, learning_rate)
     return LatentRecord(record.name, code, record.sigma,
-                        {**record.meta, "edit": {"op": "refine", "source": record.name, "l1_mapped": loss}})
+                        {"edit": {"op": "refine", "source": record.name, "l1_mapped": loss}})
 
 
 def fit_graft(
@@ -288,5 +311,5 @@ def fit_graft(
     code, values, loss = _fit(decoder, record, target_mapped, target_mask, dims, optimise_code, steps, learning_rate)
     if values is None:  # _fit returns graft values whenever it is given graft dimensions
         raise RuntimeError("graft fitting returned no grafted values")
-    meta = {**record.meta, "edit": {"op": "fit-graft", "source": record.name, "l1_mapped": loss}}
+    meta = {"edit": {"op": "fit-graft", "source": record.name, "l1_mapped": loss}}
     return GraftRecord(record.name, code, record.sigma, tuple(dims), values, meta)

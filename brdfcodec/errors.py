@@ -19,6 +19,7 @@ __all__ = [
     "DecoderMismatchError",
     "DecoderNotFoundError",
     "FileFormatError",
+    "LatentDimensionError",
     "MerlFormatError",
     "ModelChecksumError",
     "ModelNotFoundError",
@@ -26,6 +27,7 @@ __all__ = [
     "OptionalDependencyError",
     "RateTargetError",
     "SourceFormatError",
+    "UnmeasuredMaterialError",
     "UnsupportedVersionError",
 ]
 
@@ -63,6 +65,10 @@ class SourceFormatError(FileFormatError):
     """A dataset source (an NBRDF fit archive, say) is malformed."""
 
 
+class UnmeasuredMaterialError(MerlFormatError):
+    """A MERL table has no measured entry above the horizon: there is nothing to compress."""
+
+
 class DatasetError(FileFormatError):
     """An HDF5 dataset file is missing, malformed or of an unknown version."""
 
@@ -77,6 +83,14 @@ class BvaeChecksumError(BvaeFormatError):
 
 class UnsupportedVersionError(BvaeFormatError):
     """A ``.bvae`` file needs a newer reader: unknown major version, flag or record kind."""
+
+
+class LatentDimensionError(BvaeFormatError):
+    """A ``.bvae`` file declares a latent size other than that of the decoder it names.
+
+    Raised when the file is opened for decoding (``spec/bvae-format.md`` §6):
+    the file and its decoder reference contradict each other.
+    """
 
 
 class DecoderNotFoundError(BrdfcodecError):

@@ -34,6 +34,18 @@ def _axis_corners(coordinate: np.ndarray, n: int, periodic: bool) -> tuple[np.nd
     return lower, lower + 1, clamped - lower
 
 
+def _directions(values: npt.ArrayLike, label: str) -> np.ndarray:
+    """Direction vectors as float64 (..., 3): finite and non-zero (any length; they are normalised)."""
+    array = np.asarray(values, dtype=np.float64)
+    if array.ndim == 0 or array.shape[-1] != 3:
+        raise ValueError(f"{label} must hold 3-vectors, shape (..., 3), got shape {array.shape}")
+    if not np.isfinite(array).all():
+        raise ValueError(f"{label} holds NaN or infinite components")
+    if not (np.abs(array) > 0).any(axis=-1).all():
+        raise ValueError(f"{label} holds zero vectors (a direction needs a length > 0)")
+    return array
+
+
 def lookup(
     table: npt.ArrayLike,
     wi: npt.ArrayLike,
@@ -50,8 +62,10 @@ def lookup(
         Values in MERL layout, in whatever units the caller wants back
         (usually physical reflectance, 1/sr).
     wi, wo : array_like, shape (..., 3)
-        Incoming and outgoing directions in the shading frame (z = normal),
-        broadcast together. Exchanging them gives the same result.
+        Incoming and outgoing directions in the shading frame (z = normal,
+        pointing away from the surface), broadcast together; any finite,
+        non-zero length (they are normalised). Exchanging them gives the
+        same result.
     mode : {"nearest", "trilinear"}, default "nearest"
         ``nearest`` returns the entry of the bin holding the angles (as
         MERL's reader does). ``trilinear`` interpolates between the
@@ -67,6 +81,12 @@ def lookup(
     ndarray of float64, shape (..., 3)
         RGB values. Pairs with either direction at or below the horizon
         give 0.
+
+    Raises
+    ------
+    ValueError
+        A direction array whose last axis is not 3, that holds NaN, infinite
+        or zero vectors, or that does not broadcast with the other.
     """
     values = np.asarray(table)
     if values.dtype not in (np.float32, np.float64):  # float32 tables (decoded materials) are read as they are
@@ -78,8 +98,12 @@ def lookup(
     valid = None if mask is None else np.asarray(mask, dtype=bool)
     if valid is not None and valid.shape != TABLE_SHAPE:
         raise ValueError(f"mask must have shape {TABLE_SHAPE}, got {valid.shape}")
-    wi_arr = np.asarray(wi, dtype=np.float64)
-    wo_arr = np.asarray(wo, dtype=np.float64)
+    wi_arr = _directions(wi, "wi")
+    wo_arr = _directions(wo, "wo")
+    try:
+        np.broadcast_shapes(wi_arr.shape, wo_arr.shape)
+    except ValueError:
+        raise ValueError(f"wi and wo do not broadcast together: shapes {wi_arr.shape} and {wo_arr.shape}") from None
     theta_h, theta_d, phi_d, _ = half_diff_from_directions(wi_arr, wo_arr)
     wi_b, wo_b = np.broadcast_arrays(wi_arr, wo_arr)
     above = (wi_b[..., 2] > HORIZON_COS_MIN) & (wo_b[..., 2] > HORIZON_COS_MIN)

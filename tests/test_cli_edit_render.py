@@ -53,9 +53,9 @@ def test_edit_operations(capsys, library: Path, tmp_path: Path) -> None:
 
     code, _, err = run(capsys, "edit", "graft", str(library), "--material", "gold", "--values", "1",
                        "-o", str(tmp_path / "bad.bvae"))
-    assert code == 1 and "colour dimensions" in err and not (tmp_path / "bad.bvae").exists()
+    assert code == 2 and "colour dimensions" in err and not (tmp_path / "bad.bvae").exists()
     code, _, err = run(capsys, "edit", "traverse", str(library), "--dim", "1", "-o", str(tmp_path / "x.bvae"))
-    assert code == 1 and "--material" in err
+    assert code == 2 and "--material" in err  # usage errors exit 2 (README)
 
 
 def test_render_outputs(capsys, library: Path, tmp_path: Path) -> None:

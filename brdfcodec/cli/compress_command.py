@@ -66,9 +66,9 @@ def _measured_item(path: Path) -> _Item:
     name = default_material_name(path)
 
     def load() -> MaterialInput:
-        from brdfcodec.codec import MaterialInput
+        from brdfcodec.codec import MaterialInput, prepare_source
 
-        brdf = read_measured(path, name=name)
+        brdf = prepare_source(read_measured(path, name=name))  # nothing measured: an error; beyond range: clamped
         inputs, mask = network_input_from_table(brdf.values, brdf.mask)
         return MaterialInput(name, inputs, brdf, mask)
 
@@ -149,9 +149,11 @@ def run(args: argparse.Namespace) -> int:
         if "relae" in record.meta:
             relae = record.meta["relae"]
             lines.append(f"  {record.name:<32} RelAE mapped {relae['mapped']:.4f}  linear {relae['linear']:.4f}")
-        else:
+        elif args.no_measure or "source_sha256" not in record.meta:
             why = "--no-measure" if args.no_measure else "no source table"
             lines.append(f"  {record.name:<32} (RelAE not measured: {why})")
+        else:
+            lines.append(f"  {record.name:<32} (RelAE undefined: the material reflects nothing)")
     if encoder.reference is None:  # loaded from a model folder, so it has one
         raise RuntimeError("the encoder has no decoder reference")
     size = write_bvae(args.output, records, encoder.reference, latent_dtype=dtype, overwrite=args.force)

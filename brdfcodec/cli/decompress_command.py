@@ -9,7 +9,9 @@ from typing import TYPE_CHECKING
 from tqdm import tqdm
 
 from brdfcodec.atomic import check_output_path
+from brdfcodec.cli.usage import UsageError
 from brdfcodec.conventions import N_PHI_D
+from brdfcodec.material_names import material_file_path
 from brdfcodec.table_output import TABLE_FORMATS, table_format_of, write_table
 
 if TYPE_CHECKING:
@@ -64,28 +66,41 @@ def run(args: argparse.Namespace) -> int:
     with MaterialLibrary(args.input) as library:
         names = args.material or library.names
         for name in names:
-            library.header.entry(name)  # unknown names fail before anything is written
+            library.record(name)  # unknown names and corrupt records fail before anything is written
         single = len(names) == 1 and (args.material is not None or len(library) == 1)
         if single:
             table_format_of(args.output)
             targets = {names[0]: check_output_path(args.output, overwrite=args.force)}
         else:
             if args.output.exists() and not args.output.is_dir():
-                raise ValueError(f"{args.output}: several materials need an output folder, not a file")
+                raise UsageError(f"{args.output}: several materials need an output folder, not a file")
+            for name in names:
+                material_file_path(args.output, name, args.format)  # refuse bad names before creating anything
             args.output.mkdir(parents=True, exist_ok=True)
-            targets = {n: check_output_path(args.output / f"{n}.{args.format}", overwrite=args.force) for n in names}
+            # A material name never chooses a folder: material_file_path keeps every file inside args.output.
+            targets = {
+                n: check_output_path(material_file_path(args.output, n, args.format), overwrite=args.force)
+                for n in names
+            }
         if args.reference is not None and not single:
-            raise ValueError("--reference needs a single material (use --material)")
+            raise UsageError("--reference needs a single material (use --material)")
         for name, target in tqdm(targets.items(), desc="decompress", unit="material", disable=len(targets) < 2 or None):
             material = library[name]
             table = material.table(phi_d_bins=args.phi_d, masked=args.masked)
+            note = _stored_error_note(material.record.meta)  # before writing: nothing may fail after a write
             kind = write_table(target, table, phi_d_bins=args.phi_d, overwrite=args.force)
-            stored = material.record.meta.get("relae", {})
-            note = f" (RelAE at encode time: mapped {stored['mapped']:.4f})" if "mapped" in stored else ""
             print(f"wrote {target} ({name}, {kind}){note}")
         if args.reference is not None:
             _print_reference_error(args.reference, library[names[0]])
     return 0
+
+
+def _stored_error_note(meta: dict) -> str:
+    """`` (RelAE at encode time: mapped 0.0123)`` when the record carries a measurement, else ``""``."""
+    stored = meta.get("relae")
+    if isinstance(stored, dict) and isinstance(stored.get("mapped"), int | float):
+        return f" (RelAE at encode time: mapped {float(stored['mapped']):.4f})"
+    return ""
 
 
 def _print_reference_error(path: Path, material: DecodedMaterial) -> None:

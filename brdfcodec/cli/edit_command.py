@@ -6,6 +6,7 @@ import argparse
 from pathlib import Path
 
 from brdfcodec.bvae_format import BvaeLibrary, LatentRecord, Record, read_bvae, write_bvae
+from brdfcodec.cli.usage import UsageError
 
 __all__ = ["parse_floats", "register"]
 
@@ -73,7 +74,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
 def _pick(library: BvaeLibrary, path: Path, name: str | None) -> Record:
     if name is None:
         if len(library.records) != 1:
-            raise ValueError(f"{path}: holds {len(library.records)} materials; name one with --material")
+            raise UsageError(f"{path}: holds {len(library.records)} materials; name one with --material")
         return library.records[0]
     return library.record(name)
 
@@ -88,6 +89,20 @@ def _operand(library: BvaeLibrary, path: Path, spec: str) -> tuple[Record, BvaeL
     return library.record(spec), library
 
 
+def _parameter_count(record: Record) -> int:
+    from brdfcodec.edit import parameter_vector
+
+    return int(parameter_vector(record).size)
+
+
+def _check_parameters(numbers_from_zero: list[int], record: Record, option: str) -> None:
+    """Parameter numbers as typed (from 1) must exist in the record: a usage error otherwise."""
+    count = _parameter_count(record)
+    wrong = [d + 1 for d in numbers_from_zero if not 0 <= d < count]
+    if wrong:
+        raise UsageError(f"{option}: parameter {wrong[0]} does not exist; {record.name} has parameters 1 to {count}")
+
+
 def run(args: argparse.Namespace) -> int:
     """Apply the edit and write the new records."""
     from brdfcodec import edit
@@ -96,11 +111,13 @@ def run(args: argparse.Namespace) -> int:
     records: list[Record]
     if args.operation == "traverse":
         record = _pick(library, args.input, args.material)
+        _check_parameters([args.dim - 1], record, "--dim")
         records = edit.traverse(record, args.dim - 1, args.values, unit="absolute" if args.absolute else "sigma")
     elif args.operation == "interp":
         a, _ = _operand(library, args.input, args.a)
         b, _ = _operand(library, args.input, args.b)
         if args.factors_from_a is not None:
+            _check_parameters(args.factors_from_a, a, "--factors-from-a")
             records = [edit.mix_factors(a, b, args.factors_from_a)]
         else:
             records = [edit.interpolate(a, b, t) for t in args.t]
@@ -113,7 +130,7 @@ def run(args: argparse.Namespace) -> int:
         decoder = BrdfDecoder.for_header(library.header)
         if args.values is not None:
             if len(args.values) != len(decoder.colour_dims):
-                raise ValueError(f"the model has {len(decoder.colour_dims)} colour dimensions "
+                raise UsageError(f"the model has {len(decoder.colour_dims)} colour dimensions "
                                  f"({', '.join(str(d + 1) for d in decoder.colour_dims)}); give one value each")
             records = [edit.graft(record, args.values, decoder.colour_dims)]
         else:

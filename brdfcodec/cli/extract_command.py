@@ -7,6 +7,7 @@ import sys
 from pathlib import Path
 
 from brdfcodec.bvae_format import read_bvae, write_bvae
+from brdfcodec.cli.usage import UsageError
 
 __all__ = ["register"]
 
@@ -39,10 +40,10 @@ def run(args: argparse.Namespace) -> int:
         print("bvae extract: error: name the library and at least one --material, or a --scene", file=sys.stderr)
         return 2  # a usage error, as argparse's own
     if args.output.resolve() == args.input.resolve():
-        raise ValueError(f"{args.output}: the output must not be the input")
+        raise UsageError(f"{args.output}: the output must not be the input")
     library = read_bvae(args.input)
     if len(set(args.material)) != len(args.material):
-        raise ValueError("a material is named twice")
+        raise UsageError("a material is named twice")
     records = [library.record(name) for name in args.material]
     size = write_bvae(
         args.output, records, library.header.decoder, latent_dtype=library.header.latent_dtype, overwrite=args.force

@@ -10,7 +10,7 @@ from typing import Any
 
 import numpy as np
 
-from brdfcodec.bvae_format import FLAG_HEADER_ZSTD, read_header
+from brdfcodec.bvae_format import FLAG_HEADER_ZSTD, read_bvae
 from brdfcodec.bvae_format import MAGIC as BVAE_MAGIC
 from brdfcodec.conventions import MERL_SHAPE
 from brdfcodec.dataset import HDF5_SIGNATURE
@@ -33,7 +33,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
         help="describe MERL .binary files, .bvae files and dataset files",
         description="Describe MERL .binary BRDF tables (dimensions, valid entries, per-channel "
         "range, whether it is a genuine MERL file), .bvae files (version, decoder and whether it is installed, "
-        "materials, sizes) and brdfcodec dataset files. Nothing is decoded.",
+        "materials, sizes) and brdfcodec dataset files. Nothing is decoded; a .bvae file is verified whole "
+        "(header and every record's CRC-32 and values), as a decoder would.",
     )
     parser.add_argument("files", nargs="+", metavar="FILE", type=Path, help="files to describe")
     parser.add_argument("--json", action="store_true", help="print one JSON object per file")
@@ -91,7 +92,7 @@ def _bvae_summary(path: Path) -> dict[str, Any]:
     from brdfcodec.errors import DecoderNotFoundError
     from brdfcodec.models.registry import find_model
 
-    header = read_header(path)
+    header = read_bvae(path).header  # every record verified (CRC, finite values, sigma > 0), not only the header
     try:
         model = find_model(header.decoder.sha256)
         installed: str | None = str(model.folder)
@@ -241,7 +242,7 @@ def run(args: argparse.Namespace) -> int:
     for index, path in enumerate(args.files):
         summary = describe_file(path)
         if args.json:
-            print(json.dumps(summary))
+            print(json.dumps(summary, allow_nan=False))
         else:
             if index:
                 print()

@@ -2,16 +2,34 @@
 
 Each sub-command lives in its own module with ``register(subparsers)``; its
 handler returns an exit code. Errors about data or files are printed as one
-line naming the file and the problem, with exit code 1; usage errors exit
-with 2; nothing prints a traceback unless ``BVAE_DEBUG=1`` is set.
+line naming the file and the problem; nothing prints a traceback unless
+``BVAE_DEBUG=1`` is set. Exit codes (README, "Command line"):
+
+====  ==========================================================
+0     success
+1     bad input: a malformed or missing file, an output that exists
+2     usage: arguments argparse refuses, or that make no sense together
+3     internal error (a bug: please report it)
+130   interrupted (Ctrl-C, SIGINT)
+141   standard output closed early (``bvae info f.bvae | head``): quiet, like other tools
+143   terminated (SIGTERM); partial outputs are removed in every case
+====  ==========================================================
+
+Threads: torch's intra-op thread pool is sized for one process per machine,
+so several ``bvae`` processes on a small machine oversubscribe it. ``bvae`` therefore
+uses half the cores (at least 1, at most 8) unless ``BVAE_NUM_THREADS`` or
+``OMP_NUM_THREADS`` says otherwise.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import os
+import signal
 import sys
-from collections.abc import Sequence
+import warnings
+from collections.abc import Iterator, Sequence
 
 from brdfcodec.cli import (
     analytic_command,
@@ -27,16 +45,86 @@ from brdfcodec.cli import (
     studio_command,
     train_command,
 )
+from brdfcodec.cli.usage import UsageError
 from brdfcodec.errors import BrdfcodecError
 from brdfcodec.version import __version__
 
-__all__ = ["build_parser", "main"]
+__all__ = ["build_parser", "configure_threads", "main"]
 
 EXIT_OK = 0
 EXIT_ERROR = 1
 EXIT_USAGE = 2
 EXIT_INTERNAL = 3
 EXIT_INTERRUPTED = 130
+EXIT_BROKEN_PIPE = 128 + 13
+EXIT_TERMINATED = 128 + 15
+#: Most threads ``bvae`` gives torch by default.
+MAX_DEFAULT_THREADS = 8
+
+
+class Terminated(BaseException):
+    """SIGTERM arrived: unwinds like ``KeyboardInterrupt`` so that partial outputs are removed."""
+
+
+def default_thread_count(cpu_count: int | None = None) -> int:
+    """Threads for one ``bvae`` process: half the cores, at least 1, at most :data:`MAX_DEFAULT_THREADS`."""
+    cores = cpu_count if cpu_count is not None else (os.cpu_count() or 1)
+    return max(1, min(MAX_DEFAULT_THREADS, cores // 2))
+
+
+def configure_threads(environ: dict[str, str] | None = None) -> int:
+    """Choose the thread count of a ``bvae`` run and apply it; return it.
+
+    ``BVAE_NUM_THREADS`` wins, then ``OMP_NUM_THREADS``, then
+    :func:`default_thread_count`. The choice is exported as
+    ``OMP_NUM_THREADS`` (read by torch when it is first imported) and applied
+    to torch directly if it is already imported.
+    """
+    env = os.environ if environ is None else environ
+    chosen = env.get("BVAE_NUM_THREADS") or env.get("OMP_NUM_THREADS") or ""
+    try:
+        count = int(chosen)
+    except ValueError:
+        count = 0
+    if count < 1:
+        count = default_thread_count()
+    env["OMP_NUM_THREADS"] = str(count)
+    if environ is None and "torch" in sys.modules:
+        sys.modules["torch"].set_num_threads(count)
+    return count
+
+
+@contextlib.contextmanager
+def _terminate_cleanly() -> Iterator[None]:
+    """Turn SIGTERM into an exception while a command runs (main thread only), then restore the handler."""
+    def on_term(signum: int, frame: object) -> None:
+        raise Terminated
+
+    try:
+        previous = signal.signal(signal.SIGTERM, on_term)
+    except ValueError:  # not the main thread: leave signals alone
+        yield
+        return
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
+def _one_line_warning(command: str) -> object:
+    """A ``warnings.showwarning`` that prints ``bvae COMMAND: warning: MESSAGE`` (no source line)."""
+    def show(message: Warning | str, category: type[Warning], *args: object, **kwargs: object) -> None:
+        print(f"bvae {command}: warning: {message}", file=sys.stderr)
+
+    return show
+
+
+def _silence_stdout() -> None:
+    """After a broken pipe: point stdout at /dev/null so the interpreter's final flush stays quiet."""
+    with contextlib.suppress(OSError, ValueError, AttributeError):
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        os.close(devnull)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -79,11 +167,26 @@ def main(argv: Sequence[str] | None = None) -> int:
         args = parser.parse_args(argv)
     except SystemExit as stop:  # --help, --version, usage errors
         return int(stop.code or 0)
+    if argv is None:  # a real command-line run, not a call from Python: size torch's thread pool
+        configure_threads()
     try:
-        return int(args.handler(args))
+        with _terminate_cleanly(), warnings.catch_warnings():
+            warnings.showwarning = _one_line_warning(args.command)
+            code = int(args.handler(args))
+            sys.stdout.flush()  # a closed pipe shows here, not in the interpreter's exit
+            return code
     except KeyboardInterrupt:
         print("bvae: interrupted", file=sys.stderr)
         return EXIT_INTERRUPTED
+    except Terminated:
+        print("bvae: terminated", file=sys.stderr)
+        return EXIT_TERMINATED
+    except BrokenPipeError:
+        _silence_stdout()
+        return EXIT_BROKEN_PIPE
+    except UsageError as error:
+        print(f"bvae {args.command}: error: {error}", file=sys.stderr)
+        return EXIT_USAGE
     except (BrdfcodecError, OSError, ValueError, KeyError) as error:
         if os.environ.get("BVAE_DEBUG") == "1":
             raise

@@ -73,7 +73,9 @@ def _load(path: Path, material: str | None) -> tuple[Any, Any]:
     with MaterialLibrary(path) as library:
         if material is None:
             if len(library) != 1:
-                raise ValueError(f"{path}: holds {len(library)} materials; name one with --material")
+                from brdfcodec.cli.usage import UsageError
+
+                raise UsageError(f"{path}: holds {len(library)} materials; name one with --material")
             material = library.names[0]
         decoded = library[material]
         return decoded, decoded

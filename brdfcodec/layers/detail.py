@@ -1,4 +1,4 @@
-"""The detail layer: a per-material, transform-coded residual of the kept slices (``spec/bvae-format.md`` §4.3).
+"""The detail layer: a per-material, transform-coded residual of the kept slices (``spec/bvae-format.md`` §4.4).
 
 The residual ``r = x − D(μ)`` (mapped domain, network layout ``(63, 90, 90)``,
 entries below the horizon set to 0) is coded as:

@@ -1,4 +1,4 @@
-"""Layered records: the β-VAE latent (the base) plus enhancement layers (``spec/bvae-format.md`` §4.3).
+"""Layered records: the β-VAE latent (the base) plus enhancement layers (``spec/bvae-format.md`` §4.4).
 
 A :class:`LayeredRecord` is a :class:`~brdfcodec.bvae_format.LatentRecord`
 (so everything that reads a base latent — edits, parameters, the decoder's
@@ -35,7 +35,7 @@ class LayeredRecord(LatentRecord):
     ----------
     name, mu, sigma, meta
         As in :class:`~brdfcodec.bvae_format.LatentRecord`: ``mu`` is the
-        base code (refined at encode time, see ``spec/bvae-format.md`` §4.3),
+        base code (refined at encode time, see ``spec/bvae-format.md`` §4.4),
         ``sigma`` the encoder's posterior width.
     detail : DetailLayer
         The residual of the kept slices left by decoding ``mu``.

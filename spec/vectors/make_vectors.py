@@ -1,0 +1,277 @@
+"""Generate the conformance vectors of ``spec/bvae-format.md`` (§9) and their ``manifest.json``.
+
+Run from the repository root: ``python spec/vectors/make_vectors.py`` (writes
+into ``spec/vectors/``), or ``python spec/vectors/make_vectors.py OUT_DIR``.
+
+Valid files come from the reference writer; invalid files are built byte by
+byte here (JSON text, zstandard frame, CRC-32 and preamble written by hand),
+so that each breaks exactly one rule, or exactly the two rules whose
+precedence §7 settles. The expected decoder values are measured with the
+shipped model and stored with the tolerance §9 states.
+"""
+
+from __future__ import annotations
+
+import json
+import struct
+import sys
+import zlib
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from brdfcodec.bvae_format import DecoderReference, GraftRecord, LatentRecord, encode_bvae
+
+HERE = Path(__file__).resolve().parent
+MAGIC = b"\x89BVAE\r\n\x1a"
+#: The shipped default model's decoder (``brdfcodec/data/models/default``).
+SHIPPED_DECODER = DecoderReference(
+    "e1e3ed1e24dc5a8746abbfb9194725e1a9d02808c2e81125c64f3d9e37b39491", "bvae-nbrdf-proxy-small-v1"
+)
+TEST_DECODER = DecoderReference("ab" * 32, "conformance-test-decoder")
+#: Relative and absolute tolerance of expected decoded values (stored MERL units).
+DECODE_RTOL = 1e-3
+DECODE_ATOL = 1e-6
+#: Table entries [channel, θh bin, θd bin, φd bin] whose decoded values the manifest pins.
+REFERENCE_ENTRIES = [
+    [0, 0, 0, 0], [1, 0, 0, 0], [2, 0, 0, 0],
+    [0, 10, 20, 90], [1, 45, 45, 45], [2, 89, 10, 179],
+    [0, 30, 60, 9], [1, 30, 60, 13], [2, 5, 85, 100],
+    [0, 60, 30, 171], [1, 89, 89, 90], [2, 20, 40, 0],
+]
+
+
+# --------------------------------------------------------------------------- a writer independent of the library
+
+
+def canonical(header: dict[str, Any]) -> bytes:
+    return json.dumps(header, sort_keys=True, separators=(",", ":"), ensure_ascii=False).encode("utf-8")
+
+
+def assemble(stored: bytes, payload: bytes, *, flags: int = 0, major: int = 1, minor: int = 1,
+             crc_flags: int | None = None) -> bytes:
+    """Preamble + stored header + payload; ``crc_flags`` computes the CRC over other flags (a flipped bit)."""
+    def head(f: int) -> bytes:
+        return MAGIC + struct.pack("<HHII", major, minor, f, len(stored))
+
+    crc = zlib.crc32(stored, zlib.crc32(head(flags if crc_flags is None else crc_flags)))
+    return head(flags) + struct.pack("<I", crc) + stored + payload
+
+
+def zstd(data: bytes) -> bytes:
+    import zstandard
+
+    return zstandard.ZstdCompressor(level=19, write_content_size=True).compress(data)
+
+
+def base_header(records: list[dict[str, Any]], *, dim: int = 2, dtype: str = "float32") -> dict[str, Any]:
+    return {"created_by": "conformance vectors", "decoder": {"name": TEST_DECODER.name, "sha256": TEST_DECODER.sha256},
+            "format": "bvae", "latent_dim": dim, "latent_dtype": dtype, "records": records}
+
+
+def latent(name: str, mu: list[float], sigma: list[float], offset: int = 0, **extra: Any) -> tuple[dict, bytes]:
+    payload = np.array([*mu, *sigma], dtype="<f4").tobytes()
+    entry = {"crc32": zlib.crc32(payload), "kind": "latent", "length": len(payload), "name": name, "offset": offset}
+    entry.update(extra)
+    return entry, payload
+
+
+def plain(records: list[tuple[dict, bytes]], **header_changes: Any) -> tuple[bytes, bytes]:
+    """(stored header, payload) of records laid out contiguously."""
+    entries, payloads, offset = [], [], 0
+    for entry, payload in records:
+        entries.append({**entry, "offset": offset})
+        payloads.append(payload)
+        offset += len(payload)
+    header = base_header(entries)
+    header.update(header_changes)
+    return canonical(header), b"".join(payloads)
+
+
+def invalid_vectors() -> dict[str, tuple[bytes, str, str]]:
+    """name -> (file bytes, error class, what is wrong)."""
+    good = latent("a", [0.5, -1.0], [0.25, 0.5])
+    stored, payload = plain([good])
+    valid = assemble(stored, payload)
+    out: dict[str, tuple[bytes, str, str]] = {}
+
+    def add(name: str, data: bytes, error: str, why: str) -> None:
+        out[name] = (data, error, why)
+
+    def header_with(**changes: Any) -> bytes:
+        s, p = plain([good], **changes)
+        return assemble(s, p)
+
+    def with_entry(**changes: Any) -> bytes:
+        entry, p = good
+        s, p = plain([({**entry, **changes}, p)])
+        return assemble(s, p)
+
+    add("bad-magic", b"\x89BVAF" + valid[5:], "malformed", "wrong magic number")
+    add("truncated-preamble", valid[:20], "malformed", "shorter than the 24-byte preamble")
+    add("truncated-record", valid[:-1], "malformed", "the last record is one byte short")
+    add("trailing-bytes", valid + b"\x00", "malformed", "one byte after the last record")
+    flipped = bytearray(valid)
+    flipped[24 + 5] ^= 0x01
+    add("header-crc", bytes(flipped), "checksum", "one header bit flipped")
+    flipped = bytearray(valid)
+    flipped[-1] ^= 0x80
+    add("record-crc", bytes(flipped), "checksum", "one payload bit flipped")
+    add("flag-bit-flipped", assemble(stored, payload, flags=2, crc_flags=0), "checksum",
+        "flag bit 1 set by corruption (CRC over the original flags): checksum wins over unsupported (§7)")
+    add("unknown-flag", assemble(stored, payload, flags=2), "unsupported", "flag bit 1 set, CRC valid")
+    add("major-version-2", assemble(stored, payload, major=2), "unsupported", "major version 2")
+    add("unknown-kind", with_entry(kind="spline"), "unsupported", "record kind 'spline'")
+    s, _ = plain([good], latent_dtype="bfloat16")
+    add("unknown-dtype", assemble(s, payload), "unsupported", "latent_dtype 'bfloat16'")
+    add("zstd-trailing-bytes", assemble(zstd(stored) + b"\x00\x00", payload, flags=1), "malformed",
+        "two bytes after the header's zstandard frame")
+    half = len(stored) // 2
+    add("zstd-two-frames", assemble(zstd(stored[:half]) + zstd(stored[half:]), payload, flags=1), "malformed",
+        "the header split over two zstandard frames (a joining decoder would read a valid header)")
+    text = stored.decode()
+    add("number-overflow", assemble(text.replace('"latent_dim":2', '"latent_dim":2,"x":1e999').encode(), payload),
+        "malformed", "the number 1e999 (overflows binary64 to infinity)")
+    add("integer-too-large", assemble(text.replace('"latent_dim":2', '"latent_dim":2,"x":9007199254740992').encode(),
+        payload), "malformed", "the integer 2^53, beyond I-JSON's exact range")
+    add("duplicate-key", assemble(text.replace('"latent_dim":2', '"latent_dim":2,"latent_dim":2').encode(), payload),
+        "malformed", "the key latent_dim twice in one object")
+    add("nan-mu", assemble(*plain([latent("a", [float("nan"), 0.0], [0.25, 0.5])])), "malformed",
+        "mu[0] is NaN (record CRC valid)")
+    add("sigma-zero", assemble(*plain([latent("a", [0.0, 0.0], [0.0, 0.5])])), "malformed",
+        "sigma[0] is 0 (record CRC valid)")
+    add("graft-dims-on-latent", with_entry(graft_dims=[0]), "malformed", "graft_dims on a latent record")
+    graft_payload = np.array([0.5, -1.0, 0.25, 0.5, np.inf], dtype="<f4").tobytes()
+    graft_entry = {"crc32": zlib.crc32(graft_payload), "graft_dims": [1], "kind": "graft",
+                   "length": len(graft_payload), "name": "g", "offset": 0}
+    add("graft-value-infinite", assemble(*plain([(graft_entry, graft_payload)])), "malformed",
+        "a graft value is +infinity (record CRC valid)")
+    add("decoder-name-missing", header_with(decoder={"sha256": TEST_DECODER.sha256}), "malformed",
+        "decoder.name absent")
+    add("created-by-number", header_with(created_by=3), "malformed", "created_by is the number 3")
+    add("meta-relae-null", with_entry(meta={"relae": {"mapped": None}}), "malformed", "meta.relae.mapped is null")
+    add("meta-relae-string", with_entry(meta={"relae": {"mapped": "x"}}), "malformed", "meta.relae.mapped is a string")
+    add("meta-sha-type", with_entry(meta={"source_sha256": 7}), "malformed", "meta.source_sha256 is a number")
+    add("record-offset-gap", assemble(canonical(base_header([{**good[0], "offset": 4}])), b"\0" * 4 + payload),
+        "malformed", "first record at offset 4, not 0 (the file is 4 bytes longer to match)")
+    for label, name, why in [
+        ("name-parent", "../UP", "a name holding '/' and '..'"),
+        ("name-absolute", "/tmp/ESCAPED", "an absolute path as a name"),
+        ("name-dot", ".", "the name '.'"),
+        ("name-dotdot", "..", "the name '..'"),
+        ("name-hidden", ".gold", "a name starting with '.'"),
+        ("name-backslash", "a\\b", "a name holding a backslash"),
+        ("name-c0-control", "a\nb", "a name holding U+000A"),
+        ("name-c1-control", "a\u0085b", "a name holding U+0085 (C1 control)"),
+        ("name-not-nfc", "cafe\u0301", "'café' in NFD, not NFC"),
+        ("name-empty", "", "the empty name"),
+        ("name-device", "NUL", "a Windows device name"),
+        ("name-too-long", "x" * 256, "a name of 256 characters"),
+    ]:
+        add(label, with_entry(name=name), "malformed", why)
+    lone = text.replace('"name":"a"', '"name":"a\\ud800"').encode()
+    add("name-lone-surrogate", assemble(lone, payload), "malformed", "a name holding the lone surrogate \\ud800")
+    add("name-case-twins", assemble(*plain([latent("Gold", [0, 0], [1, 1]), latent("gold", [0, 0], [1, 1])])),
+        "malformed", "names 'Gold' and 'gold' (equal after case folding)")
+    add("name-duplicate", assemble(*plain([latent("a", [0, 0], [1, 1]), latent("a", [0, 0], [1, 1])])),
+        "malformed", "the name 'a' twice")
+    bomb = zstd(b"[" + b"{}," * (16 * 2**20 // 3 - 1) + b"{}]")
+    add("header-amplification", assemble(bomb, b"", flags=1), "malformed",
+        f"a {len(bomb) + 24}-byte file whose header expands to 16 MiB of [{{}},{{}},...]: more JSON containers "
+        "than the limit")
+    deep = canonical(base_header([good[0]])).replace(b'"created_by":"conformance vectors"',
+                                                     b'"created_by":"x","deep":' + b"[" * 65 + b"]" * 65)
+    add("header-too-deep", assemble(deep, payload), "malformed", "JSON nested 66 levels deep")
+    return out
+
+
+def valid_records() -> dict[str, tuple[list, DecoderReference, str, bool | None]]:
+    """name -> (records, decoder, latent dtype, compress header)."""
+    rng = np.random.default_rng(2026)
+    halves = lambda size: (np.round(rng.normal(size=size) * 8) / 8).astype(np.float32)  # noqa: E731 - exact in f16
+    sigma = lambda size: (2.0 ** -rng.integers(1, 6, size=size)).astype(np.float32)  # noqa: E731
+    lib = [LatentRecord(f"material-{i}", halves(8), sigma(8),
+                        {"source_sha256": f"{i:x}" * 64, "relae": {"mapped": 0.03125 * (i + 1), "linear": 0.25}})
+           for i in range(3)]
+    return {
+        "one-material": ([LatentRecord("gold", halves(8), sigma(8))], TEST_DECODER, "float32", False),
+        "library": (lib, TEST_DECODER, "float32", False),
+        "float16": ([LatentRecord(r.name, r.mu, r.sigma) for r in lib], TEST_DECODER, "float16", False),
+        "graft": ([GraftRecord("gold.graft", halves(8), sigma(8), (3, 4), [0.5, -1.0],
+                               {"edit": {"op": "graft", "source": "gold"}})], TEST_DECODER, "float32", False),
+        "compressed-header": (lib, TEST_DECODER, "float32", True),
+        "unicode-names": ([LatentRecord("café", halves(8), sigma(8)), LatentRecord("Ölfarbe №2 ☀", halves(8),
+                                                                                  sigma(8))],
+                          TEST_DECODER, "float32", False),
+        "reference-decode": ([LatentRecord("reference", halves(8), sigma(8)),
+                              GraftRecord("reference.graft", halves(8), sigma(8), (3, 4), [1.5, -0.5])],
+                             SHIPPED_DECODER, "float32", False),
+    }
+
+
+def describe(record: LatentRecord | GraftRecord) -> dict[str, Any]:
+    item: dict[str, Any] = {"name": record.name, "kind": record.kind, "mu": record.mu.tolist(),
+                            "sigma": record.sigma.tolist(), "meta": dict(record.meta)}
+    if isinstance(record, GraftRecord):
+        item["graft_dims"] = list(record.graft_dims)
+        item["graft_values"] = record.graft_values.tolist()
+    return item
+
+
+def reference_values(records: list) -> dict[str, list[float]]:
+    """Decoded values at REFERENCE_ENTRIES for each record, with the shipped model (masked as -1)."""
+    from brdfcodec.codec import BrdfDecoder
+
+    decoder = BrdfDecoder()
+    assert decoder.reference == SHIPPED_DECODER, "the shipped model changed: regenerate and review the vectors"
+    values = {}
+    for record in records:
+        table = decoder.table(record)
+        values[record.name] = [float(table[tuple(e)]) for e in REFERENCE_ENTRIES]
+    return values
+
+
+def generate(folder: Path, *, with_reference: bool = True) -> dict[str, Any]:
+    """Write every vector and ``manifest.json`` into ``folder``; return the manifest."""
+    (folder / "valid").mkdir(parents=True, exist_ok=True)
+    (folder / "invalid").mkdir(parents=True, exist_ok=True)
+    manifest: dict[str, Any] = {
+        "format_version": "1.1",
+        "error_classes": {
+            "malformed": "BvaeFormatError",
+            "checksum": "BvaeChecksumError",
+            "unsupported": "UnsupportedVersionError",
+            "latent-dimension": "LatentDimensionError",
+        },
+        "valid": [],
+        "invalid": [],
+        "decode": {},
+    }
+    for name, (records, decoder, dtype, compress) in valid_records().items():
+        path = folder / "valid" / f"{name}.bvae"
+        path.write_bytes(encode_bvae(records, decoder, latent_dtype=dtype, compress_header=compress))
+        manifest["valid"].append({
+            "file": f"valid/{name}.bvae", "decoder_sha256": decoder.sha256, "latent_dtype": dtype,
+            "header_compressed": bool(compress), "records": [describe(r) for r in records],
+        })
+        if name == "reference-decode" and with_reference:
+            manifest["decode"] = {
+                "file": f"valid/{name}.bvae", "entries": REFERENCE_ENTRIES, "rtol": DECODE_RTOL, "atol": DECODE_ATOL,
+                "masked": "unmeasured", "units": "stored MERL units (float32)",
+                "values": reference_values(records),
+            }
+    for name, (data, error, why) in invalid_vectors().items():
+        (folder / "invalid" / f"{name}.bvae").write_bytes(data)
+        manifest["invalid"].append({"file": f"invalid/{name}.bvae", "error": error, "why": why})
+    # Valid at the byte level, refused when opened for decoding (§6): latent_dim 4 with the shipped 8-D decoder.
+    wrong = encode_bvae([LatentRecord("small", [0.0] * 4, [1.0] * 4)], SHIPPED_DECODER, compress_header=False)
+    (folder / "invalid" / "latent-size-mismatch.bvae").write_bytes(wrong)
+    manifest["invalid"].append({"file": "invalid/latent-size-mismatch.bvae", "error": "latent-dimension",
+                                "when": "decode", "why": "latent_dim 4, but the named (shipped) decoder has 8"})
+    (folder / "manifest.json").write_text(json.dumps(manifest, indent=1, ensure_ascii=False) + "\n", encoding="utf-8")
+    return manifest
+
+
+if __name__ == "__main__":
+    generate(Path(sys.argv[1]) if len(sys.argv) > 1 else HERE)
