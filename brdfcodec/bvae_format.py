@@ -48,11 +48,11 @@ __all__ = [
     "MAGIC",
     "MAX_HEADER_BYTES",
     "BvaeHeader",
-    "BvaeLibrary",
     "BvaeReader",
     "DecoderReference",
     "GraftRecord",
     "LatentRecord",
+    "ParsedBvae",
     "Record",
     "RecordEntry",
     "encode_bvae",
@@ -336,8 +336,12 @@ class BvaeHeader:
 
 
 @dataclass(frozen=True)
-class BvaeLibrary:
-    """A whole ``.bvae`` file in memory: header and every record."""
+class ParsedBvae:
+    """What :func:`parse_bvae` and :func:`read_bvae` return: a file's header and every record, parsed.
+
+    A plain parse result with no decoder attached; the one library class
+    users open to decode materials is :class:`brdfcodec.codec.MaterialLibrary`.
+    """
 
     header: BvaeHeader
     records: tuple[Record, ...]
@@ -346,6 +350,10 @@ class BvaeLibrary:
         """The record of a material (``KeyError`` naming the available ones if absent)."""
         self.header.entry(name)  # a descriptive KeyError if absent
         return self.records[self.header.positions[name]]
+
+
+#: Former name of :class:`ParsedBvae`, kept so that existing imports work.
+BvaeLibrary = ParsedBvae
 
 
 # --------------------------------------------------------------------------- writing
@@ -788,7 +796,7 @@ def _decode_record(path: str, header: BvaeHeader, entry: RecordEntry, payload: b
         raise _fail(path, f"record {entry.name!r}: {error}") from None
 
 
-def parse_bvae(data: bytes, path: str | os.PathLike[str] = "<bytes>") -> BvaeLibrary:
+def parse_bvae(data: bytes, path: str | os.PathLike[str] = "<bytes>") -> ParsedBvae:
     """Parse and verify the complete bytes of a ``.bvae`` file.
 
     Raises
@@ -807,7 +815,7 @@ def parse_bvae(data: bytes, path: str | os.PathLike[str] = "<bytes>") -> BvaeLib
     records = tuple(
         _decode_record(name, header, e, data[start + e.offset : start + e.offset + e.length]) for e in header.entries
     )
-    return BvaeLibrary(header, records)
+    return ParsedBvae(header, records)
 
 
 def _open_checked(path: str | os.PathLike[str]) -> tuple[BinaryIO, int]:
@@ -825,7 +833,7 @@ def read_header(path: str | os.PathLike[str]) -> BvaeHeader:
         return _header_from_handle(os.fspath(path), handle, size)
 
 
-def read_bvae(path: str | os.PathLike[str]) -> BvaeLibrary:
+def read_bvae(path: str | os.PathLike[str]) -> ParsedBvae:
     """Read and verify a whole ``.bvae`` file (every record's CRC is checked)."""
     handle, _ = _open_checked(path)
     with handle:

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from brdfcodec.bvae_format import BvaeLibrary, LatentRecord, Record, read_bvae, write_bvae
+from brdfcodec.bvae_format import LatentRecord, ParsedBvae, Record, read_bvae, write_bvae
 from brdfcodec.cli.usage import UsageError
 
 __all__ = ["parse_floats", "register"]
@@ -71,7 +71,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
         op.set_defaults(handler=run)
 
 
-def _pick(library: BvaeLibrary, path: Path, name: str | None) -> Record:
+def _pick(library: ParsedBvae, path: Path, name: str | None) -> Record:
     if name is None:
         if len(library.records) != 1:
             raise UsageError(f"{path}: holds {len(library.records)} materials; name one with --material")
@@ -79,7 +79,7 @@ def _pick(library: BvaeLibrary, path: Path, name: str | None) -> Record:
     return library.record(name)
 
 
-def _operand(library: BvaeLibrary, path: Path, spec: str) -> tuple[Record, BvaeLibrary]:
+def _operand(library: ParsedBvae, path: Path, spec: str) -> tuple[Record, ParsedBvae]:
     if ":" in spec and spec.split(":", 1)[0].endswith(".bvae"):
         other_path, name = spec.split(":", 1)
         other = read_bvae(other_path)
