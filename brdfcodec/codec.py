@@ -486,7 +486,7 @@ class BrdfEncoder:
     device : str or torch.device, default "cpu"
     effort : int, default 1
         Latent refinement at encode time, 0 to 3 (0: the encoder's μ; see
-        :mod:`brdfcodec.layers.refine`). 1 keeps one MERL file under about 2 s on 2 cores.
+        :mod:`brdfcodec.layers.refine`). 1 adds about 0.2 s per material on 2 cores.
     bytes : int, optional
         Rate control: the largest record payload per material (base + detail layer).
     max_relae : float, optional
