@@ -205,3 +205,14 @@ def test_cli_rate_control_flags(red_plastic_file, tmp_path, capsys) -> None:
     assert "below the base record" in capsys.readouterr().err and not bad.exists()
     assert main(["compress", str(red_plastic_file), "-o", str(bad), "--bytes", "100", "--max-relae", "0.1"]) == 2
     assert main(["compress", str(red_plastic_file), "-o", str(bad), "--effort", "7"]) == 2
+
+
+@pytest.mark.parametrize("flags", [["--bytes", "0"], ["--bytes", "-5"], ["--max-relae", "0"], ["--max-relae", "nan"],
+                                   ["--max-relae", "inf"], ["--max-relae", "-0.1"], ["--batch-size", "0"]])
+def test_cli_bad_flag_values_are_usage_errors(red_plastic_file, tmp_path, capsys, flags) -> None:
+    from brdfcodec.cli import main
+
+    out = tmp_path / "m.bvae"
+    assert main(["compress", str(red_plastic_file), "-o", str(out), *flags]) == 2
+    err = capsys.readouterr().err
+    assert flags[0] in err and "Traceback" not in err and not out.exists()
