@@ -216,3 +216,40 @@ def test_cli_bad_flag_values_are_usage_errors(red_plastic_file, tmp_path, capsys
     assert main(["compress", str(red_plastic_file), "-o", str(out), *flags]) == 2
     err = capsys.readouterr().err
     assert flags[0] in err and "Traceback" not in err and not out.exists()
+
+
+@pytest.mark.slow
+def test_cli_graft_fit_of_a_layered_record_starts_from_its_base(red_plastic_file, tmp_path, capsys) -> None:
+    """`bvae edit graft --fit` compares the fitted graft with the base code it starts from, not the layered decode."""
+    from brdfcodec.bvae_format import read_bvae
+    from brdfcodec.cli import main
+    from brdfcodec.codec import BrdfDecoder, measure
+    from brdfcodec.merl import read_merl
+
+    layered_file, fitted = tmp_path / "m.bvae", tmp_path / "f.bvae"
+    assert main(["compress", str(red_plastic_file), "-o", str(layered_file), "--bytes", "3000", "--effort", "0"]) == 0
+    record = read_bvae(layered_file).records[0]
+    assert isinstance(record, LayeredRecord)
+    base_relae = measure(record.base(), BrdfDecoder(), read_merl(red_plastic_file)).meta["relae"]["mapped"]
+    assert record.meta["relae"]["mapped"] < base_relae - 1e-3  # the two differ: the message tells which
+    capsys.readouterr()
+    assert main(["edit", "graft", str(layered_file), "--fit", str(red_plastic_file), "-o", str(fitted)]) == 0
+    assert f"{base_relae:.4f} from the code alone" in capsys.readouterr().out
+    assert type(read_bvae(fitted).records[0]).__name__ == "GraftRecord"
+
+
+def test_cli_reference_that_reflects_nothing_is_bad_input(tmp_path, capsys) -> None:
+    from brdfcodec.analytic import AnalyticBRDF
+    from brdfcodec.bvae_format import write_bvae
+    from brdfcodec.cli import main
+    from brdfcodec.codec import BrdfDecoder
+    from brdfcodec.merl import write_merl
+
+    decoder = BrdfDecoder()
+    lib = tmp_path / "one.bvae"
+    write_bvae(lib, [LatentRecord("m", np.zeros(decoder.latent_dim), np.ones(decoder.latent_dim))], decoder.reference)
+    black = tmp_path / "black.binary"
+    write_merl(black, AnalyticBRDF("black", (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), 0.3).to_merl())
+    code = main(["decompress", str(lib), "-o", str(tmp_path / "m.npy"), "--phi-d", "0", "--reference", str(black)])
+    err = capsys.readouterr().err
+    assert code == 1 and "reflects nothing" in err and "Traceback" not in err

@@ -107,5 +107,7 @@ def _print_reference_error(path: Path, material: DecodedMaterial) -> None:
     from brdfcodec.codec import measure
     from brdfcodec.inputs import read_measured
 
-    relae = measure(material.record, material.decoder, read_measured(path)).meta["relae"]
+    relae = measure(material.record, material.decoder, read_measured(path)).meta.get("relae")
+    if relae is None:
+        raise ValueError(f"{path}: the reference reflects nothing (black): its RelAE is undefined (0/0)")
     print(f"RelAE against {path}: mapped {relae['mapped']:.4f}, linear {relae['linear']:.4f}")
