@@ -252,4 +252,4 @@ def test_cli_reference_that_reflects_nothing_is_bad_input(tmp_path, capsys) -> N
     write_merl(black, AnalyticBRDF("black", (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), 0.3).to_merl())
     code = main(["decompress", str(lib), "-o", str(tmp_path / "m.npy"), "--phi-d", "0", "--reference", str(black)])
     err = capsys.readouterr().err
-    assert code == 1 and "reflects nothing" in err and "Traceback" not in err
+    assert code == 1 and f"error: {black}: the reference reflects nothing" in err and "Traceback" not in err
