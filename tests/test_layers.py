@@ -253,3 +253,19 @@ def test_cli_reference_that_reflects_nothing_is_bad_input(tmp_path, capsys) -> N
     code = main(["decompress", str(lib), "-o", str(tmp_path / "m.npy"), "--phi-d", "0", "--reference", str(black)])
     err = capsys.readouterr().err
     assert code == 1 and f"error: {black}: the reference reflects nothing" in err and "Traceback" not in err
+
+
+def test_measure_sets_the_provenance_of_the_source_it_measured_against(analytic_tables) -> None:
+    from dataclasses import replace
+
+    from brdfcodec.codec import BrdfDecoder, measure
+
+    decoder = BrdfDecoder()
+    brdf = next(iter(analytic_tables.values()))
+    rgl = replace(brdf, source_kind="rgl-measured", source_sha256="7" * 64)
+    record = LatentRecord("m", np.zeros(decoder.latent_dim), np.ones(decoder.latent_dim), {"note": 1})
+    measured = measure(record, decoder, rgl)
+    assert measured.meta["source_kind"] == "rgl-measured" and measured.meta["source_sha256"] == "7" * 64
+    again = measure(measured, decoder, brdf)  # now against a MERL table: no source_kind left from the RGL one
+    assert "source_kind" not in again.meta and again.meta["source_sha256"] == brdf.sha256
+    assert again.meta["note"] == 1
