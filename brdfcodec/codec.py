@@ -80,6 +80,7 @@ from brdfcodec.representation import (
 __all__ = [
     "BrdfDecoder",
     "BrdfEncoder",
+    "ClampWarning",
     "DecodedMaterial",
     "MaskedEntries",
     "MaterialInput",
