@@ -180,6 +180,7 @@ class LatentRecord:
     meta : dict
         Optional facts (``spec/bvae-format.md`` §5): ``source_sha256``,
         ``relae`` (``{"mapped": float, "linear": float}``), ``encoder_sha256``,
+        ``source_kind`` (str), ``effort`` (int, 0–3), ``rate`` (object),
         ``edit`` (how an edited material was made), and any other JSON value.
     """
 
