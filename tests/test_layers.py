@@ -208,7 +208,8 @@ def test_cli_rate_control_flags(red_plastic_file, tmp_path, capsys) -> None:
 
 
 @pytest.mark.parametrize("flags", [["--bytes", "0"], ["--bytes", "-5"], ["--max-relae", "0"], ["--max-relae", "nan"],
-                                   ["--max-relae", "inf"], ["--max-relae", "-0.1"], ["--batch-size", "0"]])
+                                   ["--max-relae", "inf"], ["--max-relae", "-0.1"], ["--batch-size", "0"],
+                                   ["--metric", "linear"]])
 def test_cli_bad_flag_values_are_usage_errors(red_plastic_file, tmp_path, capsys, flags) -> None:
     from brdfcodec.cli import main
 

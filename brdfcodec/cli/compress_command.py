@@ -59,7 +59,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
                         help="largest quality within N bytes of record payload per material (adds a detail layer)")
     target.add_argument("--max-relae", type=float, metavar="X",
                         help="smallest record whose measured RelAE on its material is at most X (adds a detail layer)")
-    parser.add_argument("--metric", choices=("mapped", "linear"), default="mapped",
+    parser.add_argument("--metric", choices=("mapped", "linear"), default=None,
                         help="RelAE used by --max-relae (default mapped)")
     parser.set_defaults(handler=run)
 
@@ -131,13 +131,15 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError(f"--bytes must be a positive number of bytes, got {args.bytes}")
     if args.max_relae is not None and not (math.isfinite(args.max_relae) and args.max_relae > 0):
         raise UsageError(f"--max-relae must be a positive number, got {args.max_relae}")
+    if args.metric is not None and args.max_relae is None:
+        raise UsageError("--metric chooses the RelAE of --max-relae; give --max-relae too")
     check_output_path(args.output, overwrite=args.force)
     if args.output.suffix != ".bvae":
         raise ValueError(f"{args.output}: the output must end in .bvae")
     items = collect_items(args.inputs, args.split)
     dtype = "float16" if args.float16 else "float32"
     encoder = BrdfEncoder(
-        args.model, effort=args.effort, bytes=args.bytes, max_relae=args.max_relae, metric=args.metric,
+        args.model, effort=args.effort, bytes=args.bytes, max_relae=args.max_relae, metric=args.metric or "mapped",
         latent_dtype=dtype,
     )
     with tqdm(total=len(items), desc="compress", unit="material", disable=len(items) < 2 or None) as bar:
