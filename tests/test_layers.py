@@ -254,6 +254,7 @@ def test_cli_reference_that_reflects_nothing_is_bad_input(tmp_path, capsys) -> N
     code = main(["decompress", str(lib), "-o", str(tmp_path / "m.npy"), "--phi-d", "0", "--reference", str(black)])
     err = capsys.readouterr().err
     assert code == 1 and f"error: {black}: the reference reflects nothing" in err and "Traceback" not in err
+    assert not (tmp_path / "m.npy").exists()  # measured before writing: no output from a failed command
 
 
 def test_measure_sets_the_provenance_of_the_source_it_measured_against(analytic_tables) -> None:
