@@ -64,8 +64,8 @@ from brdfcodec.version import __version__
 _CODEC_NAMES = (
     "BrdfDecoder",
     "BrdfEncoder",
+    "ClampWarning",
     "DecodedMaterial",
-    "MaterialInput",
     "MaterialInput",
     "MaterialLibrary",
     "compress",
@@ -73,6 +73,8 @@ _CODEC_NAMES = (
     "decompress",
     "encode",
     "encode_records",
+    "measure",
+    "prepare_source",
 )
 
 
@@ -90,6 +92,7 @@ __all__ = [
     "BvaeChecksumError",
     "BvaeFormatError",
     "BvaeReader",
+    "ClampWarning",
     "DecodedMaterial",
     "MaterialInput",
     "DecoderMismatchError",
@@ -105,6 +108,8 @@ __all__ = [
     "decompress",
     "encode",
     "encode_records",
+    "measure",
+    "prepare_source",
     "read_bvae",
     "read_header",
     "write_bvae",

@@ -155,6 +155,14 @@ def _meta_problem(meta: Mapping[str, Any]) -> str | None:
         edit = meta["edit"]
         if not isinstance(edit, Mapping) or not isinstance(edit.get("op"), str):
             return "meta field 'edit' must be an object with a string 'op'"
+    if "source_kind" in meta and not isinstance(meta["source_kind"], str):
+        return f"meta field 'source_kind' must be a string, got {meta['source_kind']!r}"
+    if "effort" in meta:
+        effort = meta["effort"]
+        if not (isinstance(effort, int) and not isinstance(effort, bool) and 0 <= effort <= 3):
+            return f"meta field 'effort' must be an integer in [0, 3], got {effort!r}"
+    if "rate" in meta and not isinstance(meta["rate"], Mapping):
+        return f"meta field 'rate' must be an object, got {type(meta['rate']).__name__}"
     return None
 
 
@@ -172,6 +180,7 @@ class LatentRecord:
     meta : dict
         Optional facts (``spec/bvae-format.md`` §5): ``source_sha256``,
         ``relae`` (``{"mapped": float, "linear": float}``), ``encoder_sha256``,
+        ``source_kind`` (str), ``effort`` (int, 0–3), ``rate`` (object),
         ``edit`` (how an edited material was made), and any other JSON value.
     """
 
@@ -707,6 +716,8 @@ def _parse_header(path: str, header: dict[str, Any], preamble_fields: tuple[int,
             graft_dims = tuple(dims)
         elif "graft_dims" in raw:
             raise _fail(path, f"{where} ({entry_name}) of kind {kind!r} has graft_dims (only graft records do)")
+        if kind != "layered" and "layers" in raw:
+            raise _fail(path, f"{where} ({entry_name}) of kind {kind!r} has layers (only layered records do)")
         start = _require(path, raw, "offset", int, where)
         length = _require(path, raw, "length", int, where)
         crc = _require(path, raw, "crc32", int, where)

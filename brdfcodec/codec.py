@@ -80,6 +80,7 @@ from brdfcodec.representation import (
 __all__ = [
     "BrdfDecoder",
     "BrdfEncoder",
+    "ClampWarning",
     "DecodedMaterial",
     "MaskedEntries",
     "MaterialInput",
@@ -652,7 +653,10 @@ class BrdfEncoder:
 
 
 def measure(record: Record, decoder: BrdfDecoder, source: MerlBRDF) -> LatentRecord | GraftRecord:
-    """The record with ``meta["relae"]`` set to the RelAE of its decode against ``source`` (and its SHA-256).
+    """The record with ``meta["relae"]`` set to the RelAE of its decode against ``source`` (and its provenance).
+
+    ``source_sha256`` and ``source_kind`` are set from ``source``, replacing
+    the record's (``source_kind`` is left out for a MERL file).
 
     The RelAE (mapped and linear) is measured against the source as
     :func:`prepare_source` gives it. A material that reflects nothing (all
@@ -661,8 +665,10 @@ def measure(record: Record, decoder: BrdfDecoder, source: MerlBRDF) -> LatentRec
     source = prepare_source(source, warn=False)
     estimate = decoder.decode(record, masked="keep").astype(np.float64)
     report = error_report(source.values, estimate, source.mask)
-    meta = {key: value for key, value in record.meta.items() if key != "relae"}
-    meta["source_sha256"] = source.source_sha256 or source.sha256
+    meta = {key: value for key, value in record.meta.items() if key not in ("relae", "source_kind")}
+    meta["source_sha256"] = source.source_sha256 or source.sha256  # the provenance of what was measured against
+    if source.source_kind is not None:
+        meta["source_kind"] = source.source_kind
     relae = {"mapped": report.relae_mapped.overall, "linear": report.relae_linear.overall}
     if all(np.isfinite(v) for v in relae.values()):
         meta["relae"] = relae

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import datetime
 import os
+import re
 from collections.abc import Sequence
 from pathlib import Path
 from types import TracebackType
@@ -33,6 +34,7 @@ from brdfcodec.conventions import (
 from brdfcodec.errors import DatasetError
 from brdfcodec.merl import MerlBRDF
 from brdfcodec.representation import network_input_from_table
+from brdfcodec.rgl import RGL_SOURCE_KIND
 from brdfcodec.sources import MaterialSource
 from brdfcodec.split import TRAIN, VALIDATION, split_by_family
 from brdfcodec.version import __version__
@@ -177,6 +179,9 @@ def build_dataset(
     return Path(output)
 
 
+_SHA256_HEX = re.compile(r"[0-9a-f]{64}")
+
+
 def _check_distinct(sources: Sequence[MaterialSource]) -> None:
     seen: dict[str, str] = {}
     for source in sources:
@@ -318,7 +323,13 @@ class BrdfDataset:
         return self._rows("input_masks", indices)
 
     def table(self, index: int) -> MerlBRDF:
-        """Full table of one material, as float64 stored values.
+        """Full table of one material, as float64 stored values, with its provenance.
+
+        ``source_sha256`` is the source's (as recorded when the dataset was
+        built), and ``source_kind`` is ``"rgl-measured"`` for a table
+        tabulated from an RGL measurement, as :func:`brdfcodec.rgl.read_rgl_bsdf`
+        gives it, so that records encoded from a dataset row carry the same
+        metadata as records encoded from the source file (``spec/bvae-format.md`` §5).
 
         Raises
         ------
@@ -328,7 +339,13 @@ class BrdfDataset:
         if not self.has_tables:
             raise DatasetError(self.path, "dataset was built without full tables (--no-tables)")
         values = np.asarray(self._handle["tables"][index], dtype=np.float64)
-        return MerlBRDF(values, name=self.names[index])
+        digest = None
+        if "source_sha256" in self._handle:
+            stored = self._handle["source_sha256"][index]
+            text = stored.decode() if isinstance(stored, bytes) else str(stored)
+            digest = text if _SHA256_HEX.fullmatch(text) else None  # a hand-made dataset may hold anything
+        kind = RGL_SOURCE_KIND if self.source_kinds[index] == RGL_SOURCE_KIND else None
+        return MerlBRDF(values, name=self.names[index], source_kind=kind, source_sha256=digest)
 
     def _rows(self, key: str, indices: Sequence[int] | None) -> np.ndarray:
         data = self._handle[key]

@@ -2,9 +2,11 @@
 
 ``nbrdf-proxy-90.bvae`` is a library of the 90 materials of the NBRDF proxy
 of MERL (neural fits of MERL materials evaluated on the MERL grid; see the
-README's data section), encoded by the shipped default model with
-``bvae compress merl-nbrdf-proxy.h5 -o nbrdf-proxy-90.bvae``. Each record's
-metadata holds its RelAE against the proxy table. 12,533 bytes in all.
+README's data section), encoded by the shipped default model's encoder alone (format 1.0, written
+before encode-time refinement existed: what ``bvae compress
+merl-nbrdf-proxy.h5 -o nbrdf-proxy-90.bvae --effort 0`` gives, its
+``source_sha256`` then hashes of the dataset tables). Each record's metadata
+holds its RelAE against the proxy table. 12,533 bytes in all.
 """
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Material names: what a name may be, and the file a name becomes (``spec/bvae-format.md`` §4.1).
+"""Material names: what a name may be, and the file a name becomes (``spec/bvae-format.md`` §4.3).
 
 A material name travels from a ``.bvae`` header into file names
 (``bvae decompress LIB.bvae -o folder``), URLs and scene descriptions, so a
@@ -75,7 +75,7 @@ def check_material_name(name: object) -> str:
     Raises
     ------
     ValueError
-        The name breaks a rule of ``spec/bvae-format.md`` §4.1; the message says which.
+        The name breaks a rule of ``spec/bvae-format.md`` §4.3; the message says which.
 
     Examples
     --------

@@ -72,3 +72,35 @@ def test_unwritable_output_names_the_output(capsys: pytest.CaptureFixture[str], 
     code = main(["analytic", "gold", "-o", str(blocked / "gold.binary")])
     err = capsys.readouterr().err
     assert code == 1 and str(blocked / "gold.binary") in err and ".part" not in err, err
+
+
+def test_readme_command_table_names_every_command_and_option() -> None:
+    """The README's command-line table lists every sub-command and its long options (train ends in '...')."""
+    import argparse
+
+    from brdfcodec.cli.main import build_parser
+
+    readme = (ROOT / "README.md").read_text(encoding="utf-8")
+    table = readme.split("## Command line", 1)[1].split("```text", 1)[1].split("```", 1)[0]
+    general = {"--help", "--version", "--force", "--quiet", "--output"}  # -o in the table; --force below it
+
+    def walk(parser: argparse.ArgumentParser, path: tuple[str, ...]) -> list[tuple[tuple[str, ...], list[str]]]:
+        found = [(path, [o for a in parser._actions for o in a.option_strings if o.startswith("--")])]
+        for action in parser._actions:
+            if isinstance(action, argparse._SubParsersAction):
+                for name, sub in action.choices.items():
+                    found += walk(sub, (*path, name))
+        return found
+
+    missing = []
+    for path, options in walk(build_parser(), ()):
+        if not path:
+            continue
+        command = "bvae " + " ".join(path)
+        if command not in table:
+            missing.append(command)
+        if path == ("train",):
+            continue  # "--epochs, --lr, ..., ...": the rest is in `bvae train --help`
+        missing += [f"{command} {o}" for o in options if o not in general and not re.search(rf"{o}\b", table)]
+    assert not missing, missing
+    assert "--force" in readme and "--json" in table

@@ -117,3 +117,30 @@ def test_both_proxy_archives_give_two_families(shared_dir: Path) -> None:
     assert nbrdf_zip_family(data / "merl-nbrdf-90.zip") == "merl"
     if (data / "rgl-nbrdf-30.zip").is_file():
         assert nbrdf_zip_family(data / "rgl-nbrdf-30.zip") == "rgl"
+
+
+def test_records_encoded_from_a_dataset_keep_the_sources_provenance(tmp_path: Path) -> None:
+    """A dataset row of an RGL measurement encodes to the same source_kind and source_sha256 as its file would."""
+    from dataclasses import replace
+
+    from brdfcodec.bvae_format import read_bvae
+    from brdfcodec.rgl import RGL_SOURCE_KIND
+    from brdfcodec.sources import LoadedMaterial, MaterialSource
+
+    (gold,) = analytic_sources(["gold"])
+    (chrome,) = analytic_sources(["chrome"])
+    bsdf_sha = "5" * 64  # stands for the .bsdf file's hash, as read_rgl_bsdf sets it
+    table = replace(chrome.load().brdf, source_kind=RGL_SOURCE_KIND, source_sha256=bsdf_sha)
+    rgl = MaterialSource("paper", "paper_rgb.bsdf", lambda: LoadedMaterial(table, bsdf_sha), "rgl", RGL_SOURCE_KIND)
+    out = tmp_path / "two.h5"
+    build_dataset(out, [gold, rgl], description="x", validation_fraction=0.0, progress=False)
+    with BrdfDataset(out) as dataset:
+        rows = [dataset.table(i) for i in range(2)]
+    assert [r.source_kind for r in rows] == [None, RGL_SOURCE_KIND]
+    assert rows[0].source_sha256 == gold.load().source_sha256 and rows[1].source_sha256 == bsdf_sha
+    bvae = tmp_path / "two.bvae"
+    assert main(["compress", str(out), "-o", str(bvae), "--effort", "0"]) == 0
+    meta = {r.name: r.meta for r in read_bvae(bvae).records}
+    assert meta["paper"]["source_kind"] == RGL_SOURCE_KIND and meta["paper"]["source_sha256"] == bsdf_sha
+    assert "source_kind" not in meta["gold"] and meta["gold"]["source_sha256"] == rows[0].source_sha256
+    assert "relae" in meta["paper"]

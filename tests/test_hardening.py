@@ -359,3 +359,14 @@ def test_spec_states_the_bounds_the_reader_uses() -> None:
     assert f"at most **{MAX_HEADER_CONTAINERS:,}** objects and arrays" in text
     assert f"at most **{MAX_HEADER_DEPTH}** levels of nesting" in text
     assert MAX_JSON_INTEGER == 2**53 - 1 and "±(2⁵³ − 1)" in text
+
+
+def test_every_public_name_of_the_package_resolves() -> None:
+    """``brdfcodec.__all__`` (the lazily imported codec names included) names each object once, and each exists."""
+    import brdfcodec
+    from brdfcodec import codec
+
+    assert len(brdfcodec.__all__) == len(set(brdfcodec.__all__))
+    for name in brdfcodec.__all__:
+        assert getattr(brdfcodec, name) is not None, name
+    assert brdfcodec.ClampWarning is codec.ClampWarning and brdfcodec.prepare_source is codec.prepare_source

@@ -225,3 +225,69 @@ def test_refinement_adam_matches_torch_optim() -> None:
         reference.step()
         torch.testing.assert_close(ours, theirs, rtol=1e-6, atol=1e-7)
     assert not torch.equal(ours.detach(), start)
+
+
+@pytest.mark.parametrize("flags", [["--bytes", "0"], ["--bytes", "-5"], ["--max-relae", "0"], ["--max-relae", "nan"],
+                                   ["--max-relae", "inf"], ["--max-relae", "-0.1"], ["--batch-size", "0"],
+                                   ["--metric", "linear"]])
+def test_cli_bad_flag_values_are_usage_errors(red_plastic_file, tmp_path, capsys, flags) -> None:
+    from brdfcodec.cli import main
+
+    out = tmp_path / "m.bvae"
+    assert main(["compress", str(red_plastic_file), "-o", str(out), *flags]) == 2
+    err = capsys.readouterr().err
+    assert flags[0] in err and "Traceback" not in err and not out.exists()
+
+
+@pytest.mark.slow
+def test_cli_graft_fit_of_a_layered_record_starts_from_its_base(red_plastic_file, tmp_path, capsys) -> None:
+    """`bvae edit graft --fit` compares the fitted graft with the base code it starts from, not the layered decode."""
+    from brdfcodec.bvae_format import read_bvae
+    from brdfcodec.cli import main
+    from brdfcodec.codec import BrdfDecoder, measure
+    from brdfcodec.merl import read_merl
+
+    layered_file, fitted = tmp_path / "m.bvae", tmp_path / "f.bvae"
+    assert main(["compress", str(red_plastic_file), "-o", str(layered_file), "--bytes", "3000", "--effort", "0"]) == 0
+    record = read_bvae(layered_file).records[0]
+    assert isinstance(record, LayeredRecord)
+    base_relae = measure(record.base(), BrdfDecoder(), read_merl(red_plastic_file)).meta["relae"]["mapped"]
+    assert record.meta["relae"]["mapped"] < base_relae - 1e-3  # the two differ: the message tells which
+    capsys.readouterr()
+    assert main(["edit", "graft", str(layered_file), "--fit", str(red_plastic_file), "-o", str(fitted)]) == 0
+    assert f"{base_relae:.4f} from the code alone" in capsys.readouterr().out
+    assert type(read_bvae(fitted).records[0]).__name__ == "GraftRecord"
+
+
+def test_cli_reference_that_reflects_nothing_is_bad_input(tmp_path, capsys) -> None:
+    from brdfcodec.analytic import AnalyticBRDF
+    from brdfcodec.bvae_format import write_bvae
+    from brdfcodec.cli import main
+    from brdfcodec.codec import BrdfDecoder
+    from brdfcodec.merl import write_merl
+
+    decoder = BrdfDecoder()
+    lib = tmp_path / "one.bvae"
+    write_bvae(lib, [LatentRecord("m", np.zeros(decoder.latent_dim), np.ones(decoder.latent_dim))], decoder.reference)
+    black = tmp_path / "black.binary"
+    write_merl(black, AnalyticBRDF("black", (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), 0.3).to_merl())
+    code = main(["decompress", str(lib), "-o", str(tmp_path / "m.npy"), "--phi-d", "0", "--reference", str(black)])
+    err = capsys.readouterr().err
+    assert code == 1 and f"error: {black}: the reference reflects nothing" in err and "Traceback" not in err
+    assert not (tmp_path / "m.npy").exists()  # measured before writing: no output from a failed command
+
+
+def test_measure_sets_the_provenance_of_the_source_it_measured_against(analytic_tables) -> None:
+    from dataclasses import replace
+
+    from brdfcodec.codec import BrdfDecoder, measure
+
+    decoder = BrdfDecoder()
+    brdf = next(iter(analytic_tables.values()))
+    rgl = replace(brdf, source_kind="rgl-measured", source_sha256="7" * 64)
+    record = LatentRecord("m", np.zeros(decoder.latent_dim), np.ones(decoder.latent_dim), {"note": 1})
+    measured = measure(record, decoder, rgl)
+    assert measured.meta["source_kind"] == "rgl-measured" and measured.meta["source_sha256"] == "7" * 64
+    again = measure(measured, decoder, brdf)  # now against a MERL table: no source_kind left from the RGL one
+    assert "source_kind" not in again.meta and again.meta["source_sha256"] == brdf.sha256
+    assert again.meta["note"] == 1

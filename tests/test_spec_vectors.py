@@ -30,9 +30,13 @@ def _load_generator() -> Any:
 
 def test_manifest_covers_what_the_spec_asks_for() -> None:
     valid = {Path(v["file"]).stem for v in MANIFEST["valid"]}
-    assert {"one-material", "library", "float16", "graft", "compressed-header"} <= valid
+    assert {"one-material", "library", "float16", "graft", "compressed-header", "layered"} <= valid
     assert {v["error"] for v in MANIFEST["invalid"]} == set(ERROR_CLASSES)
     assert len(MANIFEST["invalid"]) >= 40
+    invalid = {Path(v["file"]).stem for v in MANIFEST["invalid"]}
+    # Every rule 1.1 added for layered records and the metadata keys of §5 has a vector that breaks it.
+    assert {"layers-on-latent", "layered-unknown-transform", "layered-unknown-layer", "layered-content-size",
+            "meta-effort-string", "meta-effort-range", "meta-rate-number", "meta-source-kind-number"} <= invalid
     assert MANIFEST["decode"]["values"] and MANIFEST["decode"]["rtol"] == 1e-3
 
 
@@ -53,6 +57,12 @@ def test_valid_vector_reads_as_listed(vector: dict[str, Any]) -> None:
         if isinstance(record, GraftRecord):
             assert list(record.graft_dims) == expected["graft_dims"]
             np.testing.assert_array_equal(record.graft_values, np.float32(expected["graft_values"]))
+        if record.kind == "layered":
+            from brdfcodec.layers.record import layers_entry
+
+            assert layers_entry(record) == expected["layers"]  # type: ignore[arg-type]
+        else:
+            assert "layers" not in expected
 
 
 @pytest.mark.parametrize(

@@ -210,6 +210,13 @@ def test_save_takes_plain_file_names_only(studio: str, save_dir: Path, name: str
     assert not (save_dir.parent / "escape.bvae").exists()
 
 
+@pytest.mark.parametrize("name", ["NUL", ".hidden", "a:b", "trailing.", "cafe\u0301"])
+def test_save_refuses_material_names_the_format_refuses(studio: str, save_dir: Path, name: str) -> None:
+    status, payload, _ = request(f"{studio}/api/save", save_body(file="named.bvae", name=name))
+    assert status == 400 and error_of(status, payload).startswith("name:")
+    assert not (save_dir / "named.bvae").exists()
+
+
 def test_save_checks_provenance_fields(studio: str) -> None:
     status, payload, _ = request(f"{studio}/api/save", save_body(file="p.bvae", edit={"source": "/etc/passwd"}))
     assert status == 404

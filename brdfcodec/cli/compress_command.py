@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import math
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -13,6 +14,7 @@ from tqdm import tqdm
 
 from brdfcodec.atomic import check_output_path
 from brdfcodec.bvae_format import Record, write_bvae
+from brdfcodec.cli.usage import UsageError
 from brdfcodec.dataset import HDF5_SIGNATURE
 from brdfcodec.inputs import default_material_name, is_measured_file, read_measured
 from brdfcodec.representation import network_input_from_table
@@ -57,7 +59,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
                         help="largest quality within N bytes of record payload per material (adds a detail layer)")
     target.add_argument("--max-relae", type=float, metavar="X",
                         help="smallest record whose measured RelAE on its material is at most X (adds a detail layer)")
-    parser.add_argument("--metric", choices=("mapped", "linear"), default="mapped",
+    parser.add_argument("--metric", choices=("mapped", "linear"), default=None,
                         help="RelAE used by --max-relae (default mapped)")
     parser.set_defaults(handler=run)
 
@@ -124,16 +126,20 @@ def run(args: argparse.Namespace) -> int:
     from brdfcodec.codec import BrdfEncoder, encode_records
 
     if args.batch_size < 1:
-        raise ValueError("--batch-size must be at least 1")
+        raise UsageError("--batch-size must be at least 1")
+    if args.bytes is not None and args.bytes < 1:
+        raise UsageError(f"--bytes must be a positive number of bytes, got {args.bytes}")
+    if args.max_relae is not None and not (math.isfinite(args.max_relae) and args.max_relae > 0):
+        raise UsageError(f"--max-relae must be a positive number, got {args.max_relae}")
+    if args.metric is not None and args.max_relae is None:
+        raise UsageError("--metric chooses the RelAE of --max-relae; give --max-relae too")
     check_output_path(args.output, overwrite=args.force)
     if args.output.suffix != ".bvae":
         raise ValueError(f"{args.output}: the output must end in .bvae")
     items = collect_items(args.inputs, args.split)
     dtype = "float16" if args.float16 else "float32"
-    if args.bytes is not None and args.bytes < 1:
-        raise ValueError("--bytes must be a positive number of bytes")
     encoder = BrdfEncoder(
-        args.model, effort=args.effort, bytes=args.bytes, max_relae=args.max_relae, metric=args.metric,
+        args.model, effort=args.effort, bytes=args.bytes, max_relae=args.max_relae, metric=args.metric or "mapped",
         latent_dtype=dtype,
     )
     with tqdm(total=len(items), desc="compress", unit="material", disable=len(items) < 2 or None) as bar:

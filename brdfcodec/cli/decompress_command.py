@@ -84,14 +84,16 @@ def run(args: argparse.Namespace) -> int:
             }
         if args.reference is not None and not single:
             raise UsageError("--reference needs a single material (use --material)")
+        # Measured before writing: a bad reference must not fail the command after its output exists.
+        reference_line = None if args.reference is None else _reference_error(args.reference, library[names[0]])
         for name, target in tqdm(targets.items(), desc="decompress", unit="material", disable=len(targets) < 2 or None):
             material = library[name]
             table = material.table(phi_d_bins=args.phi_d, masked=args.masked)
             note = _stored_error_note(material.record.meta)  # before writing: nothing may fail after a write
             kind = write_table(target, table, phi_d_bins=args.phi_d, overwrite=args.force)
             print(f"wrote {target} ({name}, {kind}){note}")
-        if args.reference is not None:
-            _print_reference_error(args.reference, library[names[0]])
+        if reference_line is not None:
+            print(reference_line)
     return 0
 
 
@@ -103,9 +105,11 @@ def _stored_error_note(meta: dict) -> str:
     return ""
 
 
-def _print_reference_error(path: Path, material: DecodedMaterial) -> None:
+def _reference_error(path: Path, material: DecodedMaterial) -> str:
     from brdfcodec.codec import measure
     from brdfcodec.inputs import read_measured
 
-    relae = measure(material.record, material.decoder, read_measured(path)).meta["relae"]
-    print(f"RelAE against {path}: mapped {relae['mapped']:.4f}, linear {relae['linear']:.4f}")
+    relae = measure(material.record, material.decoder, read_measured(path)).meta.get("relae")
+    if relae is None:
+        raise ValueError(f"{path}: the reference reflects nothing (black): its RelAE is undefined (0/0)")
+    return f"RelAE against {path}: mapped {relae['mapped']:.4f}, linear {relae['linear']:.4f}"

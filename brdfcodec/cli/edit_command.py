@@ -134,14 +134,17 @@ def run(args: argparse.Namespace) -> int:
                                  f"({', '.join(str(d + 1) for d in decoder.colour_dims)}); give one value each")
             records = [edit.graft(record, args.values, decoder.colour_dims)]
         else:
-            from brdfcodec.codec import measure
+            from brdfcodec.codec import measure, prepare_source
             from brdfcodec.dataset import material_arrays
-            from brdfcodec.merl import read_merl
+            from brdfcodec.inputs import read_measured
 
-            source = read_merl(args.fit)
+            source = prepare_source(read_measured(args.fit))  # MERL or RGL; clamped as for compress
             inputs, mask = material_arrays(source)
-            before = measure(record, decoder, source).meta["relae"]["mapped"]
-            fitted = measure(edit.fit_graft(decoder, record, inputs, mask), decoder, source)
+            base = record.base() if hasattr(record, "base") else record  # a layered record: its base code
+            before = measure(base, decoder, source).meta.get("relae", {}).get("mapped", float("nan"))
+            fitted = measure(edit.fit_graft(decoder, base, inputs, mask), decoder, source)
+            if "relae" not in fitted.meta:
+                raise ValueError(f"{args.fit}: the material reflects nothing (black): there is no colour to fit")
             print(f"{record.name}: RelAE (mapped) {before:.4f} from the code alone, "
                   f"{fitted.meta['relae']['mapped']:.4f} with the fitted graft")
             records = [fitted]

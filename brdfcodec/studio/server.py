@@ -191,6 +191,12 @@ class StudioServer:
         name = body.get("name", "studio-edit")
         if not isinstance(name, str) or not _MATERIAL_NAME.match(name):
             raise StudioError("name must be 1 to 200 characters without control characters or slashes")
+        from brdfcodec.material_names import check_material_name
+
+        try:
+            check_material_name(name)  # the file format's rules (spec/bvae-format.md §4.3): "NUL", ".x", "a:b" ...
+        except ValueError as error:
+            raise StudioError(f"name: {error}") from None
         overwrite = body.get("overwrite") is True
         target = self.save_dir / file_name
         if target.exists() and not overwrite:

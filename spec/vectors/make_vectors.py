@@ -153,6 +153,31 @@ def invalid_vectors() -> dict[str, tuple[bytes, str, str]]:
     add("meta-relae-null", with_entry(meta={"relae": {"mapped": None}}), "malformed", "meta.relae.mapped is null")
     add("meta-relae-string", with_entry(meta={"relae": {"mapped": "x"}}), "malformed", "meta.relae.mapped is a string")
     add("meta-sha-type", with_entry(meta={"source_sha256": 7}), "malformed", "meta.source_sha256 is a number")
+    add("layers-on-latent", with_entry(layers={"detail": {"transform": "dct3-ycc", "step": 0.1, "dtype": "int16",
+                                                          "length": 1}}),
+        "malformed", "a layers object on a latent record")
+    add("meta-effort-string", with_entry(meta={"effort": "1"}), "malformed", "meta.effort is the string '1'")
+    add("meta-effort-range", with_entry(meta={"effort": 4}), "malformed", "meta.effort is 4 (outside 0-3)")
+    add("meta-rate-number", with_entry(meta={"rate": 64}), "malformed", "meta.rate is a number, not an object")
+    add("meta-source-kind-number", with_entry(meta={"source_kind": 1}), "malformed", "meta.source_kind is a number")
+    detail = detail_frame([1], 63 * 90 * 90)
+    lay_payload = np.array([0.5, -1.0, 0.25, 0.5], dtype="<f4").tobytes() + detail
+    lay_entry = {"crc32": zlib.crc32(lay_payload), "kind": "layered", "length": len(lay_payload), "name": "l",
+                 "offset": 0, "layers": {"detail": {"dtype": "int16", "length": len(detail), "step": 0.1,
+                                                    "transform": "dct3-ycc"}}}
+    add("layered-unknown-transform", assemble(*plain([({**lay_entry, "layers": {"detail": {
+        **lay_entry["layers"]["detail"], "transform": "wavelet"}}}, lay_payload)])), "unsupported",
+        "a detail layer with transform 'wavelet'")
+    add("layered-unknown-layer", assemble(*plain([({**lay_entry, "layers": {**lay_entry["layers"], "basis": {}}},
+                                                   lay_payload)])), "unsupported",
+        "layers holding 'basis' besides 'detail'")
+    short = detail_frame([1], 63 * 90 * 90 - 1)
+    short_payload = lay_payload[:16] + short
+    add("layered-content-size", assemble(*plain([({**lay_entry, "crc32": zlib.crc32(short_payload),
+                                                   "length": len(short_payload), "layers": {"detail": {
+                                                       **lay_entry["layers"]["detail"], "length": len(short)}}},
+                                                  short_payload)])),
+        "malformed", "a detail frame declaring one int16 fewer than 63*90*90 (record CRC valid)")
     add("record-offset-gap", assemble(canonical(base_header([{**good[0], "offset": 4}])), b"\0" * 4 + payload),
         "malformed", "first record at offset 4, not 0 (the file is 4 bytes longer to match)")
     for label, name, why in [
@@ -186,6 +211,36 @@ def invalid_vectors() -> dict[str, tuple[bytes, str, str]]:
     return out
 
 
+def detail_frame(head: list[int], total: int) -> bytes:
+    """A zstandard frame written by hand (independent of the zstandard library's version): int16 ``head``
+    as a raw block, then zeros as RLE blocks, ``total`` int16 values in all; the frame declares its content size."""
+    raw = np.array(head, dtype="<i2").tobytes()
+    content = total * 2
+    out = bytearray(struct.pack("<I", 0xFD2FB528))
+    out += bytes([0b1010_0000])  # Frame_Content_Size 4 bytes, single segment, no checksum, no dictionary
+    out += struct.pack("<I", content)
+    blocks = [(0, len(raw), raw)]  # (type, size, body): type 0 raw, 1 RLE (one byte repeated size times)
+    left = content - len(raw)
+    while left:
+        size = min(left, 128 * 1024)
+        blocks.append((1, size, b"\x00"))
+        left -= size
+    for i, (kind, size, body) in enumerate(blocks):
+        last = int(i == len(blocks) - 1)
+        out += (last | kind << 1 | size << 3).to_bytes(3, "little") + body
+    return bytes(out)
+
+
+def layered_record(name: str, mu: np.ndarray, sigma: np.ndarray) -> LatentRecord:
+    """A layered record (§4.4) whose detail layer has three non-zero DCT coefficients (step 0.125)."""
+    from brdfcodec.layers.detail import N_DETAIL_VALUES, DetailLayer
+    from brdfcodec.layers.record import LayeredRecord
+
+    layer = DetailLayer(0.125, "int16", detail_frame([8, -4, 2], N_DETAIL_VALUES))
+    return LayeredRecord(name, mu, sigma, {"effort": 1, "rate": {"payload_bytes": 64 + len(layer.data),
+                                                                 "candidates_tried": 1}}, detail=layer)
+
+
 def valid_records() -> dict[str, tuple[list, DecoderReference, str, bool | None]]:
     """name -> (records, decoder, latent dtype, compress header)."""
     rng = np.random.default_rng(2026)
@@ -207,6 +262,9 @@ def valid_records() -> dict[str, tuple[list, DecoderReference, str, bool | None]
         "reference-decode": ([LatentRecord("reference", halves(8), sigma(8)),
                               GraftRecord("reference.graft", halves(8), sigma(8), (3, 4), [1.5, -0.5])],
                              SHIPPED_DECODER, "float32", False),
+        "layered": ([layered_record("gold.layered", halves(8), sigma(8)),
+                     LatentRecord("gold", halves(8), sigma(8), {"effort": 0, "source_kind": "rgl-measured"})],
+                    TEST_DECODER, "float32", False),
     }
 
 
@@ -216,6 +274,10 @@ def describe(record: LatentRecord | GraftRecord) -> dict[str, Any]:
     if isinstance(record, GraftRecord):
         item["graft_dims"] = list(record.graft_dims)
         item["graft_values"] = record.graft_values.tolist()
+    if record.kind == "layered":
+        from brdfcodec.layers.record import layers_entry
+
+        item["layers"] = layers_entry(record)  # type: ignore[arg-type]
     return item
 
 
