@@ -87,6 +87,19 @@ class MaterialSource:
     source_kind: str = MERL_SOURCE_KIND
 
 
+def _folder_files(folder: str | os.PathLike[str], suffix: str, database: str) -> list[Path]:
+    """The ``*.{suffix}`` files of a folder (not recursive), sorted; errors name the folder."""
+    root = Path(folder)
+    if not root.exists():
+        raise FileNotFoundError(f"{root}: no such folder")
+    if not root.is_dir():
+        raise NotADirectoryError(f"{root}: is not a folder of {database} .{suffix} files")
+    files = sorted(p for p in root.glob(f"*.{suffix}") if p.is_file())
+    if not files:
+        raise SourceFormatError(root, f"folder holds no {database} .{suffix} files")
+    return files
+
+
 def merl_folder_sources(folder: str | os.PathLike[str]) -> list[MaterialSource]:
     """Every ``*.binary`` file of a folder (not recursive), sorted by name.
 
@@ -97,14 +110,7 @@ def merl_folder_sources(folder: str | os.PathLike[str]) -> list[MaterialSource]:
     SourceFormatError
         The folder holds no ``.binary`` file.
     """
-    root = Path(folder)
-    if not root.exists():
-        raise FileNotFoundError(f"{root}: no such folder")
-    if not root.is_dir():
-        raise NotADirectoryError(f"{root}: is not a folder of MERL .binary files")
-    files = sorted(p for p in root.glob("*.binary") if p.is_file())
-    if not files:
-        raise SourceFormatError(root, "folder holds no MERL .binary files")
+    files = _folder_files(folder, "binary", "MERL")
 
     def loader(path: Path) -> Callable[[], LoadedMaterial]:
         def load() -> LoadedMaterial:
@@ -128,14 +134,7 @@ def rgl_folder_sources(folder: str | os.PathLike[str]) -> list[MaterialSource]:
     SourceFormatError
         The folder holds no ``.bsdf`` file.
     """
-    root = Path(folder)
-    if not root.exists():
-        raise FileNotFoundError(f"{root}: no such folder")
-    if not root.is_dir():
-        raise NotADirectoryError(f"{root}: is not a folder of RGL .bsdf files")
-    files = sorted(p for p in root.glob("*.bsdf") if p.is_file())
-    if not files:
-        raise SourceFormatError(root, "folder holds no RGL .bsdf files")
+    files = _folder_files(folder, "bsdf", "RGL")
 
     def loader(path: Path) -> Callable[[], LoadedMaterial]:
         def load() -> LoadedMaterial:
