@@ -68,7 +68,8 @@ MAGIC = b"\x89BVAE\r\n\x1a"
 FORMAT_MAJOR = 1
 #: Minor version written; readers accept any minor version of their major version.
 #: 1.1 added the "layered" record kind (issue 14); a 1.0 reader refuses it by its kind.
-FORMAT_MINOR = 1
+#: 1.2 added the basis layer and compact sigma of layered records; a 1.1 reader refuses them as unknown layers.
+FORMAT_MINOR = 2
 #: Largest stored header, in bytes (compressed size when compressed).
 MAX_HEADER_BYTES = 1 << 20
 #: Largest decompressed header, in bytes.
@@ -732,11 +733,12 @@ def _parse_header(path: str, header: dict[str, Any], preamble_fields: tuple[int,
         expected = _payload_length(kind, latent_dim, len(graft_dims), itemsize)
         layers = None
         if kind == "layered":  # --- layered records (issue 14): validated by brdfcodec.layers.record
-            from brdfcodec.layers.record import UnsupportedLayerError, layers_length
+            from brdfcodec.layers.record import UnsupportedLayerError, latent_values_stored, layers_length
 
             layers = raw.get("layers")
             try:
-                expected += layers_length(layers, f"{where} ({entry_name})")
+                tail = layers_length(layers, f"{where} ({entry_name})", latent_dim)
+                expected = latent_values_stored(layers, latent_dim) * itemsize + tail  # type: ignore[arg-type]
             except UnsupportedLayerError as error:
                 raise UnsupportedVersionError(path, str(error)) from None
             except ValueError as error:
@@ -792,6 +794,11 @@ def _decode_record(path: str, header: BvaeHeader, entry: RecordEntry, payload: b
         )
     d = header.latent_dim
     n_latent = _payload_length(entry.kind, d, len(entry.graft_dims), _DTYPES[header.latent_dtype].itemsize)
+    if entry.kind == "layered":
+        from brdfcodec.layers.record import latent_values_stored
+
+        assert entry.layers is not None
+        n_latent = latent_values_stored(entry.layers, d) * _DTYPES[header.latent_dtype].itemsize
     values = np.frombuffer(payload[:n_latent], dtype=_DTYPES[header.latent_dtype]).astype(np.float32)
     try:
         if entry.kind == "layered":  # --- layered records (issue 14)

@@ -32,7 +32,7 @@ import warnings
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Literal
+from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 import numpy.typing as npt
@@ -52,6 +52,7 @@ from brdfcodec.bvae_format import (
 )
 from brdfcodec.conventions import MAPPED_MAX, N_KEPT_SLICES, NETWORK_INPUT_SHAPE, UNMEASURED_VALUE
 from brdfcodec.errors import (
+    BasisMismatchError,
     DecoderMismatchError,
     DecoderNotFoundError,
     LatentDimensionError,
@@ -76,6 +77,9 @@ from brdfcodec.representation import (
     unmap_values,
     validate_phi_d_bins,
 )
+
+if TYPE_CHECKING:
+    from brdfcodec.layers.basis import SharedBasis
 
 __all__ = [
     "BrdfDecoder",
@@ -196,16 +200,6 @@ class _EvalMode:
 
     def __exit__(self, *exc: object) -> None:
         self.module.train(self.was_training)
-
-
-def _with_layers(record: Record, mapped: np.ndarray) -> np.ndarray:
-    """Issue 14 hook: a layered record's decode is the base decode plus its detail layer (before interpolation)."""
-    if getattr(record, "detail", None) is None:
-        return mapped
-    from brdfcodec.layers.detail import decode_detail
-
-    mapped += decode_detail(record.detail).reshape(mapped.shape)  # type: ignore[union-attr]
-    return clamp_mapped(mapped, out=mapped)  # base + detail, then the one clamp (spec §4.4, §6)
 
 
 class BrdfDecoder:
@@ -372,13 +366,46 @@ class BrdfDecoder:
             out[green] = self.decode_channels(record.second_code(), network_channels_for_slots(slots, colours=(0,)))
         else:
             channels = network_channels_for_slots(slots)
-            out[channels] = self.decode_channels(record.mu, channels)
-            if getattr(record, "detail", None) is not None:  # --- issue 14: detail layer, only the slots needed
-                from brdfcodec.layers.detail import decode_detail
-
-                out[channels] += decode_detail(record.detail, slots).reshape(len(channels), *out.shape[1:])
-                clamp_mapped(out, out=out)  # base + detail, then the one clamp (spec §4.4, §6)
+            out[channels] = self._with_layers(record, self.decode_channels(record.mu, channels), slots)
         return out
+
+    @functools.cached_property
+    def shared_basis(self) -> SharedBasis | None:
+        """The model's shared basis (``basis.safetensors``, checked against ``model.json``), or None."""
+        if self.manifest is None or not self.manifest.basis_sha256:
+            return None
+        from brdfcodec.layers.basis import BASIS_FILE, load_shared_basis
+
+        return load_shared_basis(self.manifest.folder / BASIS_FILE, self.manifest.basis_sha256)
+
+    def _with_layers(self, record: Record, mapped: np.ndarray, slots: Sequence[int] | None = None) -> np.ndarray:
+        """A layered record's decode: base + basis layer + detail layer, then the one clamp (spec §4.4, §6).
+
+        ``mapped`` is the clamped base decode of all 63 channels, or (partial decoding) of the channels of
+        the kept ``slots`` only, in :func:`~brdfcodec.representation.network_channels_for_slots` order.
+        """
+        basis_layer, detail = getattr(record, "basis", None), getattr(record, "detail", None)
+        if basis_layer is None and detail is None:
+            return mapped
+        channels = None if slots is None else network_channels_for_slots(slots)
+        if basis_layer is not None:
+            basis = self.shared_basis
+            if basis is None or basis.sha256 != basis_layer.sha256:
+                own = "none" if basis is None else basis.sha256
+                raise BasisMismatchError(
+                    f"{record.name}: the record's basis layer needs shared basis {basis_layer.sha256}, but this "
+                    f"decoder's model has {own}; decode it with the model that wrote it"
+                )
+            coefficients = basis_layer.coefficients()
+            if channels is None:
+                mapped += basis.residual(coefficients)
+            else:
+                mapped += basis.residual_channels(coefficients, channels)
+        if detail is not None:
+            from brdfcodec.layers.detail import decode_detail
+
+            mapped += decode_detail(detail, slots).reshape(mapped.shape)
+        return clamp_mapped(mapped, out=mapped)
 
     def mapped_record(self, record: Record) -> npt.NDArray[np.float32]:
         """Mapped slices of a record; a graft record's green block is the second code's red block."""
@@ -387,7 +414,7 @@ class BrdfDecoder:
             out = self.decode_mapped(record.mu)
             out[GREEN_BLOCK] = self.decode_mapped(record.second_code())[RED_BLOCK]
             return out
-        return _with_layers(record, self.decode_mapped(record.mu))
+        return self._with_layers(record, self.decode_mapped(record.mu))
 
     def decode(
         self,
@@ -433,7 +460,7 @@ class BrdfDecoder:
             batch = iter(self.decode_mapped(np.stack(codes), batch_size=batch_size) if codes else ())
             for record in chunk:  # grafts need two codes each: decoded on their own
                 if isinstance(record, LatentRecord):
-                    mapped = _with_layers(record, next(batch))
+                    mapped = self._with_layers(record, next(batch))
                 else:
                     mapped = self.mapped_record(record)
                 yield _apply_mask(table_from_mapped(mapped), None, masked)
@@ -498,6 +525,9 @@ class BrdfEncoder:
         A fixed detail-layer quantisation step (mapped units) instead of a target.
     latent_dtype : {"float32", "float16"}, default "float32"
         How the file will store latents (counts toward ``bytes``).
+    basis : bool, default True
+        Whether rate control may add a basis layer (coefficients on the model's shared basis,
+        ``spec/bvae-format.md`` §4.5) when the model has one.
     """
 
     manifest: ModelManifest | None
@@ -513,12 +543,13 @@ class BrdfEncoder:
         metric: Literal["mapped", "linear"] = "mapped",
         detail_step: float | None = None,
         latent_dtype: LatentDtype = "float32",
+        basis: bool = True,
     ) -> None:
         from brdfcodec.layers.encoding import EncodeOptions
 
         self.options = EncodeOptions(
             effort=effort, bytes_budget=bytes, max_relae=max_relae, metric=metric, detail_step=detail_step,
-            latent_itemsize=2 if latent_dtype == "float16" else 4,
+            latent_itemsize=2 if latent_dtype == "float16" else 4, basis=basis,
         )
         manifest = resolve_model(model)
         network, _, loaded = load_model(manifest.folder, parts=("encoder",), device=str(device))
@@ -679,7 +710,7 @@ def measure(record: Record, decoder: BrdfDecoder, source: MerlBRDF) -> LatentRec
     if isinstance(record, GraftRecord):
         return GraftRecord(record.name, record.mu, record.sigma, record.graft_dims, record.graft_values, meta)
     if getattr(record, "detail", None) is not None:  # issue 14: layered record
-        return type(record)(record.name, record.mu, record.sigma, meta, detail=record.detail)  # type: ignore[call-arg]
+        return replace(record, meta=meta)
     return LatentRecord(record.name, record.mu, record.sigma, meta)
 
 

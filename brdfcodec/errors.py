@@ -12,6 +12,7 @@ from __future__ import annotations
 import os
 
 __all__ = [
+    "BasisMismatchError",
     "BrdfcodecError",
     "BvaeChecksumError",
     "BvaeFormatError",
@@ -99,6 +100,10 @@ class DecoderNotFoundError(BrdfcodecError):
 
 class DecoderMismatchError(BrdfcodecError):
     """A decoder other than the one a ``.bvae`` file refers to was offered for decoding it."""
+
+
+class BasisMismatchError(DecoderMismatchError):
+    """A record's basis layer names a shared basis that its decoder's model does not have."""
 
 
 class ModelNotFoundError(DecoderNotFoundError):

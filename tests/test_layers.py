@@ -11,7 +11,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from brdfcodec.bvae_format import DecoderReference, LatentRecord, encode_bvae, parse_bvae
+from brdfcodec.bvae_format import FORMAT_MINOR, DecoderReference, LatentRecord, encode_bvae, parse_bvae
 from brdfcodec.conventions import NETWORK_INPUT_SHAPE
 from brdfcodec.errors import BvaeFormatError, RateTargetError, UnsupportedVersionError
 from brdfcodec.layers.detail import DetailLayer, decode_detail, encode_detail
@@ -67,7 +67,7 @@ def test_layered_records_round_trip_with_plain_ones(dtype: str) -> None:
     record = layered()
     data = encode_bvae([plain, record], DECODER, latent_dtype=dtype)  # type: ignore[arg-type]
     library = parse_bvae(data)
-    assert library.header.minor == 1
+    assert library.header.minor == FORMAT_MINOR == 2
     back = library.record("layered-0")
     assert isinstance(back, LayeredRecord) and back.detail == record.detail
     assert library.header.entries[1].length == 2 * 8 * (2 if dtype == "float16" else 4) + record.detail.nbytes
@@ -92,10 +92,10 @@ def test_unknown_layers_and_transforms_are_unsupported_and_bad_fields_malformed(
         return edit
 
     def extra_layer(header: dict) -> dict:
-        header["records"][0]["layers"]["basis"] = {"k": 4}
+        header["records"][0]["layers"]["hologram"] = {"k": 4}
         return header
 
-    with pytest.raises(UnsupportedVersionError, match="basis"):
+    with pytest.raises(UnsupportedVersionError, match="hologram"):
         parse_bvae(_rewrap(data, extra_layer))
     with pytest.raises(UnsupportedVersionError, match="wavelet"):
         parse_bvae(_rewrap(data, with_detail(transform="wavelet")))

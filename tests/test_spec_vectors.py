@@ -37,14 +37,18 @@ def test_manifest_covers_what_the_spec_asks_for() -> None:
     # Every rule 1.1 added for layered records and the metadata keys of §5 has a vector that breaks it.
     assert {"layers-on-latent", "layered-unknown-transform", "layered-unknown-layer", "layered-content-size",
             "meta-effort-string", "meta-effort-range", "meta-rate-number", "meta-source-kind-number"} <= invalid
+    # ... and every rule 1.2 added for the basis layer and compact sigma.
+    assert {"basis-unknown-sigma", "basis-unknown-field", "basis-count-zero", "basis-sha-upper", "basis-length",
+            "basis-step-nan", "basis-step-zero"} <= invalid
     assert MANIFEST["decode"]["values"] and MANIFEST["decode"]["rtol"] == 1e-3
+    assert MANIFEST["decode_layers"]["values"]
 
 
 @pytest.mark.parametrize("vector", MANIFEST["valid"], ids=lambda v: Path(v["file"]).stem)
 def test_valid_vector_reads_as_listed(vector: dict[str, Any]) -> None:
     parsed = parse_bvae((VECTORS / vector["file"]).read_bytes(), vector["file"])
     header = parsed.header
-    assert (header.major, header.minor) == (1, 1)
+    assert (header.major, header.minor) == (1, 2)
     assert header.decoder.sha256 == vector["decoder_sha256"]
     assert header.latent_dtype == vector["latent_dtype"]
     assert bool(header.flags & FLAG_HEADER_ZSTD) == vector["header_compressed"]
@@ -88,10 +92,11 @@ def test_latent_size_mismatch_is_refused_when_opened_for_decoding() -> None:
     assert str(path) in str(caught.value)
 
 
-def test_reference_latents_decode_to_the_pinned_values() -> None:
+@pytest.mark.parametrize("section", ["decode", "decode_layers"])
+def test_reference_latents_decode_to_the_pinned_values(section: str) -> None:
     from brdfcodec.codec import MaterialLibrary
 
-    decode = MANIFEST["decode"]
+    decode = MANIFEST[section]
     entries = [tuple(e) for e in decode["entries"]]
     with MaterialLibrary(VECTORS / decode["file"]) as library:
         for name, expected in decode["values"].items():
@@ -104,6 +109,7 @@ def test_reference_latents_decode_to_the_pinned_values() -> None:
 def test_generator_reproduces_the_committed_vectors(tmp_path: Path) -> None:
     generated = _load_generator().generate(tmp_path, with_reference=False)
     committed = dict(MANIFEST, decode={})
+    committed.pop("decode_layers")
     assert generated == committed
     for vector in [*MANIFEST["valid"], *MANIFEST["invalid"]]:
         new, old = (tmp_path / vector["file"]).read_bytes(), (VECTORS / vector["file"]).read_bytes()

@@ -112,7 +112,12 @@ def test_export_card_store_and_registry(tiny_dataset: Path, tmp_path: Path) -> N
     folder = tmp_path / "model"
     manifest = export_run(run, folder, name="tiny-test", command="bvae train ...")
     assert {p.name for p in folder.iterdir()} == {"encoder.safetensors", "decoder.safetensors", "model.json",
-                                                  "MODEL_CARD.md"}
+                                                  "MODEL_CARD.md", "basis.safetensors"}
+    from brdfcodec.codec import BrdfDecoder
+
+    basis = BrdfDecoder(folder).shared_basis  # fitted on the training split, at most N − 1 vectors
+    assert basis is not None and basis.count == json.loads((folder / "model.json").read_text())["info"]["basis"]["count"]
+    assert basis.count == min(64, len(json.loads((folder / "model.json").read_text())["info"]["data"]["train"]) - 1)
     card = (folder / "MODEL_CARD.md").read_text()
     for heading in ("## Data", "## Training", "## Reconstruction error", "PCA-8", "## Latent dimensions",
                     "## Known limits", manifest.decoder_sha256):

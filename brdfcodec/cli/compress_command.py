@@ -56,11 +56,15 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
                         help="latent refinement at encode time: 0 (encoder only) to 3 (slowest); default 1")
     target = parser.add_mutually_exclusive_group()
     target.add_argument("--bytes", type=int, metavar="N",
-                        help="largest quality within N bytes of record payload per material (adds a detail layer)")
+                        help="largest quality within N bytes of record payload per material (adds enhancement "
+                        "layers: basis coefficients, then a detail layer)")
     target.add_argument("--max-relae", type=float, metavar="X",
-                        help="smallest record whose measured RelAE on its material is at most X (adds a detail layer)")
+                        help="smallest record whose measured RelAE on its material is at most X (adds enhancement "
+                        "layers)")
     parser.add_argument("--metric", choices=("mapped", "linear"), default=None,
                         help="RelAE used by --max-relae (default mapped)")
+    parser.add_argument("--no-basis", action="store_true",
+                        help="with --bytes/--max-relae: no basis layer, only the detail layer")
     parser.set_defaults(handler=run)
 
 
@@ -140,6 +144,7 @@ def run(args: argparse.Namespace) -> int:
     dtype = "float16" if args.float16 else "float32"
     encoder = BrdfEncoder(
         args.model, effort=args.effort, bytes=args.bytes, max_relae=args.max_relae, metric=args.metric or "mapped",
+        basis=not args.no_basis,
         latent_dtype=dtype,
     )
     with tqdm(total=len(items), desc="compress", unit="material", disable=len(items) < 2 or None) as bar:

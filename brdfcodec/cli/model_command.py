@@ -28,7 +28,19 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     export.add_argument("--command", default="", help="the command that reproduces the run, for the card")
     export.add_argument("--compare", action="append", default=[], metavar="LABEL=FOLDER",
                         help="an exported model to show beside this one in the card (repeatable)")
+    export.add_argument("--basis-count", type=int, default=None, metavar="K",
+                        help="vectors of the shared basis fitted on the training split (default 64; 0: none)")
     export.set_defaults(handler=run_export)
+    fit = actions.add_parser(
+        "fit-basis", help="fit a shared basis (the basis layer's) for an exported model",
+        description="Fit the shared basis of the basis layer (principal components of the training split's "
+        "mapped kept slices) for a model folder that lacks one, and name it in model.json. The weights "
+        "are not touched: the decoder hash, and every file made with the model, stay valid.",
+    )
+    fit.add_argument("folder", type=Path, help="model folder")
+    fit.add_argument("--dataset", type=Path, required=True, help="dataset whose training split the model used")
+    fit.add_argument("--count", type=int, default=None, metavar="K", help="vectors (default 64)")
+    fit.set_defaults(handler=run_fit_basis)
     show = actions.add_parser("info", help="show a model folder's manifest, verifying its weights",
                               description="Show a model (the default one without FOLDER) and verify its hashes.")
     show.add_argument("folder", type=Path, nargs="?", help="model folder (default: the shipped default model)")
@@ -56,9 +68,28 @@ def run_export(args: argparse.Namespace) -> int:
         if not sep or not label or not folder:
             raise ValueError(f"--compare takes LABEL=FOLDER, got {item!r}")
         comparisons[label] = Path(folder)
+    from brdfcodec.training.export import DEFAULT_BASIS_COUNT
+
+    count = DEFAULT_BASIS_COUNT if args.basis_count is None else args.basis_count
+    if count < 0:
+        raise ValueError(f"--basis-count must be ≥ 0, got {count}")
     manifest = export_run(args.run_dir, args.output, name=args.name, dataset_path=args.dataset, command=command,
-                          comparisons=comparisons)
+                          comparisons=comparisons, basis_count=count)
     print(f"wrote {args.output}: {manifest.name}, decoder sha256 {manifest.decoder_sha256}")
+    return 0
+
+
+def run_fit_basis(args: argparse.Namespace) -> int:
+    """Fit and write the shared basis, then print its hash."""
+    from brdfcodec.models.store import load_model
+    from brdfcodec.training.export import DEFAULT_BASIS_COUNT, add_shared_basis
+
+    load_model(args.folder)  # a complete, verified model folder before anything is written into it
+    count = DEFAULT_BASIS_COUNT if args.count is None else args.count
+    if count < 1:
+        raise ValueError(f"--count must be ≥ 1, got {count}")
+    manifest = add_shared_basis(args.folder, args.dataset, count)
+    print(f"wrote {args.folder}/basis.safetensors: {count} vectors, sha256 {manifest.basis_sha256}")
     return 0
 
 

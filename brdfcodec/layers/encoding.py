@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
@@ -9,8 +10,9 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from brdfcodec.bvae_format import LatentRecord
-from brdfcodec.layers.rate import Metric, encode_layers
-from brdfcodec.layers.refine import EFFORT_STEPS, refine_latent
+from brdfcodec.layers.basis import BasisLayer, SharedBasis, quantise_coefficients
+from brdfcodec.layers.rate import BasisFit, Metric, encode_layers
+from brdfcodec.layers.refine import EFFORT_STEPS, fit_basis_coefficients, refine_latent
 
 if TYPE_CHECKING:
     from brdfcodec.codec import BrdfDecoder
@@ -37,6 +39,8 @@ class EncodeOptions:
         A fixed detail quantisation step (mapped units) instead of a target.
     latent_itemsize : int
         Bytes per stored latent value (4 for float32 files, 2 for float16).
+    basis : bool
+        Whether layered records may use the model's shared basis (when it has one).
     """
 
     effort: int = 1
@@ -45,6 +49,7 @@ class EncodeOptions:
     metric: Metric = "mapped"
     detail_step: float | None = None
     latent_itemsize: int = 4
+    basis: bool = True
 
     def __post_init__(self) -> None:
         if self.effort not in EFFORT_STEPS:
@@ -80,9 +85,10 @@ def layer_records(
     ``meta["rate"]`` what rate control chose.
     """
     mu = np.stack([r.mu for r in records])
-    codes = refine_latent(decoder.network, mu, inputs, masks, options.effort)
+    codes = _as_stored(refine_latent(decoder.network, mu, inputs, masks, options.effort), options.latent_itemsize)
     out: list[LatentRecord] = []
     base_mapped = decoder.decode_mapped(codes) if options.layered else None
+    basis = decoder.shared_basis if options.layered and options.basis else None
     for i, record in enumerate(records):
         meta: dict[str, Any] = {**record.meta, "effort": options.effort}
         base = LatentRecord(record.name, codes[i], record.sigma, meta)
@@ -98,6 +104,8 @@ def layer_records(
             mask=None if source is None else source.mask,
             bytes_budget=options.bytes_budget, max_relae=options.max_relae, metric=options.metric,
             step=options.detail_step, latent_itemsize=options.latent_itemsize,
+            basis_fit=None if basis is None else _basis_fit(decoder, basis, base, inputs[i], masks[i], options),
+            basis_count=0 if basis is None else basis.count,
         )
         chosen = result.record
         rate = {"payload_bytes": result.payload_bytes, "candidates_tried": len(result.tried)}
@@ -107,8 +115,29 @@ def layer_records(
             rate["max_relae"] = options.max_relae
             rate["metric"] = options.metric
         new_meta = {**chosen.meta, "rate": rate}
-        if type(chosen) is LatentRecord:
-            out.append(LatentRecord(chosen.name, chosen.mu, chosen.sigma, new_meta))
-        else:
-            out.append(type(chosen)(chosen.name, chosen.mu, chosen.sigma, new_meta, detail=chosen.detail))  # type: ignore[call-arg,attr-defined]
+        out.append(dataclasses.replace(chosen, meta=new_meta))
     return out
+
+
+def _as_stored(codes: np.ndarray, itemsize: int) -> np.ndarray:
+    """Codes rounded as the file will store them (layers code what the stored code decodes to)."""
+    return codes.astype(np.float16).astype(np.float32) if itemsize == 2 else codes.astype(np.float32)
+
+
+def _basis_fit(
+    decoder: BrdfDecoder, basis: SharedBasis, base: LatentRecord, inputs: np.ndarray, masks: np.ndarray,
+    options: EncodeOptions,
+) -> BasisFit:
+    """The basis fit of one material for :func:`~brdfcodec.layers.rate.encode_layers`."""
+
+    def fit(k: int) -> tuple[LatentRecord, BasisLayer, np.ndarray]:
+        codes, coefficients = fit_basis_coefficients(
+            decoder.network, base.mu[None], inputs[None], masks[None], basis.components[:k], basis.entries,
+            options.effort,
+        )
+        code = _as_stored(codes, options.latent_itemsize)[0]
+        layer = quantise_coefficients(basis.sha256, coefficients[0])
+        mapped = decoder.decode_mapped(code) + basis.residual(layer.coefficients())
+        return LatentRecord(base.name, code, base.sigma, base.meta), layer, mapped
+
+    return fit

@@ -5,13 +5,15 @@ Every point here is evaluated on the held-out materials only
 which codec is better on materials it has not seen". Points of one family
 (``family``) form one curve of the rate–distortion plots.
 
-- ``bvae-layered@N``: the shipped β-VAE, float16 latents, effort 1, a detail
-  layer chosen by rate control within N bytes of record payload;
+- ``bvae-layered@N``: the shipped β-VAE, float16 latents, effort 1, and the
+  enhancement layers rate control chooses within N bytes of record payload:
+  coefficients on the model's shared basis (compact σ), then a detail layer;
 - ``bvae-max-relae-X``: the same with ``--max-relae X`` (the smallest tried
   record meeting X on each material);
 - ``pca-k-float16`` / ``pca-k-int8``: PCA of the mapped kept slices (basis of
-  the training split), coefficients as float16, or as int8 with one float16
-  scale per material (k + 2 bytes);
+  the training split), coefficients (orthogonal projection) as float16, or
+  as int8 with one float16 scale per material (k + 2 bytes; also k = 30 and
+  62, which fill 32 B and 64 B exactly);
 - ``zstd-slices@Δ``: the mapped kept slices quantised at step Δ, int16,
   zstandard level 19 (the plain "quantise and zip" codec);
 - ``dct-slices@Δ``: the detail layer's own coder (colour decorrelation, 3-D
@@ -53,7 +55,9 @@ class LayeredBvae(OperatingPoint):
         self.decoder = self.encoder.decoder
         if bytes_budget is not None:
             self.name = f"bvae-layered@{_size_label(bytes_budget)}"
-            self.description = f"β-VAE (effort 1, float16) + detail layer, at most {bytes_budget} B of payload"
+            self.description = (
+                f"β-VAE (effort 1, float16) + basis and detail layers, at most {bytes_budget} B of payload"
+            )
         else:
             self.family = f"bvae-max-relae-{max_relae:g}"
             self.name = self.family
@@ -62,7 +66,9 @@ class LayeredBvae(OperatingPoint):
             )
 
     def shared_bytes(self) -> int:
-        return int((self.decoder.manifest.folder / "decoder.safetensors").stat().st_size)
+        folder = self.decoder.manifest.folder
+        files = ["decoder.safetensors", *(["basis.safetensors"] if self.decoder.manifest.basis_sha256 else [])]
+        return sum(int((folder / name).stat().st_size) for name in files)
 
     def encode(self, material: Material) -> bytes:
         from brdfcodec.bvae_format import encode_bvae
@@ -193,7 +199,9 @@ def rate_distortion_points(train_inputs: np.ndarray, model: Any = None) -> list[
     basis = fit_pca(train_inputs, min(75, len(train_inputs)))
     sizes = [k for k in (8, 16, 32, 64, 75) if k <= basis.n_components]
     points += [PcaPacked(basis, k, "float16") for k in sizes]
-    points += [PcaPacked(basis, k, "int8") for k in sizes]
+    # int8 also at k = N − 2, so that each budget of the comparison (32 B, 64 B) is filled exactly.
+    int8_sizes = sorted({*sizes, *(k for k in (30, 62) if k <= basis.n_components)})
+    points += [PcaPacked(basis, k, "int8") for k in int8_sizes]
     points += [ZstdSlices(step) for step in (0.004, 0.016, 0.064, 0.25, 1.0)]
     points += [DctSlices(step) for step in (0.01, 0.04, 0.16, 0.64, 2.56, 10.24)]
     return points

@@ -31,12 +31,13 @@ import numpy.typing as npt
 from brdfcodec.bvae_format import LatentRecord
 from brdfcodec.conventions import MAPPED_MAX
 from brdfcodec.errors import RateTargetError
+from brdfcodec.layers.basis import STEP_BYTES, BasisLayer
 from brdfcodec.layers.detail import DetailLayer, decode_detail, encode_detail
 from brdfcodec.layers.record import LayeredRecord
 from brdfcodec.metrics import error_report
 from brdfcodec.transforms import table_from_network_output
 
-__all__ = ["STEP_LADDER", "Metric", "RateResult", "encode_layers", "layered_mapped"]
+__all__ = ["STEP_LADDER", "BasisFit", "Metric", "RateResult", "encode_layers", "layered_mapped"]
 
 Metric = Literal["mapped", "linear"]
 #: Quantisation steps tried, coarsest first (mapped units): 16 · 2^(−i/2), i = 0 … 28.
@@ -53,9 +54,9 @@ class RateResult:
     ----------
     record : LatentRecord or LayeredRecord
     payload_bytes : int
-        μ, σ and the layer, as stored.
+        μ, σ and the layers, as stored.
     tried : list of (step or None, payload bytes, RelAE or None)
-        Every candidate evaluated (None step: base only).
+        Every candidate evaluated (None step: no detail layer).
     """
 
     record: LatentRecord
@@ -63,11 +64,62 @@ class RateResult:
     tried: list[tuple[float | None, int, float | None]]
 
 
+#: What a basis fit returns for k coefficients: the base with its jointly refined μ, the layer, and
+#: the decoder's mapped output before the detail layer (clamped base decode plus the basis residual).
+BasisFit = Callable[[int], tuple[LatentRecord, BasisLayer, np.ndarray]]
+#: Basis sizes tried by an error target below the basis' full size.
+_BASIS_COUNTS: Final = (4, 8, 16)
+
+
 def layered_mapped(base_mapped: np.ndarray, record: LatentRecord) -> np.ndarray:
     """Base decode plus the record's detail layer, if any (mapped, network layout)."""
     if isinstance(record, LayeredRecord) and record.detail is not None:
         return base_mapped + decode_detail(record.detail).reshape(base_mapped.shape)
     return base_mapped
+
+
+class _Candidates:
+    """Records made of the base, k basis coefficients (0: none) and a detail layer at step s (None: none)."""
+
+    def __init__(self, base: LatentRecord, base_mapped: np.ndarray, inputs: np.ndarray, masks: np.ndarray,
+                 latent_itemsize: int, basis_fit: BasisFit | None) -> None:
+        self.base, self.inputs, self.masks = base, inputs, masks
+        d = base.latent_dim
+        self.plain_bytes = 2 * d * latent_itemsize  # a latent record: μ and σ in the latent dtype
+        self.layered_bytes = d * latent_itemsize + d  # a layered record: μ, then σ as one byte each
+        self.basis_fit = basis_fit
+        self.stages: dict[int, tuple[LatentRecord, BasisLayer | None, np.ndarray]] = {0: (base, None, base_mapped)}
+        self.details: dict[tuple[int, float], DetailLayer] = {}
+
+    def stage(self, k: int) -> tuple[LatentRecord, BasisLayer | None, np.ndarray]:
+        if k not in self.stages:
+            assert self.basis_fit is not None
+            self.stages[k] = self.basis_fit(k)
+        return self.stages[k]
+
+    def detail(self, k: int, s: float) -> DetailLayer:
+        if (k, s) not in self.details:
+            _, _, mapped = self.stage(k)
+            self.details[k, s] = encode_detail((self.inputs - mapped) * self.masks, s)
+        return self.details[k, s]
+
+    def record(self, k: int, s: float | None) -> LatentRecord:
+        base, basis, _ = self.stage(k)
+        if basis is None and s is None:
+            return base
+        detail = None if s is None else self.detail(k, s)
+        return LayeredRecord(base.name, base.mu, base.sigma, base.meta, detail=detail, basis=basis, compact_sigma=True)
+
+    def size(self, k: int, s: float | None) -> int:
+        _, basis, _ = self.stage(k)
+        if basis is None and s is None:
+            return self.plain_bytes
+        return (self.layered_bytes + (0 if basis is None else basis.nbytes)
+                + (0 if s is None else self.detail(k, s).nbytes))
+
+    def mapped(self, k: int, s: float | None) -> np.ndarray:
+        _, _, mapped = self.stage(k)
+        return mapped if s is None else mapped + decode_detail(self.detail(k, s)).reshape(mapped.shape)
 
 
 def encode_layers(
@@ -83,6 +135,8 @@ def encode_layers(
     metric: Metric = "mapped",
     step: float | None = None,
     latent_itemsize: int = 4,
+    basis_fit: BasisFit | None = None,
+    basis_count: int = 0,
 ) -> RateResult:
     """A base record, layered to a size budget, an error target or a fixed step.
 
@@ -91,7 +145,7 @@ def encode_layers(
     base : LatentRecord
         The base (refined μ, σ, meta).
     base_mapped : ndarray, shape (63, 90, 90)
-        Decoder output of ``base.mu``.
+        Decoder output of ``base.mu`` (clamped).
     inputs, masks : array_like, shape (63, 90, 90)
         The material's mapped kept slices and their validity.
     values, mask : ndarray, shape (3, 90, 90, 180), optional
@@ -103,134 +157,120 @@ def encode_layers(
     metric : {"mapped", "linear"}
         RelAE used by ``max_relae``.
     step : float, optional
-        A fixed quantisation step instead of a target.
+        A fixed quantisation step instead of a target (on top of the full basis layer, when there is one).
     latent_itemsize : int
         Bytes per stored latent value (4: float32, 2: float16).
+    basis_fit : callable, optional
+        Fits k coefficients on the model's shared basis (with the base's μ); None when the model has no basis.
+    basis_count : int
+        Size K of that basis (the most coefficients a record may carry).
 
     Raises
     ------
     RateTargetError
-        The budget is below the base record's size, or no rung meets ``max_relae``.
+        The budget is below the base record's size, or no candidate meets ``max_relae``.
     """
     if sum(x is not None for x in (bytes_budget, max_relae, step)) != 1:
         raise ValueError("give exactly one of bytes_budget, max_relae or step")
     if metric not in ("mapped", "linear"):
         raise ValueError(f"metric must be 'mapped' or 'linear', got {metric!r}")
-    residual = (np.asarray(inputs, dtype=np.float64) - base_mapped) * np.asarray(masks)
-    base_bytes = 2 * base.latent_dim * latent_itemsize
-    layers: dict[float, DetailLayer] = {}
-
-    def layer(s: float) -> DetailLayer:
-        if s not in layers:
-            layers[s] = encode_detail(residual, s)
-        return layers[s]
-
-    def record_of(s: float | None) -> LatentRecord:
-        if s is None:
-            return base
-        return LayeredRecord(base.name, base.mu, base.sigma, base.meta, detail=layer(s))
-
-    def size(s: float | None) -> int:
-        return base_bytes + (0 if s is None else layer(s).nbytes)
-
+    full = basis_count if basis_fit is not None else 0
+    target = np.asarray(inputs, dtype=np.float32)
+    weights = np.asarray(masks, dtype=np.float32)
+    cands = _Candidates(base, base_mapped, target, weights, latent_itemsize, basis_fit)
+    base_bytes = min(cands.plain_bytes, cands.layered_bytes + STEP_BYTES + 1) if full else cands.plain_bytes
     if step is not None:
-        return RateResult(record_of(float(step)), size(float(step)), [(float(step), size(float(step)), None)])
+        return RateResult(cands.record(full, float(step)), cands.size(full, float(step)),
+                          [(float(step), cands.size(full, float(step)), None)])
     tried: list[tuple[float | None, int, float | None]] = []
     if bytes_budget is not None:
         if bytes_budget < base_bytes:
             raise RateTargetError(f"{base.name}: {bytes_budget} bytes is below the base record's {base_bytes} bytes")
-        candidates: list[float | None] = [None, *STEP_LADDER]
-        lo, hi = 0, len(candidates)  # candidates[lo] fits (the base does); candidates[hi] does not (or is past the end)
+        k = max(0, min(full, bytes_budget - cands.layered_bytes - STEP_BYTES))
+        ladder: list[float | None] = [None, *STEP_LADDER]
+        lo, hi = 0, len(ladder)  # ladder[lo] fits (no detail fits); ladder[hi] does not (or is past the end)
         while hi - lo > 1:
             mid = (lo + hi) // 2
-            tried.append((candidates[mid], size(candidates[mid]), None))
-            if size(candidates[mid]) <= bytes_budget:
+            tried.append((ladder[mid], cands.size(k, ladder[mid]), None))
+            if cands.size(k, ladder[mid]) <= bytes_budget:
                 lo = mid
             else:
                 hi = mid
-        if lo > 0 and hi < len(candidates):  # between two rungs: a few halvings of the step ratio, in log space
-            fine, coarse = candidates[hi], candidates[lo]
+        if lo > 0 and hi < len(ladder):  # between two rungs: a few halvings of the step ratio, in log space
+            fine, coarse = ladder[hi], ladder[lo]
             for _ in range(_REFINE_ROUNDS):
                 mid_step = float(np.sqrt(fine * coarse))  # type: ignore[operator]
-                tried.append((mid_step, size(mid_step), None))
-                if size(mid_step) <= bytes_budget:
+                tried.append((mid_step, cands.size(k, mid_step), None))
+                if cands.size(k, mid_step) <= bytes_budget:
                     coarse = mid_step
                 else:
                     fine = mid_step
-        # Among the fitting candidates, the lowest kept-slice L1 error (a very coarse layer can be worse than none).
-        weights = np.asarray(masks, dtype=np.float32)
-        target = np.asarray(inputs, dtype=np.float32)
 
-        def slice_error(s: float | None) -> float:
-            mapped = np.clip(layered_mapped(base_mapped.copy(), record_of(s)), 0.0, MAPPED_MAX)
+        # Among the fitting candidates, the lowest kept-slice L1 error (a very coarse layer can be worse than none).
+        def slice_error(candidate: tuple[int, float | None]) -> float:
+            mapped = np.clip(cands.mapped(*candidate), 0.0, MAPPED_MAX)
             return float((np.abs(mapped - target) * weights).sum())
 
-        fitting = {None, *(s for s, n, _ in tried if n <= bytes_budget)}
+        fitting = {(k, s) for s, n, _ in tried if s is not None and n <= bytes_budget}
+        fitting |= {c for c in ((0, None), (k, None)) if cands.size(*c) <= bytes_budget}
         chosen = min(fitting, key=slice_error)
-        return RateResult(record_of(chosen), size(chosen), tried)
+        return RateResult(cands.record(*chosen), cands.size(*chosen), tried)
     assert max_relae is not None
     if values is None or mask is None:
         raise ValueError(f"{base.name}: max_relae needs the source table to measure the error")
     if not max_relae > 0:
         raise ValueError(f"max_relae must be > 0, got {max_relae}")
-    errors: dict[float | None, float] = {}
+    errors: dict[tuple[int, float | None], float] = {}
 
-    def error(s: float | None) -> float:
-        if s not in errors:
-            table = table_from_network_output(layered_mapped(base_mapped, record_of(s))).astype(np.float64)
+    def error(candidate: tuple[int, float | None]) -> float:
+        if candidate not in errors:
+            table = table_from_network_output(cands.mapped(*candidate)).astype(np.float64)
             report = error_report(values, table, mask)
-            errors[s] = (report.relae_mapped if metric == "mapped" else report.relae_linear).overall
-        return errors[s]
+            errors[candidate] = (report.relae_mapped if metric == "mapped" else report.relae_linear).overall
+            tried.append((candidate[1], cands.size(*candidate), errors[candidate]))
+        return errors[candidate]
 
-    bracket = _bisect(lambda s: error(s) <= max_relae, tried, size, error)
+    sequence: list[tuple[int, float | None]] = [(0, None)]
+    sequence += [(n, None) for n in (*(n for n in _BASIS_COUNTS if n < full), full) if n > 0]
+    sequence += [(full, s) for s in STEP_LADDER]
+    bracket = _bisect(lambda c: error(c) <= max_relae, len(sequence), sequence)
     if bracket is None:
         best = min(errors.values())
         raise RateTargetError(
             f"{base.name}: RelAE ({metric}) {max_relae} is not reachable; the finest step reaches {best:.4g}"
         )
     failing, meeting = bracket
-    if failing is not None and meeting is not None:  # between two rungs: look for a coarser step that still meets X
+    if failing is not None and failing[1] is not None and meeting[1] is not None:
+        # between two rungs: look for a coarser step that still meets X
+        low, high = failing[1], meeting[1]
         for _ in range(_REFINE_ROUNDS - 1):
-            mid_step = float(np.sqrt(failing * meeting))
-            ok = error(mid_step) <= max_relae
-            tried.append((mid_step, size(mid_step), error(mid_step)))
-            if ok:
-                meeting = mid_step
+            mid_step = float(np.sqrt(low * high))
+            if error((full, mid_step)) <= max_relae:
+                high = mid_step
             else:
-                failing = mid_step
-    candidates = [s for s in errors if errors[s] <= max_relae]
-    chosen = min(candidates, key=size)
-    return RateResult(record_of(chosen), size(chosen), tried)
+                low = mid_step
+    candidates = [c for c in errors if errors[c] <= max_relae]
+    chosen = min(candidates, key=lambda c: cands.size(*c))
+    return RateResult(cands.record(*chosen), cands.size(*chosen), tried)
 
 
 def _bisect(
-    ok: Callable[[float | None], bool],
-    tried: list[tuple[float | None, int, float | None]],
-    size: Callable[[float | None], int],
-    error: Callable[[float | None], float] | None,
-) -> tuple[float | None, float | None] | None:
-    """Bracket the coarsest candidate (base only, then the ladder from coarse to fine) for which ``ok`` holds.
+    ok: Callable[[tuple[int, float | None]], bool], n: int, sequence: list[tuple[int, float | None]]
+) -> tuple[tuple[int, float | None] | None, tuple[int, float | None]] | None:
+    """Bracket the first candidate of ``sequence`` (ordered from smallest to largest) for which ``ok`` holds.
 
-    Returns ``(last failing, first passing)`` — ``(None, None)`` when the base
-    passes — or None when even the finest rung fails. ``ok`` is assumed to
-    hold from some rung on.
+    Returns ``(last failing, first passing)`` — ``(None, first)`` when the first passes — or None when even the
+    last fails. ``ok`` is assumed to hold from some candidate on.
     """
-    candidates: list[float | None] = [None, *STEP_LADDER]
-
-    def check(i: int) -> bool:
-        result = ok(candidates[i])
-        tried.append((candidates[i], size(candidates[i]), error(candidates[i]) if error else None))
-        return result
-
-    if check(0):
-        return None, None
-    lo, hi = 0, len(candidates) - 1  # ok(lo) false
-    if not check(hi):
+    if ok(sequence[0]):
+        return None, sequence[0]
+    lo, hi = 0, n - 1  # ok(lo) false
+    if not ok(sequence[hi]):
         return None
     while hi - lo > 1:
         mid = (lo + hi) // 2
-        if check(mid):
+        if ok(sequence[mid]):
             hi = mid
         else:
             lo = mid
-    return candidates[lo], candidates[hi]
+    return sequence[lo], sequence[hi]

@@ -17,7 +17,7 @@ import numpy as np
 import numpy.typing as npt
 import torch
 
-__all__ = ["EFFORT_STEPS", "refine_latent"]
+__all__ = ["BASIS_STEPS", "EFFORT_STEPS", "fit_basis_coefficients", "refine_latent"]
 
 #: Adam steps per effort level (0 = the encoder's μ as is).
 EFFORT_STEPS: Final = {0: 0, 1: 4, 2: 20, 3: 60}
@@ -121,3 +121,97 @@ class _Adam:
         bias_correction2_sqrt = (1 - beta2**self.steps) ** 0.5
         denom = (self.exp_avg_sq.sqrt() / bias_correction2_sqrt).add_(self.eps)
         self.parameter.addcdiv_(self.exp_avg, denom, value=-self.lr / bias_correction1)
+
+
+#: Adam steps of the joint fit of the latent and the basis coefficients, per effort level (0: least squares only).
+BASIS_STEPS: Final = {0: 0, 1: 20, 2: 60, 3: 150}
+#: Adam learning rate of the basis coefficients (mapped units; the basis vectors have unit norm).
+BASIS_LEARNING_RATE: Final = 0.05
+#: Adam learning rate of the latent during the joint fit (smaller than alone: the coefficients follow it).
+JOINT_LATENT_RATE: Final = 0.02
+
+
+def fit_basis_coefficients(
+    decoder: torch.nn.Module,
+    codes: npt.ArrayLike,
+    inputs: npt.ArrayLike,
+    masks: npt.ArrayLike,
+    components: npt.ArrayLike,
+    entries: npt.ArrayLike,
+    effort: int,
+) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.float32]]:
+    """Latent codes and basis coefficients fitted together (the basis layer's encoder).
+
+    Starts from ``codes`` and the least-squares coefficients of the residual
+    they leave (the orthogonal projection of ``x − clamp(D(z))`` on the basis,
+    over valid entries), then takes :data:`BASIS_STEPS` ``[effort]`` Adam steps
+    on the mapped L1 error of ``clamp(D(z)) + Σ cᵢ bᵢ`` over valid entries, and
+    keeps, per material, the best pair seen.
+
+    Parameters
+    ----------
+    decoder : torch.nn.Module
+        Latent → mapped kept slices ``(B, 63, 90, 90)``.
+    codes : array_like, shape (B, latent_dim)
+        Starting codes (refined μ).
+    inputs, masks : array_like, shape (B, 63, 90, 90)
+        Mapped kept slices and validity.
+    components : array_like, shape (k, E)
+        The first k vectors of the shared basis.
+    entries : array_like of int, shape (E,)
+        Their flat positions in the ``(63, 90, 90)`` layout.
+    effort : int
+        0 to 3.
+
+    Returns
+    -------
+    codes : ndarray of float32, shape (B, latent_dim)
+    coefficients : ndarray of float32, shape (B, k)
+    """
+    from brdfcodec.conventions import MAPPED_MAX
+
+    if effort not in BASIS_STEPS:
+        raise ValueError(f"effort must be one of {sorted(BASIS_STEPS)}, got {effort!r}")
+    parameter = next(decoder.parameters())
+    device, dtype = parameter.device, parameter.dtype
+    start = torch.as_tensor(np.array(codes, dtype=np.float32, ndmin=2), device=device, dtype=dtype)
+    target = torch.as_tensor(np.asarray(inputs, dtype=np.float32), device=device, dtype=dtype).flatten(1)
+    weight = torch.as_tensor(np.asarray(masks, dtype=np.float32), device=device, dtype=dtype).flatten(1)
+    basis = torch.as_tensor(np.asarray(components, dtype=np.float32), device=device, dtype=dtype)
+    where = torch.as_tensor(np.asarray(entries, dtype=np.int64), device=device)
+    grads = [p.requires_grad for p in decoder.parameters()]
+    for p in decoder.parameters():
+        p.requires_grad_(False)
+
+    def decoded(z: torch.Tensor, c: torch.Tensor) -> torch.Tensor:
+        return decoder(z).clamp(0.0, MAPPED_MAX).flatten(1).index_add(1, where, c @ basis)
+
+    try:
+        with torch.no_grad():
+            residual = (target - decoder(start).clamp(0.0, MAPPED_MAX).flatten(1)) * weight
+            c0 = residual[:, where] @ basis.T
+        z = start.clone().requires_grad_(True)
+        c = c0.clone().requires_grad_(True)
+        best_z, best_c = z.detach().clone(), c.detach().clone()
+        best_error = torch.full((len(start),), float("inf"), device=device)
+        steps = BASIS_STEPS[effort]
+        adam_z, adam_c = _Adam(z, JOINT_LATENT_RATE), _Adam(c, BASIS_LEARNING_RATE)
+        with torch.enable_grad():
+            for step in range(steps + 1):
+                error = ((decoded(z, c) - target) * weight).abs().sum(1)
+                better = error.detach() < best_error
+                best_z[better], best_c[better] = z.detach()[better], c.detach()[better]
+                best_error = torch.minimum(best_error, error.detach())
+                if step == steps:
+                    break
+                z.grad = c.grad = None
+                error.sum().backward()
+                adam_z.step()
+                adam_c.step()
+    finally:
+        for p, g in zip(decoder.parameters(), grads, strict=True):
+            p.requires_grad_(g)
+    out_z, out_c = best_z.float().cpu().numpy(), best_c.float().cpu().numpy()
+    if not (np.isfinite(out_z).all() and np.isfinite(out_c).all()):
+        return start.float().cpu().numpy(), c0.float().cpu().numpy()
+    return out_z, out_c

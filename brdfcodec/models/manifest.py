@@ -34,6 +34,10 @@ class ModelManifest:
         Where the files are.
     info : dict
         Training facts (data, split, schedule, metrics), free-form.
+    parameters : dict
+        What each latent dimension controls (named parameters, colour dimensions).
+    basis_sha256 : str or None
+        Hex SHA-256 of the shared basis file (``basis.safetensors``), when the model has one.
     """
 
     name: str
@@ -43,6 +47,7 @@ class ModelManifest:
     folder: Path
     info: dict[str, Any]
     parameters: dict[str, Any] = field(default_factory=dict)
+    basis_sha256: str | None = None
 
 
 def load_manifest(folder: str | os.PathLike[str]) -> ModelManifest:
@@ -58,6 +63,7 @@ def load_manifest(folder: str | os.PathLike[str]) -> ModelManifest:
             folder=Path(folder),
             info=dict(data.get("info", {})),
             parameters=dict(data.get("parameters", {})),
+            basis_sha256=None if data.get("basis_sha256") is None else str(data["basis_sha256"]),
         )
     except (KeyError, TypeError, ValueError) as error:
         raise BrdfcodecError(f"{path}: not a valid model manifest ({error})") from None

@@ -22,9 +22,11 @@ from brdfcodec.training.card import render_model_card
 from brdfcodec.training.measurements import kl_per_dim, measure_model, summarise, traversal_changes
 from brdfcodec.version import __version__
 
-__all__ = ["CARD", "export_run"]
+__all__ = ["CARD", "DEFAULT_BASIS_COUNT", "add_shared_basis", "export_run"]
 
 CARD = "MODEL_CARD.md"
+#: Vectors of the shared basis that ``bvae model export`` fits (64 float16 vectors: 50 MB).
+DEFAULT_BASIS_COUNT = 64
 
 _LIMITS = [
     "Trained and measured on the NBRDF proxy of MERL (neural fits evaluated on the MERL grid), which is smoother "
@@ -44,8 +46,9 @@ def export_run(
     dataset_path: str | os.PathLike[str] | None = None,
     command: str = "",
     comparisons: dict[str, str | os.PathLike[str]] | None = None,
+    basis_count: int = DEFAULT_BASIS_COUNT,
 ) -> ModelManifest:
-    """Export the best weights of a run with every measurement its card needs.
+    """Export the best weights of a run with every measurement its card needs, and fit its shared basis.
 
     Parameters
     ----------
@@ -63,6 +66,9 @@ def export_run(
     comparisons : dict of str to path, optional
         Other exported model folders (label → folder) whose measurements the
         card shows beside this model's (a paper-sized model, ablations).
+    basis_count : int
+        Vectors of the shared basis fitted on the training split (``basis.safetensors``, the basis layer
+        of ``spec/bvae-format.md`` §4.4); 0 for none.
     """
     run = Path(run_dir)
     run_info = json.loads((run / "run.json").read_text())
@@ -84,6 +90,9 @@ def export_run(
         data = {"source_kind": dataset.source_kind, "description": dataset.description,
                 "train": [dataset.names[i] for i in dataset.indices("train")],
                 "validation": [dataset.names[i] for i in dataset.indices("validation")]}
+        out = Path(folder)
+        out.mkdir(parents=True, exist_ok=True)
+        basis = _fit_basis(out, dataset, basis_count) if basis_count else None
     info: dict[str, Any] = {
         "brdfcodec_version": __version__,
         "torch_version": torch.__version__,
@@ -111,16 +120,50 @@ def export_run(
     for label, other in (comparisons or {}).items():
         other_manifest = json.loads((Path(other) / MANIFEST).read_text())
         info["comparisons"].append(_comparison_row(label, other_manifest["info"], Path(other)))
-    out = Path(folder)
     identity = write_weights(model, out, name=name)
     info["decoder_bytes"] = identity["decoder_bytes"]
     info["encoder_bytes"] = identity["encoder_bytes"]
     info["comparisons"][0]["decoder_bytes"] = info["decoder_bytes"]
     manifest = {key: identity[key] for key in ("name", "config", "decoder_sha256", "encoder_sha256")}
+    if basis is not None:
+        manifest["basis_sha256"] = basis.pop("sha256")
+        info["basis"] = basis
     manifest["info"] = info
     manifest["parameters"] = describe_parameters(BrdfDecoder.from_network(model.decoder))
     write_card(out, manifest)
     return write_manifest(out, manifest)  # last: a folder with a model.json is a complete model
+
+
+def _fit_basis(folder: Path, dataset: BrdfDataset, count: int) -> dict[str, Any]:
+    """Fit the shared basis on the dataset's training split and write ``basis.safetensors`` into ``folder``."""
+    from brdfcodec.layers.basis import BASIS_FILE, fit_shared_basis, write_shared_basis
+
+    rows = dataset.indices("train")
+    count = min(count, len(rows) - 1)  # the centred training data has rank at most N − 1
+    if count < 1:
+        raise ValueError(f"{dataset.path}: a shared basis needs at least 2 training materials")
+    components, entries = fit_shared_basis(dataset.inputs(rows), dataset.input_masks(rows), count)
+    sha = write_shared_basis(folder / BASIS_FILE, components, entries)
+    return {"sha256": sha, "count": int(count), "entries": len(entries), "fitted_on": "train",
+            "materials": len(rows), "bytes": (folder / BASIS_FILE).stat().st_size,
+            "kind": "principal components of the training split's mapped kept slices (valid entries)"}
+
+
+def add_shared_basis(folder: str | os.PathLike[str], dataset_path: str | os.PathLike[str],
+                     count: int = DEFAULT_BASIS_COUNT) -> ModelManifest:
+    """Fit a shared basis for an exported model (on a dataset's training split) and name it in ``model.json``.
+
+    For a model exported before shared bases existed (:func:`export_run` fits one itself). The weights are
+    not touched, so the model's identity (its decoder hash) is unchanged; files written before keep decoding.
+    """
+    out = Path(folder)
+    stored = json.loads((out / MANIFEST).read_text())
+    with BrdfDataset(dataset_path) as dataset:
+        basis = _fit_basis(out, dataset, count)
+    stored["basis_sha256"] = basis.pop("sha256")
+    stored.setdefault("info", {})["basis"] = basis
+    write_card(out, stored)
+    return write_manifest(out, stored)
 
 
 def write_card(folder: str | os.PathLike[str], manifest: dict[str, Any]) -> Path:

@@ -30,6 +30,8 @@ SHIPPED_DECODER = DecoderReference(
     "e1e3ed1e24dc5a8746abbfb9194725e1a9d02808c2e81125c64f3d9e37b39491", "bvae-nbrdf-proxy-small-v1"
 )
 TEST_DECODER = DecoderReference("ab" * 32, "conformance-test-decoder")
+#: SHA-256 of the shipped default model's shared basis (``basis.safetensors``).
+SHIPPED_BASIS = "c33897f0299a8124e7708455492b7105f2bf362d079a64b97cc71a002a367268"
 #: Relative and absolute tolerance of expected decoded values (stored MERL units).
 DECODE_RTOL = 1e-3
 DECODE_ATOL = 1e-6
@@ -168,9 +170,35 @@ def invalid_vectors() -> dict[str, tuple[bytes, str, str]]:
     add("layered-unknown-transform", assemble(*plain([({**lay_entry, "layers": {"detail": {
         **lay_entry["layers"]["detail"], "transform": "wavelet"}}}, lay_payload)])), "unsupported",
         "a detail layer with transform 'wavelet'")
-    add("layered-unknown-layer", assemble(*plain([({**lay_entry, "layers": {**lay_entry["layers"], "basis": {}}},
+    add("layered-unknown-layer", assemble(*plain([({**lay_entry, "layers": {**lay_entry["layers"], "hologram": {}}},
                                                    lay_payload)])), "unsupported",
-        "layers holding 'basis' besides 'detail'")
+        "layers holding 'hologram' besides 'detail'")
+    # Basis layer (since 1.2): mu as float32, sigma as one byte each, the basis step (float16) and coefficients.
+    basis_payload = (np.array([0.5, -1.0], dtype="<f4").tobytes() + bytes([160, 176])
+                     + np.float16(0.25).astype("<f2").tobytes() + bytes([3, 253, 0]))
+    basis_entry = {"crc32": zlib.crc32(basis_payload), "kind": "layered", "length": len(basis_payload), "name": "b",
+                   "offset": 0, "layers": {"sigma": "log2-u8", "basis": {"sha256": "cd" * 32, "count": 3}}}
+
+    def basis_vector(layers: dict[str, Any], payload: bytes = basis_payload) -> bytes:
+        return assemble(*plain([({**basis_entry, "layers": layers, "length": len(payload),
+                                  "crc32": zlib.crc32(payload)}, payload)]))
+
+    add("basis-unknown-sigma", basis_vector({**basis_entry["layers"], "sigma": "log2-u4"}), "unsupported",
+        "sigma stored as 'log2-u4'")
+    add("basis-unknown-field", basis_vector({**basis_entry["layers"], "basis": {
+        **basis_entry["layers"]["basis"], "transform": "ica"}}), "unsupported", "a basis layer with a field 'transform'")
+    add("basis-count-zero", basis_vector({**basis_entry["layers"], "basis": {"sha256": "cd" * 32, "count": 0}},
+                                         basis_payload[:12]), "malformed", "a basis layer of 0 coefficients")
+    add("basis-sha-upper", basis_vector({**basis_entry["layers"], "basis": {"sha256": "CD" * 32, "count": 3}}),
+        "malformed", "a basis sha256 in upper-case hex")
+    add("basis-length", basis_vector({**basis_entry["layers"], "basis": {"sha256": "cd" * 32, "count": 4}}),
+        "malformed", "count 4 but 3 coefficient bytes (record length as the payload)")
+    nan_step = basis_payload[:10] + np.float16(np.nan).astype("<f2").tobytes() + basis_payload[12:]
+    add("basis-step-nan", basis_vector(basis_entry["layers"], nan_step), "malformed",
+        "the basis step is NaN (record CRC valid)")
+    zero_step = basis_payload[:10] + np.float16(0).astype("<f2").tobytes() + basis_payload[12:]
+    add("basis-step-zero", basis_vector(basis_entry["layers"], zero_step), "malformed",
+        "the basis step is 0 (record CRC valid)")
     short = detail_frame([1], 63 * 90 * 90 - 1)
     short_payload = lay_payload[:16] + short
     add("layered-content-size", assemble(*plain([({**lay_entry, "crc32": zlib.crc32(short_payload),
@@ -241,6 +269,17 @@ def layered_record(name: str, mu: np.ndarray, sigma: np.ndarray) -> LatentRecord
                                                                  "candidates_tried": 1}}, detail=layer)
 
 
+def basis_record(name: str, mu: np.ndarray, sigma: np.ndarray, sha256: str, *, detail: bool = False) -> LatentRecord:
+    """A layered record (§4.4) with compact sigma and 5 coefficients on a shared basis (and a detail layer)."""
+    from brdfcodec.layers.basis import BasisLayer
+    from brdfcodec.layers.detail import N_DETAIL_VALUES, DetailLayer
+    from brdfcodec.layers.record import LayeredRecord
+
+    layer = DetailLayer(0.125, "int16", detail_frame([8, -4, 2], N_DETAIL_VALUES)) if detail else None
+    basis = BasisLayer(sha256, 0.5, np.array([12, -7, 3, 0, -1], dtype=np.int8))
+    return LayeredRecord(name, mu, sigma, {"effort": 1}, detail=layer, basis=basis, compact_sigma=True)
+
+
 def valid_records() -> dict[str, tuple[list, DecoderReference, str, bool | None]]:
     """name -> (records, decoder, latent dtype, compress header)."""
     rng = np.random.default_rng(2026)
@@ -262,8 +301,13 @@ def valid_records() -> dict[str, tuple[list, DecoderReference, str, bool | None]
         "reference-decode": ([LatentRecord("reference", halves(8), sigma(8)),
                               GraftRecord("reference.graft", halves(8), sigma(8), (3, 4), [1.5, -0.5])],
                              SHIPPED_DECODER, "float32", False),
+        "reference-decode-layers": ([basis_record("reference.basis", halves(8), sigma(8), SHIPPED_BASIS),
+                                     basis_record("reference.basis-detail", halves(8), sigma(8), SHIPPED_BASIS,
+                                                  detail=True)],
+                                    SHIPPED_DECODER, "float16", False),
         "layered": ([layered_record("gold.layered", halves(8), sigma(8)),
-                     LatentRecord("gold", halves(8), sigma(8), {"effort": 0, "source_kind": "rgl-measured"})],
+                     LatentRecord("gold", halves(8), sigma(8), {"effort": 0, "source_kind": "rgl-measured"}),
+                     basis_record("gold.basis", halves(8), sigma(8), "cd" * 32, detail=True)],
                     TEST_DECODER, "float32", False),
     }
 
@@ -299,7 +343,7 @@ def generate(folder: Path, *, with_reference: bool = True) -> dict[str, Any]:
     (folder / "valid").mkdir(parents=True, exist_ok=True)
     (folder / "invalid").mkdir(parents=True, exist_ok=True)
     manifest: dict[str, Any] = {
-        "format_version": "1.1",
+        "format_version": "1.2",
         "error_classes": {
             "malformed": "BvaeFormatError",
             "checksum": "BvaeChecksumError",
@@ -321,6 +365,12 @@ def generate(folder: Path, *, with_reference: bool = True) -> dict[str, Any]:
             manifest["decode"] = {
                 "file": f"valid/{name}.bvae", "entries": REFERENCE_ENTRIES, "rtol": DECODE_RTOL, "atol": DECODE_ATOL,
                 "masked": "unmeasured", "units": "stored MERL units (float32)",
+                "values": reference_values(records),
+            }
+        if name == "reference-decode-layers" and with_reference:
+            manifest["decode_layers"] = {
+                "file": f"valid/{name}.bvae", "entries": REFERENCE_ENTRIES, "rtol": DECODE_RTOL, "atol": DECODE_ATOL,
+                "masked": "unmeasured", "units": "stored MERL units (float32)", "basis_sha256": SHIPPED_BASIS,
                 "values": reference_values(records),
             }
     for name, (data, error, why) in invalid_vectors().items():

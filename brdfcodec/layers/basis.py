@@ -1,0 +1,287 @@
+"""The basis layer: a few quantised coefficients on a basis shared by every material (``spec/bvae-format.md`` §4.4).
+
+A model may ship a *shared basis* (``basis.safetensors`` beside its weights,
+``spec/model.md`` §5): K orthonormal vectors over the entries of the mapped
+kept slices that lie above the horizon, fitted by :func:`fit_shared_basis`
+when the model is exported — the principal components of the training
+materials' mapped kept slices. A record's basis layer holds k ≤ K integer
+coefficients ``q`` and one float16 step ``s``; decoding adds
+``s · Σᵢ qᵢ · bᵢ`` to the decoder's output for μ (before the detail layer,
+the clamp and the interpolation).
+
+This is the low-rate enhancement: between the 8-D latent (32 B as float16)
+and the per-material detail layer (hundreds of bytes and up), each extra
+byte buys one more coefficient. Which basis was measured, not guessed
+(``benchmarks/rd_study.py``; held-out NBRDF proxy of MERL, kept-slice mapped
+RelAE after refinement, coefficients by least squares): the principal
+components of the training *data* beat those of the training *residuals*
+(what the decoder leaves on the materials it was trained on, which it fits
+far better than new ones) from about 12 coefficients on; with 30, 0.0308
+against 0.0375.
+
+This module does not import torch (the encoder's joint fit is in
+:mod:`brdfcodec.layers.refine`).
+"""
+
+from __future__ import annotations
+
+import functools
+import os
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Final
+
+import numpy as np
+import numpy.typing as npt
+
+from brdfcodec.conventions import NETWORK_INPUT_SHAPE
+
+__all__ = [
+    "BASIS_FILE",
+    "MAX_BASIS_COUNT",
+    "BasisLayer",
+    "SharedBasis",
+    "basis_layer_from_bytes",
+    "fit_shared_basis",
+    "load_shared_basis",
+    "quantise_coefficients",
+    "write_shared_basis",
+]
+
+#: File name of a model's shared basis, beside ``decoder.safetensors``.
+BASIS_FILE: Final = "basis.safetensors"
+#: Most coefficients a record may carry (and most vectors a basis may hold).
+MAX_BASIS_COUNT: Final = 4096
+_ENTRIES_PER_CHANNEL: Final = NETWORK_INPUT_SHAPE[1] * NETWORK_INPUT_SHAPE[2]
+_N_ENTRIES: Final = int(np.prod(NETWORK_INPUT_SHAPE))
+#: Bytes of the step that precedes the coefficients.
+STEP_BYTES: Final = 2
+
+
+class BasisError(ValueError):
+    """A basis file that is malformed or does not match its expected SHA-256."""
+
+
+@dataclass(frozen=True, eq=False)
+class SharedBasis:
+    """A model's shared basis.
+
+    Attributes
+    ----------
+    components : ndarray of float16, shape (K, E)
+        Orthonormal rows (up to float16 rounding) over ``entries``.
+    entries : ndarray of int64, shape (E,)
+        Strictly increasing flat positions in the ``(63, 90, 90)`` network layout.
+    sha256 : str
+        SHA-256 of the file it was read from (its identity in records).
+    """
+
+    components: npt.NDArray[np.float16]
+    entries: npt.NDArray[np.int64]
+    sha256: str
+
+    @property
+    def count(self) -> int:
+        """Number of vectors K."""
+        return int(self.components.shape[0])
+
+    @functools.cached_property
+    def _float32(self) -> npt.NDArray[np.float32]:
+        return self.components.astype(np.float32)
+
+    @functools.cached_property
+    def _channel_of_entry(self) -> npt.NDArray[np.int64]:
+        return self.entries // _ENTRIES_PER_CHANNEL
+
+    def residual(self, coefficients: npt.ArrayLike) -> npt.NDArray[np.float32]:
+        """``Σᵢ cᵢ · bᵢ`` in the ``(63, 90, 90)`` layout (0 off the basis' entries), mapped units."""
+        c = np.asarray(coefficients, dtype=np.float32).reshape(-1)
+        self._check_count(len(c))
+        out = np.zeros(_N_ENTRIES, dtype=np.float32)
+        out[self.entries] = c @ self._float32[: len(c)]
+        return out.reshape(NETWORK_INPUT_SHAPE)
+
+    def residual_channels(self, coefficients: npt.ArrayLike, channels: Sequence[int]) -> npt.NDArray[np.float32]:
+        """Only some channels of :meth:`residual`, shape ``(len(channels), 90, 90)`` (partial decoding)."""
+        c = np.asarray(coefficients, dtype=np.float32).reshape(-1)
+        self._check_count(len(c))
+        wanted = np.asarray(channels, dtype=np.int64)
+        out = np.zeros((len(wanted), _ENTRIES_PER_CHANNEL), dtype=np.float32)
+        for row, channel in enumerate(wanted):
+            start, stop = np.searchsorted(self._channel_of_entry, [channel, channel + 1])
+            if stop > start:
+                out[row, self.entries[start:stop] - channel * _ENTRIES_PER_CHANNEL] = (
+                    c @ self._float32[: len(c), start:stop]
+                )
+        return out.reshape(len(wanted), *NETWORK_INPUT_SHAPE[1:])
+
+    def _check_count(self, k: int) -> None:
+        if not 1 <= k <= self.count:
+            raise BasisError(f"a basis layer of {k} coefficients needs 1 to {self.count} (this basis' size)")
+
+
+def fit_shared_basis(
+    inputs: npt.ArrayLike, masks: npt.ArrayLike, count: int
+) -> tuple[npt.NDArray[np.float16], npt.NDArray[np.int64]]:
+    """Principal components of training materials' mapped kept slices, over the entries valid in all of them.
+
+    Parameters
+    ----------
+    inputs : array_like, shape (N, 63, 90, 90)
+        Mapped kept slices (network inputs) of the training materials.
+    masks : array_like of bool, shape (N, 63, 90, 90)
+        Their valid entries; the basis covers the entries valid in every material.
+    count : int
+        K, in [1, N − 1] (the centred data has rank at most N − 1).
+
+    Returns
+    -------
+    components : ndarray of float16, shape (K, E)
+    entries : ndarray of int64, shape (E,)
+    """
+    flat = np.asarray(inputs, dtype=np.float64).reshape(len(inputs), -1)
+    valid = np.asarray(masks, dtype=bool).reshape(len(flat), -1).all(axis=0)
+    if not 1 <= count <= min(len(flat) - 1, MAX_BASIS_COUNT):
+        raise ValueError(f"count must be in [1, {min(len(flat) - 1, MAX_BASIS_COUNT)}] for {len(flat)} materials")
+    entries = np.flatnonzero(valid).astype(np.int64)
+    data = flat[:, entries]
+    _, _, vt = np.linalg.svd(data - data.mean(axis=0), full_matrices=False)
+    return vt[:count].astype(np.float16), entries
+
+
+def write_shared_basis(
+    path: str | os.PathLike[str], components: npt.ArrayLike, entries: npt.ArrayLike
+) -> str:
+    """Write a basis file atomically and return its SHA-256 (what records and ``model.json`` name it by)."""
+    from safetensors.numpy import save_file
+
+    from brdfcodec.atomic import atomic_output
+    from brdfcodec.hashing import sha256_of_file
+
+    tensors = {
+        "components": np.ascontiguousarray(components, dtype=np.float16),
+        "entries": np.ascontiguousarray(entries, dtype=np.int64),
+    }
+    _validate(tensors["components"], tensors["entries"], str(path))
+    with atomic_output(Path(path), overwrite=True) as tmp:
+        save_file(tensors, str(tmp))
+    return sha256_of_file(path)
+
+
+def load_shared_basis(path: str | os.PathLike[str], expected_sha256: str) -> SharedBasis:
+    """Read a basis file after checking its SHA-256.
+
+    Raises
+    ------
+    BasisError
+        The file's hash is not ``expected_sha256``, or its tensors are malformed.
+    """
+    from safetensors import SafetensorError
+    from safetensors.numpy import load_file
+
+    from brdfcodec.hashing import sha256_of_file
+
+    actual = sha256_of_file(path)
+    if actual != expected_sha256:
+        raise BasisError(f"{path}: SHA-256 {actual} is not the {expected_sha256} its model.json names")
+    try:
+        tensors = load_file(str(path))
+    except (SafetensorError, OSError) as error:
+        raise BasisError(f"{path}: not a readable safetensors file ({error})") from None
+    components, entries = tensors.get("components"), tensors.get("entries")
+    if components is None or entries is None:
+        raise BasisError(f"{path}: a basis file needs the tensors 'components' and 'entries'")
+    _validate(components, entries, str(path))
+    return SharedBasis(components, entries.astype(np.int64), actual)
+
+
+def _validate(components: np.ndarray, entries: np.ndarray, where: str) -> None:
+    if components.dtype != np.float16 or components.ndim != 2:
+        raise BasisError(f"{where}: 'components' must be a 2-D float16 tensor, got {components.dtype} {components.shape}")
+    if not 1 <= components.shape[0] <= MAX_BASIS_COUNT:
+        raise BasisError(f"{where}: a basis holds 1 to {MAX_BASIS_COUNT} vectors, got {components.shape[0]}")
+    if entries.ndim != 1 or entries.shape[0] != components.shape[1] or entries.shape[0] == 0:
+        raise BasisError(f"{where}: 'entries' must be 1-D with one position per component column")
+    if entries.min() < 0 or entries.max() >= _N_ENTRIES or np.any(np.diff(entries) <= 0):
+        raise BasisError(f"{where}: 'entries' must be strictly increasing positions in [0, {_N_ENTRIES})")
+    if not np.isfinite(components).all():
+        raise BasisError(f"{where}: 'components' holds non-finite values")
+
+
+@dataclass(frozen=True)
+class BasisLayer:
+    """A record's coefficients on its model's shared basis.
+
+    Attributes
+    ----------
+    sha256 : str
+        The shared basis' SHA-256 (64 lower-case hex digits).
+    step : float
+        Quantisation step s (a positive, finite float16 value), mapped units.
+    q : ndarray of int8, shape (k,)
+        Quantised coefficients; the coefficients are ``s · q``.
+    """
+
+    sha256: str
+    step: float
+    q: npt.NDArray[np.int8]
+
+    def __post_init__(self) -> None:
+        if not (isinstance(self.sha256, str) and len(self.sha256) == 64
+                and all(ch in "0123456789abcdef" for ch in self.sha256)):
+            raise ValueError(f"basis sha256 must be 64 lower-case hex digits, got {self.sha256!r}")
+        step = np.float16(self.step)
+        if not (np.isfinite(step) and step > 0 and float(step) == float(self.step)):
+            raise ValueError(f"basis step must be a positive finite float16 value, got {self.step!r}")
+        q = np.asarray(self.q)
+        if q.dtype != np.int8 or q.ndim != 1 or not 1 <= len(q) <= MAX_BASIS_COUNT:
+            raise ValueError(f"basis coefficients must be 1 to {MAX_BASIS_COUNT} int8 values")
+
+    @property
+    def count(self) -> int:
+        """Number of coefficients k."""
+        return len(self.q)
+
+    @property
+    def nbytes(self) -> int:
+        """Stored size: the float16 step and k bytes."""
+        return STEP_BYTES + self.count
+
+    @property
+    def data(self) -> bytes:
+        """Payload bytes: the step as little-endian float16, then the k int8 coefficients."""
+        return np.float16(self.step).astype("<f2").tobytes() + self.q.tobytes()
+
+    def coefficients(self) -> npt.NDArray[np.float32]:
+        """``s · q`` as float32."""
+        return np.float32(self.step) * self.q.astype(np.float32)
+
+    def entry(self) -> dict[str, object]:
+        """The ``layers.basis`` object of the record's index entry."""
+        return {"sha256": self.sha256, "count": self.count}
+
+
+def quantise_coefficients(sha256: str, coefficients: npt.ArrayLike) -> BasisLayer:
+    """A basis layer holding ``coefficients`` quantised to int8 with one float16 step (max |c| / 127)."""
+    c = np.asarray(coefficients, dtype=np.float64).reshape(-1)
+    if not np.isfinite(c).all():
+        raise ValueError("basis coefficients must be finite")
+    largest = float(np.abs(c).max(initial=0.0))
+    step = np.float16(min(max(largest / 127.0, 1e-4), 60000.0))
+    if largest / float(step) > 127.49:  # float16 rounding made the step too small for the largest value
+        step = np.nextafter(step, np.float16(np.inf))
+    q = np.clip(np.rint(c / float(step)), -127, 127).astype(np.int8)
+    return BasisLayer(sha256, float(step), q)
+
+
+def basis_layer_from_bytes(entry: Mapping[str, Any], data: bytes) -> BasisLayer:
+    """A basis layer from its validated index entry and its payload bytes."""
+    count = int(entry["count"])
+    if len(data) != STEP_BYTES + count:
+        raise ValueError(f"basis layer holds {len(data)} bytes, expected {STEP_BYTES + count}")
+    step = float(np.frombuffer(data[:STEP_BYTES], dtype="<f2")[0])
+    if not (np.isfinite(step) and step > 0):
+        raise ValueError(f"basis step {step} is not a positive finite number")
+    return BasisLayer(str(entry["sha256"]), step, np.frombuffer(data[STEP_BYTES:], dtype=np.int8).copy())
+

@@ -1,0 +1,168 @@
+"""Issue 14: the basis layer (coefficients on the model's shared basis) and compact sigma (spec §4.5)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from brdfcodec.bvae_format import DecoderReference, LatentRecord, encode_bvae, parse_bvae
+from brdfcodec.conventions import NETWORK_INPUT_SHAPE
+from brdfcodec.errors import BasisMismatchError, BvaeFormatError
+from brdfcodec.layers.basis import (
+    BasisError,
+    BasisLayer,
+    fit_shared_basis,
+    load_shared_basis,
+    quantise_coefficients,
+    write_shared_basis,
+)
+from brdfcodec.layers.record import LayeredRecord, quantise_sigma, sigma_from_codes
+
+DECODER = DecoderReference("ab" * 32, "test-decoder")
+SHA = "cd" * 32
+
+
+def basis_record(name: str = "b", k: int = 5, *, compact: bool = True, sha: str = SHA) -> LayeredRecord:
+    rng = np.random.default_rng(3)
+    layer = quantise_coefficients(sha, rng.normal(0, 4, size=k))
+    return LayeredRecord(name, rng.normal(size=8), np.exp(rng.normal(-2, 1, size=8)), {"effort": 1},
+                         basis=layer, compact_sigma=compact)
+
+
+def test_quantised_coefficients_are_within_half_a_step() -> None:
+    c = np.array([40.0, -3.2, 0.01, 0.0, -40.5])
+    layer = quantise_coefficients(SHA, c)
+    assert np.float16(layer.step) == layer.step and layer.step > 0
+    assert np.abs(layer.coefficients() - c).max() <= layer.step / 2 * 1.001
+    assert np.abs(layer.q).max() <= 127
+    assert layer.nbytes == len(layer.data) == 2 + len(c)
+    assert quantise_coefficients(SHA, np.zeros(3)).coefficients().tolist() == [0.0, 0.0, 0.0]  # no division by 0
+
+
+def test_compact_sigma_is_within_its_bound_and_stable() -> None:
+    sigma = np.exp(np.linspace(np.log(3e-4), np.log(12.0), 200))
+    stored = sigma_from_codes(quantise_sigma(sigma))
+    assert np.abs(stored / sigma - 1).max() <= 2 ** (1 / 32) - 1 + 1e-6  # half a 1/16 octave: 2.2 %
+    np.testing.assert_array_equal(sigma_from_codes(quantise_sigma(stored)), stored)  # re-encoding changes nothing
+
+
+@pytest.mark.parametrize("dtype", ["float32", "float16"])
+def test_basis_records_round_trip_and_cost_what_the_spec_says(dtype: str) -> None:
+    plain = LatentRecord("plain", np.zeros(8), np.ones(8))
+    record = basis_record()
+    parsed = parse_bvae(encode_bvae([plain, record], DECODER, latent_dtype=dtype))  # type: ignore[arg-type]
+    entry = parsed.header.entries[1]
+    itemsize = 2 if dtype == "float16" else 4
+    assert entry.length == 8 * itemsize + 8 + 2 + 5  # mu, sigma as bytes, step, coefficients
+    assert entry.layers == {"sigma": "log2-u8", "basis": {"sha256": SHA, "count": 5}}
+    back = parsed.records[1]
+    assert isinstance(back, LayeredRecord) and back.compact_sigma and back.detail is None
+    np.testing.assert_array_equal(back.basis.q, record.basis.q)
+    assert back.basis.step == record.basis.step
+    np.testing.assert_array_equal(back.sigma, record.sigma)  # the record already holds the stored widths
+    wide = LayeredRecord("w", record.mu, record.sigma, basis=record.basis)
+    assert parse_bvae(encode_bvae([wide], DECODER)).header.entries[0].length == 16 * 4 + 7
+
+
+def test_a_layered_record_needs_a_layer() -> None:
+    with pytest.raises(ValueError, match="basis layer, a detail layer or both"):
+        LayeredRecord("x", np.zeros(8), np.ones(8), compact_sigma=True)
+
+
+def test_a_truncated_basis_payload_is_malformed() -> None:
+    data = bytearray(encode_bvae([basis_record()], DECODER, compress_header=False))
+    # The last byte is a coefficient: drop it and fix nothing else; the length no longer matches the layers.
+    with pytest.raises(BvaeFormatError):
+        parse_bvae(bytes(data[:-1]))
+
+
+def synthetic_inputs(n: int = 6) -> tuple[np.ndarray, np.ndarray]:
+    rng = np.random.default_rng(0)
+    h = np.linspace(0, 1, 90)
+    shapes = [np.outer(np.sin((i + 1) * h), np.cos((i + 2) * h)) for i in range(3)]
+    inputs = np.stack([sum(rng.normal() * s for s in shapes)[None].repeat(63, 0) + 1.0 for _ in range(n)])
+    masks = np.ones(inputs.shape, dtype=bool)
+    masks[:, :, :, 80:] = False  # entries invalid in every material are not covered
+    masks[0, 0, 0, 0] = False  # nor one invalid in a single material
+    return (inputs * masks).astype(np.float32), masks
+
+
+def test_fitted_basis_is_orthonormal_over_the_valid_entries(tmp_path) -> None:
+    inputs, masks = synthetic_inputs()
+    components, entries = fit_shared_basis(inputs, masks, 3)
+    assert components.dtype == np.float16 and components.shape == (3, len(entries))
+    assert 0 not in entries and len(entries) == 63 * 90 * 80 - 1
+    gram = components.astype(np.float64) @ components.astype(np.float64).T
+    np.testing.assert_allclose(gram, np.eye(3), atol=2e-3)
+    with pytest.raises(ValueError, match="count"):
+        fit_shared_basis(inputs, masks, 6)  # rank of 6 centred materials is at most 5
+    path = tmp_path / "basis.safetensors"
+    sha = write_shared_basis(path, components, entries)
+    basis = load_shared_basis(path, sha)
+    assert basis.count == 3 and basis.sha256 == sha
+    # Data in the span of the basis (plus the mean) is reproduced by its projection.
+    mean = inputs.reshape(len(inputs), -1)[:, entries].mean(0)
+    x = inputs[2].reshape(-1)[entries]
+    c = components.astype(np.float32) @ (x - mean)
+    rebuilt = basis.residual(c).reshape(-1)[entries] + mean
+    assert np.abs(rebuilt - x).max() < 5e-3 * np.abs(x).max()
+    np.testing.assert_allclose(basis.residual_channels(c, [5, 62]), basis.residual(c)[[5, 62]], atol=1e-6)
+    with pytest.raises(BasisError, match="SHA-256"):
+        load_shared_basis(path, "0" * 64)
+    with pytest.raises(BasisError, match="strictly increasing"):
+        write_shared_basis(tmp_path / "bad.safetensors", components, entries[::-1].copy())
+
+
+def test_the_shipped_model_has_a_basis_and_partial_decoding_matches() -> None:
+    from brdfcodec.codec import BrdfDecoder
+
+    decoder = BrdfDecoder()
+    basis = decoder.shared_basis
+    assert basis is not None and basis.count == 64 and basis.entries.shape == (387378,)
+    record = basis_record("m", k=20, sha=basis.sha256)
+    full = decoder.decode(record, masked="zero")
+    base = decoder.decode(record.base(), masked="zero")
+    assert np.abs(full - base).max() > 1e-3  # the layer changes the decode
+    part = decoder.decode(record, phi_d_bins=[3, 90], masked="zero")
+    np.testing.assert_allclose(part, full[..., [3, 90]], rtol=1e-5, atol=1e-5)
+    batched = next(decoder.decode_many([record], masked="zero"))
+    np.testing.assert_allclose(batched, full, rtol=1e-6, atol=1e-6)
+    with pytest.raises(BasisMismatchError, match=SHA):
+        decoder.decode(basis_record("other"))  # made for another basis
+    too_long = LayeredRecord("long", record.mu, record.sigma,
+                             basis=BasisLayer(basis.sha256, 0.5, np.ones(65, dtype=np.int8)))
+    with pytest.raises(BasisError, match="1 to 64"):
+        decoder.decode(too_long)
+
+
+def test_the_basis_layer_follows_the_decoder_output_it_was_fitted_on(analytic_tables) -> None:
+    """Rate control at a small budget spends the bytes on basis coefficients, and they help."""
+    from brdfcodec.codec import BrdfEncoder, measure
+
+    brdf = analytic_tables["red-plastic"]
+    base = BrdfEncoder(effort=1, latent_dtype="float16")
+    base_error = measure(base.encode(brdf, name="m"), base.decoder, brdf).meta["relae"]["mapped"]
+    encoder = BrdfEncoder(effort=1, bytes=64, latent_dtype="float16")
+    record = encoder.encode(brdf, name="m")
+    assert isinstance(record, LayeredRecord) and record.compact_sigma and record.detail is None
+    assert record.basis is not None and record.basis.count == 64 - 16 - 8 - 2
+    stored = parse_bvae(encode_bvae([record], encoder.reference, latent_dtype="float16")).header.entries[0].length
+    assert stored == record.meta["rate"]["payload_bytes"] == 64
+    layered_error = measure(record, encoder.decoder, brdf).meta["relae"]["mapped"]
+    assert layered_error < 0.9 * base_error
+    no_basis = BrdfEncoder(effort=1, bytes=64, latent_dtype="float16", basis=False).encode(brdf, name="m")
+    assert getattr(no_basis, "basis", None) is None
+
+
+def test_an_error_target_takes_the_smallest_candidate_that_meets_it(analytic_tables) -> None:
+    from brdfcodec.codec import BrdfEncoder, measure
+
+    brdf = analytic_tables["red-plastic"]
+    probe = BrdfEncoder(effort=0, bytes=40, latent_dtype="float16")
+    record = probe.encode(brdf, name="m")
+    reached = measure(record, probe.decoder, brdf).meta["relae"]["mapped"]
+    encoder = BrdfEncoder(effort=0, max_relae=reached * 1.05, latent_dtype="float16")
+    chosen = encoder.encode(brdf, name="m")
+    assert measure(chosen, encoder.decoder, brdf).meta["relae"]["mapped"] <= reached * 1.05
+    assert isinstance(chosen, LayeredRecord) and chosen.basis is not None and chosen.detail is None
+    assert chosen.meta["rate"]["payload_bytes"] <= 64 * 2
