@@ -709,9 +709,7 @@ def measure(record: Record, decoder: BrdfDecoder, source: MerlBRDF) -> LatentRec
                       stacklevel=2)
     if isinstance(record, GraftRecord):
         return GraftRecord(record.name, record.mu, record.sigma, record.graft_dims, record.graft_values, meta)
-    if getattr(record, "detail", None) is not None:  # issue 14: layered record
-        return replace(record, meta=meta)
-    return LatentRecord(record.name, record.mu, record.sigma, meta)
+    return replace(record, meta=meta)  # the same kind: a layered record keeps its layers
 
 
 class DecodedMaterial:

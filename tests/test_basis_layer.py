@@ -166,3 +166,16 @@ def test_an_error_target_takes_the_smallest_candidate_that_meets_it(analytic_tab
     assert measure(chosen, encoder.decoder, brdf).meta["relae"]["mapped"] <= reached * 1.05
     assert isinstance(chosen, LayeredRecord) and chosen.basis is not None and chosen.detail is None
     assert chosen.meta["rate"]["payload_bytes"] <= 64 * 2
+
+
+def test_cli_bytes_writes_the_basis_layer(red_plastic_file, tmp_path, capsys) -> None:
+    from brdfcodec.cli.main import main
+
+    out = tmp_path / "r.bvae"
+    assert main(["compress", str(red_plastic_file), "-o", str(out), "--bytes", "64", "--float16"]) == 0
+    entry = parse_bvae(out.read_bytes()).header.entries[0]
+    assert entry.kind == "layered" and entry.length == 64 and entry.layers["basis"]["count"] == 38
+    assert entry.meta["relae"]["mapped"] > 0  # measured on the record that was written
+    capsys.readouterr()
+    assert main(["info", str(out)]) == 0
+    assert "64 B" in capsys.readouterr().out

@@ -103,7 +103,9 @@ def _bvae_summary(path: Path) -> dict[str, Any]:
         item: dict[str, Any] = {"name": entry.name, "kind": entry.kind, "payload_bytes": entry.length}
         if entry.graft_dims:
             item["graft_dims"] = list(entry.graft_dims)
-        item.update({k: v for k, v in entry.meta.items() if k in ("relae", "source_sha256", "edit")})
+        if entry.layers is not None:
+            item["layers"] = dict(entry.layers)
+        item.update({k: v for k, v in entry.meta.items() if k in ("relae", "source_sha256", "edit", "effort", "rate")})
         materials.append(item)
     return {
         "file": str(path),
@@ -190,6 +192,14 @@ def _format_text(summary: dict[str, Any]) -> str:
             relae = item.get("relae", {})
             error = f"RelAE {relae['mapped']:.4f}" if isinstance(relae, dict) and "mapped" in relae else ""
             kind = "" if item["kind"] == "latent" else f"[{item['kind']}] "
+            layers = item.get("layers") or {}
+            if layers:
+                parts = []
+                if "basis" in layers:
+                    parts.append(f"basis {layers['basis']['count']}")
+                if "detail" in layers:
+                    parts.append(f"detail {layers['detail']['length']} B")
+                kind = f"[{' + '.join(parts)}] "
             lines.append(f"    {item['name']:<32} {kind}{item['payload_bytes']} B  {error}".rstrip())
         if len(summary["materials"]) > 50:
             lines.append(f"    … and {len(summary['materials']) - 50} more (--json lists all)")

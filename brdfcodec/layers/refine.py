@@ -146,7 +146,7 @@ def fit_basis_coefficients(
     they leave (the orthogonal projection of ``x − clamp(D(z))`` on the basis,
     over valid entries), then takes :data:`BASIS_STEPS` ``[effort]`` Adam steps
     on the mapped L1 error of ``clamp(D(z)) + Σ cᵢ bᵢ`` over valid entries, and
-    keeps, per material, the best pair seen.
+    keeps, per material, the best pair seen (the start with no coefficients included).
 
     Parameters
     ----------
@@ -190,10 +190,12 @@ def fit_basis_coefficients(
         with torch.no_grad():
             residual = (target - decoder(start).clamp(0.0, MAPPED_MAX).flatten(1)) * weight
             c0 = residual[:, where] @ basis.T
+            # No coefficients at all is a candidate too: on a material unlike the training ones the projection
+            # (best in L2) can raise the L1 error.
+            best_error = ((decoded(start, torch.zeros_like(c0)) - target) * weight).abs().sum(1)
         z = start.clone().requires_grad_(True)
         c = c0.clone().requires_grad_(True)
-        best_z, best_c = z.detach().clone(), c.detach().clone()
-        best_error = torch.full((len(start),), float("inf"), device=device)
+        best_z, best_c = start.clone(), torch.zeros_like(c0)
         steps = BASIS_STEPS[effort]
         adam_z, adam_c = _Adam(z, JOINT_LATENT_RATE), _Adam(c, BASIS_LEARNING_RATE)
         with torch.enable_grad():
