@@ -6,7 +6,6 @@ import numpy as np
 import pytest
 
 from brdfcodec.bvae_format import DecoderReference, LatentRecord, encode_bvae, parse_bvae
-from brdfcodec.conventions import NETWORK_INPUT_SHAPE
 from brdfcodec.errors import BasisMismatchError, BvaeFormatError
 from brdfcodec.layers.basis import (
     BasisError,

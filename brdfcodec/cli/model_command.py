@@ -41,6 +41,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     fit.add_argument("--dataset", type=Path, required=True, help="dataset whose training split the model used")
     fit.add_argument("--count", type=int, default=None, metavar="K", help="vectors (default 64)")
     fit.set_defaults(handler=run_fit_basis)
+    compact = actions.add_parser(
+        "compact-encoder", help="store an exported model's encoder compactly (float16, basis from the decoder)",
+        description="Rewrite encoder.safetensors with its large matrices in float16 and without the linear "
+        "path (rebuilt from the decoder's basis when loaded); the decoder and its hash are untouched.",
+    )
+    compact.add_argument("folder", type=Path, help="model folder")
+    compact.set_defaults(handler=run_compact_encoder)
     show = actions.add_parser("info", help="show a model folder's manifest, verifying its weights",
                               description="Show a model (the default one without FOLDER) and verify its hashes.")
     show.add_argument("folder", type=Path, nargs="?", help="model folder (default: the shipped default model)")
@@ -90,6 +97,19 @@ def run_fit_basis(args: argparse.Namespace) -> int:
         raise ValueError(f"--count must be ≥ 1, got {count}")
     manifest = add_shared_basis(args.folder, args.dataset, count)
     print(f"wrote {args.folder}/basis.safetensors: {count} vectors, sha256 {manifest.basis_sha256}")
+    return 0
+
+
+def run_compact_encoder(args: argparse.Namespace) -> int:
+    """Compact the encoder file, then print its size and hash."""
+    from brdfcodec.models.store import compact_encoder, load_model
+
+    _, _, manifest = load_model(args.folder, parts=("decoder",))  # verified before anything is rewritten
+    if not manifest.config.linear_basis:
+        raise ValueError(f"{args.folder}: compact storage needs a model with a linear basis")
+    manifest = compact_encoder(args.folder)
+    size = (manifest.folder / "encoder.safetensors").stat().st_size
+    print(f"wrote {args.folder}/encoder.safetensors: {size:,} bytes, sha256 {manifest.encoder_sha256}")
     return 0
 
 

@@ -198,7 +198,9 @@ def load_shared_basis(path: str | os.PathLike[str], expected_sha256: str) -> Sha
 
 def _validate(components: np.ndarray, entries: np.ndarray, where: str) -> None:
     if components.dtype != np.float16 or components.ndim != 2:
-        raise BasisError(f"{where}: 'components' must be a 2-D float16 tensor, got {components.dtype} {components.shape}")
+        raise BasisError(
+            f"{where}: 'components' must be a 2-D float16 tensor, got {components.dtype} {components.shape}"
+        )
     if not 1 <= components.shape[0] <= MAX_BASIS_COUNT:
         raise BasisError(f"{where}: a basis holds 1 to {MAX_BASIS_COUNT} vectors, got {components.shape[0]}")
     if entries.ndim != 1 or entries.shape[0] != components.shape[1] or entries.shape[0] == 0:

@@ -1,22 +1,27 @@
 """Layered encoding with rate control: a size budget or an error target per material.
 
 Given a material's base code, its decode and its source, :func:`encode_layers`
-picks the detail layer's quantisation step from a fixed ladder
-(:data:`STEP_LADDER`, halving every two rungs):
+chooses the enhancement layers: k coefficients on the model's shared basis
+(:mod:`brdfcodec.layers.basis`, when the model has one) and a detail layer
+whose quantisation step comes from a fixed ladder (:data:`STEP_LADDER`,
+halving every two rungs):
 
-- ``bytes_budget=N``: of the rungs whose record payload (μ, σ and the
-  layer) fits in N bytes, and the base alone, the one with the lowest
-  kept-slice mapped L1 error — the largest quality within N bytes;
-- ``max_relae=X``: the coarsest rung whose decoded table has a measured
-  RelAE (mapped or linear, full table, valid entries) of at most X — the
-  smallest file that meets X; a base-only record when the base meets X.
+- ``bytes_budget=N``: as many basis coefficients as fit (up to the basis'
+  size K), then, of the rungs whose record payload (μ, σ and the layers)
+  fits in N bytes, no detail layer, and the base alone, the one with the
+  lowest kept-slice mapped L1 error — the largest quality within N bytes;
+- ``max_relae=X``: the first of base, 4, 8, 16 and K basis coefficients, then
+  K coefficients plus each rung from coarse to fine, whose decoded table has
+  a measured RelAE (mapped or linear, full table, valid entries) of at most
+  X — the smallest file that meets X.
 
-Both searches bisect the ladder (size falls and error rises with the step),
-then bisect the step in log space between the two rungs that bracket the
-target (3 rounds for a budget, 2 for an error target), and return the best
-of every step actually tried, so the answer is the smallest tried file that
+Both searches bisect (size falls and error rises along the sequence), then
+bisect the step in log space between the two rungs that bracket the target
+(3 rounds for a budget, 2 for an error target), and return the best of every
+candidate actually tried, so the answer is the smallest tried file that
 meets the target even where the curve is not monotonic. The achieved RelAE
-is measured on the returned record.
+is measured on the returned record. A layered record stores σ compactly
+(one byte per dimension, ``spec/bvae-format.md`` §4.5).
 """
 
 from __future__ import annotations

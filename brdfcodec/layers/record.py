@@ -140,7 +140,8 @@ def layers_length(layers: object, where: str, latent_dim: int = 0) -> int:
     if "sigma" in layers:
         if layers["sigma"] != SIGMA_LOG2_U8:
             raise UnsupportedLayerError(
-                f"{where} stores sigma as {layers['sigma']!r}, unknown to this reader ({SIGMA_LOG2_U8}); upgrade brdfcodec"
+                f"{where} stores sigma as {layers['sigma']!r}, unknown to this reader ({SIGMA_LOG2_U8}); "
+                "upgrade brdfcodec"
             )
         length += latent_dim
     if "basis" in layers:
@@ -155,7 +156,9 @@ def _basis_length(basis: object, where: str) -> int:
         raise ValueError(f"{where} layers.basis is not a JSON object")
     unknown = sorted(set(basis) - {"sha256", "count"})
     if unknown:
-        raise UnsupportedLayerError(f"{where} basis layer has fields {unknown}, unknown to this reader; upgrade brdfcodec")
+        raise UnsupportedLayerError(
+            f"{where} basis layer has fields {unknown}, unknown to this reader; upgrade brdfcodec"
+        )
     sha, count = basis.get("sha256"), basis.get("count")
     if not (isinstance(sha, str) and len(sha) == 64 and all(ch in "0123456789abcdef" for ch in sha)):
         raise ValueError(f"{where} basis sha256 {sha!r} is not 64 lower-case hex digits")

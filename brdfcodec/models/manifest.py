@@ -38,6 +38,9 @@ class ModelManifest:
         What each latent dimension controls (named parameters, colour dimensions).
     basis_sha256 : str or None
         Hex SHA-256 of the shared basis file (``basis.safetensors``), when the model has one.
+    encoder_storage : {"full", "compact"}
+        How ``encoder.safetensors`` stores the encoder (``spec/model.md`` §3): every tensor as trained, or
+        large matrices as float16 and the linear path derived from the decoder's basis.
     """
 
     name: str
@@ -48,6 +51,17 @@ class ModelManifest:
     info: dict[str, Any]
     parameters: dict[str, Any] = field(default_factory=dict)
     basis_sha256: str | None = None
+    encoder_storage: str = "full"
+
+
+#: Values of ``encoder_storage`` this reader knows.
+ENCODER_STORAGES = ("full", "compact")
+
+
+def _encoder_storage(value: object) -> str:
+    if value not in ENCODER_STORAGES:
+        raise ValueError(f"encoder_storage {value!r} is not one of {ENCODER_STORAGES}")
+    return str(value)
 
 
 def load_manifest(folder: str | os.PathLike[str]) -> ModelManifest:
@@ -64,6 +78,7 @@ def load_manifest(folder: str | os.PathLike[str]) -> ModelManifest:
             info=dict(data.get("info", {})),
             parameters=dict(data.get("parameters", {})),
             basis_sha256=None if data.get("basis_sha256") is None else str(data["basis_sha256"]),
+            encoder_storage=_encoder_storage(data.get("encoder_storage", "full")),
         )
     except (KeyError, TypeError, ValueError) as error:
         raise BrdfcodecError(f"{path}: not a valid model manifest ({error})") from None

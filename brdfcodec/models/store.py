@@ -32,6 +32,9 @@ __all__ = [
     "MANIFEST",
     "ModelChecksumError",
     "ModelManifest",
+    "compact_encoder",
+    "compact_encoder_tensors",
+    "expand_encoder_tensors",
     "export_model",
     "load_manifest",
     "load_model",
@@ -40,7 +43,9 @@ __all__ = [
 ]
 
 
-def write_weights(model: BetaVAE, folder: str | os.PathLike[str], *, name: str) -> dict[str, Any]:
+def write_weights(
+    model: BetaVAE, folder: str | os.PathLike[str], *, name: str, compact: bool = False
+) -> dict[str, Any]:
     """Write the encoder's and decoder's weights as safetensors (atomically, each file), nothing else.
 
     Parameters
@@ -51,23 +56,32 @@ def write_weights(model: BetaVAE, folder: str | os.PathLike[str], *, name: str) 
         Created if absent; existing weight files are replaced.
     name : str
         Readable name stored in the files' metadata.
+    compact : bool
+        Store the encoder compactly (:func:`compact_encoder_tensors`; only for a model with a linear basis).
 
     Returns
     -------
     dict
         The manifest's identity fields: ``name``, ``config``, ``decoder_sha256``,
-        ``encoder_sha256``, and the two files' sizes in bytes (``decoder_bytes``, ``encoder_bytes``).
+        ``encoder_sha256``, ``encoder_storage``, and the two files' sizes in bytes (``decoder_bytes``,
+        ``encoder_bytes``).
     """
+    if compact and not model.config.linear_basis:
+        raise ValueError("compact encoder storage needs a model with a linear basis (it is derived from the decoder's)")
     out = Path(folder)
     out.mkdir(parents=True, exist_ok=True)
     metadata = {"brdfcodec_model": name, "config": model.config.to_json()}
     for part, module, file in (("encoder", model.encoder, ENCODER_FILE), ("decoder", model.decoder, DECODER_FILE)):
         # Floating tensors keep their dtype (the linear basis is float16 by design); integers stay as they are.
         tensors = {k: v.detach().to("cpu").contiguous() for k, v in module.state_dict().items()}
+        extra = {}
+        if compact and part == "encoder":
+            tensors, extra = compact_encoder_tensors(tensors), {"storage": "compact"}
         with atomic_output(out / file, overwrite=True) as tmp:
-            save_file(tensors, str(tmp), metadata={**metadata, "part": part})
+            save_file(tensors, str(tmp), metadata={**metadata, "part": part, **extra})
         os.chmod(out / file, 0o644)
     return {
+        "encoder_storage": "compact" if compact else "full",
         "name": name,
         "config": json.loads(model.config.to_json()),
         "decoder_sha256": sha256_of_file(out / DECODER_FILE),
@@ -127,6 +141,66 @@ def _verified_weights(manifest: ModelManifest, file: str, expected: str) -> dict
     return load_file(str(path))
 
 
+#: Floating tensors of at least this many elements are stored as float16 in a compact encoder file.
+_COMPACT_MIN_ELEMENTS = 1 << 16
+#: Encoder buffers a compact file leaves out: they are derived from the decoder's linear basis.
+_DERIVED_FROM_DECODER = ("basis_mean", "basis_projection")
+
+
+def compact_encoder_tensors(state: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
+    """An encoder's tensors as a compact file stores them (``spec/model.md`` §3).
+
+    The linear path's buffers are left out (the encoder's projection is the decoder's components divided by
+    their squared norms, and both share the mean), and floating tensors of 65,536 elements or more (the
+    fully connected layer) are stored as float16.
+    """
+    out = {}
+    for key, value in state.items():
+        if key in _DERIVED_FROM_DECODER:
+            continue
+        value = value.detach().to("cpu").contiguous()
+        if value.is_floating_point() and value.numel() >= _COMPACT_MIN_ELEMENTS:
+            value = value.half()
+        out[key] = value
+    return out
+
+
+def expand_encoder_tensors(
+    tensors: dict[str, torch.Tensor], decoder_tensors: dict[str, torch.Tensor]
+) -> dict[str, torch.Tensor]:
+    """Inverse of :func:`compact_encoder_tensors`: float32 tensors, the linear path rebuilt from the decoder's."""
+    out = {key: value.float() if value.is_floating_point() else value for key, value in tensors.items()}
+    if "basis_components" in decoder_tensors:
+        components = decoder_tensors["basis_components"].double()
+        out["basis_mean"] = decoder_tensors["basis_mean"].float()
+        out["basis_projection"] = (components / (components * components).sum(1, keepdim=True)).float()
+    return out
+
+
+def compact_encoder(folder: str | os.PathLike[str]) -> ModelManifest:
+    """Rewrite a model folder's encoder in compact storage and update ``model.json`` (the decoder is untouched).
+
+    The encoder's outputs change by the float16 rounding of its large matrices; the decoder hash, and every
+    file made with the model, stay valid.
+    """
+    manifest = load_manifest(folder)
+    if manifest.encoder_storage == "compact":
+        return manifest
+    encoder, _, _ = load_model(folder, parts=("encoder",))
+    assert encoder is not None
+    out = Path(folder)
+    metadata = {"brdfcodec_model": manifest.name, "config": manifest.config.to_json(), "part": "encoder",
+                "storage": "compact"}
+    with atomic_output(out / ENCODER_FILE, overwrite=True) as tmp:
+        save_file(compact_encoder_tensors(encoder.state_dict()), str(tmp), metadata=metadata)
+    os.chmod(out / ENCODER_FILE, 0o644)
+    stored = json.loads((out / MANIFEST).read_text(encoding="utf-8"))
+    stored["encoder_sha256"] = sha256_of_file(out / ENCODER_FILE)
+    stored["encoder_storage"] = "compact"
+    stored.setdefault("info", {})["encoder_bytes"] = (out / ENCODER_FILE).stat().st_size
+    return write_manifest(out, stored)
+
+
 def load_model(
     folder: str | os.PathLike[str], *, parts: tuple[str, ...] = ("encoder", "decoder"), device: str = "cpu"
 ) -> tuple[Encoder | None, Decoder | None, ModelManifest]:
@@ -142,7 +216,10 @@ def load_model(
     encoder = decoder = None
     if "encoder" in parts:
         encoder = Encoder(manifest.config)
-        encoder.load_state_dict(_verified_weights(manifest, ENCODER_FILE, manifest.encoder_sha256))
+        tensors = _verified_weights(manifest, ENCODER_FILE, manifest.encoder_sha256)
+        if manifest.encoder_storage == "compact":
+            tensors = expand_encoder_tensors(tensors, _verified_weights(manifest, DECODER_FILE, manifest.decoder_sha256))
+        encoder.load_state_dict(tensors)
         encoder = encoder.to(device).eval()
     if "decoder" in parts:
         decoder = Decoder(manifest.config)

@@ -120,11 +120,12 @@ def export_run(
     for label, other in (comparisons or {}).items():
         other_manifest = json.loads((Path(other) / MANIFEST).read_text())
         info["comparisons"].append(_comparison_row(label, other_manifest["info"], Path(other)))
-    identity = write_weights(model, out, name=name)
+    identity = write_weights(model, out, name=name, compact=config.linear_basis)
     info["decoder_bytes"] = identity["decoder_bytes"]
     info["encoder_bytes"] = identity["encoder_bytes"]
     info["comparisons"][0]["decoder_bytes"] = info["decoder_bytes"]
-    manifest = {key: identity[key] for key in ("name", "config", "decoder_sha256", "encoder_sha256")}
+    manifest = {key: identity[key] for key in ("name", "config", "decoder_sha256", "encoder_sha256",
+                                               "encoder_storage")}
     if basis is not None:
         manifest["basis_sha256"] = basis.pop("sha256")
         info["basis"] = basis
