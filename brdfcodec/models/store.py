@@ -218,7 +218,8 @@ def load_model(
         encoder = Encoder(manifest.config)
         tensors = _verified_weights(manifest, ENCODER_FILE, manifest.encoder_sha256)
         if manifest.encoder_storage == "compact":
-            tensors = expand_encoder_tensors(tensors, _verified_weights(manifest, DECODER_FILE, manifest.decoder_sha256))
+            decoder_tensors = _verified_weights(manifest, DECODER_FILE, manifest.decoder_sha256)
+            tensors = expand_encoder_tensors(tensors, decoder_tensors)
         encoder.load_state_dict(tensors)
         encoder = encoder.to(device).eval()
     if "decoder" in parts:
