@@ -48,6 +48,19 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     )
     compact.add_argument("folder", type=Path, help="model folder")
     compact.set_defaults(handler=run_compact_encoder)
+    evaluate = actions.add_parser(
+        "evaluate", help="measure a model per measurement family against PCA-8/16 (RelAE, ΔE ITP)",
+        description="Encode and decode every material of a dataset with a model and report, per family and "
+        "split (trained on / held out), mapped and linear RelAE and ΔE ITP, beside PCA-8 and PCA-16 fitted on "
+        "the model's own training materials.",
+    )
+    evaluate.add_argument("folder", type=Path, nargs="?", help="model folder (default: the shipped default model)")
+    evaluate.add_argument("--dataset", type=Path, required=True, help="dataset (bvae dataset build), any families")
+    evaluate.add_argument("--effort", type=int, choices=(0, 1, 2, 3), default=0, help="refinement effort (default 0)")
+    evaluate.add_argument("--json", action="store_true", help="print the rows as JSON")
+    evaluate.add_argument("--store", action="store_true",
+                          help="also store the rows in model.json and the model card (weights untouched)")
+    evaluate.set_defaults(handler=run_evaluate)
     show = actions.add_parser("info", help="show a model folder's manifest, verifying its weights",
                               description="Show a model (the default one without FOLDER) and verify its hashes.")
     show.add_argument("folder", type=Path, nargs="?", help="model folder (default: the shipped default model)")
@@ -110,6 +123,32 @@ def run_compact_encoder(args: argparse.Namespace) -> int:
     manifest = compact_encoder(args.folder)
     size = (manifest.folder / "encoder.safetensors").stat().st_size
     print(f"wrote {args.folder}/encoder.safetensors: {size:,} bytes, sha256 {manifest.encoder_sha256}")
+    return 0
+
+
+def run_evaluate(args: argparse.Namespace) -> int:
+    """Print (and optionally store) the per-family table."""
+    import json
+
+    from brdfcodec.models.registry import default_model_folder
+    from brdfcodec.training.family_report import evaluate_by_family, family_table
+
+    folder = args.folder or default_model_folder()
+    rows = evaluate_by_family(folder, args.dataset, effort=args.effort)
+    if args.json:
+        print(json.dumps([row.as_dict() for row in rows], indent=1))
+    else:
+        print("\n".join(family_table(rows)))
+    if args.store:
+        from brdfcodec.dataset import BrdfDataset
+        from brdfcodec.training.export import store_info
+
+        with BrdfDataset(args.dataset) as dataset:
+            description = dataset.description
+        command = " ".join(shlex.quote(a) for a in ["bvae", *sys.argv[1:]])
+        store_info(folder, "by_family", {"dataset": description, "effort": args.effort, "command": command,
+                                         "rows": [row.as_dict() for row in rows]})
+        print(f"stored in {folder}/model.json and MODEL_CARD.md")
     return 0
 
 

@@ -20,7 +20,7 @@ from brdfcodec.report.points import Material, OperatingPoint, standard_points
 from brdfcodec.representation import map_values, reflectance_from_stored
 from brdfcodec.version import __version__
 
-__all__ = ["environment", "evaluate_dataset", "summarise"]
+__all__ = ["comparison_render", "environment", "evaluate_dataset", "summarise"]
 
 _RENDER_SIZE = 64
 _LIGHT = (-1.0, 1.0, 1.0)
@@ -40,7 +40,8 @@ def environment() -> dict[str, Any]:
     }
 
 
-def _render(values: np.ndarray, mask: np.ndarray) -> np.ndarray:
+def comparison_render(values: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """The report's ΔE render: a 64² sphere under a directional light of a table in stored units (valid entries)."""
     reflectance = reflectance_from_stored(np.where(mask, np.maximum(values, 0.0), 0.0))
     return render_sphere(MaterialTable(reflectance, mask), size=_RENDER_SIZE, light=_LIGHT)
 
@@ -56,7 +57,7 @@ def _measure(
     estimate = np.nan_to_num(estimate, nan=0.0, posinf=0.0, neginf=0.0)
     valid = material.mask
     mapped_est = map_values(estimate)
-    image = compare_images(reference_image, _render(estimate, valid))
+    image = compare_images(reference_image, comparison_render(estimate, valid))
     return {
         "material": material.name,
         "split": material.split,
@@ -117,7 +118,7 @@ def evaluate_dataset(
                 inputs=dataset.inputs([index])[0],
                 split="train" if index in train else "validation",
             )
-            reference_image = _render(material.values, material.mask)
+            reference_image = comparison_render(material.values, material.mask)
             mapped_reference = map_values(material.values)  # once per material, shared by every point
             for point in points:
                 if material.split == "train" and getattr(point, "held_out_only", False):  # issue 14 RD points

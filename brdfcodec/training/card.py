@@ -88,6 +88,21 @@ def render_model_card(manifest: dict[str, Any]) -> str:
     for row in sorted(info["errors"], key=lambda r: (r["split"], r["name"])):
         lines.append(f"| {row['name']} | {row['split']} | {_fmt(row['relae_mapped'])} | {_fmt(row['relae_linear'])} "
                      f"| {_fmt(pca[row['name']]['relae_mapped'])} |")
+    if info.get("by_family"):
+        from brdfcodec.training.family_report import family_table
+
+        by_family = info["by_family"]
+        lines += [
+            "",
+            "## Per measurement family",
+            "",
+            f"Measured on {by_family['dataset']} with `{by_family['command']}` (effort {by_family['effort']}, "
+            "base latent only). `train`: the materials this model was trained on; `held-out`: every other "
+            "material of that dataset (a family it never saw is all held-out). PCA-8/16 are fitted on the same "
+            "training materials. ΔE ITP: mean over a 64² sphere render under a directional light.",
+            "",
+            *family_table(by_family["rows"]),
+        ]
     if len(info.get("comparisons", [])) > 1:
         lines += [
             "",

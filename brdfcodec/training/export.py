@@ -22,7 +22,7 @@ from brdfcodec.training.card import render_model_card
 from brdfcodec.training.measurements import kl_per_dim, measure_model, summarise, traversal_changes
 from brdfcodec.version import __version__
 
-__all__ = ["CARD", "DEFAULT_BASIS_COUNT", "add_shared_basis", "export_run"]
+__all__ = ["CARD", "DEFAULT_BASIS_COUNT", "add_shared_basis", "export_run", "store_info"]
 
 CARD = "MODEL_CARD.md"
 #: Vectors of the shared basis that ``bvae model export`` fits (64 float16 vectors: 50 MB).
@@ -163,6 +163,15 @@ def add_shared_basis(folder: str | os.PathLike[str], dataset_path: str | os.Path
         basis = _fit_basis(out, dataset, count)
     stored["basis_sha256"] = basis.pop("sha256")
     stored.setdefault("info", {})["basis"] = basis
+    write_card(out, stored)
+    return write_manifest(out, stored)
+
+
+def store_info(folder: str | os.PathLike[str], key: str, value: Any) -> ModelManifest:
+    """Add a measurement to ``info`` in ``model.json`` and rewrite the card (weights and identity untouched)."""
+    out = Path(folder)
+    stored = json.loads((out / MANIFEST).read_text())
+    stored.setdefault("info", {})[key] = value
     write_card(out, stored)
     return write_manifest(out, stored)
 

@@ -1,0 +1,53 @@
+"""Issue 12 item 6: a model measured per family and split, beside PCA-8/16 of its own training materials."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from brdfcodec.dataset import build_dataset
+from brdfcodec.sources import analytic_sources
+
+
+@pytest.fixture(scope="module")
+def analytic_dataset(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    out = tmp_path_factory.mktemp("families") / "analytic.h5"
+    sources = analytic_sources(["white-matte", "gold", "red-plastic"], random_count=9, seed=4)
+    build_dataset(out, sources, source_kind="analytic", description="analytic test materials", progress=False)
+    return out
+
+
+def test_rows_per_family_and_split(analytic_dataset: Path) -> None:
+    from brdfcodec.training.family_report import evaluate_by_family, family_table
+
+    rows = evaluate_by_family(None, analytic_dataset, limit=2)
+    # The shipped model was trained on none of these materials: every one is held out, in the one family.
+    assert [(r.family, r.split, r.count) for r in rows] == [("analytic", "held-out", 2)]
+    row = rows[0]
+    for value in (row.mapped, row.linear, row.delta_e_itp, row.pca8_mapped, row.pca16_mapped):
+        assert 0 < value < 5
+    assert row.pca16_mapped <= row.pca8_mapped + 1e-9  # more components, never worse in least squares terms
+    assert "| analytic | held-out | 2 |" in "\n".join(family_table(rows))
+
+
+def test_cli_evaluate_stores_into_a_copy_of_the_model(analytic_dataset: Path, tmp_path: Path, capsys) -> None:
+    import shutil
+
+    from brdfcodec.cli.main import main
+    from brdfcodec.models.registry import default_model_folder
+    from brdfcodec.training import family_report
+
+    folder = tmp_path / "model"
+    shutil.copytree(default_model_folder(), folder)
+    original = family_report.evaluate_by_family
+    family_report.evaluate_by_family = lambda *a, **k: original(*a, **{**k, "limit": 1})  # type: ignore[assignment]
+    try:
+        assert main(["model", "evaluate", str(folder), "--dataset", str(analytic_dataset), "--store"]) == 0
+    finally:
+        family_report.evaluate_by_family = original  # type: ignore[assignment]
+    assert "| analytic | held-out | 1 |" in capsys.readouterr().out
+    stored = json.loads((folder / "model.json").read_text())["info"]["by_family"]
+    assert stored["effort"] == 0 and stored["rows"][0]["family"] == "analytic"
+    assert "## Per measurement family" in (folder / "MODEL_CARD.md").read_text()
