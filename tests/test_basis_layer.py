@@ -117,7 +117,7 @@ def test_the_shipped_model_has_a_basis_and_partial_decoding_matches() -> None:
 
     decoder = BrdfDecoder()
     basis = decoder.shared_basis
-    assert basis is not None and basis.count == 64 and basis.entries.shape == (387378,)
+    assert basis is not None and basis.count == 75 and basis.entries.shape == (387378,)
     record = basis_record("m", k=20, sha=basis.sha256)
     full = decoder.decode(record, masked="zero")
     base = decoder.decode(record.base(), masked="zero")
@@ -129,8 +129,8 @@ def test_the_shipped_model_has_a_basis_and_partial_decoding_matches() -> None:
     with pytest.raises(BasisMismatchError, match=SHA):
         decoder.decode(basis_record("other"))  # made for another basis
     too_long = LayeredRecord("long", record.mu, record.sigma,
-                             basis=BasisLayer(basis.sha256, 0.5, np.ones(65, dtype=np.int8)))
-    with pytest.raises(BasisError, match="1 to 64"):
+                             basis=BasisLayer(basis.sha256, 0.5, np.ones(76, dtype=np.int8)))
+    with pytest.raises(BasisError, match="1 to 75"):
         decoder.decode(too_long)
 
 

@@ -29,7 +29,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     export.add_argument("--compare", action="append", default=[], metavar="LABEL=FOLDER",
                         help="an exported model to show beside this one in the card (repeatable)")
     export.add_argument("--basis-count", type=int, default=None, metavar="K",
-                        help="vectors of the shared basis fitted on the training split (default 64; 0: none)")
+                        help="vectors of the shared basis fitted on the training split (default 75, at most the training materials − 1; 0: none)")
     export.set_defaults(handler=run_export)
     fit = actions.add_parser(
         "fit-basis", help="fit a shared basis (the basis layer's) for an exported model",
@@ -39,7 +39,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     )
     fit.add_argument("folder", type=Path, help="model folder")
     fit.add_argument("--dataset", type=Path, required=True, help="dataset whose training split the model used")
-    fit.add_argument("--count", type=int, default=None, metavar="K", help="vectors (default 64)")
+    fit.add_argument("--count", type=int, default=None, metavar="K", help="vectors (default 75)")
     fit.set_defaults(handler=run_fit_basis)
     compact = actions.add_parser(
         "compact-encoder", help="store an exported model's encoder compactly (float16, basis from the decoder)",
@@ -121,6 +121,11 @@ def run_compact_encoder(args: argparse.Namespace) -> int:
     if not manifest.config.linear_basis:
         raise ValueError(f"{args.folder}: compact storage needs a model with a linear basis")
     manifest = compact_encoder(args.folder)
+    import json
+
+    from brdfcodec.training.export import write_card
+
+    write_card(args.folder, json.loads((manifest.folder / "model.json").read_text(encoding="utf-8")))
     size = (manifest.folder / "encoder.safetensors").stat().st_size
     print(f"wrote {args.folder}/encoder.safetensors: {size:,} bytes, sha256 {manifest.encoder_sha256}")
     return 0

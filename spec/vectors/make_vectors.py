@@ -31,7 +31,7 @@ SHIPPED_DECODER = DecoderReference(
 )
 TEST_DECODER = DecoderReference("ab" * 32, "conformance-test-decoder")
 #: SHA-256 of the shipped default model's shared basis (``basis.safetensors``).
-SHIPPED_BASIS = "c33897f0299a8124e7708455492b7105f2bf362d079a64b97cc71a002a367268"
+SHIPPED_BASIS = "4fb0b97752edc3049cba46a0fb0cfcf5fa51a0575136efeab3d2bc1e391296b1"
 #: Relative and absolute tolerance of expected decoded values (stored MERL units).
 DECODE_RTOL = 1e-3
 DECODE_ATOL = 1e-6
