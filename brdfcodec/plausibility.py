@@ -30,7 +30,8 @@ source decode at μ and against the library:
 ``holes``
     Some near-specular entry (θh bins 0–1, above the horizon) decodes to
     exactly 0 (the decoder's output was clamped at the floor of the mapped
-    domain) where the source decode was above 0: the "black hole" of issue 12.
+    domain) while the off-specular flank of its cell (θh bins 4–6) is above
+    0, where the source decode was above 0: the "black hole" of issue 12.
 
 Examples
 --------
@@ -185,7 +186,13 @@ def inverted_cells(mapped: npt.ArrayLike, tolerance: float = 0.1) -> BoolArray:
 
 
 def new_holes(source: npt.ArrayLike, edited: npt.ArrayLike) -> BoolArray:
-    """Near-specular entries (θh bins 0–1, above the horizon) at 0 in ``edited`` but above 0 in ``source``.
+    """Holes in the highlight: near-specular entries at 0 in ``edited`` whose flank is not, and which ``source`` had above 0.
+
+    An entry (θh bin 0 or 1, above the horizon) is a hole when the edited
+    decode is 0 there (the decoder's output fell to the floor of the mapped
+    domain and was clamped), the off-specular flank of its cell (θh bins 4–6)
+    is still above 0, and the source decode was above 0 there. A region that
+    goes black as a whole is not a hole.
 
     Parameters
     ----------
@@ -201,9 +208,11 @@ def new_holes(source: npt.ArrayLike, edited: npt.ArrayLike) -> BoolArray:
     """
     near = list(NEAR_THETA_H_BINS)
     src = _split(source)[..., near, :]
-    out = _split(edited)[..., near, :]
+    blocks = _split(edited)
+    out = blocks[..., near, :]
+    flank = blocks[..., list(OFF_THETA_H_BINS), :].max(axis=-2)[..., None, :]
     valid = _entry_valid()[:, near, :]
-    return (out <= 0) & (src > 0) & valid
+    return (out <= 0) & (flank > 0) & (src > 0) & valid
 
 
 @functools.cache
@@ -261,7 +270,8 @@ def _invalid_counts(mapped: np.ndarray) -> np.ndarray:
     from brdfcodec.mask import kept_slice_horizon_mask
     from brdfcodec.representation.network_io import table_from_mapped
 
-    table = table_from_mapped(mapped, phi_d_bins=KEPT_PHI_D_SLICES)  # (B, 3, θh, θd, 21): the decode path
+    with np.errstate(invalid="ignore", over="ignore"):  # a NaN spreads over its row (0 · NaN): still one bad decode
+        table = table_from_mapped(mapped, phi_d_bins=KEPT_PHI_D_SLICES)  # (B, 3, θh, θd, 21): the decode path
     bad = ~np.isfinite(table) | (table < 0)
     return (bad & kept_slice_horizon_mask()).reshape(len(mapped), -1).sum(axis=1)
 
