@@ -27,6 +27,9 @@ source decode at μ and against the library:
     The decode's white-sky albedo (:func:`white_sky_albedo`, largest channel)
     exceeds the largest over the library's μ decodes by more than the
     relative margin (default 10 %).
+``unphysical``
+    The decode's white-sky albedo exceeds 1 in some channel: it reflects more
+    energy than it receives (energy conservation requires ≤ 1).
 ``holes``
     Some near-specular entry (θh bins 0–1, above the horizon) decodes to
     exactly 0 (the decoder's output was clamped at the floor of the mapped
@@ -91,7 +94,7 @@ NEAR_THETA_H_BINS: tuple[int, ...] = (0, 1)
 #: θh bins of the off-specular flank (θh ≈ 0.18–0.45°).
 OFF_THETA_H_BINS: tuple[int, ...] = (4, 5, 6)
 #: The kinds of implausibility, in report order.
-KINDS: tuple[str, ...] = ("invalid", "inverted", "energetic", "holes")
+KINDS: tuple[str, ...] = ("invalid", "inverted", "energetic", "unphysical", "holes")
 
 FloatArray = npt.NDArray[np.floating]
 BoolArray = npt.NDArray[np.bool_]
@@ -186,7 +189,7 @@ def inverted_cells(mapped: npt.ArrayLike, tolerance: float = 0.1) -> BoolArray:
 
 
 def new_holes(source: npt.ArrayLike, edited: npt.ArrayLike) -> BoolArray:
-    """Holes in the highlight: near-specular entries at 0 in ``edited`` whose flank is not, and which ``source`` had above 0.
+    """Holes in the highlight: near-specular zeros under a lit flank, where the source was above 0.
 
     An entry (θh bin 0 or 1, above the horizon) is a hole when the edited
     decode is 0 there (the decoder's output fell to the floor of the mapped
@@ -282,8 +285,8 @@ class Offender:
 
     ``score`` depends on ``kind``: ``inverted``, the largest specular deficit
     (mapped units) among new inversions, at ``where`` = (colour, φd bin, θd bin);
-    ``holes``, the number of new zero entries near the peak; ``energetic``,
-    the albedo; ``invalid``, the number of bad values.
+    ``holes``, the number of new zero entries near the peak; ``energetic`` and
+    ``unphysical``, the largest channel's white-sky albedo; ``invalid``, the number of bad values.
     """
 
     material: str
@@ -436,10 +439,11 @@ def measure_plausibility(
             "invalid": bad > 0,
             "inverted": new_inv.reshape(*shape, -1).any(axis=-1),
             "energetic": albedo > limit,
+            "unphysical": albedo > 1,
             "holes": holes > 0,
         }
         scores = {"invalid": bad, "inverted": deficit.reshape(*shape, -1).max(axis=-1), "energetic": albedo,
-                  "holes": holes}
+                  "unphysical": albedo, "holes": holes}
         for kind, flag in flags.items():
             counts[kind] += flag
             for i, j in zip(*np.nonzero(flag), strict=True):
@@ -487,7 +491,7 @@ def decompose_output(decoder: Any, codes: npt.ArrayLike) -> tuple[np.ndarray, np
     network = decoder.network
     if not hasattr(network, "logits") or not hasattr(network, "unbounded"):
         raise ValueError("decompose_output needs a brdfcodec Decoder network (with logits and unbounded)")
-    z = torch.as_tensor(np.asarray(codes, dtype=np.float32)).reshape(-1, decoder.latent_dim)
+    z = torch.from_numpy(np.array(codes, dtype=np.float32)).reshape(-1, decoder.latent_dim)
     was_training = network.training
     network.eval()
     try:

@@ -136,6 +136,7 @@ def test_measure_plausibility_on_a_constructed_decoder() -> None:
     assert report.fractions["invalid"].sum() == 0
     # energy: b's μ peak (1.9) sets the limit; a at −1σ (peak 2) stays within 10 %, b at −1σ (2.9) does not
     assert report.fractions["energetic"][0].tolist() == [1, 1, 0.5, 0, 0, 0]
+    assert report.fractions["unphysical"][0].tolist() == [1, 0.5, 0, 0, 0, 0]  # albedo > 1: peaks 4.9 and 3.9
     assert report.fractions["any"][0].tolist() == [1, 1, 0.5, 0.5, 1, 1]
     worst = [o for o in report.worst if o.kind == "inverted"][0]
     assert worst.score == pytest.approx(0.5) and worst.step > 0 and worst.dim == 0
