@@ -83,6 +83,7 @@ __all__ = [
     "inverted_cells",
     "measure_plausibility",
     "new_holes",
+    "plausible_range",
     "specular_deficit",
     "white_sky_albedo",
 ]
@@ -363,6 +364,80 @@ class PlausibilityReport:
         return "\n".join(lines)
 
 
+def _judge(
+    source: np.ndarray, source_inv: np.ndarray, mapped: np.ndarray, limit: float, tol: float
+) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray], np.ndarray]:
+    """Flags and scores of each kind for edited decodes ``mapped`` (..., 63, 90, 90) of one source."""
+    lead = mapped.shape[:-3]
+    bad = _invalid_counts(mapped.reshape(-1, *NETWORK_INPUT_SHAPE)).reshape(lead)
+    new_inv = inverted_cells(mapped, tol) & ~source_inv
+    deficit = np.where(new_inv, specular_deficit(mapped), -np.inf)
+    holes = new_holes(source, mapped).reshape(*lead, -1).sum(axis=-1)
+    albedo = white_sky_albedo(mapped).max(axis=-1)
+    flags = {
+        "invalid": bad > 0,
+        "inverted": new_inv.reshape(*lead, -1).any(axis=-1),
+        "energetic": albedo > limit,
+        "unphysical": albedo > 1,
+        "holes": holes > 0,
+    }
+    scores = {"invalid": bad, "inverted": deficit.reshape(*lead, -1).max(axis=-1), "energetic": albedo,
+              "unphysical": albedo, "holes": holes}
+    return flags, scores, deficit
+
+
+def plausible_range(
+    decoder: Any,
+    record: Any,
+    dim: int,
+    *,
+    steps: Sequence[float] = DEFAULT_STEPS,
+    albedo_limit: float | None = None,
+    criteria: PlausibilityCriteria | None = None,
+) -> tuple[float, float]:
+    """How far a traversal of ``record`` along ``dim`` stays plausible, on each side.
+
+    Parameters
+    ----------
+    decoder : BrdfDecoder
+    record : LatentRecord
+    dim : int
+        Latent dimension (0-based).
+    steps : sequence of float, default ``(-3, -2, -1, 1, 2, 3)``
+        Offsets tried, prior σ units.
+    albedo_limit : float, optional
+        Energy limit (:attr:`PlausibilityReport.albedo_limit`); without it energy is not checked.
+    criteria : PlausibilityCriteria, optional
+
+    Returns
+    -------
+    (low, high) : tuple of float
+        The most negative and most positive offsets reached before the first
+        implausible decode on that side (0 when the first step already is);
+        an editor can keep traversals within them.
+    """
+    from brdfcodec.edit import traverse
+
+    tol = (criteria or PlausibilityCriteria()).inversion_tolerance
+    steps = tuple(sorted(float(s) for s in steps if s != 0))
+    source = decoder.decode_mapped(np.asarray(record.mu, dtype=np.float32)[None])
+    codes = np.stack([np.asarray(e.mu, dtype=np.float32) for e in traverse(record, dim, steps)])
+    mapped = decoder.decode_mapped(codes)
+    flags, _, _ = _judge(source[0], inverted_cells(source[0], tol), mapped, np.inf if albedo_limit is None
+                         else albedo_limit, tol)
+    bad = np.logical_or.reduce(list(flags.values()))
+    low = high = 0.0
+    for step, implausible in sorted(((s, b) for s, b in zip(steps, bad, strict=True) if s > 0)):
+        if implausible:
+            break
+        high = step
+    for step, implausible in sorted(((s, b) for s, b in zip(steps, bad, strict=True) if s < 0), reverse=True):
+        if implausible:
+            break
+        low = step
+    return low, high
+
+
 def measure_plausibility(
     decoder: Any,
     records: Sequence[Any],
@@ -429,21 +504,7 @@ def measure_plausibility(
         edits = [e for d in dims for e in traverse(record, d, steps)]
         codes = np.stack([np.asarray(e.mu, dtype=np.float32) for e in edits])
         mapped = decoder.decode_mapped(codes, batch_size=batch_size).reshape(*shape, *NETWORK_INPUT_SHAPE)
-        flat = mapped.reshape(-1, *NETWORK_INPUT_SHAPE)
-        bad = _invalid_counts(flat).reshape(shape)
-        new_inv = inverted_cells(mapped, tol) & ~source_inv[m]
-        deficit = np.where(new_inv, specular_deficit(mapped), -np.inf)
-        holes = new_holes(sources[m], mapped).reshape(*shape, -1).sum(axis=-1)
-        albedo = white_sky_albedo(mapped).max(axis=-1)
-        flags = {
-            "invalid": bad > 0,
-            "inverted": new_inv.reshape(*shape, -1).any(axis=-1),
-            "energetic": albedo > limit,
-            "unphysical": albedo > 1,
-            "holes": holes > 0,
-        }
-        scores = {"invalid": bad, "inverted": deficit.reshape(*shape, -1).max(axis=-1), "energetic": albedo,
-                  "unphysical": albedo, "holes": holes}
+        flags, scores, deficit = _judge(sources[m], source_inv[m], mapped, limit, tol)
         for kind, flag in flags.items():
             counts[kind] += flag
             for i, j in zip(*np.nonzero(flag), strict=True):

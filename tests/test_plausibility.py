@@ -15,6 +15,7 @@ from brdfcodec.plausibility import (
     inverted_cells,
     measure_plausibility,
     new_holes,
+    plausible_range,
     specular_deficit,
     white_sky_albedo,
 )
@@ -150,6 +151,17 @@ def test_inversions_the_source_already_has_do_not_count() -> None:
     assert report.source_inverted == 1
     assert report.fractions["inverted"][0].tolist() == [0, 0, 0, 0, 0, 0]
     assert report.fractions["holes"][0].tolist() == [0, 0, 0, 1, 1, 1]  # the peak still falls to 0 under its flank
+
+
+def test_plausible_range_stops_before_the_first_implausible_step() -> None:
+    decoder = PeakDecoder()
+    # b, peak 1.9 − t: +1σ fine, +2σ inverted (0 under a flank of 0.5); −2σ (peak 3.9) has an albedo > 1
+    assert plausible_range(decoder, Code("b", [-0.9, 0.0]).record, 0) == (-1.0, 1.0)
+    # a, peak 1 − t: +1σ inverted; −3σ (peak 4) has an albedo > 1
+    assert plausible_range(decoder, Code("a", [0.0, 0.0]).record, 0) == (-2.0, 0.0)
+    limit = float(white_sky_albedo(peaked(2.0))[0]) * 1.1  # energy: a at −1σ (peak 2) fine, −2σ (peak 3) not
+    assert plausible_range(decoder, Code("a", [0.0, 0.0]).record, 0, albedo_limit=limit) == (-1.0, 0.0)
+    assert plausible_range(decoder, Code("a", [0.0, 0.0]).record, 1) == (-3.0, 3.0)
 
 
 def test_measure_plausibility_counts_non_finite_decodes() -> None:
