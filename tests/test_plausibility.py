@@ -228,5 +228,8 @@ def test_cli_plausibility_json(capsys: pytest.CaptureFixture[str]) -> None:
 
 
 def test_cli_plausibility_bad_dims(capsys: pytest.CaptureFixture[str]) -> None:
-    assert main(["model", "plausibility", "--dims", "0"]) == 1
+    assert main(["model", "plausibility", "--dims", "0"]) == 2  # a usage error, like --dim 9 of 8
     assert "--dims" in capsys.readouterr().err
+    assert main(["model", "plausibility", "--dims", "1,x"]) == 2
+    assert main(["model", "plausibility", "--materials", "0"]) == 2
+    assert main(["model", "plausibility", "--library", "/nonexistent.bvae", "--materials", "1"]) == 1

@@ -8,6 +8,8 @@ import shlex
 import sys
 from pathlib import Path
 
+from brdfcodec.cli.usage import UsageError
+
 __all__ = ["register"]
 
 
@@ -124,9 +126,9 @@ def _parse_dims(text: str | None, latent_dim: int) -> list[int] | None:
     try:
         dims = [int(item) - 1 for item in text.split(",") if item.strip()]
     except ValueError:
-        raise ValueError(f"--dims takes comma-separated integers, got {text!r}") from None
+        raise UsageError(f"--dims takes comma-separated integers, got {text!r}") from None
     if not dims or any(not 0 <= d < latent_dim for d in dims):
-        raise ValueError(f"--dims must name dimensions in 1…{latent_dim}, got {text!r}")
+        raise UsageError(f"--dims must name dimensions in 1…{latent_dim}, got {text!r}")
     return dims
 
 
@@ -138,7 +140,7 @@ def run_plausibility(args: argparse.Namespace) -> int:
 
     criteria = PlausibilityCriteria(args.tolerance, args.energy_margin)
     if args.materials is not None and args.materials < 1:
-        raise ValueError(f"--materials must be at least 1, got {args.materials}")
+        raise UsageError(f"--materials must be at least 1, got {args.materials}")
     decoder = BrdfDecoder(args.model)
     library_path = args.library or example_library()
     with MaterialLibrary(library_path, decoder=decoder) as library:
