@@ -143,6 +143,7 @@ def run_plausibility(args: argparse.Namespace) -> int:
         raise UsageError(f"--materials must be at least 1, got {args.materials}")
     decoder = BrdfDecoder(args.model)
     library_path = args.library or example_library()
+    library_label = str(args.library) if args.library else "the shipped example library (NBRDF proxy of MERL)"
     with MaterialLibrary(library_path, decoder=decoder) as library:
         everything = [library.record(name) for name in library.names]
     records = everything[: args.materials]
@@ -151,11 +152,11 @@ def run_plausibility(args: argparse.Namespace) -> int:
     if args.json:
         summary = {"model": decoder.manifest.name if decoder.manifest else None,
                    "decoder_sha256": decoder.reference.sha256 if decoder.reference else None,
-                   "library": str(library_path), **report.to_dict()}
+                   "library": library_label, **report.to_dict()}
         print(json.dumps(summary, allow_nan=False))
         return 0
     name = decoder.manifest.name if decoder.manifest else "in-memory decoder"
-    print(f"{name}: {len(records)} materials of {library_path}")
+    print(f"{name}: {len(records)} materials of {library_label}")
     print(report.format_table())
     if report.worst:
         print("\nworst decodes:")
