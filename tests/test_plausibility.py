@@ -164,6 +164,19 @@ def test_plausible_range_stops_before_the_first_implausible_step() -> None:
     assert plausible_range(decoder, Code("a", [0.0, 0.0]).record, 1) == (-3.0, 3.0)
 
 
+class NotchDecoder(PeakDecoder):
+    """Peak 1 except at z0 = 1 (and z0 = −2), where it drops to 0: implausible at one step only."""
+
+    def decode_mapped(self, codes: np.ndarray, *, batch_size: int = 16) -> np.ndarray:
+        codes = np.asarray(codes, dtype=np.float32)
+        notch = np.isclose(codes[:, 0], 1.0) | np.isclose(codes[:, 0], -2.0)
+        return np.stack([peaked(0.0 if n else 1.0) for n in notch])
+
+
+def test_plausible_range_stops_at_the_first_implausible_step_even_if_later_ones_are_fine() -> None:
+    assert plausible_range(NotchDecoder(), Code("a", [0.0, 0.0]).record, 0) == (-1.0, 0.0)
+
+
 def test_measure_plausibility_counts_non_finite_decodes() -> None:
     records = [Code("a", [0.0, 0.0]).record]
     report = measure_plausibility(PeakDecoder(nan_at=-2.0), records, dims=[0])
