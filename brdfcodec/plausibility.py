@@ -17,8 +17,8 @@ source decode at μ and against the library:
 
         D = \\max_{θ_h \\in \\{4, 5, 6\\}} m[c, s, θ_h, j] - \\max_{θ_h \\in \\{0, 1\\}} m[c, s, θ_h, j]
 
-    in mapped units m (``spec/conventions.md`` §4; θh bins 0–1 are θh < 0.05°,
-    bins 4–6 are θh ≈ 0.18–0.45°). A cell is inverted when D exceeds the
+    in mapped units m (``spec/conventions.md`` §4; θh bins 0–1 span θh < 0.045°,
+    bins 4–6 span 0.18–0.54°). A cell is inverted when D exceeds the
     tolerance τ (default 0.1 mapped units, a factor 101^0.1 ≈ 1.6 in ρ/ε + 1).
     Every θd bin 0–89 counts where the five entries are above the horizon at
     that slot. A decode is flagged when some cell is inverted and the same
@@ -90,9 +90,9 @@ __all__ = [
 
 #: Traversal offsets, prior σ units.
 DEFAULT_STEPS: tuple[float, ...] = (-3.0, -2.0, -1.0, 1.0, 2.0, 3.0)
-#: θh bins of the near-specular peak (θh < 0.05°).
+#: θh bins of the near-specular peak (they span θh < 0.045°).
 NEAR_THETA_H_BINS: tuple[int, ...] = (0, 1)
-#: θh bins of the off-specular flank (θh ≈ 0.18–0.45°).
+#: θh bins of the off-specular flank (they span θh 0.18–0.54°).
 OFF_THETA_H_BINS: tuple[int, ...] = (4, 5, 6)
 #: The kinds of implausibility, in report order.
 KINDS: tuple[str, ...] = ("invalid", "inverted", "energetic", "unphysical", "holes")
