@@ -3,9 +3,12 @@
 from __future__ import annotations
 
 import argparse
+import json
 import shlex
 import sys
 from pathlib import Path
+
+from brdfcodec.cli.usage import UsageError
 
 __all__ = ["register"]
 
@@ -73,6 +76,24 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     listing = actions.add_parser("list", help="list every model that can be found, in search order",
                                  description="List every findable model: name, decoder SHA-256, folder.")
     listing.set_defaults(handler=run_list)
+    plaus = actions.add_parser(
+        "plausibility", help="count implausible decodes over ±3σ traversals of a library",
+        description="Traverse every material of a library along every latent dimension (−3…+3 prior σ) and "
+        "report, per dimension and step, the fraction of decodes with non-finite or negative values, a new "
+        "inverted specular peak, energy above the library's, or new zeros at the peak (brdfcodec.plausibility).",
+    )
+    plaus.add_argument("model", nargs="?", help="model folder or decoder SHA-256 (default: the shipped default model)")
+    plaus.add_argument("--library", type=Path,
+                       help=".bvae library encoded with MODEL (default: the shipped example library, 90 materials "
+                       "of the NBRDF proxy of MERL, encoded with the default model)")
+    plaus.add_argument("--dims", help="latent dimensions to traverse, 1-based, comma-separated (default: all)")
+    plaus.add_argument("--materials", type=int, metavar="N", help="only the first N materials of the library")
+    plaus.add_argument("--tolerance", type=float, default=0.1,
+                       help="inversion tolerance τ, mapped units (default 0.1)")
+    plaus.add_argument("--energy-margin", type=float, default=0.1,
+                       help="relative margin over the library's largest albedo (default 0.1)")
+    plaus.add_argument("--json", action="store_true", help="print one JSON object")
+    plaus.set_defaults(handler=run_plausibility)
 
 
 def run_export(args: argparse.Namespace) -> int:
@@ -190,4 +211,51 @@ def run_list(args: argparse.Namespace) -> int:
 
     for manifest in available_models():
         print(f"{manifest.decoder_sha256}  {manifest.name:<36} {manifest.folder}")
+    return 0
+
+
+def _parse_dims(text: str | None, latent_dim: int) -> list[int] | None:
+    """``"1,3"`` → ``[0, 2]``; None for all."""
+    if text is None:
+        return None
+    try:
+        dims = [int(item) - 1 for item in text.split(",") if item.strip()]
+    except ValueError:
+        raise UsageError(f"--dims takes comma-separated integers, got {text!r}") from None
+    if not dims or any(not 0 <= d < latent_dim for d in dims):
+        raise UsageError(f"--dims must name dimensions in 1…{latent_dim}, got {text!r}")
+    return dims
+
+
+def run_plausibility(args: argparse.Namespace) -> int:
+    """Measure and print the plausibility table (or JSON)."""
+    from brdfcodec.codec import BrdfDecoder, MaterialLibrary
+    from brdfcodec.examples import example_library
+    from brdfcodec.plausibility import PlausibilityCriteria, measure_plausibility
+
+    criteria = PlausibilityCriteria(args.tolerance, args.energy_margin)
+    if args.materials is not None and args.materials < 1:
+        raise UsageError(f"--materials must be at least 1, got {args.materials}")
+    decoder = BrdfDecoder(args.model)
+    library_path = args.library or example_library()
+    library_label = str(args.library) if args.library else "the shipped example library (NBRDF proxy of MERL)"
+    with MaterialLibrary(library_path, decoder=decoder) as library:
+        everything = [library.record(name) for name in library.names]
+    records = everything[: args.materials]
+    report = measure_plausibility(decoder, records, dims=_parse_dims(args.dims, decoder.latent_dim),
+                                  criteria=criteria, reference=everything)
+    if args.json:
+        summary = {"model": decoder.manifest.name if decoder.manifest else None,
+                   "decoder_sha256": decoder.reference.sha256 if decoder.reference else None,
+                   "library": library_label, **report.to_dict()}
+        print(json.dumps(summary, allow_nan=False))
+        return 0
+    name = decoder.manifest.name if decoder.manifest else "in-memory decoder"
+    print(f"{name}: {len(records)} materials of {library_label}")
+    print(report.format_table())
+    if report.worst:
+        print("\nworst decodes:")
+        for o in report.worst:
+            where = f" at (colour, φd bin, θd bin) {o.where}" if o.where else ""
+            print(f"  {o.kind:<9} {o.material} z{o.dim + 1}{o.step:+g}σ: {o.score:.4g}{where}")
     return 0

@@ -159,4 +159,6 @@ def render_model_card(manifest: dict[str, Any]) -> str:
         ]
     if info.get("limits"):
         lines += ["## Known limits", "", *[f"- {limit}" for limit in info["limits"]], ""]
+    for section in info.get("card_sections", []):  # measured after export (e.g. bvae model plausibility)
+        lines += [f"## {section['title']}", "", section["markdown"].strip(), ""]
     return "\n".join(lines)

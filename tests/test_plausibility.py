@@ -1,0 +1,248 @@
+"""Plausibility of traversal decodes (brdfcodec.plausibility, ``bvae model plausibility``)."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from brdfcodec.cli import main
+from brdfcodec.conventions import MERL_COLOR_SCALE, NETWORK_INPUT_SHAPE
+from brdfcodec.plausibility import (
+    PlausibilityCriteria,
+    decompose_output,
+    inverted_cells,
+    measure_plausibility,
+    new_holes,
+    plausible_range,
+    specular_deficit,
+    white_sky_albedo,
+)
+from brdfcodec.plausibility import _invalid_counts as invalid_counts
+from brdfcodec.representation import to_network_layout
+from brdfcodec.representation.mapping import map_values
+
+GREEN_SLOT_10 = 21 + 10  # green at kept slot 10 (φd bin 90)
+
+
+def peaked(peak: float = 1.0, flank: float = 0.5, floor: float = 0.3) -> np.ndarray:
+    """Mapped slices with a specular peak: θh 0–1 at ``peak``, θh 2–6 at ``flank``, the rest at ``floor``."""
+    mapped = np.full(NETWORK_INPUT_SHAPE, floor, dtype=np.float32)
+    mapped[:, 0:2] = peak
+    mapped[:, 2:7] = flank
+    return mapped
+
+
+def test_a_peak_is_not_inverted_and_a_flank_above_it_is() -> None:
+    assert not inverted_cells(peaked()).any()
+    assert float(np.nanmax(specular_deficit(peaked()))) == pytest.approx(-0.5)
+    flat = peaked(0.5, 0.5)  # a diffuse material: no peak, no inversion
+    assert not inverted_cells(flat).any()
+    dent = peaked()
+    dent[GREEN_SLOT_10, 0:2, 10] = 0.2  # one cell: peak 0.3 below its flank
+    cells = inverted_cells(dent)
+    assert cells.sum() == 1 and cells[1, 10, 10]
+    assert specular_deficit(dent)[1, 10, 10] == pytest.approx(0.3)
+
+
+def test_inversion_tolerance_and_the_peak_rows() -> None:
+    small = peaked()
+    small[GREEN_SLOT_10, 0:2, 10] = 0.45  # 0.05 below the flank: within τ = 0.1
+    assert not inverted_cells(small).any()
+    assert inverted_cells(small, tolerance=0.01).sum() == 1
+    one_row = peaked()
+    one_row[GREEN_SLOT_10, 0, 10] = 0.0  # θh bin 1 still holds the peak: not inverted
+    assert not inverted_cells(one_row).any()
+    flank_row = peaked()
+    flank_row[GREEN_SLOT_10, 6, 10] = 1.3  # θh bin 6 is in the flank
+    assert inverted_cells(flank_row).sum() == 1
+    outside = peaked()
+    outside[GREEN_SLOT_10, 7, 10] = 1.3  # θh bin 7 is not
+    assert not inverted_cells(outside).any()
+
+
+def test_non_finite_peaks_count_as_inverted() -> None:
+    broken = peaked()
+    broken[GREEN_SLOT_10, 0, 10] = np.nan
+    assert inverted_cells(broken).sum() == 1
+
+
+def test_invalid_values_are_counted_above_the_horizon_only() -> None:
+    good = peaked()[None]
+    assert invalid_counts(good).tolist() == [0]
+    bad = np.repeat(good, 3, axis=0)
+    bad[1, 5, 3, 4] = np.nan
+    bad[2, 40, 50, 60] = -0.5  # a negative mapped value unmaps to a negative stored value
+    counts = invalid_counts(bad)  # the decode path's φd interpolation spreads a NaN over its (θh, θd) row
+    assert counts[0] == 0 and counts[1] >= 1 and counts[2] == 1
+    bad[2, 40, 50, 60] = np.inf
+    assert invalid_counts(bad[2:])[0] >= 1
+    below = good.copy()
+    below[0, 0, 89, 89] = -1.0  # θh 89°, θd 89° at φd bin 0: below the horizon
+    assert invalid_counts(below).tolist() == [0]
+
+
+def test_new_holes_are_zeros_at_the_peak_that_the_source_lacked() -> None:
+    source = peaked()
+    edited = peaked()
+    edited[GREEN_SLOT_10, 0, 10] = 0.0
+    edited[GREEN_SLOT_10, 5, 10] = 0.0  # off the peak: not a hole
+    assert new_holes(source, edited).sum() == 1
+    assert new_holes(edited, edited).sum() == 0  # a zero the source had already
+    dark = edited.copy()
+    dark[GREEN_SLOT_10, 0:7, 10] = 0.0  # the whole peak region black: no hole in a highlight
+    assert new_holes(source, dark).sum() == 0
+
+
+def test_white_sky_albedo_of_lambertian_materials() -> None:
+    albedo = np.array([0.05, 0.5, 0.95])
+    stored = np.broadcast_to((albedo / np.pi / MERL_COLOR_SCALE)[:, None, None, None], (3, 90, 90, 21))
+    mapped = to_network_layout(map_values(np.ascontiguousarray(stored)))
+    assert white_sky_albedo(mapped) == pytest.approx(albedo, rel=1e-3)
+    assert white_sky_albedo(np.zeros(NETWORK_INPUT_SHAPE)) == pytest.approx([0, 0, 0])
+
+
+class PeakDecoder:
+    """A constructed decoder: peak 1 − z0, flank 0.5, floor 0.3 (mapped), clamped to [0, 5] like the real one."""
+
+    latent_dim = 2
+
+    def __init__(self, nan_at: float | None = None) -> None:
+        self.nan_at = nan_at
+
+    def decode_mapped(self, codes: np.ndarray, *, batch_size: int = 16) -> np.ndarray:
+        codes = np.asarray(codes, dtype=np.float32)
+        out = np.stack([peaked(float(np.clip(1.0 - z[0], 0, 5))) for z in codes])
+        if self.nan_at is not None:
+            out[np.isclose(codes[:, 0], self.nan_at), 30, 20, 20] = np.nan
+        return out
+
+
+class Code:
+    def __init__(self, name: str, mu: list[float]) -> None:
+        from brdfcodec.bvae_format import LatentRecord
+
+        self.record = LatentRecord(name, np.asarray(mu, dtype=np.float32), np.ones(len(mu), dtype=np.float32))
+
+
+def test_measure_plausibility_on_a_constructed_decoder() -> None:
+    records = [Code("a", [0.0, 0.0]).record, Code("b", [-0.9, 0.0]).record]
+    report = measure_plausibility(PeakDecoder(), records)
+    # dim 0: peak 1 − z0. a (peak 1): +1σ → 0 (inverted by 0.5, a hole), +2σ, +3σ likewise; −σ brighter.
+    # b (peak 1.9): +1σ → 0.9 fine, +2σ → 0 inverted, +3σ inverted.
+    assert report.fractions["inverted"][0].tolist() == [0, 0, 0, 0.5, 1, 1]
+    assert report.fractions["holes"][0].tolist() == [0, 0, 0, 0.5, 1, 1]
+    assert report.fractions["inverted"][1].tolist() == [0] * 6  # dim 1 does nothing
+    assert report.fractions["invalid"].sum() == 0
+    # energy: b's μ peak (1.9) sets the limit; a at −1σ (peak 2) stays within 10 %, b at −1σ (2.9) does not
+    assert report.fractions["energetic"][0].tolist() == [1, 1, 0.5, 0, 0, 0]
+    assert report.fractions["unphysical"][0].tolist() == [1, 0.5, 0, 0, 0, 0]  # albedo > 1: peaks 4.9 and 3.9
+    assert report.fractions["any"][0].tolist() == [1, 1, 0.5, 0.5, 1, 1]
+    worst = [o for o in report.worst if o.kind == "inverted"][0]
+    assert worst.score == pytest.approx(0.5) and worst.step > 0 and worst.dim == 0
+    assert report.source_inverted == 0
+    json.dumps(report.to_dict(), allow_nan=False)
+
+
+def test_inversions_the_source_already_has_do_not_count() -> None:
+    records = [Code("dented", [0.8, 0.0]).record]  # peak 0.2 under its flank 0.5 at μ
+    report = measure_plausibility(PeakDecoder(), records, dims=[0])
+    assert report.source_inverted == 1
+    assert report.fractions["inverted"][0].tolist() == [0, 0, 0, 0, 0, 0]
+    assert report.fractions["holes"][0].tolist() == [0, 0, 0, 1, 1, 1]  # the peak still falls to 0 under its flank
+
+
+def test_plausible_range_stops_before_the_first_implausible_step() -> None:
+    decoder = PeakDecoder()
+    # b, peak 1.9 − t: +1σ fine, +2σ inverted (0 under a flank of 0.5); −2σ (peak 3.9) has an albedo > 1
+    assert plausible_range(decoder, Code("b", [-0.9, 0.0]).record, 0) == (-1.0, 1.0)
+    # a, peak 1 − t: +1σ inverted; −3σ (peak 4) has an albedo > 1
+    assert plausible_range(decoder, Code("a", [0.0, 0.0]).record, 0) == (-2.0, 0.0)
+    limit = float(white_sky_albedo(peaked(2.0))[0]) * 1.1  # energy: a at −1σ (peak 2) fine, −2σ (peak 3) not
+    assert plausible_range(decoder, Code("a", [0.0, 0.0]).record, 0, albedo_limit=limit) == (-1.0, 0.0)
+    assert plausible_range(decoder, Code("a", [0.0, 0.0]).record, 1) == (-3.0, 3.0)
+
+
+class NotchDecoder(PeakDecoder):
+    """Peak 1 except at z0 = 1 (and z0 = −2), where it drops to 0: implausible at one step only."""
+
+    def decode_mapped(self, codes: np.ndarray, *, batch_size: int = 16) -> np.ndarray:
+        codes = np.asarray(codes, dtype=np.float32)
+        notch = np.isclose(codes[:, 0], 1.0) | np.isclose(codes[:, 0], -2.0)
+        return np.stack([peaked(0.0 if n else 1.0) for n in notch])
+
+
+def test_plausible_range_stops_at_the_first_implausible_step_even_if_later_ones_are_fine() -> None:
+    assert plausible_range(NotchDecoder(), Code("a", [0.0, 0.0]).record, 0) == (-1.0, 0.0)
+
+
+def test_measure_plausibility_counts_non_finite_decodes() -> None:
+    records = [Code("a", [0.0, 0.0]).record]
+    report = measure_plausibility(PeakDecoder(nan_at=-2.0), records, dims=[0])
+    assert report.fractions["invalid"][0].tolist() == [0, 1, 0, 0, 0, 0]
+
+
+def test_measure_plausibility_rejects_bad_arguments() -> None:
+    records = [Code("a", [0.0, 0.0]).record]
+    with pytest.raises(ValueError, match="dims"):
+        measure_plausibility(PeakDecoder(), records, dims=[2])
+    with pytest.raises(ValueError, match="no records"):
+        measure_plausibility(PeakDecoder(), [])
+    with pytest.raises(ValueError, match="inversion_tolerance"):
+        PlausibilityCriteria(inversion_tolerance=-1)
+
+
+@pytest.fixture(scope="module")
+def default_library() -> tuple[object, dict[str, object]]:
+    from brdfcodec.codec import BrdfDecoder, MaterialLibrary
+    from brdfcodec.examples import example_library
+
+    decoder = BrdfDecoder()
+    with MaterialLibrary(example_library(), decoder=decoder) as library:
+        records = {name: library.record(name) for name in ("gold-paint", "white-paint")}
+    return decoder, records
+
+
+def test_default_model_gold_paint_black_hole_is_found(default_library: tuple[object, dict[str, object]]) -> None:
+    decoder, records = default_library
+    report = measure_plausibility(decoder, list(records.values()), dims=[0])
+    plus1 = report.steps.index(1.0)
+    assert report.fractions["inverted"][0, plus1] >= 0.5  # gold-paint at +1σ of z1
+    assert report.fractions["holes"][0, plus1] >= 0.5
+    assert report.fractions["invalid"].sum() == 0
+    assert any(o.material == "gold-paint" and o.kind == "holes" and o.step == 1.0 for o in report.worst)
+
+
+def test_gold_paint_black_hole_is_the_linear_path_below_the_clamp(
+    default_library: tuple[object, dict[str, object]],
+) -> None:
+    decoder, records = default_library
+    mu = np.asarray(records["gold-paint"].mu)
+    codes = np.stack([mu + np.eye(8)[0] * t for t in (0.0, 1.0, 2.0)])
+    linear, correction = decompose_output(decoder, codes)
+    raw = linear + correction
+    entry = (slice(None), GREEN_SLOT_10, 0, 10)  # green, φd bin 90, θh bin 0, θd bin 10
+    assert raw[entry][0] == pytest.approx(0.664, abs=0.01)
+    assert raw[entry][2] < 0  # below the floor at +2σ: clamped to 0, the hole
+    assert np.abs(correction[entry]).max() < 0.05  # the convolutional correction is small there
+    assert np.diff(linear[entry]).max() < -0.6  # the linear path falls by > 0.6 per σ
+    clamped = decoder.decode_mapped(codes)
+    np.testing.assert_array_equal(clamped, np.clip(raw, 0, 5))
+
+
+def test_cli_plausibility_json(capsys: pytest.CaptureFixture[str]) -> None:
+    code = main(["model", "plausibility", "--materials", "1", "--dims", "1", "--json"])
+    captured = capsys.readouterr()
+    assert code == 0, captured.err
+    summary = json.loads(captured.out)
+    assert summary["dims"] == [1] and summary["materials"] == 1
+    assert len(summary["fractions"]["inverted"]) == 1 and len(summary["fractions"]["inverted"][0]) == 6
+
+
+def test_cli_plausibility_bad_dims(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["model", "plausibility", "--dims", "0"]) == 2  # a usage error, like --dim 9 of 8
+    assert "--dims" in capsys.readouterr().err
+    assert main(["model", "plausibility", "--dims", "1,x"]) == 2
+    assert main(["model", "plausibility", "--materials", "0"]) == 2
+    assert main(["model", "plausibility", "--library", "/nonexistent.bvae", "--materials", "1"]) == 1
