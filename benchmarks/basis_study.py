@@ -73,7 +73,7 @@ def main() -> None:
     def placed(values: np.ndarray, offset: np.ndarray | float = 0.0) -> np.ndarray:
         out = np.zeros((len(values), x_held[0].size))
         out[:, valid] = values
-        return (out + offset).reshape(x_held.shape)
+        return out.reshape(x_held.shape) + offset
 
     rows = [{"k": 0, "base": kept_slice_relae(base_held, x_held, m_held)}]
     for k in COUNTS:

@@ -34,7 +34,7 @@ TARGETS = {
     "mitsuba-vs-scalar": 1 / 50,  # the same render in llvm_ad_rgb vs the scalar_rgb plug-in (scaled from 32², 4 spp)
     "rgl-tabulate": 4.0,  # an RGL .bsdf through Mitsuba's measured plugin vs an NBRDF proxy fit, same MERL grid
     "studio-slider-to-paint": 1.5,  # browser: slider input → painted preview vs a server-side render before transfer
-    "decode-layered": 1.5,  # a layered record (base + 16 KB detail layer) vs its base alone (issue 14)
+    "decode-layered": 1.5,  # a layered record (base + 75 basis coefficients + 16 KB detail layer) vs its base alone
     "encode-effort": 4.0,  # read + encode at the default effort (1: refinement) vs effort 0 (issue 14)
 }
 

@@ -24,7 +24,7 @@ from brdfcodec.bvae_format import encode_bvae, parse_bvae
 from brdfcodec.codec import BrdfEncoder, measure
 from brdfcodec.errors import RateTargetError
 
-BUDGETS = (None, 1024, 16384, 262144)
+BUDGETS = (None, 64, 128, 1024, 16384, 262144)
 
 
 def main() -> None:

@@ -12,12 +12,17 @@ the clamp and the interpolation).
 This is the low-rate enhancement: between the 8-D latent (32 B as float16)
 and the per-material detail layer (hundreds of bytes and up), each extra
 byte buys one more coefficient. Which basis was measured, not guessed
-(``benchmarks/rd_study.py``; held-out NBRDF proxy of MERL, kept-slice mapped
-RelAE after refinement, coefficients by least squares): the principal
-components of the training *data* beat those of the training *residuals*
-(what the decoder leaves on the materials it was trained on, which it fits
-far better than new ones) from about 12 coefficients on; with 30, 0.0308
-against 0.0375.
+(``python benchmarks/basis_study.py DATASET``, ``reports/rd-study/basis.json``;
+held-out NBRDF proxy of MERL, kept-slice mapped RelAE, base refined at
+effort 3, least-squares coefficients): the principal components of the
+training *data* beat those of the training *residuals* (what the decoder
+leaves on the materials it was trained on, which it fits far better than
+new ones) from 16 coefficients on — with 30, 0.0308 against 0.0381; with
+64, 0.0258 against 0.0344 — while the residual basis is better below (4:
+0.0440 against 0.0492). Fitting μ and the coefficients together on the L1
+error (the encoder's way) lowers the data basis' figures to 0.0354 (16),
+0.0285 (30) and 0.0239 (64), below PCA of the same size with least squares
+(0.0387, 0.0298, 0.0241).
 
 This module does not import torch (the encoder's joint fit is in
 :mod:`brdfcodec.layers.refine`).
