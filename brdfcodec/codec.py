@@ -1002,7 +1002,7 @@ def encode(
     >>> from brdfcodec.analytic import ANALYTIC_PRESETS
     >>> data = bc.encode([ANALYTIC_PRESETS["gold"].to_merl()], measure_error=False)
     >>> data[1:5], len(data)   # one material: a header naming the decoder, then 64 bytes of latents
-    (b'BVAE', 426)
+    (b'BVAE', 428)
     >>> bc.decode(data)["gold"].table(phi_d_bins=[0]).shape
     (3, 90, 90, 1)
     """
