@@ -178,3 +178,45 @@ def test_cli_bytes_writes_the_basis_layer(red_plastic_file, tmp_path, capsys) ->
     capsys.readouterr()
     assert main(["info", str(out)]) == 0
     assert "64 B" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("step", [1e-4, 1.0, 60000.0])
+def test_extreme_basis_coefficients_decode_finite_and_in_range(step: float) -> None:
+    """The largest and smallest steps a float16 holds, all coefficients at ±127: clamped, finite, ≥ 0."""
+    from brdfcodec.codec import BrdfDecoder
+
+    decoder = BrdfDecoder()
+    sha = decoder.shared_basis.sha256
+    q = np.where(np.arange(75) % 2 == 0, 127, -127).astype(np.int8)
+    for mu in (np.zeros(8), np.full(8, 6.0), np.full(8, -6.0)):
+        record = LayeredRecord("x", mu, np.ones(8), basis=BasisLayer(sha, float(np.float16(step)), q))
+        table = decoder.decode(record, masked="zero")
+        assert np.isfinite(table).all() and table.min() >= 0.0
+
+
+def test_float16_decoding_of_a_basis_record_stays_close(analytic_tables) -> None:
+    import torch
+
+    from brdfcodec.codec import BrdfDecoder, BrdfEncoder
+    from brdfcodec.metrics import relae_mapped
+
+    brdf = analytic_tables["chrome"]  # a hard material: a sharp, bright lobe
+    record = BrdfEncoder(effort=0, bytes=128, latent_dtype="float16").encode(brdf, name="chrome")
+    assert isinstance(record, LayeredRecord) and record.basis is not None
+    full = BrdfDecoder().decode(record, masked="keep").astype(np.float64)
+    half = BrdfDecoder(dtype=torch.float16).decode(record, masked="keep").astype(np.float64)
+    assert np.isfinite(half).all()
+    assert relae_mapped(full, half, brdf.mask).overall < 0.01  # the bound spec §6 states for the base
+
+
+@pytest.mark.parametrize("name", ["chrome", "black-obsidian"])
+def test_extreme_materials_layered_within_budget(analytic_tables, name: str) -> None:
+    from brdfcodec.codec import BrdfEncoder, measure
+
+    brdf = analytic_tables[name]
+    base = BrdfEncoder(effort=1, latent_dtype="float16")
+    base_error = measure(base.encode(brdf, name=name), base.decoder, brdf).meta["relae"]["mapped"]
+    encoder = BrdfEncoder(effort=1, bytes=128, latent_dtype="float16")
+    record = measure(encoder.encode(brdf, name=name), encoder.decoder, brdf)
+    assert record.meta["rate"]["payload_bytes"] <= 128
+    assert np.isfinite(record.meta["relae"]["mapped"]) and record.meta["relae"]["mapped"] <= base_error + 1e-9
