@@ -125,6 +125,12 @@ def test_compress_and_decompress_round_trip(rgl_file: Path, mitsuba_llvm: None, 
     assert "RelAE" in capsys.readouterr().out
     decoded = read_merl(out)
     assert decoded.values.shape == (3, 90, 90, 180) and np.isfinite(decoded.values).all()
+    # Rendering takes the RGL file too, as the reference of --compare and as the material itself.
+    capsys.readouterr()
+    image = tmp_path / "p.png"
+    assert main(["render", str(bvae), "-o", str(image), "--size", "32", "--compare", str(rgl_file)]) == 0
+    assert "ΔE ITP" in capsys.readouterr().out and image.stat().st_size > 0
+    assert main(["render", str(rgl_file), "-o", str(tmp_path / "q.png"), "--size", "32"]) == 0
 
 
 @pytest.mark.shared

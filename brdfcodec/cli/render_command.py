@@ -32,7 +32,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
         "environment; or, with --traversal, a sheet with one row per latent parameter. PNG is exposed and "
         "sRGB-encoded; EXR holds linear radiance.",
     )
-    parser.add_argument("input", type=Path, metavar="IN", nargs="?", help=".bvae file or MERL .binary file")
+    parser.add_argument("input", type=Path, metavar="IN", nargs="?", help=".bvae file, MERL .binary or RGL .bsdf file")
     parser.add_argument("-o", "--output", type=Path, required=True, help="output .png or .exr")
     parser.add_argument("--material", help="material of a .bvae library (default: the only one)")
     parser.add_argument("--size", type=int, default=256, help="image size in pixels (default 256)")
@@ -45,8 +45,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     parser.add_argument("--umap-grid", type=int, metavar="N", help="the paper's UMAP figure of a library: the map "
                         "with its materials and N×N sample points, and the N×N sheet rendered from them (.png)")
     parser.add_argument("--exposure", type=float, help="PNG exposure (default: automatic)")
-    parser.add_argument("--compare", type=Path, metavar="SOURCE.binary",
-                        help="also render this MERL file the same way and print ΔE ITP, ΔE 2000 and PSNR against it")
+    parser.add_argument("--compare", type=Path, metavar="SOURCE",
+                        help="also render this MERL .binary or RGL .bsdf file the same way and print ΔE ITP, "
+                        "ΔE 2000 and PSNR against it")
     parser.add_argument("--mitsuba", type=Path, metavar="SCENE",
                         help="render a Mitsuba 3 scene (.xml or .json) instead of IN, with its bvae/merl BSDFs")
     parser.add_argument("--spp", type=int, help="with --mitsuba: samples per pixel (default: the scene's)")
@@ -63,11 +64,11 @@ def _load(path: Path, material: str | None) -> tuple[Any, Any]:
     from brdfcodec.bvae_format import MAGIC
 
     if head != MAGIC:
-        from brdfcodec.merl import read_merl
+        from brdfcodec.inputs import read_measured
 
         if material is not None:
             raise ValueError(f"{path}: --material applies to .bvae files only")
-        return read_merl(path), None
+        return read_measured(path), None  # a MERL .binary, or an RGL .bsdf tabulated on the MERL grid
     from brdfcodec.codec import MaterialLibrary
 
     with MaterialLibrary(path) as library:
@@ -142,9 +143,9 @@ def run(args: argparse.Namespace) -> int:
     render_s = time.perf_counter() - start
     if args.compare is not None:
         from brdfcodec.image_metrics import compare_images
-        from brdfcodec.merl import read_merl
+        from brdfcodec.inputs import read_measured
 
-        error = compare_images(view(read_merl(args.compare)), image)
+        error = compare_images(view(read_measured(args.compare)), image)
         if args.exposure is None:
             args.exposure = error.exposure  # same exposure for both, the reference's
         print(f"against {args.compare}: ΔE ITP mean {error.delta_e_itp_mean:.3f} (p95 {error.delta_e_itp_p95:.3f}), "
