@@ -32,7 +32,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     export.add_argument("--compare", action="append", default=[], metavar="LABEL=FOLDER",
                         help="an exported model to show beside this one in the card (repeatable)")
     export.add_argument("--basis-count", type=int, default=None, metavar="K",
-                        help="vectors of the shared basis fitted on the training split (default 75, at most the training materials − 1; 0: none)")
+                        help="vectors of the shared basis fitted on the training split "
+                        "(default 75, at most the training materials − 1; 0: none)")
     export.set_defaults(handler=run_export)
     fit = actions.add_parser(
         "fit-basis", help="fit a shared basis (the basis layer's) for an exported model",
