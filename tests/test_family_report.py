@@ -22,14 +22,28 @@ def analytic_dataset(tmp_path_factory: pytest.TempPathFactory) -> Path:
 def test_rows_per_family_and_split(analytic_dataset: Path) -> None:
     from brdfcodec.training.family_report import evaluate_by_family, family_table
 
-    rows = evaluate_by_family(None, analytic_dataset, limit=2)
+    rows = evaluate_by_family(None, analytic_dataset)
     # The shipped model was trained on none of these materials: every one is held out, in the one family.
-    assert [(r.family, r.split, r.count) for r in rows] == [("analytic", "held-out", 2)]
+    assert [(r.family, r.split, r.count) for r in rows] == [("analytic", "held-out", 12)]
     row = rows[0]
-    for value in (row.mapped, row.linear, row.delta_e_itp, row.pca8_mapped, row.pca16_mapped):
+    for value in (row.mapped, row.linear, row.delta_e_itp, row.pca8_mapped):
         assert 0 < value < 5
     assert row.pca16_mapped <= row.pca8_mapped + 1e-9  # more components, never worse in least squares terms
-    assert "| analytic | held-out | 2 |" in "\n".join(family_table(rows))
+    # The baselines never see the materials the dataset holds out: fitted on its training materials, PCA
+    # reproduces those up to the slice interpolation but not the held-out ones, which lift the mean above it.
+    import numpy as np
+
+    from brdfcodec.dataset import BrdfDataset
+    from brdfcodec.metrics import relae_mapped
+    from brdfcodec.representation import table_from_network_output
+
+    with BrdfDataset(analytic_dataset) as dataset:
+        assert len(dataset.indices("validation")) >= 1
+        floor = np.mean([relae_mapped(dataset.table(i).values,
+                                      table_from_network_output(dataset.inputs([i])[0]).astype(np.float64),
+                                      dataset.table(i).mask).overall for i in range(len(dataset))])
+    assert row.pca16_mapped > floor + 2e-3
+    assert "| analytic | held-out | 12 |" in "\n".join(family_table(rows))
 
 
 def test_cli_evaluate_stores_into_a_copy_of_the_model(analytic_dataset: Path, tmp_path: Path, capsys) -> None:
