@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import datetime
 import os
-import re
 from collections.abc import Sequence
 from pathlib import Path
 from types import TracebackType
@@ -32,6 +31,7 @@ from brdfcodec.conventions import (
     UNMEASURED_VALUE,
 )
 from brdfcodec.errors import DatasetError
+from brdfcodec.hashing import is_sha256_hex
 from brdfcodec.merl import MerlBRDF
 from brdfcodec.representation import network_input_from_table
 from brdfcodec.rgl import RGL_SOURCE_KIND
@@ -177,9 +177,6 @@ def build_dataset(
             if tables is not None:
                 tables[index] = np.where(loaded.brdf.mask, loaded.brdf.values, UNMEASURED_VALUE)
     return Path(output)
-
-
-_SHA256_HEX = re.compile(r"[0-9a-f]{64}")
 
 
 def _check_distinct(sources: Sequence[MaterialSource]) -> None:
@@ -343,7 +340,7 @@ class BrdfDataset:
         if "source_sha256" in self._handle:
             stored = self._handle["source_sha256"][index]
             text = stored.decode() if isinstance(stored, bytes) else str(stored)
-            digest = text if _SHA256_HEX.fullmatch(text) else None  # a hand-made dataset may hold anything
+            digest = text if is_sha256_hex(text) else None  # a hand-made dataset may hold anything
         kind = RGL_SOURCE_KIND if self.source_kinds[index] == RGL_SOURCE_KIND else None
         return MerlBRDF(values, name=self.names[index], source_kind=kind, source_sha256=digest)
 

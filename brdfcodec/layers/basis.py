@@ -41,6 +41,7 @@ import numpy as np
 import numpy.typing as npt
 
 from brdfcodec.conventions import NETWORK_INPUT_SHAPE
+from brdfcodec.hashing import is_sha256_hex
 
 __all__ = [
     "BASIS_FILE",
@@ -183,16 +184,16 @@ def load_shared_basis(path: str | os.PathLike[str], expected_sha256: str) -> Sha
         The file's hash is not ``expected_sha256``, or its tensors are malformed.
     """
     from safetensors import SafetensorError
-    from safetensors.numpy import load_file
+    from safetensors.numpy import load
 
-    from brdfcodec.hashing import sha256_of_file
+    from brdfcodec.hashing import read_with_sha256
 
-    actual = sha256_of_file(path)
+    data, actual = read_with_sha256(path)
     if actual != expected_sha256:
         raise BasisError(f"{path}: SHA-256 {actual} is not the {expected_sha256} its model.json names")
     try:
-        tensors = load_file(str(path))
-    except (SafetensorError, OSError) as error:
+        tensors = load(data)
+    except SafetensorError as error:
         raise BasisError(f"{path}: not a readable safetensors file ({error})") from None
     components, entries = tensors.get("components"), tensors.get("entries")
     if components is None or entries is None:
@@ -235,8 +236,7 @@ class BasisLayer:
     q: npt.NDArray[np.int8]
 
     def __post_init__(self) -> None:
-        if not (isinstance(self.sha256, str) and len(self.sha256) == 64
-                and all(ch in "0123456789abcdef" for ch in self.sha256)):
+        if not is_sha256_hex(self.sha256):
             raise ValueError(f"basis sha256 must be 64 lower-case hex digits, got {self.sha256!r}")
         step = np.float16(self.step)
         if not (np.isfinite(step) and step > 0 and float(step) == float(self.step)):

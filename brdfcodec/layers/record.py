@@ -17,6 +17,7 @@ from typing import Any, Literal
 import numpy as np
 
 from brdfcodec.bvae_format import LatentRecord
+from brdfcodec.hashing import is_sha256_hex
 from brdfcodec.layers.basis import MAX_BASIS_COUNT, STEP_BYTES, BasisLayer, basis_layer_from_bytes
 from brdfcodec.layers.detail import _DTYPES, DETAIL_TRANSFORM, MAX_STEP, MIN_STEP, N_DETAIL_VALUES, DetailLayer
 
@@ -160,7 +161,7 @@ def _basis_length(basis: object, where: str) -> int:
             f"{where} basis layer has fields {unknown}, unknown to this reader; upgrade brdfcodec"
         )
     sha, count = basis.get("sha256"), basis.get("count")
-    if not (isinstance(sha, str) and len(sha) == 64 and all(ch in "0123456789abcdef" for ch in sha)):
+    if not is_sha256_hex(sha):
         raise ValueError(f"{where} basis sha256 {sha!r} is not 64 lower-case hex digits")
     if not isinstance(count, int) or isinstance(count, bool) or not 1 <= count <= MAX_BASIS_COUNT:
         raise ValueError(f"{where} basis count {count!r} is not an integer in [1, {MAX_BASIS_COUNT}]")

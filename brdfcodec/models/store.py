@@ -20,11 +20,11 @@ from pathlib import Path
 from typing import Any
 
 import torch
-from safetensors.torch import load_file, save_file
+from safetensors.torch import load, save_file
 
 from brdfcodec.atomic import atomic_output
 from brdfcodec.errors import ModelChecksumError
-from brdfcodec.hashing import sha256_of_file
+from brdfcodec.hashing import read_with_sha256, sha256_of_file
 from brdfcodec.models.manifest import DECODER_FILE, ENCODER_FILE, MANIFEST, ModelManifest, load_manifest
 from brdfcodec.models.network import BetaVAE, Decoder, Encoder
 
@@ -132,13 +132,13 @@ def export_model(
 
 def _verified_weights(manifest: ModelManifest, file: str, expected: str) -> dict[str, torch.Tensor]:
     path = manifest.folder / file
-    actual = sha256_of_file(path)
+    data, actual = read_with_sha256(path)
     if actual != expected:
         raise ModelChecksumError(
             f"{path}: SHA-256 {actual} differs from the manifest's {expected}; the file is corrupt or belongs "
             "to another model (reinstall brdfcodec, or re-export the model)"
         )
-    return load_file(str(path))
+    return load(data)
 
 
 #: Floating tensors of at least this many elements are stored as float16 in a compact encoder file.

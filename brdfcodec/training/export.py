@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import os
 import platform
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -158,21 +159,30 @@ def add_shared_basis(folder: str | os.PathLike[str], dataset_path: str | os.Path
     For a model exported before shared bases existed (:func:`export_run` fits one itself). The weights are
     not touched, so the model's identity (its decoder hash) is unchanged; files written before keep decoding.
     """
-    out = Path(folder)
-    stored = json.loads((out / MANIFEST).read_text())
     with BrdfDataset(dataset_path) as dataset:
-        basis = _fit_basis(out, dataset, count)
-    stored["basis_sha256"] = basis.pop("sha256")
-    stored.setdefault("info", {})["basis"] = basis
-    write_card(out, stored)
-    return write_manifest(out, stored)
+        basis = _fit_basis(Path(folder), dataset, count)
+
+    def add(stored: dict[str, Any]) -> None:
+        stored["basis_sha256"] = basis.pop("sha256")
+        stored.setdefault("info", {})["basis"] = basis
+
+    return _rewrite_manifest(folder, add)
 
 
 def store_info(folder: str | os.PathLike[str], key: str, value: Any) -> ModelManifest:
     """Add a measurement to ``info`` in ``model.json`` and rewrite the card (weights and identity untouched)."""
+
+    def add(stored: dict[str, Any]) -> None:
+        stored.setdefault("info", {})[key] = value
+
+    return _rewrite_manifest(folder, add)
+
+
+def _rewrite_manifest(folder: str | os.PathLike[str], change: Callable[[dict[str, Any]], None]) -> ModelManifest:
+    """Read ``model.json``, apply ``change`` to it, then write the card and ``model.json`` (atomically, in order)."""
     out = Path(folder)
     stored = json.loads((out / MANIFEST).read_text())
-    stored.setdefault("info", {})[key] = value
+    change(stored)
     write_card(out, stored)
     return write_manifest(out, stored)
 
@@ -191,12 +201,13 @@ def add_named_parameters(folder: str | Path) -> dict[str, Any]:
     For a model exported before named parameters existed (:func:`export_run` measures them itself). The
     weights are not touched, so the model's identity (its decoder hash) is unchanged.
     """
-    out = Path(folder)
-    stored = json.loads((out / MANIFEST).read_text())
-    stored["parameters"] = describe_parameters(BrdfDecoder(load_manifest(out)))
-    write_card(out, stored)
-    write_manifest(out, stored)
-    return stored["parameters"]
+    parameters = describe_parameters(BrdfDecoder(load_manifest(folder)))
+
+    def add(stored: dict[str, Any]) -> None:
+        stored["parameters"] = parameters
+
+    _rewrite_manifest(folder, add)
+    return parameters
 
 
 #: Materials of the proxy whose colour is green (the paper's hard case).
