@@ -130,15 +130,21 @@ def _describe(name: str, tables: MaterialTables, sampling: str) -> str:
             f"table={tables.nbytes / 1e6:.1f} MB, sampling={sampling}]")
 
 
+def _tables_of(props: Any, default_kind: str) -> tuple[dict[str, Any], Any]:
+    """A plug-in's validated properties and the material tables they name (shared by both plug-in classes)."""
+    options = _source_properties(props, default_kind)
+    tables = material_tables(options["filename"], options["material"], precision=options["precision"],
+                             kind=options["kind"])
+    return options, tables
+
+
 def _scalar_class(mi: Any, default_kind: str) -> type:
     class ScalarBvaeBSDF(mi.BSDF):  # type: ignore[misc, name-defined]
         """A brdfcodec material as a Mitsuba BSDF for scalar variants (reflection only, one-sided)."""
 
         def __init__(self, props: Any) -> None:
             mi.BSDF.__init__(self, props)
-            options = _source_properties(props, default_kind)
-            self.tables = material_tables(options["filename"], options["material"], precision=options["precision"],
-                                          kind=options["kind"])
+            options, self.tables = _tables_of(props, default_kind)
             self.name = self.tables.name
             channels_last = self.tables.host().reshape(N_THETA_H, N_THETA_D, N_PHI_D, 3)
             self.table = np.moveaxis(channels_last, -1, 0)  # a view: (3, 90, 90, 180)
@@ -252,9 +258,7 @@ def _vector_class(mi: Any, default_kind: str) -> type:
 
         def __init__(self, props: Any) -> None:
             mi.BSDF.__init__(self, props)
-            options = _source_properties(props, default_kind)
-            self.tables = material_tables(options["filename"], options["material"], precision=options["precision"],
-                                          kind=options["kind"])
+            options, self.tables = _tables_of(props, default_kind)
             self.name = self.tables.name
             self.sampling = options["sampling"]
             self.lookup = options["lookup"]
