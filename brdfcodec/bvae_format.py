@@ -69,7 +69,8 @@ FORMAT_MAJOR = 1
 #: Minor version written; readers accept any minor version of their major version.
 #: 1.1 added the "layered" record kind (issue 14); a 1.0 reader refuses it by its kind.
 #: 1.2 added the basis layer and compact sigma of layered records; a 1.1 reader refuses them as unknown layers.
-FORMAT_MINOR = 2
+#: 1.3 added the basis layer's ``first`` vector; a 1.2 reader refuses it as an unknown basis field.
+FORMAT_MINOR = 3
 #: Largest stored header, in bytes (compressed size when compressed).
 MAX_HEADER_BYTES = 1 << 20
 #: Largest decompressed header, in bytes.

@@ -39,6 +39,7 @@ import numpy.typing as npt
 import torch
 
 from brdfcodec.atomic import atomic_output, check_output_path
+from brdfcodec.blas_threads import single_blas_thread
 from brdfcodec.bvae_format import (
     BvaeHeader,
     BvaeReader,
@@ -396,11 +397,11 @@ class BrdfDecoder:
                     f"{record.name}: the record's basis layer needs shared basis {basis_layer.sha256}, but this "
                     f"decoder's model has {own}; decode it with the model that wrote it"
                 )
-            coefficients = basis_layer.coefficients()
+            coefficients, first = basis_layer.coefficients(), basis_layer.first
             if channels is None:
-                mapped += basis.residual(coefficients)
+                mapped += basis.residual(coefficients, first)
             else:
-                mapped += basis.residual_channels(coefficients, channels)
+                mapped += basis.residual_channels(coefficients, channels, first)
         if detail is not None:
             from brdfcodec.layers.detail import decode_detail
 
@@ -439,11 +440,12 @@ class BrdfDecoder:
         ndarray of float32, shape (3, 90, 90, K)
         """
         self._check_record(record)
-        if phi_d_bins is None:
-            return _apply_mask(table_from_mapped(self.mapped_record(record)), None, masked)
-        bins = validate_phi_d_bins(phi_d_bins)
-        table = table_from_mapped(self.mapped_for_bins(record, bins), phi_d_bins=bins)
-        return _apply_mask(table, bins, masked)
+        with single_blas_thread():
+            if phi_d_bins is None:
+                return _apply_mask(table_from_mapped(self.mapped_record(record)), None, masked)
+            bins = validate_phi_d_bins(phi_d_bins)
+            table = table_from_mapped(self.mapped_for_bins(record, bins), phi_d_bins=bins)
+            return _apply_mask(table, bins, masked)
 
     #: Former name of :meth:`decode`.
     table = decode
@@ -459,11 +461,13 @@ class BrdfDecoder:
             codes = [r.mu for r in chunk if isinstance(r, LatentRecord)]
             batch = iter(self.decode_mapped(np.stack(codes), batch_size=batch_size) if codes else ())
             for record in chunk:  # grafts need two codes each: decoded on their own
-                if isinstance(record, LatentRecord):
-                    mapped = self._with_layers(record, next(batch))
-                else:
-                    mapped = self.mapped_record(record)
-                yield _apply_mask(table_from_mapped(mapped), None, masked)
+                with single_blas_thread():
+                    if isinstance(record, LatentRecord):
+                        mapped = self._with_layers(record, next(batch))
+                    else:
+                        mapped = self.mapped_record(record)
+                    table = _apply_mask(table_from_mapped(mapped), None, masked)
+                yield table
 
     #: Former name of :meth:`decode_many`.
     tables = decode_many

@@ -130,8 +130,53 @@ def test_the_shipped_model_has_a_basis_and_partial_decoding_matches() -> None:
         decoder.decode(basis_record("other"))  # made for another basis
     too_long = LayeredRecord("long", record.mu, record.sigma,
                              basis=BasisLayer(basis.sha256, 0.5, np.ones(76, dtype=np.int8)))
-    with pytest.raises(BasisError, match="1 to 75"):
+    with pytest.raises(BasisError, match="this basis holds 75"):
         decoder.decode(too_long)
+    past_the_end = LayeredRecord("past", record.mu, record.sigma,
+                                 basis=BasisLayer(basis.sha256, 0.5, np.ones(6, dtype=np.int8), 70))
+    with pytest.raises(BasisError, match="vectors 70 to 75, but this basis holds 75"):
+        decoder.decode(past_the_end)
+
+
+def test_a_layer_from_vector_f_sums_vectors_f_on() -> None:
+    """``first`` (format 1.3) shifts which vectors the coefficients weigh, in full and partial decoding."""
+    from brdfcodec.codec import BrdfDecoder
+
+    decoder = BrdfDecoder()
+    basis = decoder.shared_basis
+    rng = np.random.default_rng(5)
+    q = rng.integers(-127, 128, size=6).astype(np.int8)
+    mu, sigma = rng.normal(size=8), np.ones(8)
+    shifted = LayeredRecord("f", mu, sigma, basis=BasisLayer(basis.sha256, 0.25, q, 8))
+    c = 0.25 * q.astype(np.float32)
+    expected = decoder.decode_mapped(mu) + basis.residual(np.concatenate([np.zeros(8, np.float32), c]))
+    np.testing.assert_allclose(decoder.mapped_record(shifted), np.clip(expected, 0.0, 5.0), atol=2e-6)
+    unshifted = decoder.mapped_record(LayeredRecord("u", mu, sigma, basis=BasisLayer(basis.sha256, 0.25, q)))
+    assert np.abs(unshifted - decoder.mapped_record(shifted)).max() > 1e-3
+    full = decoder.decode(shifted, masked="zero")
+    np.testing.assert_allclose(decoder.decode(shifted, phi_d_bins=[7], masked="zero"), full[..., [7]],
+                               rtol=1e-5, atol=1e-5)
+
+
+def test_first_round_trips_and_is_written_only_when_set() -> None:
+    layer = quantise_coefficients(SHA, [3.0, -1.0, 0.5], first=8)
+    assert layer.first == 8 and layer.entry() == {"sha256": SHA, "count": 3, "first": 8}
+    assert quantise_coefficients(SHA, [1.0]).entry() == {"sha256": SHA, "count": 1}  # a 1.2 reader reads it
+    record = LayeredRecord("f", np.zeros(8), np.ones(8), basis=layer, compact_sigma=True)
+    parsed = parse_bvae(encode_bvae([record], DECODER))
+    assert parsed.header.entries[0].layers["basis"] == {"sha256": SHA, "count": 3, "first": 8}
+    back = parsed.records[0]
+    assert back.basis.first == 8 and back.basis.q.tolist() == layer.q.tolist()
+    for bad in (-1, 4094, True, 2.0):
+        with pytest.raises(ValueError, match="first"):
+            BasisLayer(SHA, 0.5, np.ones(3, dtype=np.int8), bad)  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize(("linear_rank", "k", "first"), [(8, 6, 8), (8, 67, 8), (8, 70, 5), (8, 75, 0), (0, 6, 0)])
+def test_the_encoder_skips_the_vectors_its_linear_path_spans(linear_rank: int, k: int, first: int) -> None:
+    from brdfcodec.layers.basis import basis_offset
+
+    assert basis_offset(linear_rank, 75, k) == first
 
 
 def test_the_basis_layer_follows_the_decoder_output_it_was_fitted_on(analytic_tables) -> None:
@@ -145,6 +190,7 @@ def test_the_basis_layer_follows_the_decoder_output_it_was_fitted_on(analytic_ta
     record = encoder.encode(brdf, name="m")
     assert isinstance(record, LayeredRecord) and record.compact_sigma and record.detail is None
     assert record.basis is not None and record.basis.count == 64 - 16 - 8 - 2
+    assert record.basis.first == 8  # the shipped decoder's linear path spans the basis' first 8 vectors
     stored = parse_bvae(encode_bvae([record], encoder.reference, latent_dtype="float16")).header.entries[0].length
     assert stored == record.meta["rate"]["payload_bytes"] == 64
     layered_error = measure(record, encoder.decoder, brdf).meta["relae"]["mapped"]

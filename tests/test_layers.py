@@ -67,7 +67,7 @@ def test_layered_records_round_trip_with_plain_ones(dtype: str) -> None:
     record = layered()
     data = encode_bvae([plain, record], DECODER, latent_dtype=dtype)  # type: ignore[arg-type]
     library = parse_bvae(data)
-    assert library.header.minor == FORMAT_MINOR == 2
+    assert library.header.minor == FORMAT_MINOR == 3
     back = library.record("layered-0")
     assert isinstance(back, LayeredRecord) and back.detail == record.detail
     assert library.header.entries[1].length == 2 * 8 * (2 if dtype == "float16" else 4) + record.detail.nbytes
@@ -118,7 +118,15 @@ def test_a_layer_that_is_not_the_declared_frame_is_refused() -> None:
         parse_bvae(encode_bvae([bogus], DECODER))
 
 
-_VALID = encode_bvae([layered(0.5)], DECODER)
+def _with_basis_from_vector_8() -> LayeredRecord:
+    from brdfcodec.layers.basis import BasisLayer
+
+    return LayeredRecord("basis-8", np.zeros(8), np.ones(8), basis=BasisLayer("cd" * 32, 0.5, np.arange(
+        -3, 4, dtype=np.int8), 8), compact_sigma=True)
+
+
+# A detail layer, and (format 1.3) a basis layer starting at vector 8: mutations hit both entries.
+_VALID = encode_bvae([layered(0.5), _with_basis_from_vector_8()], DECODER)
 
 
 @settings(max_examples=150, suppress_health_check=[HealthCheck.too_slow], deadline=None)

@@ -40,6 +40,8 @@ def test_manifest_covers_what_the_spec_asks_for() -> None:
     # ... and every rule 1.2 added for the basis layer and compact sigma.
     assert {"basis-unknown-sigma", "basis-unknown-field", "basis-count-zero", "basis-sha-upper", "basis-length",
             "basis-step-nan", "basis-step-zero"} <= invalid
+    # ... and the basis layer's first vector (1.3).
+    assert {"basis-first-negative", "basis-first-string", "basis-first-range"} <= invalid
     assert MANIFEST["decode"]["values"] and MANIFEST["decode"]["rtol"] == 1e-3
     assert MANIFEST["decode_layers"]["values"]
 
@@ -48,7 +50,7 @@ def test_manifest_covers_what_the_spec_asks_for() -> None:
 def test_valid_vector_reads_as_listed(vector: dict[str, Any]) -> None:
     parsed = parse_bvae((VECTORS / vector["file"]).read_bytes(), vector["file"])
     header = parsed.header
-    assert (header.major, header.minor) == (1, 2)
+    assert (header.major, header.minor) == (1, 3)
     assert header.decoder.sha256 == vector["decoder_sha256"]
     assert header.latent_dtype == vector["latent_dtype"]
     assert bool(header.flags & FLAG_HEADER_ZSTD) == vector["header_compressed"]

@@ -10,7 +10,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from brdfcodec.bvae_format import LatentRecord
-from brdfcodec.layers.basis import BasisLayer, SharedBasis, quantise_coefficients
+from brdfcodec.layers.basis import BasisLayer, SharedBasis, basis_offset, quantise_coefficients
 from brdfcodec.layers.rate import BasisFit, Metric, encode_layers
 from brdfcodec.layers.refine import EFFORT_STEPS, fit_basis_coefficients, refine_latent
 
@@ -130,14 +130,18 @@ def _basis_fit(
 ) -> BasisFit:
     """The basis fit of one material for :func:`~brdfcodec.layers.rate.encode_layers`."""
 
+    config = decoder.network.config
+    linear_rank = config.latent_dim if config.linear_basis else 0
+
     def fit(k: int) -> tuple[LatentRecord, BasisLayer, np.ndarray]:
+        first = basis_offset(linear_rank, basis.count, k)
         codes, coefficients = fit_basis_coefficients(
-            decoder.network, base.mu[None], inputs[None], masks[None], basis.components[:k], basis.entries,
-            options.effort,
+            decoder.network, base.mu[None], inputs[None], masks[None], basis.components[first : first + k],
+            basis.entries, options.effort,
         )
         code = _as_stored(codes, options.latent_itemsize)[0]
-        layer = quantise_coefficients(basis.sha256, coefficients[0])
-        mapped = decoder.decode_mapped(code) + basis.residual(layer.coefficients())
+        layer = quantise_coefficients(basis.sha256, coefficients[0], first)
+        mapped = decoder.decode_mapped(code) + basis.residual(layer.coefficients(), first)
         return LatentRecord(base.name, code, base.sigma, base.meta), layer, mapped
 
     return fit

@@ -196,6 +196,14 @@ def invalid_vectors() -> dict[str, tuple[bytes, str, str]]:
     nan_step = basis_payload[:10] + np.float16(np.nan).astype("<f2").tobytes() + basis_payload[12:]
     add("basis-step-nan", basis_vector(basis_entry["layers"], nan_step), "malformed",
         "the basis step is NaN (record CRC valid)")
+    # The basis layer's first vector (since 1.3).
+    add("basis-first-negative", basis_vector({**basis_entry["layers"], "basis": {
+        **basis_entry["layers"]["basis"], "first": -1}}), "malformed", "a basis layer whose first vector is -1")
+    add("basis-first-string", basis_vector({**basis_entry["layers"], "basis": {
+        **basis_entry["layers"]["basis"], "first": "8"}}), "malformed", "a basis layer whose first vector is '8'")
+    add("basis-first-range", basis_vector({**basis_entry["layers"], "basis": {
+        **basis_entry["layers"]["basis"], "first": 4094}}), "malformed",
+        "first 4094 with count 3 runs past the 4096 vectors a basis may hold")
     zero_step = basis_payload[:10] + np.float16(0).astype("<f2").tobytes() + basis_payload[12:]
     add("basis-step-zero", basis_vector(basis_entry["layers"], zero_step), "malformed",
         "the basis step is 0 (record CRC valid)")
@@ -269,14 +277,16 @@ def layered_record(name: str, mu: np.ndarray, sigma: np.ndarray) -> LatentRecord
                                                                  "candidates_tried": 1}}, detail=layer)
 
 
-def basis_record(name: str, mu: np.ndarray, sigma: np.ndarray, sha256: str, *, detail: bool = False) -> LatentRecord:
-    """A layered record (§4.4) with compact sigma and 5 coefficients on a shared basis (and a detail layer)."""
+def basis_record(name: str, mu: np.ndarray, sigma: np.ndarray, sha256: str, *, detail: bool = False,
+                 first: int = 0) -> LatentRecord:
+    """A layered record (§4.4) with compact sigma and 5 coefficients on a shared basis from vector ``first``
+    (and a detail layer)."""
     from brdfcodec.layers.basis import BasisLayer
     from brdfcodec.layers.detail import N_DETAIL_VALUES, DetailLayer
     from brdfcodec.layers.record import LayeredRecord
 
     layer = DetailLayer(0.125, "int16", detail_frame([8, -4, 2], N_DETAIL_VALUES)) if detail else None
-    basis = BasisLayer(sha256, 0.5, np.array([12, -7, 3, 0, -1], dtype=np.int8))
+    basis = BasisLayer(sha256, 0.5, np.array([12, -7, 3, 0, -1], dtype=np.int8), first)
     return LayeredRecord(name, mu, sigma, {"effort": 1}, detail=layer, basis=basis, compact_sigma=True)
 
 
@@ -303,11 +313,14 @@ def valid_records() -> dict[str, tuple[list, DecoderReference, str, bool | None]
                              SHIPPED_DECODER, "float32", False),
         "reference-decode-layers": ([basis_record("reference.basis", halves(8), sigma(8), SHIPPED_BASIS),
                                      basis_record("reference.basis-detail", halves(8), sigma(8), SHIPPED_BASIS,
-                                                  detail=True)],
+                                                  detail=True),
+                                     basis_record("reference.basis-first", halves(8), sigma(8), SHIPPED_BASIS,
+                                                  first=8)],
                                     SHIPPED_DECODER, "float16", False),
         "layered": ([layered_record("gold.layered", halves(8), sigma(8)),
                      LatentRecord("gold", halves(8), sigma(8), {"effort": 0, "source_kind": "rgl-measured"}),
-                     basis_record("gold.basis", halves(8), sigma(8), "cd" * 32, detail=True)],
+                     basis_record("gold.basis", halves(8), sigma(8), "cd" * 32, detail=True),
+                     basis_record("gold.basis-first", halves(8), sigma(8), "cd" * 32, first=8)],
                     TEST_DECODER, "float32", False),
     }
 
@@ -343,7 +356,7 @@ def generate(folder: Path, *, with_reference: bool = True) -> dict[str, Any]:
     (folder / "valid").mkdir(parents=True, exist_ok=True)
     (folder / "invalid").mkdir(parents=True, exist_ok=True)
     manifest: dict[str, Any] = {
-        "format_version": "1.2",
+        "format_version": "1.3",
         "error_classes": {
             "malformed": "BvaeFormatError",
             "checksum": "BvaeChecksumError",
