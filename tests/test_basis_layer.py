@@ -223,7 +223,8 @@ def test_cli_bytes_writes_the_basis_layer(red_plastic_file, tmp_path, capsys) ->
     assert entry.meta["relae"]["mapped"] > 0  # measured on the record that was written
     capsys.readouterr()
     assert main(["info", str(out)]) == 0
-    assert "64 B" in capsys.readouterr().out
+    shown = capsys.readouterr().out
+    assert "64 B" in shown and "basis 38 (vectors 9–46)" in shown
 
 
 @pytest.mark.parametrize("step", [1e-4, 1.0, 60000.0])

@@ -196,7 +196,10 @@ def _format_text(summary: dict[str, Any]) -> str:
             if layers:
                 parts = []
                 if "basis" in layers:
-                    parts.append(f"basis {layers['basis']['count']}")
+                    count, first = layers["basis"]["count"], layers["basis"].get("first", 0)
+                    # vectors numbered from 1, like every number the CLI shows
+                    span = f" (vectors {first + 1}–{first + count})" if first else ""
+                    parts.append(f"basis {count}{span}")
                 if "detail" in layers:
                     parts.append(f"detail {layers['detail']['length']} B")
                 kind = f"[{' + '.join(parts)}] "

@@ -4,10 +4,11 @@ A model may ship a *shared basis* (``basis.safetensors`` beside its weights,
 ``spec/model.md`` §5): K orthonormal vectors over the entries of the mapped
 kept slices that lie above the horizon, fitted by :func:`fit_shared_basis`
 when the model is exported — the principal components of the training
-materials' mapped kept slices. A record's basis layer holds k ≤ K integer
-coefficients ``q`` and one float16 step ``s``; decoding adds
-``s · Σᵢ qᵢ · bᵢ`` to the decoder's output for μ (before the detail layer,
-the clamp and the interpolation).
+materials' mapped kept slices. A record's basis layer holds k integer
+coefficients ``q`` of the vectors ``first … first + k − 1`` (≤ K) and one
+float16 step ``s``; decoding adds ``s · Σᵢ qᵢ · b_(first+i)`` to the
+decoder's output for μ (before the detail layer, the clamp and the
+interpolation).
 
 This is the low-rate enhancement: between the 8-D latent (32 B as float16)
 and the per-material detail layer (hundreds of bytes and up), each extra
