@@ -25,20 +25,15 @@ from pathlib import Path
 
 import numpy as np
 import torch
+from basis_study import kept_slice_relae  # sibling script: Python puts the running script's folder on sys.path
 
 from brdfcodec.codec import BrdfEncoder
-from brdfcodec.conventions import MAPPED_MAX
 from brdfcodec.dataset import BrdfDataset
 from brdfcodec.layers.basis import quantise_coefficients
 from brdfcodec.layers.refine import fit_basis_coefficients
 
 COUNTS = (6, 14, 22, 30, 38, 54)
 OFFSETS = (0, 8)
-
-
-def kept_slice_relae(estimate: np.ndarray, inputs: np.ndarray, masks: np.ndarray) -> float:
-    error = (np.abs(np.clip(estimate, 0.0, MAPPED_MAX) - inputs) * masks).reshape(len(inputs), -1).sum(1)
-    return float((error / (np.abs(inputs) * masks).reshape(len(inputs), -1).sum(1)).mean())
 
 
 def main() -> None:

@@ -6,7 +6,8 @@ the other. OpenBLAS' worker threads keep spinning for a while after each
 call, so on a machine with few cores they take the cores torch's threads
 need next: on 2 cores a layered decode took 27.3 ms with BLAS threaded and
 21.6 ms with BLAS on one thread, a base-only decode 11.9 ms either way
-(``python -m pytest benchmarks/test_bench_codec.py -k layered``). The limit
+(``python -m pytest benchmarks/test_bench_codec.py -k layered``; measured
+before the layers moved ahead of the network, see ``BrdfDecoder``). The limit
 is set for the duration of a decode only, through threadpoolctl, and the
 caller's own BLAS setting is restored afterwards.
 """

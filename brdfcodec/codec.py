@@ -28,6 +28,7 @@ from __future__ import annotations
 import functools
 import itertools
 import os
+import threading
 import warnings
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, replace
@@ -176,6 +177,33 @@ def _invalid_bins() -> np.ndarray:
     invalid = ~horizon_mask()
     invalid.setflags(write=False)
     return invalid
+
+
+class _BackgroundCall:
+    """``function(*args)`` run on a new thread; :meth:`result` joins it and returns its value or raises its error.
+
+    A thread per call (about 0.1 ms) rather than a pool, so that a process forked after a decode
+    (multiprocessing) has nothing stale to wait on.
+    """
+
+    def __init__(self, function: Callable[..., np.ndarray], *args: object) -> None:
+        self._value: np.ndarray | None = None
+        self._error: BaseException | None = None
+        self._thread = threading.Thread(target=self._run, args=(function, args), daemon=True)
+        self._thread.start()
+
+    def _run(self, function: Callable[..., np.ndarray], args: tuple[object, ...]) -> None:
+        try:
+            self._value = function(*args)
+        except BaseException as error:  # noqa: BLE001 - handed to the caller by result()
+            self._error = error
+
+    def result(self) -> np.ndarray:
+        self._thread.join()
+        if self._error is not None:
+            raise self._error
+        assert self._value is not None
+        return self._value
 
 
 def _apply_mask(table: np.ndarray, bins: Sequence[int] | None, masked: MaskedEntries) -> np.ndarray:
@@ -379,16 +407,23 @@ class BrdfDecoder:
 
         return load_shared_basis(self.manifest.folder / BASIS_FILE, self.manifest.basis_sha256)
 
-    def _with_layers(self, record: Record, mapped: np.ndarray, slots: Sequence[int] | None = None) -> np.ndarray:
-        """A layered record's decode: base + basis layer + detail layer, then the one clamp (spec §4.4, §6).
+    def _layer_residual(self, record: Record, slots: Sequence[int] | None = None) -> np.ndarray | None:
+        """Sum of a record's basis and detail layers in mapped units (None for a base-only record).
 
-        ``mapped`` is the clamped base decode of all 63 channels, or (partial decoding) of the channels of
-        the kept ``slots`` only, in :func:`~brdfcodec.representation.network_channels_for_slots` order.
+        Shape ``(63, 90, 90)``, or (partial decoding) the channels of the kept ``slots`` only, in
+        :func:`~brdfcodec.representation.network_channels_for_slots` order. The detail layer's inverse
+        DCT (compute-bound) runs on a second thread beside the basis sum (memory-bound).
         """
         basis_layer, detail = getattr(record, "basis", None), getattr(record, "detail", None)
         if basis_layer is None and detail is None:
-            return mapped
+            return None
         channels = None if slots is None else network_channels_for_slots(slots)
+        detail_residual = None
+        if detail is not None:
+            from brdfcodec.layers.detail import decode_detail
+
+            detail_residual = _BackgroundCall(decode_detail, detail, slots)
+        residual = None
         if basis_layer is not None:
             basis = self.shared_basis
             if basis is None or basis.sha256 != basis_layer.sha256:
@@ -399,13 +434,29 @@ class BrdfDecoder:
                 )
             coefficients, first = basis_layer.coefficients(), basis_layer.first
             if channels is None:
-                mapped += basis.residual(coefficients, first)
+                residual = basis.residual(coefficients, first)
             else:
-                mapped += basis.residual_channels(coefficients, channels, first)
-        if detail is not None:
-            from brdfcodec.layers.detail import decode_detail
+                residual = basis.residual_channels(coefficients, channels, first)
+        if detail_residual is not None:
+            coded = detail_residual.result()
+            residual = coded.reshape(-1, *NETWORK_INPUT_SHAPE[1:]) if residual is None else residual + coded.reshape(
+                residual.shape
+            )
+        return residual
 
-            mapped += decode_detail(detail, slots).reshape(mapped.shape)
+    def _with_layers(
+        self, record: Record, mapped: np.ndarray, slots: Sequence[int] | None = None, residual: np.ndarray | None = None
+    ) -> np.ndarray:
+        """A layered record's decode: base + (basis layer + detail layer), then the one clamp (spec §4.4, §6).
+
+        ``mapped`` is the clamped base decode of all 63 channels, or (partial decoding) of the channels of
+        the kept ``slots`` only; ``residual`` is :meth:`_layer_residual`'s, computed here when not given.
+        """
+        if residual is None:
+            residual = self._layer_residual(record, slots)
+            if residual is None:
+                return mapped
+        mapped += residual
         return clamp_mapped(mapped, out=mapped)
 
     def mapped_record(self, record: Record) -> npt.NDArray[np.float32]:
@@ -415,7 +466,9 @@ class BrdfDecoder:
             out = self.decode_mapped(record.mu)
             out[GREEN_BLOCK] = self.decode_mapped(record.second_code())[RED_BLOCK]
             return out
-        return self._with_layers(record, self.decode_mapped(record.mu))
+        # The layers first: the numpy work then does not share the cores with torch's still-spinning threads.
+        residual = self._layer_residual(record)
+        return self._with_layers(record, self.decode_mapped(record.mu), residual=residual)
 
     def decode(
         self,

@@ -15,7 +15,7 @@ import numpy as np
 import numpy.typing as npt
 
 from brdfcodec.conventions import HORIZON_COS_MIN, KEPT_PHI_D_SLICES, TABLE_SHAPE
-from brdfcodec.coords import directions_from_half_diff, grid_angles
+from brdfcodec.coords import grid_direction_cosines
 
 __all__ = ["horizon_mask", "kept_slice_horizon_mask", "validity_mask"]
 
@@ -31,8 +31,8 @@ def horizon_mask() -> BoolArray:
     ndarray of bool, shape (90, 90, 180)
         Indexed ``[θh, θd, φd]``; read-only and shared between calls.
     """
-    wi, wo = directions_from_half_diff(*grid_angles())
-    mask = (wi[..., 2] > HORIZON_COS_MIN) & (wo[..., 2] > HORIZON_COS_MIN)
+    cos_in, cos_out = grid_direction_cosines()
+    mask = (cos_in > HORIZON_COS_MIN) & (cos_out > HORIZON_COS_MIN)
     mask.setflags(write=False)
     return mask
 

@@ -33,7 +33,7 @@ import numpy as np
 import numpy.typing as npt
 
 from brdfcodec.conventions import TABLE_SHAPE
-from brdfcodec.coords import directions_from_half_diff, grid_angles
+from brdfcodec.coords import grid_direction_cosines
 from brdfcodec.mask import validity_mask
 from brdfcodec.representation import map_values, reflectance_from_stored
 
@@ -176,8 +176,7 @@ def relae_between_mapped(
 
 @functools.cache
 def _cos_theta_in() -> np.ndarray:
-    wi, _ = directions_from_half_diff(*grid_angles())
-    cos = np.clip(wi[..., 2], 0.0, 1.0)
+    cos = np.clip(grid_direction_cosines()[0], 0.0, 1.0)
     cos.setflags(write=False)
     return cos
 

@@ -12,6 +12,7 @@ from brdfcodec.coords import (
     directions_from_half_diff,
     fold_phi_d,
     grid_angles,
+    grid_direction_cosines,
     half_diff_from_directions,
     phi_d_from_index,
     phi_d_index,
@@ -100,6 +101,17 @@ def test_grid_angles_shape_and_subset() -> None:
     assert th.shape == td.shape == pd.shape == (90, 90, 180)
     _, _, pd_sub = grid_angles([0, 9, 179])
     np.testing.assert_allclose(pd_sub[0, 0], phi_d_from_index([0, 9, 179]))
+
+
+@pytest.mark.parametrize("slices", [None, [0, 9, 90, 179]])
+def test_grid_direction_cosines_equal_the_directions_z(slices: list[int] | None) -> None:
+    # Bit-identical: the horizon mask (a spec convention) is computed from them.
+    wi, wo = directions_from_half_diff(*grid_angles(slices))
+    cos_in, cos_out = grid_direction_cosines(slices)
+    assert cos_in.shape == cos_out.shape == wi.shape[:-1]
+    np.testing.assert_array_equal(cos_in, wi[..., 2])
+    np.testing.assert_array_equal(cos_out, wo[..., 2])
+    assert (cos_in[:, :, 0] > 0).sum() < cos_in[:, :, 0].size  # some entries are below the horizon
 
 
 # --- lookup ---------------------------------------------------------------------

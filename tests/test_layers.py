@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import struct
 import zlib
@@ -191,6 +192,11 @@ def test_layered_decode_adds_the_layer_and_partial_decode_matches(analytic_table
     np.testing.assert_allclose(part, full[..., [4, 100]], rtol=1e-4, atol=1e-4)
     batched = next(decoder.tables([record], masked="zero"))
     np.testing.assert_allclose(batched, full, rtol=1e-5, atol=1e-5)
+    # The detail layer is decoded on a second thread beside the basis sum: its errors reach the caller.
+    broken = dataclasses.replace(record, detail=DetailLayer(0.05, "int16", b"not zstd at all"))
+    with pytest.raises(ValueError, match="cannot be decompressed"):
+        decoder.table(broken)
+    np.testing.assert_array_equal(decoder.table(record, masked="zero"), full)
 
 
 @pytest.mark.slow
