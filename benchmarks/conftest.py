@@ -35,6 +35,7 @@ TARGETS = {
     "rgl-tabulate": 4.0,  # an RGL .bsdf through Mitsuba's measured plugin vs an NBRDF proxy fit, same MERL grid
     "studio-slider-to-paint": 1.5,  # browser: slider input → painted preview vs a server-side render before transfer
     "decode-layered": 1.5,  # a layered record (base + 75 basis coefficients + 16 KB detail layer) vs its base alone
+    "decode-layered-64B": 1.5,  # a 64 B float16 record (base + basis coefficients, no detail layer) vs its base alone
     "encode-effort": 4.0,  # read + encode at the default effort (1: refinement) vs effort 0 (issue 14)
 }
 

@@ -147,6 +147,30 @@ def test_layered_decode(benchmark, decoder: BrdfDecoder, layered_record) -> None
     assert table.shape == (3, 90, 90, 180)
 
 
+@pytest.fixture(scope="module")
+def layered_record_64b(merl_file: Path):
+    from brdfcodec.layers.record import LayeredRecord
+
+    record = BrdfEncoder(effort=0, bytes=64, latent_dtype="float16").encode(read_merl(merl_file), name="layered-64")
+    assert isinstance(record, LayeredRecord) and record.basis is not None and record.detail is None
+    return record
+
+
+def test_layered_64b_baseline_base_only(benchmark, decoder: BrdfDecoder, layered_record_64b) -> None:
+    benchmark.group = "decode-layered-64B"
+    benchmark.extra_info["role"] = "baseline"
+    benchmark(decoder.table, layered_record_64b.base())
+
+
+def test_layered_64b_decode(benchmark, decoder: BrdfDecoder, layered_record_64b) -> None:
+    """Base decode plus a basis layer of the coefficients a 64 B float16 record holds (the low-rate end)."""
+    benchmark.group = "decode-layered-64B"
+    benchmark.extra_info["role"] = "candidate"
+    decoder.table(layered_record_64b)  # loads the shared basis once
+    table = benchmark(decoder.table, layered_record_64b)
+    assert table.shape == (3, 90, 90, 180)
+
+
 def test_encode_effort_baseline_effort0(benchmark, merl_file: Path) -> None:
     encoder = BrdfEncoder(effort=0)
     benchmark.group = "encode-effort"

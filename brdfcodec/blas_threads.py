@@ -16,10 +16,17 @@ from __future__ import annotations
 
 import contextlib
 import functools
+import threading
 from collections.abc import Iterator
 from typing import Any
 
 __all__ = ["single_blas_thread"]
+
+# The BLAS thread count is one setting for the whole process, so overlapping decodes on several threads
+# share one limit: the first to enter saves the setting and applies the limit, the last to leave restores it.
+_lock = threading.Lock()
+_holders = 0
+_limiter: Any = None
 
 
 @functools.cache
@@ -29,8 +36,43 @@ def _controller() -> Any:
     return ThreadpoolController()
 
 
+def _release_openblas_control() -> None:
+    """Let any thread set OpenBLAS' thread count next.
+
+    threadpoolctl ≥ 3.6 lets only one "controlling" Python thread change a
+    process-wide OpenBLAS pool (others are silently ignored), and a limit not
+    used as a ``with`` block keeps that control. Our sets and restores are
+    serialised by ``_lock``, so control is released around each of them.
+    """
+    import threadpoolctl
+
+    clear = getattr(getattr(threadpoolctl, "OpenBLASController", None), "clear_controlling_thread", None)
+    if clear is not None:
+        clear(force=True)
+
+
 @contextlib.contextmanager
 def single_blas_thread() -> Iterator[None]:
-    """Run the enclosed block with numpy's BLAS limited to one thread (torch's threads are untouched)."""
-    with _controller().limit(limits=1, user_api="blas"):
+    """Run the enclosed block with numpy's BLAS limited to one thread (torch's threads are untouched).
+
+    Safe to nest and to enter from several threads at once: the BLAS setting
+    found when the first block began is restored when the last one ends.
+    The BLAS libraries are those loaded at the first call (numpy's).
+    """
+    global _holders, _limiter
+    with _lock:
+        if _holders == 0:
+            _release_openblas_control()
+            _limiter = _controller().limit(limits=1, user_api="blas")
+            _release_openblas_control()
+        _holders += 1
+    try:
         yield
+    finally:
+        with _lock:
+            _holders -= 1
+            if _holders == 0:
+                _release_openblas_control()
+                _limiter.restore_original_limits()
+                _release_openblas_control()
+                _limiter = None

@@ -202,7 +202,8 @@ class _BackgroundCall:
         self._thread.join()
         if self._error is not None:
             raise self._error
-        assert self._value is not None
+        if self._value is None:
+            raise RuntimeError("background call ended without a result")
         return self._value
 
 
@@ -407,23 +408,24 @@ class BrdfDecoder:
 
         return load_shared_basis(self.manifest.folder / BASIS_FILE, self.manifest.basis_sha256)
 
-    def _layer_residual(self, record: Record, slots: Sequence[int] | None = None) -> np.ndarray | None:
-        """Sum of a record's basis and detail layers in mapped units (None for a base-only record).
+    def _layer_residuals(self, record: Record, slots: Sequence[int] | None = None) -> list[np.ndarray]:
+        """A record's layers decoded to mapped residuals, in the order they are added (basis, then detail).
 
-        Shape ``(63, 90, 90)``, or (partial decoding) the channels of the kept ``slots`` only, in
-        :func:`~brdfcodec.representation.network_channels_for_slots` order. The detail layer's inverse
-        DCT (compute-bound) runs on a second thread beside the basis sum (memory-bound).
+        Each has shape ``(63, 90, 90)``, or (partial decoding) the channels of the kept ``slots`` only, in
+        :func:`~brdfcodec.representation.network_channels_for_slots` order; empty for a base-only record.
+        The detail layer's inverse DCT (compute-bound) runs on a second thread beside the basis sum
+        (memory-bound).
         """
         basis_layer, detail = getattr(record, "basis", None), getattr(record, "detail", None)
         if basis_layer is None and detail is None:
-            return None
+            return []
         channels = None if slots is None else network_channels_for_slots(slots)
+        residuals = []
         detail_residual = None
         if detail is not None:
             from brdfcodec.layers.detail import decode_detail
 
             detail_residual = _BackgroundCall(decode_detail, detail, slots)
-        residual = None
         if basis_layer is not None:
             basis = self.shared_basis
             if basis is None or basis.sha256 != basis_layer.sha256:
@@ -434,41 +436,44 @@ class BrdfDecoder:
                 )
             coefficients, first = basis_layer.coefficients(), basis_layer.first
             if channels is None:
-                residual = basis.residual(coefficients, first)
+                residuals.append(basis.residual(coefficients, first))
             else:
-                residual = basis.residual_channels(coefficients, channels, first)
+                residuals.append(basis.residual_channels(coefficients, channels, first))
         if detail_residual is not None:
-            coded = detail_residual.result()
-            residual = coded.reshape(-1, *NETWORK_INPUT_SHAPE[1:]) if residual is None else residual + coded.reshape(
-                residual.shape
-            )
-        return residual
+            residuals.append(detail_residual.result().reshape(-1, *NETWORK_INPUT_SHAPE[1:]))
+        return residuals
 
     def _with_layers(
-        self, record: Record, mapped: np.ndarray, slots: Sequence[int] | None = None, residual: np.ndarray | None = None
+        self,
+        record: Record,
+        mapped: np.ndarray,
+        slots: Sequence[int] | None = None,
+        residuals: list[np.ndarray] | None = None,
     ) -> np.ndarray:
-        """A layered record's decode: base + (basis layer + detail layer), then the one clamp (spec §4.4, §6).
+        """A layered record's decode: base + basis layer + detail layer, then the one clamp (spec §4.4, §6).
 
         ``mapped`` is the clamped base decode of all 63 channels, or (partial decoding) of the channels of
-        the kept ``slots`` only; ``residual`` is :meth:`_layer_residual`'s, computed here when not given.
+        the kept ``slots`` only; ``residuals`` are :meth:`_layer_residuals`', computed here when not given.
         """
-        if residual is None:
-            residual = self._layer_residual(record, slots)
-            if residual is None:
-                return mapped
-        mapped += residual
+        if residuals is None:
+            residuals = self._layer_residuals(record, slots)
+        if not residuals:
+            return mapped
+        for residual in residuals:
+            mapped += residual
         return clamp_mapped(mapped, out=mapped)
 
     def mapped_record(self, record: Record) -> npt.NDArray[np.float32]:
         """Mapped slices of a record; a graft record's green block is the second code's red block."""
-        if isinstance(record, GraftRecord):
-            # One code at a time, so M1 is bit-identical to decoding V1 as a plain record.
-            out = self.decode_mapped(record.mu)
-            out[GREEN_BLOCK] = self.decode_mapped(record.second_code())[RED_BLOCK]
-            return out
-        # The layers first: the numpy work then does not share the cores with torch's still-spinning threads.
-        residual = self._layer_residual(record)
-        return self._with_layers(record, self.decode_mapped(record.mu), residual=residual)
+        with single_blas_thread():
+            if isinstance(record, GraftRecord):
+                # One code at a time, so M1 is bit-identical to decoding V1 as a plain record.
+                out = self.decode_mapped(record.mu)
+                out[GREEN_BLOCK] = self.decode_mapped(record.second_code())[RED_BLOCK]
+                return out
+            # The layers first: the numpy work then does not share the cores with torch's still-spinning threads.
+            residuals = self._layer_residuals(record)
+            return self._with_layers(record, self.decode_mapped(record.mu), residuals=residuals)
 
     def decode(
         self,
