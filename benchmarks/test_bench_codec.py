@@ -120,54 +120,40 @@ def test_query_decoded_material(benchmark, decoder: BrdfDecoder, record: LatentR
 # --- issue 14: layered decoding and refinement effort
 
 
-@pytest.fixture(scope="module")
-def layered_record(merl_file: Path):
+#: Benchmark group → (encoder options, has a detail layer): the high-rate record with all three parts
+#: (75 basis coefficients + a 16 KB detail layer), and the low-rate one (a 64 B float16 record: base + basis).
+_LAYERED_CASES = {
+    "decode-layered": ({"bytes": 16384}, True),
+    "decode-layered-64B": ({"bytes": 64, "latent_dtype": "float16"}, False),
+}
+
+
+@pytest.fixture(scope="module", params=sorted(_LAYERED_CASES))
+def layered_case(request: pytest.FixtureRequest, merl_file: Path):
     from brdfcodec.layers.record import LayeredRecord
 
-    record = BrdfEncoder(effort=0, bytes=16384).encode(read_merl(merl_file), name="layered")
-    assert isinstance(record, LayeredRecord) and record.basis is not None and record.detail is not None
-    return record
+    options, has_detail = _LAYERED_CASES[request.param]
+    record = BrdfEncoder(effort=0, **options).encode(read_merl(merl_file), name=request.param)
+    assert isinstance(record, LayeredRecord) and record.basis is not None
+    assert (record.detail is not None) == has_detail
+    return request.param, record
 
 
-def test_layered_baseline_base_only(benchmark, decoder: BrdfDecoder, layered_record) -> None:
-    benchmark.group = "decode-layered"
+def test_layered_baseline_base_only(benchmark, decoder: BrdfDecoder, layered_case) -> None:
+    benchmark.group, record = layered_case
     benchmark.extra_info["role"] = "baseline"
-    benchmark(decoder.table, layered_record.base())
+    benchmark(decoder.table, record.base())
 
 
-def test_layered_decode(benchmark, decoder: BrdfDecoder, layered_record) -> None:
-    """Base decode plus the basis layer (75 coefficients) and the detail layer (zstandard, inverse DCT).
+def test_layered_decode(benchmark, decoder: BrdfDecoder, layered_case) -> None:
+    """Base decode plus the record's layers (basis coefficients; the detail layer: zstandard, inverse DCT).
 
     The shared basis is loaded (and its hash checked) once per decoder, like the weights: not timed here.
     """
-    benchmark.group = "decode-layered"
+    benchmark.group, record = layered_case
     benchmark.extra_info["role"] = "candidate"
-    decoder.table(layered_record)  # loads the shared basis once
-    table = benchmark(decoder.table, layered_record)
-    assert table.shape == (3, 90, 90, 180)
-
-
-@pytest.fixture(scope="module")
-def layered_record_64b(merl_file: Path):
-    from brdfcodec.layers.record import LayeredRecord
-
-    record = BrdfEncoder(effort=0, bytes=64, latent_dtype="float16").encode(read_merl(merl_file), name="layered-64")
-    assert isinstance(record, LayeredRecord) and record.basis is not None and record.detail is None
-    return record
-
-
-def test_layered_64b_baseline_base_only(benchmark, decoder: BrdfDecoder, layered_record_64b) -> None:
-    benchmark.group = "decode-layered-64B"
-    benchmark.extra_info["role"] = "baseline"
-    benchmark(decoder.table, layered_record_64b.base())
-
-
-def test_layered_64b_decode(benchmark, decoder: BrdfDecoder, layered_record_64b) -> None:
-    """Base decode plus a basis layer of the coefficients a 64 B float16 record holds (the low-rate end)."""
-    benchmark.group = "decode-layered-64B"
-    benchmark.extra_info["role"] = "candidate"
-    decoder.table(layered_record_64b)  # loads the shared basis once
-    table = benchmark(decoder.table, layered_record_64b)
+    decoder.table(record)  # loads the shared basis once
+    table = benchmark(decoder.table, record)
     assert table.shape == (3, 90, 90, 180)
 
 
