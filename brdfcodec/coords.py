@@ -256,12 +256,12 @@ def grid_direction_cosines(phi_d_slices: ArrayLike | None = None) -> tuple[Float
     Parameters
     ----------
     phi_d_slices : array_like of int, optional
-        φd bins to include; all 180 by default.
+        As for :func:`grid_angles`.
 
     Returns
     -------
     cos_in, cos_out : ndarray of float64, shape (90, 90, n_φd)
-        Indexed ``[θh bin, θd bin, φd bin]``; in [-1, 1].
+        Indexed like :func:`grid_angles`' arrays; in [-1, 1].
     """
     th, td, pd = _grid_axes(phi_d_slices)
     # diff = (sin θd cos φd, ·, cos θd); wi = R_y(θh) diff; wo = 2 (wi·h) h − wi with h = (sin θh, 0, cos θh).
@@ -271,5 +271,4 @@ def grid_direction_cosines(phi_d_slices: ArrayLike | None = None) -> tuple[Float
     cos_in = -diff_x * sin_h + diff_z * cos_h
     wi_dot_h = wi_x * sin_h + cos_in * cos_h
     cos_out = 2.0 * wi_dot_h * cos_h - cos_in
-    shape = (N_THETA_H, N_THETA_D, pd.size)
-    return np.broadcast_to(cos_in, shape).copy(), np.broadcast_to(cos_out, shape).copy()
+    return cos_in, cos_out  # (90, 1, 1) × (1, 90, n_φd) terms: already full-size arrays
