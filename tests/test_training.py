@@ -157,3 +157,31 @@ def test_early_stopping_after_patience_evaluations_without_gain(
     result = train(tiny_dataset, tmp_path / "run", model_config=TINY_CONFIG, train_config=config, progress=False)
     assert result.stop_reason == "early stopping"
     assert result.epochs_done == 3 and result.best_epoch == 1  # no gain at epochs 2 and 3
+
+
+def test_weight_decay_shrinks_weights_only() -> None:
+    from brdfcodec.training.card import _optimizer_words
+    from brdfcodec.training.trainer import _optimizer
+
+    model = BetaVAE(dataclasses.replace(TINY_CONFIG, linear_basis=True))
+    assert type(_optimizer(model, TINY_TRAIN)) is torch.optim.Adam
+    config = TrainConfig(**{**TINY_TRAIN.to_dict(), "weight_decay": 2.0, "learning_rate": 1e-2})
+    optimizer = _optimizer(model, config)
+    assert type(optimizer) is torch.optim.AdamW
+    before = {name: p.detach().clone() for name, p in model.named_parameters()}
+    buffers = {name: b.detach().clone() for name, b in model.named_buffers()}
+    for p in model.parameters():
+        p.grad = torch.zeros_like(p)  # no gradient: only the decay moves a parameter
+    optimizer.step()
+    decayed = 0
+    for name, p in model.named_parameters():
+        expected = before[name] * (1 - 1e-2 * 2.0) if p.ndim >= 2 else before[name]
+        torch.testing.assert_close(p.detach(), expected, msg=name)
+        decayed += p.ndim >= 2
+    assert decayed >= 4
+    for name, b in model.named_buffers():
+        assert torch.equal(b, buffers[name]), name  # the linear basis is never decayed
+    assert _optimizer_words(0.0) == "Adam" and "weight decay 2" in _optimizer_words(2.0)
+    for bad in (-1.0, float("inf"), float("nan")):
+        with pytest.raises(ValueError, match="weight_decay"):
+            TrainConfig(weight_decay=bad)

@@ -12,6 +12,11 @@ def _fmt(value: float) -> str:
     return f"{value:.4f}"
 
 
+def _optimizer_words(weight_decay: float) -> str:
+    """How the card names the optimiser of a run (older runs have no ``weight_decay``)."""
+    return f"AdamW (weight decay {weight_decay:g} on weights)" if weight_decay else "Adam"
+
+
 def _summary_table(title: str, summary: dict[str, dict[str, Any]]) -> list[str]:
     lines = [f"| {title} | materials | mapped RelAE mean | mapped worst | linear RelAE mean | linear worst |",
              "|---|---|---|---|---|---|"]
@@ -58,7 +63,8 @@ def render_model_card(manifest: dict[str, Any]) -> str:
         "",
         f"- β = {train['beta']} (β_norm = β·M/N against the reconstruction summed over valid entries; "
         f"reconstruction error `{train['recon']}`).",
-        f"- Adam, batch {train['batch_size']}, learning rate {train['learning_rate']:g} with {train['warmup_epochs']} "
+        f"- {_optimizer_words(train.get('weight_decay', 0.0))}, batch {train['batch_size']}, "
+        f"learning rate {train['learning_rate']:g} with {train['warmup_epochs']} "
         f"warm-up epochs and cosine decay to {train['min_learning_rate']:g}, {info['epochs_done']} of "
         f"{train['epochs']} epochs; weights of epoch {info['best_epoch']} (best validation RelAE).",
         f"- Augmentation: colour permutation with probability {train['permute_colours']}, reflectance blend of two "

@@ -21,6 +21,14 @@ class TrainConfig:
         Global batch (split evenly across processes under torchrun).
     learning_rate, min_learning_rate : float
         Adam's rate after warm-up, and the end of its cosine decay.
+    weight_decay : float
+        Decoupled weight decay (AdamW) of the convolution and fully connected
+        weights, per unit of learning rate; biases, normalisation parameters
+        and the linear basis are not decayed. 0 (the default) is plain Adam.
+        A weight left to decay alone shrinks by about
+        ``exp(-weight_decay · Σ lr)``; over the default schedule
+        Σ lr ≈ 0.5 · learning_rate · steps, so values of order 1 are needed
+        for the decay to matter on ~100 materials.
     warmup_epochs : int
         Linear warm-up.
     beta : float
@@ -48,6 +56,7 @@ class TrainConfig:
     batch_size: int = 8
     learning_rate: float = 3e-4
     min_learning_rate: float = 1e-5
+    weight_decay: float = 0.0
     warmup_epochs: int = 2
     beta: float = 12.0
     recon: Literal["l2", "l1"] = "l1"
@@ -68,6 +77,8 @@ class TrainConfig:
             raise ValueError(f"recon must be 'l2' or 'l1', got {self.recon!r}")
         if self.learning_rate <= 0 or self.min_learning_rate < 0 or self.beta < 0:
             raise ValueError("learning rates must be positive and beta ≥ 0")
+        if not 0 <= self.weight_decay < float("inf"):
+            raise ValueError(f"weight_decay must be finite and ≥ 0, got {self.weight_decay}")
 
     def to_dict(self) -> dict[str, Any]:
         """Plain dictionary (JSON-ready)."""

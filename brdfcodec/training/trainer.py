@@ -207,7 +207,7 @@ def _build_model(model_config: ModelConfig, train_config: TrainConfig, data: _Tr
     if model_config.linear_basis and not resume:
         initialise_linear_basis(model, data.inputs)
     model = model.to(world.device)
-    optimizer = torch.optim.Adam(model.parameters(), lr=train_config.learning_rate)
+    optimizer = _optimizer(model, train_config)
     progress = _Progress()
     if resume:
         state = torch.load(out / CHECKPOINT, map_location=world.device, weights_only=False)
@@ -215,6 +215,18 @@ def _build_model(model_config: ModelConfig, train_config: TrainConfig, data: _Tr
         optimizer.load_state_dict(state["optimizer"])
         progress = _Progress(state["epoch"], state["best"], state["best_epoch"], state["step"])
     return model, optimizer, progress
+
+
+def _optimizer(model: BetaVAE, train_config: TrainConfig) -> torch.optim.Optimizer:
+    """Adam, or AdamW decaying only the weight matrices and kernels when ``weight_decay`` > 0."""
+    if train_config.weight_decay == 0:
+        return torch.optim.Adam(model.parameters(), lr=train_config.learning_rate)
+    parameters = [p for p in model.parameters() if p.requires_grad]
+    groups = [
+        {"params": [p for p in parameters if p.ndim >= 2], "weight_decay": train_config.weight_decay},
+        {"params": [p for p in parameters if p.ndim < 2], "weight_decay": 0.0},
+    ]
+    return torch.optim.AdamW(groups, lr=train_config.learning_rate)
 
 
 def _train_epoch(model: BetaVAE, forward: torch.nn.Module, optimizer: torch.optim.Optimizer, data: _TrainingData,
