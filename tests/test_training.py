@@ -79,6 +79,21 @@ def test_resume_refuses_a_different_config(tiny_dataset: Path, tmp_path: Path) -
         train(tiny_dataset, run, model_config=TINY_CONFIG, train_config=other, resume=True, progress=False)
 
 
+def test_resume_accepts_a_run_from_before_new_config_fields(tiny_dataset: Path, tmp_path: Path) -> None:
+    run = tmp_path / "run"
+    first = TrainConfig(**{**TINY_TRAIN.to_dict(), "time_limit_s": 0.0})
+    train(tiny_dataset, run, model_config=TINY_CONFIG, train_config=first, progress=False)
+    info = json.loads((run / "run.json").read_text())
+    for key in ("weight_decay", "decoder_dropout"):  # as a run.json written before these fields existed
+        del info["train_config"][key]
+    (run / "run.json").write_text(json.dumps(info))
+    result = train(tiny_dataset, run, model_config=TINY_CONFIG, train_config=TINY_TRAIN, resume=True, progress=False)
+    assert result.epochs_done == 3
+    other = TrainConfig(**{**TINY_TRAIN.to_dict(), "weight_decay": 0.5})
+    with pytest.raises(ValueError, match="different train config"):
+        train(tiny_dataset, run, model_config=TINY_CONFIG, train_config=other, resume=True, progress=False)
+
+
 @pytest.mark.slow
 def test_two_torchrun_processes_match_one(tiny_dataset: Path, tmp_path: Path) -> None:
     common = ["train", str(tiny_dataset), "--model", "tiny", "--epochs", "2", "--batch-size", "4", "--seed", "7",
@@ -185,3 +200,56 @@ def test_weight_decay_shrinks_weights_only() -> None:
     for bad in (-1.0, float("inf"), float("nan")):
         with pytest.raises(ValueError, match="weight_decay"):
             TrainConfig(weight_decay=bad)
+
+
+def test_decoder_dropout_hook_masks_only_in_training() -> None:
+    from brdfcodec.training.dropout import DecoderHiddenDropout
+
+    model = BetaVAE(TINY_CONFIG)
+    decoder = model.decoder
+    z = torch.randn(3, TINY_CONFIG.latent_dim)
+    seen: list[torch.Tensor] = []
+    decoder.fc[2].register_forward_pre_hook(lambda module, args: seen.append(args[0].detach().clone()))
+    dropout = DecoderHiddenDropout(decoder, 0.5)
+    keep = torch.zeros(3, TINY_CONFIG.decoder_fc[0], dtype=torch.bool)
+    keep[:, ::2] = True
+    dropout.set_keep(keep)
+    decoder.train()
+    decoder(z)
+    decoder.eval()
+    decoder(z)
+    dropped, plain = seen
+    torch.testing.assert_close(dropped, plain * keep * 2.0)  # inverted dropout: kept units doubled at p = 0.5
+    assert (dropped[:, 1::2] == 0).all() and plain.abs().sum() > 0
+    with pytest.raises(ValueError, match="width"):
+        dropout.set_keep(torch.ones(3, 5, dtype=torch.bool))
+    dropout.remove()
+    decoder.train()
+    decoder(z)
+    torch.testing.assert_close(seen[-1], plain)  # no hook left behind
+    with pytest.raises(ValueError, match="decoder_dropout"):
+        TrainConfig(decoder_dropout=1.0)
+
+
+def test_decoder_dropout_draws_leave_the_plain_stream_alone() -> None:
+    from brdfcodec.training.trainer import _global_batches
+
+    plain = list(_global_batches(10, TINY_TRAIN, 0, 4))
+    config = TrainConfig(**{**TINY_TRAIN.to_dict(), "decoder_dropout": 0.25})
+    masked = list(_global_batches(10, config, 0, 4, dropout_width=16))
+    assert "keep" not in plain[0] and masked[0]["keep"].shape == (4, 16)
+    for key in ("rows", "permutation", "partner", "weight", "noise"):
+        assert torch.equal(plain[0][key], masked[0][key]), key
+    assert 0.6 < float(torch.cat([d["keep"] for d in masked]).float().mean()) < 0.9
+
+
+@pytest.mark.slow  # > 10 s on 2 cores
+def test_decoder_dropout_run_is_reproducible_and_differs(tiny_dataset: Path, tmp_path: Path) -> None:
+    config = TrainConfig(**{**TINY_TRAIN.to_dict(), "epochs": 2, "decoder_dropout": 0.3})
+    plain = TrainConfig(**{**TINY_TRAIN.to_dict(), "epochs": 2})
+    for name, train_config in (("a", config), ("b", config), ("plain", plain)):
+        train(tiny_dataset, tmp_path / name, model_config=TINY_CONFIG, train_config=train_config, progress=False)
+    a, b, c = (read_log(tmp_path / name) for name in ("a", "b", "plain"))
+    assert [r["loss"] for r in a] == [r["loss"] for r in b]
+    assert a[-1]["loss"] != c[-1]["loss"]
+    assert json.loads((tmp_path / "a" / "run.json").read_text())["train_config"]["decoder_dropout"] == 0.3

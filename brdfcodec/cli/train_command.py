@@ -32,6 +32,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     parser.add_argument("--lr", type=float, dest="learning_rate")
     parser.add_argument("--weight-decay", type=float,
                         help="decoupled (AdamW) decay of the weights, per unit of learning rate (0: Adam)")
+    parser.add_argument("--decoder-dropout", type=float,
+                        help="probability of dropping a hidden unit of the decoder's first fully connected layer")
     parser.add_argument("--beta", type=float)
     parser.add_argument("--recon", choices=("l2", "l1"))
     parser.add_argument("--permute-colours", type=float, help="probability of a colour permutation")

@@ -68,7 +68,8 @@ def render_model_card(manifest: dict[str, Any]) -> str:
         f"warm-up epochs and cosine decay to {train['min_learning_rate']:g}, {info['epochs_done']} of "
         f"{train['epochs']} epochs; weights of epoch {info['best_epoch']} (best validation RelAE).",
         f"- Augmentation: colour permutation with probability {train['permute_colours']}, reflectance blend of two "
-        f"materials with probability {train['mix_probability']}.",
+        f"materials with probability {train['mix_probability']}"
+        + (f"; decoder dropout {train['decoder_dropout']:g}." if train.get("decoder_dropout") else "."),
         f"- Training time: {info['training_seconds'] / 60:.1f} min on {info['device']} "
         f"({info['world_size']} process(es)).",
         f"- Reproduce: `{info['command']}`",

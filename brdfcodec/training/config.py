@@ -31,6 +31,11 @@ class TrainConfig:
         for the decay to matter on ~100 materials.
     warmup_epochs : int
         Linear warm-up.
+    decoder_dropout : float
+        Probability that a unit of the decoder's first hidden fully connected
+        layer is dropped in a training step (inverted dropout; none at
+        evaluation). 0 (the default) draws no mask, so runs without it keep
+        their random stream.
     beta : float
         β of the objective (β_norm = β·M/N; 12 in the paper).
     recon : {"l2", "l1"}
@@ -57,6 +62,7 @@ class TrainConfig:
     learning_rate: float = 3e-4
     min_learning_rate: float = 1e-5
     weight_decay: float = 0.0
+    decoder_dropout: float = 0.0
     warmup_epochs: int = 2
     beta: float = 12.0
     recon: Literal["l2", "l1"] = "l1"
@@ -79,6 +85,8 @@ class TrainConfig:
             raise ValueError("learning rates must be positive and beta ≥ 0")
         if not 0 <= self.weight_decay < float("inf"):
             raise ValueError(f"weight_decay must be finite and ≥ 0, got {self.weight_decay}")
+        if not 0 <= self.decoder_dropout < 1:
+            raise ValueError(f"decoder_dropout must be in [0, 1), got {self.decoder_dropout}")
 
     def to_dict(self) -> dict[str, Any]:
         """Plain dictionary (JSON-ready)."""

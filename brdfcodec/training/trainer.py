@@ -36,6 +36,7 @@ from brdfcodec.models.loss import beta_vae_loss, kl_per_dimension
 from brdfcodec.models.network import BetaVAE, initialise_linear_basis
 from brdfcodec.training.augment import COLOUR_PERMUTATIONS, mix_physical, permute_colours
 from brdfcodec.training.config import TrainConfig
+from brdfcodec.training.dropout import DecoderHiddenDropout
 from brdfcodec.training.evaluation import MappedReference, reconstruct_mapped
 from brdfcodec.version import __version__
 
@@ -99,9 +100,13 @@ def _epoch_generator(seed: int, epoch: int) -> torch.Generator:
 
 
 def _global_batches(
-    n_train: int, config: TrainConfig, epoch: int, latent_dim: int
+    n_train: int, config: TrainConfig, epoch: int, latent_dim: int, dropout_width: int = 0
 ) -> Iterator[dict[str, torch.Tensor]]:
-    """Every random draw of one epoch, for the global batches, identical on every rank."""
+    """Every random draw of one epoch, for the global batches, identical on every rank.
+
+    A decoder dropout mask ``(size, dropout_width)`` is drawn last, and only
+    when ``config.decoder_dropout`` > 0, so runs without dropout keep their stream.
+    """
     generator = _epoch_generator(config.seed, epoch)
     order = torch.randperm(n_train, generator=generator)
     n_batches = max(1, n_train // config.batch_size)
@@ -114,7 +119,10 @@ def _global_batches(
         partner = torch.randint(0, n_train, (size,), generator=generator)
         weight = torch.where(mix, torch.rand(size, generator=generator), torch.ones(size))
         noise = torch.randn(size, latent_dim, generator=generator)
-        yield {"rows": rows, "permutation": permutation, "partner": partner, "weight": weight, "noise": noise}
+        draw = {"rows": rows, "permutation": permutation, "partner": partner, "weight": weight, "noise": noise}
+        if config.decoder_dropout > 0:
+            draw["keep"] = torch.rand(size, dropout_width, generator=generator) >= config.decoder_dropout
+        yield draw
 
 
 def _trajectory(config: dict[str, Any]) -> dict[str, Any]:
@@ -169,6 +177,9 @@ def _check_run_folder(out: Path, run_info: dict[str, Any], resume: bool) -> None
     """Refuse a non-empty folder for a new run, or a resume with another trajectory."""
     if resume:
         stored = json.loads((out / "run.json").read_text())
+        # Fields added after a run was started take their defaults (which reproduce the old behaviour).
+        stored["model_config"] = json.loads(ModelConfig.from_dict(stored["model_config"]).to_json())
+        stored["train_config"] = TrainConfig.from_dict(stored["train_config"]).to_dict()
         for key in ("model_config", "train_config"):
             if _trajectory(stored[key]) != _trajectory(run_info[key]):
                 raise ValueError(f"{out}: cannot resume with a different {key.replace('_', ' ')}")
@@ -241,8 +252,13 @@ def _train_epoch(model: BetaVAE, forward: torch.nn.Module, optimizer: torch.opti
     sums = torch.zeros(3, dtype=torch.float64)  # loss, recon, kl (sums over samples)
     kl_dims = torch.zeros(model_config.latent_dim, dtype=torch.float64)
     count = 0
-    for draw in _global_batches(n_train, train_config, epoch, model_config.latent_dim):
+    dropout = (DecoderHiddenDropout(model.decoder, train_config.decoder_dropout)
+               if train_config.decoder_dropout > 0 else None)
+    width = dropout.width if dropout is not None else 0
+    for draw in _global_batches(n_train, train_config, epoch, model_config.latent_dim, width):
         part = slice(world.rank * local, (world.rank + 1) * local)
+        if dropout is not None:
+            dropout.set_keep(draw["keep"][part])
         rows, partner = draw["rows"][part], draw["partner"][part]
         x = mix_physical(data.inputs[rows], data.inputs[partner], draw["weight"][part])
         m = data.masks[rows] & data.masks[partner]
@@ -260,6 +276,8 @@ def _train_epoch(model: BetaVAE, forward: torch.nn.Module, optimizer: torch.opti
         sums += torch.tensor([terms.loss.item(), terms.recon.item(), terms.kl.item()], dtype=torch.float64) * n
         kl_dims += kl_per_dimension(mu.detach(), logvar.detach()).sum(0).double().cpu()
         count += n
+    if dropout is not None:
+        dropout.remove()
     totals = torch.cat([sums, kl_dims, torch.tensor([count], dtype=torch.float64)])
     if world.size > 1:
         dist.all_reduce(totals)
