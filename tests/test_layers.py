@@ -305,3 +305,28 @@ def test_measure_sets_the_provenance_of_the_source_it_measured_against(analytic_
     again = measure(measured, decoder, brdf)  # now against a MERL table: no source_kind left from the RGL one
     assert "source_kind" not in again.meta and again.meta["source_sha256"] == brdf.sha256
     assert again.meta["note"] == 1
+
+
+@pytest.mark.parametrize("better", [32, 75])
+def test_size_budget_tries_a_smaller_basis_under_the_detail_layer(better: int) -> None:
+    """Under a budget with room for detail, the search fits 75 and 32 coefficients and keeps the lower error."""
+    from brdfcodec.layers.basis import quantise_coefficients
+    from brdfcodec.layers.rate import DETAIL_BASIS_COUNT, encode_layers
+
+    rng = np.random.default_rng(5)
+    target = rng.uniform(0.0, 1.0, NETWORK_INPUT_SHAPE).astype(np.float32)
+    masks = np.ones(NETWORK_INPUT_SHAPE, dtype=np.float32)
+    base = LatentRecord("m", np.zeros(8), np.ones(8))
+    fitted: list[int] = []
+
+    def fit(k: int):  # noqa: ANN202 - the BasisFit callable
+        fitted.append(k)
+        share = 0.9 if k == better else 0.5  # how much of the material k coefficients explain
+        return base, quantise_coefficients("cd" * 32, np.ones(k)), (target * share).astype(np.float32)
+
+    budget = 4096
+    result = encode_layers(base, np.zeros_like(target), target, masks, bytes_budget=budget, basis_fit=fit,
+                           basis_count=75)
+    assert sorted(set(fitted)) == [DETAIL_BASIS_COUNT, 75]
+    assert isinstance(result.record, LayeredRecord) and result.record.detail is not None
+    assert result.record.basis.count == better and result.payload_bytes <= budget

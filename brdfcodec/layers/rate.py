@@ -6,10 +6,15 @@ chooses the enhancement layers: k coefficients on the model's shared basis
 whose quantisation step comes from a fixed ladder (:data:`STEP_LADDER`,
 halving every two rungs):
 
-- ``bytes_budget=N``: as many basis coefficients as fit (up to the basis'
-  size K), then, of the rungs whose record payload (μ, σ and the layers)
-  fits in N bytes, no detail layer, and the base alone, the one with the
-  lowest kept-slice mapped L1 error — the largest quality within N bytes;
+- ``bytes_budget=N``: two basis sizes, as many coefficients as fit (up to
+  the basis' size K) and at most :data:`DETAIL_BASIS_COUNT`; for each, the
+  finest rung whose record payload (μ, σ and the layers) fits in N bytes;
+  then, of those records, the same without a detail layer, and the base
+  alone, the one with the lowest kept-slice mapped L1 error (ties: fewer
+  coefficients) — the largest quality within N bytes. Where a detail layer
+  has room, the bytes of coefficients past the first few dozen buy more as
+  detail, and each costs decode time (``reports/rd-study/basis-cap.json``);
+  below that, all K coefficients win;
 - ``max_relae=X``: the first of base, 4, 8, 16 and K basis coefficients, then
   K coefficients plus each rung from coarse to fine, whose decoded table has
   a measured RelAE (mapped or linear, full table, valid entries) of at most
@@ -42,7 +47,7 @@ from brdfcodec.layers.record import LayeredRecord
 from brdfcodec.metrics import error_report
 from brdfcodec.transforms import table_from_network_output
 
-__all__ = ["STEP_LADDER", "BasisFit", "Metric", "RateResult", "encode_layers", "layered_mapped"]
+__all__ = ["DETAIL_BASIS_COUNT", "STEP_LADDER", "BasisFit", "Metric", "RateResult", "encode_layers", "layered_mapped"]
 
 Metric = Literal["mapped", "linear"]
 #: Quantisation steps tried, coarsest first (mapped units): 16 · 2^(−i/2), i = 0 … 28.
@@ -74,6 +79,9 @@ class RateResult:
 BasisFit = Callable[[int], tuple[LatentRecord, BasisLayer, np.ndarray]]
 #: Basis sizes tried by an error target below the basis' full size.
 _BASIS_COUNTS: Final = (4, 8, 16)
+#: The smaller basis size a size budget also tries under a detail layer (measured on held-out materials of the
+#: NBRDF proxy: at 1 KB and 16 KB, 32 coefficients plus detail beat 75 plus detail; at 256 B, 75 win).
+DETAIL_BASIS_COUNT: Final = 32
 
 
 def layered_mapped(base_mapped: np.ndarray, record: LatentRecord) -> np.ndarray:
@@ -192,32 +200,17 @@ def encode_layers(
         if bytes_budget < base_bytes:
             raise RateTargetError(f"{base.name}: {bytes_budget} bytes is below the base record's {base_bytes} bytes")
         k = max(0, min(full, bytes_budget - cands.layered_bytes - STEP_BYTES))
-        ladder: list[float | None] = [None, *STEP_LADDER]
-        lo, hi = 0, len(ladder)  # ladder[lo] fits (no detail fits); ladder[hi] does not (or is past the end)
-        while hi - lo > 1:
-            mid = (lo + hi) // 2
-            tried.append((ladder[mid], cands.size(k, ladder[mid]), None))
-            if cands.size(k, ladder[mid]) <= bytes_budget:
-                lo = mid
-            else:
-                hi = mid
-        if lo > 0 and hi < len(ladder):  # between two rungs: a few halvings of the step ratio, in log space
-            fine, coarse = ladder[hi], ladder[lo]
-            for _ in range(_REFINE_ROUNDS):
-                mid_step = float(np.sqrt(fine * coarse))  # type: ignore[operator]
-                tried.append((mid_step, cands.size(k, mid_step), None))
-                if cands.size(k, mid_step) <= bytes_budget:
-                    coarse = mid_step
-                else:
-                    fine = mid_step
+        counts = sorted({k, min(k, DETAIL_BASIS_COUNT)})
+        fitting: set[tuple[int, float | None]] = {c for c in ((0, None), (k, None)) if cands.size(*c) <= bytes_budget}
+        for count in counts:
+            fitting |= {(count, s) for s in _finest_fitting_steps(cands, count, bytes_budget, tried)}
 
-        # Among the fitting candidates, the lowest kept-slice L1 error (a very coarse layer can be worse than none).
-        def slice_error(candidate: tuple[int, float | None]) -> float:
+        # Among the fitting candidates, the lowest kept-slice L1 error (a very coarse layer can be worse than none);
+        # of equal errors, the one with fewer coefficients (faster to decode).
+        def slice_error(candidate: tuple[int, float | None]) -> tuple[float, int]:
             mapped = np.clip(cands.mapped(*candidate), 0.0, MAPPED_MAX)
-            return float((np.abs(mapped - target) * weights).sum())
+            return float((np.abs(mapped - target) * weights).sum()), candidate[0]
 
-        fitting = {(k, s) for s, n, _ in tried if s is not None and n <= bytes_budget}
-        fitting |= {c for c in ((0, None), (k, None)) if cands.size(*c) <= bytes_budget}
         chosen = min(fitting, key=slice_error)
         return RateResult(cands.record(*chosen), cands.size(*chosen), tried)
     assert max_relae is not None
@@ -257,6 +250,35 @@ def encode_layers(
     candidates = [c for c in errors if errors[c] <= max_relae]
     chosen = min(candidates, key=lambda c: cands.size(*c))
     return RateResult(cands.record(*chosen), cands.size(*chosen), tried)
+
+
+def _finest_fitting_steps(cands: _Candidates, k: int, bytes_budget: int,
+                          tried: list[tuple[float | None, int, float | None]]) -> list[float]:
+    """Detail steps over k basis coefficients that fit ``bytes_budget``, found on the way to the finest one.
+
+    Bisects :data:`STEP_LADDER` (sizes grow as the step falls), then a few log-space halvings between the two
+    rungs that bracket the budget; appends every size it measured to ``tried``.
+    """
+    ladder: list[float | None] = [None, *STEP_LADDER]
+    lo, hi = 0, len(ladder)  # ladder[lo] fits (no detail fits); ladder[hi] does not (or is past the end)
+    start = len(tried)
+    while hi - lo > 1:
+        mid = (lo + hi) // 2
+        tried.append((ladder[mid], cands.size(k, ladder[mid]), None))
+        if cands.size(k, ladder[mid]) <= bytes_budget:
+            lo = mid
+        else:
+            hi = mid
+    if lo > 0 and hi < len(ladder):  # between two rungs: a few halvings of the step ratio, in log space
+        fine, coarse = ladder[hi], ladder[lo]
+        for _ in range(_REFINE_ROUNDS):
+            mid_step = float(np.sqrt(fine * coarse))  # type: ignore[operator]
+            tried.append((mid_step, cands.size(k, mid_step), None))
+            if cands.size(k, mid_step) <= bytes_budget:
+                coarse = mid_step
+            else:
+                fine = mid_step
+    return [s for s, n, _ in tried[start:] if s is not None and n <= bytes_budget]
 
 
 def _bisect(
