@@ -330,3 +330,16 @@ def test_size_budget_tries_a_smaller_basis_under_the_detail_layer(better: int) -
     assert sorted(set(fitted)) == [DETAIL_BASIS_COUNT, 75]
     assert isinstance(result.record, LayeredRecord) and result.record.detail is not None
     assert result.record.basis.count == better and result.payload_bytes <= budget
+
+
+def test_fewer_coefficients_are_kept_within_the_decode_tolerance() -> None:
+    from brdfcodec.layers.rate import DECODE_TOLERANCE, fewest_coefficients_within_tolerance
+
+    assert DECODE_TOLERANCE == 0.02
+    close = {(75, 0.1): 100.0, (32, 0.12): 101.5, (0, None): 300.0}
+    assert fewest_coefficients_within_tolerance(close) == (32, 0.12)
+    far = {(75, 0.1): 100.0, (32, 0.12): 102.5, (0, None): 300.0}
+    assert fewest_coefficients_within_tolerance(far) == (75, 0.1)
+    same_count = {(32, 0.1): 100.0, (32, 0.2): 101.0}
+    assert fewest_coefficients_within_tolerance(same_count) == (32, 0.1)  # then the lower error
+    assert fewest_coefficients_within_tolerance({(0, None): 0.0, (5, None): 0.0}) == (0, None)  # a lossless base

@@ -1,0 +1,96 @@
+"""How many basis coefficients a size budget should spend under a detail layer (issue 14).
+
+Usage::
+
+    python benchmarks/basis_cap_study.py DATASET.h5 [-o reports/rd-study/basis-cap.json]
+
+Encodes the dataset's held-out (validation) materials with the default model
+at several size budgets (``BrdfEncoder(bytes=N)``, effort 1, float32 latents) under five
+policies for the basis layer — the encoder's own search (all coefficients
+that fit, and at most :data:`~brdfcodec.layers.rate.DETAIL_BASIS_COUNT`),
+all that fit only, and at most 32, 16 or 0 — and records the mean
+full-table mapped RelAE, the mean payload and the coefficient counts used.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+import brdfcodec.layers.encoding as encoding
+import brdfcodec.layers.rate as rate
+from brdfcodec.codec import BrdfEncoder
+from brdfcodec.dataset import BrdfDataset
+from brdfcodec.layers.record import LayeredRecord
+from brdfcodec.metrics import error_report
+
+BUDGETS = (128, 256, 1024, 4096, 16384)
+#: policy → (largest basis count allowed, whether the encoder's smaller second count is tried)
+POLICIES: dict[str, tuple[int | None, bool]] = {
+    "search": (None, True), "all": (None, False), "at-most-32": (32, False), "at-most-16": (16, False),
+    "none": (0, False),
+}
+
+
+@contextmanager
+def policy(cap: int | None, search: bool) -> Iterator[None]:
+    """Limit the basis size the encoder may use, and switch its second count off."""
+    original_layers, original_count = encoding.encode_layers, rate.DETAIL_BASIS_COUNT
+
+    def capped(*args: Any, **kwargs: Any) -> rate.RateResult:
+        if cap is not None:
+            kwargs["basis_count"] = min(kwargs["basis_count"], cap)
+        return original_layers(*args, **kwargs)
+
+    encoding.encode_layers = capped  # type: ignore[assignment]
+    if not search:
+        rate.DETAIL_BASIS_COUNT = 1 << 30  # type: ignore[misc]
+    try:
+        yield
+    finally:
+        encoding.encode_layers = original_layers  # type: ignore[assignment]
+        rate.DETAIL_BASIS_COUNT = original_count  # type: ignore[misc]
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("dataset", type=Path)
+    parser.add_argument("-o", "--output", type=Path, default=Path("reports/rd-study/basis-cap.json"))
+    args = parser.parse_args()
+    torch.set_num_threads(1)
+    start = time.perf_counter()
+    with BrdfDataset(args.dataset) as dataset:
+        held = dataset.indices("validation")
+        x, m = dataset.inputs(held), dataset.input_masks(held)
+        tables = [dataset.table(i) for i in held]
+        names = [dataset.names[i] for i in held]
+        description = dataset.description
+    rows: list[dict[str, Any]] = []
+    for budget in BUDGETS:
+        for label, (cap, search) in POLICIES.items():
+            with policy(cap, search):
+                encoder = BrdfEncoder(bytes=budget)
+                records = encoder.encode_arrays(names, x, m, tables)
+            errors = [error_report(t.values, encoder.decoder.decode(r, masked="keep").astype(np.float64),
+                                   t.mask).relae_mapped.overall for r, t in zip(records, tables, strict=True)]
+            counts = [r.basis.count if isinstance(r, LayeredRecord) and r.basis is not None else 0 for r in records]
+            row = {"budget": budget, "policy": label, "relae_mapped_mean": float(np.mean(errors)),
+                   "payload_bytes_mean": float(np.mean([r.meta["rate"]["payload_bytes"] for r in records])),
+                   "basis_counts": sorted(set(counts))}
+            rows.append(row)
+            print(json.dumps(row), flush=True)
+    args.output.parent.mkdir(parents=True, exist_ok=True)
+    args.output.write_text(json.dumps({"data": description, "materials": names, "effort": 1, "rows": rows,
+                                       "seconds": time.perf_counter() - start}, indent=1) + "\n")
+
+
+if __name__ == "__main__":
+    main()
