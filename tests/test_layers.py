@@ -330,6 +330,10 @@ def test_size_budget_tries_a_smaller_basis_under_the_detail_layer(better: int) -
     assert sorted(set(fitted)) == [DETAIL_BASIS_COUNT, 75]
     assert isinstance(result.record, LayeredRecord) and result.record.detail is not None
     assert result.record.basis.count == better and result.payload_bytes <= budget
+    fitted.clear()  # 100 B: μ (float32) and σ take 40 B, the step 2 B, so 58 coefficients fit; beside 32 there is
+    # no room for a detail layer (49 B at least), so only one basis is fitted
+    encode_layers(base, np.zeros_like(target), target, masks, bytes_budget=100, basis_fit=fit, basis_count=75)
+    assert fitted == [58]
 
 
 def test_fewer_coefficients_are_kept_within_the_decode_tolerance() -> None:

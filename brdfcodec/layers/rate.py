@@ -32,6 +32,7 @@ is measured on the returned record. A layered record stores σ compactly
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Final, Literal
@@ -40,7 +41,7 @@ import numpy as np
 import numpy.typing as npt
 
 from brdfcodec.bvae_format import LatentRecord
-from brdfcodec.conventions import MAPPED_MAX
+from brdfcodec.conventions import MAPPED_MAX, NETWORK_INPUT_SHAPE
 from brdfcodec.errors import RateTargetError
 from brdfcodec.layers.basis import STEP_BYTES, BasisLayer
 from brdfcodec.layers.detail import DetailLayer, decode_detail, encode_detail
@@ -207,7 +208,10 @@ def encode_layers(
         if bytes_budget < base_bytes:
             raise RateTargetError(f"{base.name}: {bytes_budget} bytes is below the base record's {base_bytes} bytes")
         k = max(0, min(full, bytes_budget - cands.layered_bytes - STEP_BYTES))
-        counts = sorted({k, min(k, DETAIL_BASIS_COUNT)})
+        small = min(k, DETAIL_BASIS_COUNT)
+        # The smaller basis only pays where a detail layer fits beside it (no room at 64 B: 38 coefficients, no detail).
+        room = bytes_budget - (cands.layered_bytes + STEP_BYTES + small) >= _empty_detail_bytes()
+        counts = sorted({k, small}) if room else [k]
         fitting: set[tuple[int, float | None]] = {c for c in ((0, None), (k, None)) if cands.size(*c) <= bytes_budget}
         for count in counts:
             fitting |= {(count, s) for s in _finest_fitting_steps(cands, count, bytes_budget, tried)}
@@ -257,6 +261,12 @@ def encode_layers(
     candidates = [c for c in errors if errors[c] <= max_relae]
     chosen = min(candidates, key=lambda c: cands.size(*c))
     return RateResult(cands.record(*chosen), cands.size(*chosen), tried)
+
+
+@functools.cache
+def _empty_detail_bytes() -> int:
+    """Payload of the smallest detail layer (all coefficients zero, coarsest step)."""
+    return encode_detail(np.zeros(NETWORK_INPUT_SHAPE, dtype=np.float32), STEP_LADDER[0]).nbytes
 
 
 def fewest_coefficients_within_tolerance(
