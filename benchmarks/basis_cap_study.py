@@ -14,16 +14,14 @@ full-table mapped RelAE, the mean payload and the coefficient counts used.
 
 from __future__ import annotations
 
-import argparse
 import json
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
-from pathlib import Path
 from typing import Any
 
 import numpy as np
-import torch
+from basis_study import study_arguments  # sibling script: Python puts the running script's folder on sys.path
 
 import brdfcodec.layers.encoding as encoding
 import brdfcodec.layers.rate as rate
@@ -61,11 +59,7 @@ def policy(cap: int | None, search: bool) -> Iterator[None]:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("dataset", type=Path)
-    parser.add_argument("-o", "--output", type=Path, default=Path("reports/rd-study/basis-cap.json"))
-    args = parser.parse_args()
-    torch.set_num_threads(1)
+    args = study_arguments(__doc__, "reports/rd-study/basis-cap.json")
     start = time.perf_counter()
     with BrdfDataset(args.dataset) as dataset:
         held = dataset.indices("validation")

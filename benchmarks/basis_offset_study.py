@@ -18,14 +18,14 @@ int8 quantisation is listed beside it.
 
 from __future__ import annotations
 
-import argparse
 import json
 import time
-from pathlib import Path
 
 import numpy as np
-import torch
-from basis_study import kept_slice_relae  # sibling script: Python puts the running script's folder on sys.path
+from basis_study import (  # sibling script: Python puts the running script's folder on sys.path
+    kept_slice_relae,
+    study_arguments,
+)
 
 from brdfcodec.codec import BrdfEncoder
 from brdfcodec.dataset import BrdfDataset
@@ -37,11 +37,7 @@ OFFSETS = (0, 8)
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("dataset", type=Path)
-    parser.add_argument("-o", "--output", type=Path, default=Path("reports/rd-study/basis-offset.json"))
-    args = parser.parse_args()
-    torch.set_num_threads(1)
+    args = study_arguments(__doc__, "reports/rd-study/basis-offset.json")
     start = time.perf_counter()
     with BrdfDataset(args.dataset) as dataset:
         held, train = dataset.indices("validation"), dataset.indices("train")

@@ -36,6 +36,16 @@ from brdfcodec.layers.refine import fit_basis_coefficients, refine_latent
 COUNTS = (4, 8, 16, 30, 48, 64)
 
 
+def study_arguments(doc: str, default_output: str) -> argparse.Namespace:
+    """The command line every study script shares: a dataset file and ``-o OUTPUT.json``; torch on one thread."""
+    parser = argparse.ArgumentParser(description=doc.splitlines()[0])
+    parser.add_argument("dataset", type=Path)
+    parser.add_argument("-o", "--output", type=Path, default=Path(default_output))
+    args = parser.parse_args()
+    torch.set_num_threads(1)
+    return args
+
+
 def kept_slice_relae(estimate: np.ndarray, inputs: np.ndarray, masks: np.ndarray) -> float:
     error = (np.abs(np.clip(estimate, 0.0, MAPPED_MAX) - inputs) * masks).reshape(len(inputs), -1).sum(1)
     return float((error / (np.abs(inputs) * masks).reshape(len(inputs), -1).sum(1)).mean())
