@@ -121,7 +121,8 @@ def test_query_decoded_material(benchmark, decoder: BrdfDecoder, record: LatentR
 
 
 #: Benchmark group → (encoder options, has a detail layer): the high-rate record with all three parts
-#: (75 basis coefficients + a 16 KB detail layer), and the low-rate one (a 64 B float16 record: base + basis).
+#: (75 basis coefficients + a 16 KB detail layer), and the low-rate one (a 64 B record: compact base + 51 basis
+#: coefficients).
 _LAYERED_CASES = {
     "decode-layered": ({"bytes": 16384}, True),
     "decode-layered-64B": ({"bytes": 64, "latent_dtype": "float16"}, False),

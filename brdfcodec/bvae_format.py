@@ -70,7 +70,8 @@ FORMAT_MAJOR = 1
 #: 1.1 added the "layered" record kind (issue 14); a 1.0 reader refuses it by its kind.
 #: 1.2 added the basis layer and compact sigma of layered records; a 1.1 reader refuses them as unknown layers.
 #: 1.3 added the basis layer's ``first`` vector; a 1.2 reader refuses it as an unknown basis field.
-FORMAT_MINOR = 3
+#: 1.4 added compact μ and shared σ of layered records; a 1.3 reader refuses them as an unknown layer / sigma mode.
+FORMAT_MINOR = 4
 #: Largest stored header, in bytes (compressed size when compressed).
 MAX_HEADER_BYTES = 1 << 20
 #: Largest decompressed header, in bytes.
@@ -513,7 +514,7 @@ def encode_bvae(
     offset = 0
     for record in records:
         values = record.payload_values()
-        if latent_dtype == "float16" and np.abs(values).max() > np.finfo(np.float16).max:
+        if latent_dtype == "float16" and np.abs(values).max(initial=0.0) > np.finfo(np.float16).max:
             raise ValueError(f"{record.name}: latent values exceed the float16 range; store them as float32")
         payload = values.astype(dtype).tobytes()
         # --- layered records (issue 14, brdfcodec.layers): layer bytes follow mu and sigma
@@ -807,7 +808,7 @@ def _decode_record(path: str, header: BvaeHeader, entry: RecordEntry, payload: b
 
             assert entry.layers is not None
             tail = payload[n_latent:]
-            return layered_from_payload(entry.name, values[:d], values[d:], entry.layers, tail, entry.meta)
+            return layered_from_payload(entry.name, values, d, entry.layers, tail, entry.meta)
         if entry.kind == "graft":
             return GraftRecord(entry.name, values[:d], values[d : 2 * d], entry.graft_dims, values[2 * d :], entry.meta)
         return LatentRecord(entry.name, values[:d], values[d:], entry.meta)

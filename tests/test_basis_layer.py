@@ -63,6 +63,57 @@ def test_basis_records_round_trip_and_cost_what_the_spec_says(dtype: str) -> Non
     assert parse_bvae(encode_bvae([wide], DECODER)).header.entries[0].length == 16 * 4 + 7
 
 
+@pytest.mark.parametrize("dtype", ["float32", "float16"])
+def test_compact_mu_and_shared_sigma_round_trip_in_eleven_bytes(dtype: str) -> None:
+    rng = np.random.default_rng(4)
+    mu, sigma = rng.normal(0, 1.5, size=8), np.exp(rng.normal(-6, 0.6, size=8))
+    layer = quantise_coefficients(SHA, rng.normal(0, 4, size=19), 8)
+    record = LayeredRecord("c", mu, sigma, {"effort": 1}, basis=layer, compact_mu=True, shared_sigma=True)
+    step = np.abs(mu).max() / 127
+    assert np.abs(record.mu - mu).max() <= step / 2 * 1.01  # μ within half a step of max |μ| / 127
+    geometric_mean = np.exp2(np.log2(sigma).mean())
+    assert np.allclose(record.sigma, record.sigma[0]) and abs(record.sigma[0] / geometric_mean - 1) <= 0.022
+    data = encode_bvae([record], DECODER, latent_dtype=dtype)  # type: ignore[arg-type]
+    parsed = parse_bvae(data)
+    entry = parsed.header.entries[0]
+    assert entry.length == 2 + 8 + 1 + 2 + 19 == 32  # the same in either latent dtype: nothing is stored in it
+    assert entry.layers == {"mu": "int8", "sigma": "log2-u8-shared", "basis": layer.entry()}
+    back = parsed.records[0]
+    assert isinstance(back, LayeredRecord) and back.compact_mu and back.shared_sigma
+    np.testing.assert_array_equal(back.mu, record.mu)
+    np.testing.assert_array_equal(back.sigma, record.sigma)
+    assert encode_bvae([back], DECODER, latent_dtype=dtype) == data  # re-encoding changes nothing  # type: ignore[arg-type]
+    only_mu = LayeredRecord("m", mu, sigma, basis=layer, compact_mu=True)  # σ stays in the latent dtype
+    itemsize = 4 if dtype == "float32" else 2
+    assert parse_bvae(encode_bvae([only_mu], DECODER, latent_dtype=dtype)).records[0].sigma.tolist() == pytest.approx(  # type: ignore[arg-type]
+        sigma.astype(np.float16 if itemsize == 2 else np.float32).tolist())
+    with pytest.raises(ValueError, match="either per dimension or shared"):
+        LayeredRecord("x", mu, sigma, basis=layer, compact_sigma=True, shared_sigma=True)
+
+
+@pytest.mark.parametrize("step", [0.0, float("inf"), float("nan"), -0.5])
+def test_a_compact_mu_step_that_is_not_positive_and_finite_is_malformed(step: float, monkeypatch) -> None:
+    record = LayeredRecord("c", np.ones(8), np.ones(8), basis=quantise_coefficients(SHA, [1.0]), compact_mu=True,
+                           shared_sigma=True)
+    # The writer stores whatever step the record gives it (CRCs and lengths stay right): only the step is wrong.
+    monkeypatch.setattr(LayeredRecord, "_mu_code", lambda self: (step, np.ones(8, dtype=np.int8)))
+    data = encode_bvae([record], DECODER)
+    with pytest.raises(BvaeFormatError, match="compact mu step"):
+        parse_bvae(data)
+
+
+def test_unknown_mu_and_sigma_storage_are_unsupported() -> None:
+    from brdfcodec.layers.record import layers_length
+
+    for layers, what in (({"mu": "int4", "basis": {"sha256": SHA, "count": 1}}, "mu"),
+                         ({"sigma": "log2-u4", "basis": {"sha256": SHA, "count": 1}}, "sigma")):
+        with pytest.raises(ValueError, match=f"stores {what} as") as raised:
+            layers_length(layers, "record 0", 8)
+        assert type(raised.value).__name__ == "UnsupportedLayerError"
+    full = {"mu": "int8", "sigma": "log2-u8-shared", "basis": {"sha256": SHA, "count": 5}}
+    assert layers_length(full, "record 0", 8) == (2 + 8) + 1 + (2 + 5)
+
+
 def test_a_layered_record_needs_a_layer() -> None:
     with pytest.raises(ValueError, match="basis layer, a detail layer or both"):
         LayeredRecord("x", np.zeros(8), np.ones(8), compact_sigma=True)
@@ -188,13 +239,17 @@ def test_the_basis_layer_follows_the_decoder_output_it_was_fitted_on(analytic_ta
     base_error = measure(base.encode(brdf, name="m"), base.decoder, brdf).meta["relae"]["mapped"]
     encoder = BrdfEncoder(effort=1, bytes=64, latent_dtype="float16")
     record = encoder.encode(brdf, name="m")
-    assert isinstance(record, LayeredRecord) and record.compact_sigma and record.detail is None
-    assert record.basis is not None and record.basis.count == 64 - 16 - 8 - 2
+    # 64 B cannot hold all 75 coefficients beside a float16 μ, so the base is compact: 2 + 8 bytes of μ, 1 of σ.
+    assert isinstance(record, LayeredRecord) and record.compact_mu and record.shared_sigma and record.detail is None
+    assert record.basis is not None and record.basis.count == 64 - 11 - 2
     assert record.basis.first == 8  # the shipped decoder's linear path spans the basis' first 8 vectors
     stored = parse_bvae(encode_bvae([record], encoder.reference, latent_dtype="float16")).header.entries[0].length
     assert stored == record.meta["rate"]["payload_bytes"] == 64
     layered_error = measure(record, encoder.decoder, brdf).meta["relae"]["mapped"]
     assert layered_error < 0.9 * base_error
+    # The coefficients are fitted to the quantised μ the record stores: refitting them to it changes nothing.
+    tiny = BrdfEncoder(effort=1, bytes=14).encode(brdf, name="t")  # the smallest record: compact base, 1 coefficient
+    assert tiny.basis.count == 1 and tiny.meta["rate"]["payload_bytes"] == 14
     no_basis = BrdfEncoder(effort=1, bytes=64, latent_dtype="float16", basis=False).encode(brdf, name="m")
     assert getattr(no_basis, "basis", None) is None
 
@@ -219,12 +274,12 @@ def test_cli_bytes_writes_the_basis_layer(red_plastic_file, tmp_path, capsys) ->
     out = tmp_path / "r.bvae"
     assert main(["compress", str(red_plastic_file), "-o", str(out), "--bytes", "64", "--float16"]) == 0
     entry = parse_bvae(out.read_bytes()).header.entries[0]
-    assert entry.kind == "layered" and entry.length == 64 and entry.layers["basis"]["count"] == 38
+    assert entry.kind == "layered" and entry.length == 64 and entry.layers["basis"]["count"] == 51
     assert entry.meta["relae"]["mapped"] > 0  # measured on the record that was written
     capsys.readouterr()
     assert main(["info", str(out)]) == 0
     shown = capsys.readouterr().out
-    assert "64 B" in shown and "basis 38 (vectors 9–46)" in shown
+    assert "64 B" in shown and "[μ int8 + σ shared + basis 51 (vectors 9–59)]" in shown
 
 
 @pytest.mark.parametrize("step", [1e-4, 1.0, 60000.0])
@@ -267,3 +322,30 @@ def test_extreme_materials_layered_within_budget(analytic_tables, name: str) -> 
     record = measure(encoder.encode(brdf, name=name), encoder.decoder, brdf)
     assert record.meta["rate"]["payload_bytes"] <= 128
     assert np.isfinite(record.meta["relae"]["mapped"]) and record.meta["relae"]["mapped"] <= base_error + 1e-9
+
+
+def test_coefficients_fitted_to_a_fixed_code_leave_it_and_lower_the_error(analytic_tables) -> None:
+    """``fit_latent=False`` (a compact μ): the code is kept as given, and the Adam steps on the coefficients never
+    end above the least-squares start."""
+    from brdfcodec.codec import BrdfDecoder, BrdfEncoder
+    from brdfcodec.conventions import MAPPED_MAX
+    from brdfcodec.layers.refine import fit_basis_coefficients
+    from brdfcodec.representation import network_input_from_table
+
+    decoder = BrdfDecoder()
+    basis = decoder.shared_basis
+    brdf = analytic_tables["red-plastic"]
+    inputs, masks = network_input_from_table(brdf.values, brdf.mask)
+    code = BrdfEncoder(effort=0).encode(brdf).mu + np.float32(0.05)  # off the encoder's own answer
+    components = basis.components[8:28]
+    codes, fitted = fit_basis_coefficients(decoder.network, code[None], inputs[None], masks[None], components,
+                                           basis.entries, 1, fit_latent=False)
+    np.testing.assert_array_equal(codes[0], code)
+    base = decoder.decode_mapped(code)
+    start = basis._float32[8:28] @ ((inputs - base) * masks).reshape(-1)[basis.entries]  # the projection
+
+    def l1(c: np.ndarray) -> float:
+        mapped = np.clip(base + basis.residual(c, 8), 0.0, MAPPED_MAX)
+        return float((np.abs(mapped - inputs) * masks).sum())
+
+    assert l1(fitted[0]) < l1(start)

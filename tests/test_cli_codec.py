@@ -45,7 +45,7 @@ def test_compress_decompress_round_trip(capsys, merl_folder: Path, tmp_path: Pat
 
     code, out, err = run(capsys, "info", str(lib))
     assert code == 0, err
-    assert "tiny-test-model" in out and "format 1.3" in out and "gold" in out
+    assert "tiny-test-model" in out and "format 1.4" in out and "gold" in out
 
     code, _, err = run(capsys, "decompress", str(lib), "--material", "gold", "-o", str(tmp_path / "gold.binary"),
                        "--reference", str(merl_folder / "gold.binary"))

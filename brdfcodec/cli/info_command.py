@@ -195,6 +195,10 @@ def _format_text(summary: dict[str, Any]) -> str:
             layers = item.get("layers") or {}
             if layers:
                 parts = []
+                if "mu" in layers:  # a compact base (format 1.4): μ as int8 with a step
+                    parts.append("μ int8")
+                if layers.get("sigma") == "log2-u8-shared":
+                    parts.append("σ shared")
                 if "basis" in layers:
                     count, first = layers["basis"]["count"], layers["basis"].get("first", 0)
                     # vectors numbered from 1, like every number the CLI shows

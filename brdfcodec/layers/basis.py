@@ -51,6 +51,7 @@ __all__ = [
     "SharedBasis",
     "basis_layer_from_bytes",
     "basis_offset",
+    "int8_with_step",
     "fit_shared_basis",
     "load_shared_basis",
     "quantise_coefficients",
@@ -315,18 +316,35 @@ def basis_offset(linear_rank: int, basis_count: int, k: int) -> int:
     return max(0, min(linear_rank, basis_count - k))
 
 
-def quantise_coefficients(sha256: str, coefficients: npt.ArrayLike, first: int = 0) -> BasisLayer:
-    """A basis layer holding ``coefficients`` (of vectors ``first``, ``first + 1``, …) quantised to int8
-    with one float16 step (max |c| / 127)."""
-    c = np.asarray(coefficients, dtype=np.float64).reshape(-1)
-    if not np.isfinite(c).all():
-        raise ValueError("basis coefficients must be finite")
-    largest = float(np.abs(c).max(initial=0.0))
-    step = np.float16(min(max(largest / 127.0, 1e-4), 60000.0))
+def int8_with_step(values: npt.ArrayLike, what: str = "values") -> tuple[float, npt.NDArray[np.int8]]:
+    """Values quantised to int8 with one float16 step: ``(s, q)`` with s = max |v| / 127 (rounded up to a
+    float16 value, at least 1e-4) and q = round(v / s) in −127…127, so every value is kept within s / 2.
+
+    Used by the basis layer's coefficients and by a layered record's compact μ (``spec/bvae-format.md`` §4.5).
+
+    Raises
+    ------
+    ValueError
+        A value is not finite, or so large that the step would leave the float16 range.
+    """
+    v = np.asarray(values, dtype=np.float64).reshape(-1)
+    if not np.isfinite(v).all():
+        raise ValueError(f"{what} must be finite")
+    largest = float(np.abs(v).max(initial=0.0))
+    if largest > 127.0 * 60000.0:
+        raise ValueError(f"{what} reach {largest:.4g}, too large for an int8 code with a float16 step")
+    step = np.float16(max(largest / 127.0, 1e-4))
     if largest / float(step) > 127.49:  # float16 rounding made the step too small for the largest value
         step = np.nextafter(step, np.float16(np.inf))
-    q = np.clip(np.rint(c / float(step)), -127, 127).astype(np.int8)
-    return BasisLayer(sha256, float(step), q, int(first))
+    q = np.clip(np.rint(v / float(step)), -127, 127).astype(np.int8)
+    return float(step), q
+
+
+def quantise_coefficients(sha256: str, coefficients: npt.ArrayLike, first: int = 0) -> BasisLayer:
+    """A basis layer holding ``coefficients`` (of vectors ``first``, ``first + 1``, …) quantised to int8
+    with one float16 step (max |c| / 127, :func:`int8_with_step`)."""
+    step, q = int8_with_step(coefficients, "basis coefficients")
+    return BasisLayer(sha256, step, q, int(first))
 
 
 def basis_layer_from_bytes(entry: Mapping[str, Any], data: bytes) -> BasisLayer:

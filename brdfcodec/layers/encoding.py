@@ -10,7 +10,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from brdfcodec.bvae_format import LatentRecord
-from brdfcodec.layers.basis import BasisLayer, SharedBasis, basis_offset, quantise_coefficients
+from brdfcodec.layers.basis import BasisLayer, SharedBasis, basis_offset, int8_with_step, quantise_coefficients
 from brdfcodec.layers.rate import BasisFit, Metric, encode_layers
 from brdfcodec.layers.refine import EFFORT_STEPS, fit_basis_coefficients, refine_latent
 
@@ -133,13 +133,26 @@ def _basis_fit(
     config = decoder.network.config
     linear_rank = config.latent_dim if config.linear_basis else 0
 
-    def fit(k: int) -> tuple[LatentRecord, BasisLayer, np.ndarray]:
+    joint: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+
+    def fit(k: int, compact: bool) -> tuple[LatentRecord, BasisLayer, np.ndarray]:
         first = basis_offset(linear_rank, basis.count, k)
-        codes, coefficients = fit_basis_coefficients(
-            decoder.network, base.mu[None], inputs[None], masks[None], basis.components[first : first + k],
-            basis.entries, options.effort,
-        )
-        code = _as_stored(codes, options.latent_itemsize)[0]
+        components = basis.components[first : first + k]
+        if k not in joint:
+            joint[k] = fit_basis_coefficients(
+                decoder.network, base.mu[None], inputs[None], masks[None], components, basis.entries, options.effort,
+            )
+        codes, coefficients = joint[k]
+        if compact:
+            # μ as a compact record stores it (int8), then the coefficients refitted to that code.
+            step, q = int8_with_step(codes[0], f"{base.name}: mu")
+            code = np.float32(step) * q.astype(np.float32)
+            _, coefficients = fit_basis_coefficients(
+                decoder.network, code[None], inputs[None], masks[None], components, basis.entries, options.effort,
+                fit_latent=False,
+            )
+        else:
+            code = _as_stored(codes, options.latent_itemsize)[0]
         layer = quantise_coefficients(basis.sha256, coefficients[0], first)
         mapped = decoder.decode_mapped(code) + basis.residual(layer.coefficients(), first)
         return LatentRecord(base.name, code, base.sigma, base.meta), layer, mapped

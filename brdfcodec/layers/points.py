@@ -7,13 +7,15 @@ which codec is better on materials it has not seen". Points of one family
 
 - ``bvae-layered@N``: the shipped β-VAE, float16 latents, effort 1, and the
   enhancement layers rate control chooses within N bytes of record payload:
-  coefficients on the model's shared basis (compact σ), then a detail layer;
+  coefficients on the model's shared basis (compact σ; below the size that
+  holds all of them, a compact base: μ as int8, one σ byte), then a detail
+  layer;
 - ``bvae-max-relae-X``: the same with ``--max-relae X`` (the smallest tried
   record meeting X on each material);
 - ``pca-k-float16`` / ``pca-k-int8``: PCA of the mapped kept slices (basis of
   the training split), coefficients (orthogonal projection) as float16, or
-  as int8 with one float16 scale per material (k + 2 bytes; also k = 30 and
-  62, which fill 32 B and 64 B exactly);
+  as int8 with one float16 scale per material (k + 2 bytes; also k = 14, 30
+  and 62, which fill 16 B, 32 B and 64 B exactly);
 - ``zstd-slices@Δ``: the mapped kept slices quantised at step Δ, int16,
   zstandard level 19 (the plain "quantise and zip" codec);
 - ``dct-slices@Δ``: the detail layer's own coder (colour decorrelation, 3-D
@@ -35,7 +37,7 @@ from brdfcodec.transforms import table_from_network_output
 __all__ = ["rate_distortion_points"]
 
 #: Payload budgets of the layered points, bytes per material.
-LAYERED_BUDGETS = (32, 64, 128, 256, 1024, 4096, 16384, 65536, 262144)
+LAYERED_BUDGETS = (16, 32, 64, 128, 256, 1024, 4096, 16384, 65536, 262144)
 
 
 def _size_label(n: int) -> str:
@@ -199,8 +201,8 @@ def rate_distortion_points(train_inputs: np.ndarray, model: Any = None) -> list[
     basis = fit_pca(train_inputs, min(75, len(train_inputs)))
     sizes = [k for k in (8, 16, 32, 64, 75) if k <= basis.n_components]
     points += [PcaPacked(basis, k, "float16") for k in sizes]
-    # int8 also at k = N − 2, so that each budget of the comparison (32 B, 64 B) is filled exactly.
-    int8_sizes = sorted({*sizes, *(k for k in (30, 62) if k <= basis.n_components)})
+    # int8 also at k = N − 2, so that each budget of the comparison (16 B, 32 B, 64 B) is filled exactly.
+    int8_sizes = sorted({*sizes, *(k for k in (14, 30, 62) if k <= basis.n_components)})
     points += [PcaPacked(basis, k, "int8") for k in int8_sizes]
     points += [ZstdSlices(step) for step in (0.004, 0.016, 0.064, 0.25, 1.0)]
     points += [DctSlices(step) for step in (0.01, 0.04, 0.16, 0.64, 2.56, 10.24)]

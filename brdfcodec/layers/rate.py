@@ -27,7 +27,10 @@ bisect the step in log space between the two rungs that bracket the target
 candidate actually tried, so the answer is the smallest tried file that
 meets the target even where the curve is not monotonic. The achieved RelAE
 is measured on the returned record. A layered record stores σ compactly
-(one byte per dimension, ``spec/bvae-format.md`` §4.5).
+(one byte per dimension, ``spec/bvae-format.md`` §4.5); under a budget too
+small for all K coefficients beside μ in the latent dtype, the base itself is
+compact (μ as int8 with a float16 step, σ as one shared byte: 11 bytes for
+D = 8, :func:`compact_base_pays`), which makes budgets from 14 bytes possible.
 """
 
 from __future__ import annotations
@@ -50,7 +53,8 @@ from brdfcodec.metrics import error_report
 from brdfcodec.transforms import table_from_network_output
 
 __all__ = [
-    "DECODE_TOLERANCE", "DETAIL_BASIS_COUNT", "STEP_LADDER", "BasisFit", "Metric", "RateResult", "encode_layers",
+    "DECODE_TOLERANCE", "DETAIL_BASIS_COUNT", "STEP_LADDER", "BasisFit", "Metric", "RateResult", "compact_base_pays",
+    "encode_layers",
     "fewest_coefficients_within_tolerance", "layered_mapped",
 ]
 
@@ -79,9 +83,10 @@ class RateResult:
     tried: list[tuple[float | None, int, float | None]]
 
 
-#: What a basis fit returns for k coefficients: the base with its jointly refined μ, the layer, and
+#: What a basis fit returns for k coefficients and whether μ is stored compact (then the code it returns is the
+#: quantised one, and the coefficients are fitted to it): the base with its jointly refined μ, the layer, and
 #: the decoder's mapped output before the detail layer (clamped base decode plus the basis residual).
-BasisFit = Callable[[int], tuple[LatentRecord, BasisLayer, np.ndarray]]
+BasisFit = Callable[[int, bool], tuple[LatentRecord, BasisLayer, np.ndarray]]
 #: Basis sizes tried by an error target below the basis' full size.
 _BASIS_COUNTS: Final = (4, 8, 16)
 #: The smaller basis size a size budget also tries under a detail layer (measured on held-out materials of the
@@ -103,19 +108,22 @@ class _Candidates:
     """Records made of the base, k basis coefficients (0: none) and a detail layer at step s (None: none)."""
 
     def __init__(self, base: LatentRecord, base_mapped: np.ndarray, inputs: np.ndarray, masks: np.ndarray,
-                 latent_itemsize: int, basis_fit: BasisFit | None) -> None:
+                 latent_itemsize: int, basis_fit: BasisFit | None, compact: bool = False) -> None:
         self.base, self.inputs, self.masks = base, inputs, masks
         d = base.latent_dim
         self.plain_bytes = 2 * d * latent_itemsize  # a latent record: μ and σ in the latent dtype
-        self.layered_bytes = d * latent_itemsize + d  # a layered record: μ, then σ as one byte each
+        self.compact = compact
+        # A layered record: μ in the latent dtype and σ as one byte each, or (compact) μ as a float16 step and
+        # one byte each, and σ as one shared byte.
+        self.layered_bytes = _compact_base_bytes(d) if compact else d * latent_itemsize + d
         self.basis_fit = basis_fit
         self.stages: dict[int, tuple[LatentRecord, BasisLayer | None, np.ndarray]] = {0: (base, None, base_mapped)}
         self.details: dict[tuple[int, float], DetailLayer] = {}
 
     def stage(self, k: int) -> tuple[LatentRecord, BasisLayer | None, np.ndarray]:
         if k not in self.stages:
-            assert self.basis_fit is not None
-            self.stages[k] = self.basis_fit(k)
+            assert self.basis_fit is not None and k > 0
+            self.stages[k] = self.basis_fit(k, self.compact)
         return self.stages[k]
 
     def detail(self, k: int, s: float) -> DetailLayer:
@@ -129,7 +137,8 @@ class _Candidates:
         if basis is None and s is None:
             return base
         detail = None if s is None else self.detail(k, s)
-        return LayeredRecord(base.name, base.mu, base.sigma, base.meta, detail=detail, basis=basis, compact_sigma=True)
+        storage = {"compact_mu": True, "shared_sigma": True} if self.compact else {"compact_sigma": True}
+        return LayeredRecord(base.name, base.mu, base.sigma, base.meta, detail=detail, basis=basis, **storage)
 
     def size(self, k: int, s: float | None) -> int:
         _, basis, _ = self.stage(k)
@@ -198,7 +207,9 @@ def encode_layers(
     full = basis_count if basis_fit is not None else 0
     target = np.asarray(inputs, dtype=np.float32)
     weights = np.asarray(masks, dtype=np.float32)
-    cands = _Candidates(base, base_mapped, target, weights, latent_itemsize, basis_fit)
+    d = base.latent_dim
+    compact = bytes_budget is not None and compact_base_pays(bytes_budget, d, latent_itemsize, full)
+    cands = _Candidates(base, base_mapped, target, weights, latent_itemsize, basis_fit, compact)
     base_bytes = min(cands.plain_bytes, cands.layered_bytes + STEP_BYTES + 1) if full else cands.plain_bytes
     if step is not None:
         return RateResult(cands.record(full, float(step)), cands.size(full, float(step)),
@@ -209,7 +220,7 @@ def encode_layers(
             raise RateTargetError(f"{base.name}: {bytes_budget} bytes is below the base record's {base_bytes} bytes")
         k = max(0, min(full, bytes_budget - cands.layered_bytes - STEP_BYTES))
         small = min(k, DETAIL_BASIS_COUNT)
-        # The smaller basis only pays where a detail layer fits beside it (no room at 64 B: 38 coefficients, no detail).
+        # The smaller basis only pays where a detail layer fits beside it (no room at 64 B: 51 coefficients, no detail).
         room = bytes_budget - (cands.layered_bytes + STEP_BYTES + small) >= _empty_detail_bytes()
         counts = sorted({k, small}) if room else [k]
         fitting: set[tuple[int, float | None]] = {c for c in ((0, None), (k, None)) if cands.size(*c) <= bytes_budget}
@@ -261,6 +272,23 @@ def encode_layers(
     candidates = [c for c in errors if errors[c] <= max_relae]
     chosen = min(candidates, key=lambda c: cands.size(*c))
     return RateResult(cands.record(*chosen), cands.size(*chosen), tried)
+
+
+def compact_base_pays(bytes_budget: int, latent_dim: int, latent_itemsize: int, basis_count: int) -> bool:
+    """Whether a size budget stores the base compact: when it cannot hold all K basis coefficients beside μ in
+    the latent dtype (and σ as one byte each).
+
+    A compact base (μ as int8 with a float16 step, one shared σ byte: 11 bytes for D = 8 instead of 24 in
+    float16 or 40 in float32) frees 13 or 29 bytes for coefficients, at a cost in error that the measurement
+    found negligible beside them (``benchmarks/compact_base_study.py``, ``reports/rd-study/compact-base.json``).
+    Above that, the bytes would go to the detail layer, where they buy little.
+    """
+    return basis_count > 0 and bytes_budget < latent_dim * latent_itemsize + latent_dim + STEP_BYTES + basis_count
+
+
+def _compact_base_bytes(latent_dim: int) -> int:
+    """Payload of a compact base: μ as a float16 step and D int8 values, σ as one shared byte."""
+    return STEP_BYTES + latent_dim + 1
 
 
 @functools.cache

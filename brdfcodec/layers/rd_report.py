@@ -11,7 +11,7 @@ from brdfcodec.atomic import atomic_output
 __all__ = ["TARGET_SIZES", "rd_markdown", "write_rd_plots"]
 
 #: Payload sizes at which the report compares brdfcodec with the best baseline.
-TARGET_SIZES = (32, 64, 128, 1024, 16384, 262144)
+TARGET_SIZES = (16, 32, 64, 128, 1024, 16384, 262144)
 _METRICS = (("relae_mapped", "RelAE (mapped)"), ("relae_linear", "RelAE (linear)"), ("delta_e_itp", "ΔE ITP"))
 
 

@@ -18,12 +18,14 @@ import numpy as np
 
 from brdfcodec.bvae_format import LatentRecord
 from brdfcodec.hashing import is_sha256_hex
-from brdfcodec.layers.basis import MAX_BASIS_COUNT, STEP_BYTES, BasisLayer, basis_layer_from_bytes
+from brdfcodec.layers.basis import MAX_BASIS_COUNT, STEP_BYTES, BasisLayer, basis_layer_from_bytes, int8_with_step
 from brdfcodec.layers.detail import _DTYPES, DETAIL_TRANSFORM, MAX_STEP, MIN_STEP, N_DETAIL_VALUES, DetailLayer
 
 __all__ = [
     "LAYERED_KIND",
+    "MU_INT8",
     "SIGMA_LOG2_U8",
+    "SIGMA_LOG2_U8_SHARED",
     "LayeredRecord",
     "latent_values_stored",
     "layered_from_payload",
@@ -39,13 +41,24 @@ LAYERED_KIND = "layered"
 MAX_DETAIL_BYTES = 64 << 20
 #: ``layers.sigma`` of a record that stores σ as one byte per dimension: σ = 2^(q/16 − 12), q in 0…255.
 SIGMA_LOG2_U8 = "log2-u8"
+#: ``layers.sigma`` of a record that stores one byte for all dimensions (the same code, ``"log2-u8"``'s scale).
+SIGMA_LOG2_U8_SHARED = "log2-u8-shared"
+#: ``layers.mu`` of a record that stores μ as a float16 step s and D int8 values q: μ = s · q (since 1.4).
+MU_INT8 = "int8"
 _SIGMA_LOG2_MIN, _SIGMA_STEPS_PER_OCTAVE = -12.0, 16.0
+_SIGMA_MODES = (SIGMA_LOG2_U8, SIGMA_LOG2_U8_SHARED)
 
 
 def quantise_sigma(sigma: np.ndarray) -> np.ndarray:
     """One byte per posterior width: ``round(16 · (log2 σ + 12))`` clipped to 0…255 (σ within 2.2 %)."""
     log2 = np.log2(np.maximum(np.asarray(sigma, dtype=np.float64), 1e-30))
     return np.clip(np.rint((log2 - _SIGMA_LOG2_MIN) * _SIGMA_STEPS_PER_OCTAVE), 0, 255).astype(np.uint8)
+
+
+def shared_sigma_code(sigma: np.ndarray) -> np.ndarray:
+    """The one byte of a shared σ: the code of the geometric mean of the widths (:func:`quantise_sigma`)."""
+    log2 = np.log2(np.maximum(np.asarray(sigma, dtype=np.float64), 1e-30))
+    return quantise_sigma(np.exp2(np.array([log2.mean()])))
 
 
 def sigma_from_codes(codes: np.ndarray) -> np.ndarray:
@@ -70,12 +83,21 @@ class LayeredRecord(LatentRecord):
     compact_sigma : bool
         Store σ as one byte per dimension (``layers.sigma = "log2-u8"``, within 2.2 %) instead of in the
         file's latent dtype. ``sigma`` then holds the stored (quantised) widths.
+    shared_sigma : bool
+        Store one byte for all of σ (``layers.sigma = "log2-u8-shared"``): the geometric mean of the widths,
+        which ``sigma`` then holds in every dimension. Excludes ``compact_sigma``.
+    compact_mu : bool
+        Store μ as a float16 step and one signed byte per dimension (``layers.mu = "int8"``: 2 + D bytes,
+        each value within half a step, max |μ| / 254) instead of in the file's latent dtype. ``mu`` then
+        holds the stored (quantised) code.
     """
 
     detail: DetailLayer | None = None
     kind: Literal["layered"] = field(default="layered", init=False)  # type: ignore[assignment]
     basis: BasisLayer | None = None
     compact_sigma: bool = False
+    shared_sigma: bool = False
+    compact_mu: bool = False
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -85,29 +107,63 @@ class LayeredRecord(LatentRecord):
             raise ValueError(f"{self.name}: detail must be a DetailLayer, got {type(self.detail).__name__}")
         if self.basis is not None and not isinstance(self.basis, BasisLayer):
             raise ValueError(f"{self.name}: basis must be a BasisLayer, got {type(self.basis).__name__}")
-        if self.compact_sigma:  # what is stored is what the record holds, so writing and reading agree
-            object.__setattr__(self, "sigma", sigma_from_codes(quantise_sigma(self.sigma)))
+        if self.compact_sigma and self.shared_sigma:
+            raise ValueError(f"{self.name}: sigma is stored either per dimension or shared, not both")
+        # What is stored is what the record holds, so writing and reading agree.
+        if self.compact_sigma:
+            self._hold("sigma", sigma_from_codes(quantise_sigma(self.sigma)))
+        if self.shared_sigma:
+            self._hold("sigma", np.repeat(sigma_from_codes(shared_sigma_code(self.sigma)), len(self.mu)))
+        if self.compact_mu:
+            step, q = self._mu_code()
+            self._hold("mu", np.float32(step) * q.astype(np.float32))
+
+    def _hold(self, field_name: str, values: np.ndarray) -> None:
+        """Replace ``mu`` or ``sigma`` by the values stored (float32, read-only like the base record's)."""
+        array = np.asarray(values, dtype=np.float32)
+        array.setflags(write=False)
+        object.__setattr__(self, field_name, array)
+
+    def _mu_code(self) -> tuple[float, np.ndarray]:
+        return int8_with_step(self.mu, f"{self.name}: mu")
+
+    @property
+    def sigma_bytes_stored(self) -> bool:
+        """Whether σ is stored as bytes after the latent values (per dimension or shared) rather than among them."""
+        return self.compact_sigma or self.shared_sigma
 
     def payload_values(self) -> np.ndarray:
-        """Values stored in the latent dtype: ``mu`` and, unless σ is compact, ``sigma``."""
-        return np.array(self.mu) if self.compact_sigma else super().payload_values()
+        """Values stored in the latent dtype: ``mu`` unless it is compact, ``sigma`` unless it is stored as bytes."""
+        parts = ([] if self.compact_mu else [self.mu]) + ([] if self.sigma_bytes_stored else [self.sigma])
+        return np.concatenate(parts) if parts else np.zeros(0, dtype=np.float32)
 
     def base(self) -> LatentRecord:
         """The base alone (what edits act on): a plain latent record with the same μ, σ and meta."""
         return LatentRecord(self.name, self.mu, self.sigma, self.meta)
 
     def layer_bytes(self) -> bytes:
-        """The bytes that follow the latent values: compact σ, the basis layer's, then the detail layer's."""
+        """The bytes that follow the latent values: compact μ, compact σ, the basis layer's, then the detail
+        layer's."""
+        mu = b""
+        if self.compact_mu:
+            step, q = self._mu_code()
+            mu = np.float16(step).astype("<f2").tobytes() + q.tobytes()
         sigma = quantise_sigma(self.sigma).tobytes() if self.compact_sigma else b""
-        return (sigma + (b"" if self.basis is None else self.basis.data)
+        if self.shared_sigma:
+            sigma = shared_sigma_code(self.sigma).tobytes()
+        return (mu + sigma + (b"" if self.basis is None else self.basis.data)
                 + (b"" if self.detail is None else self.detail.data))
 
 
 def layers_entry(record: LayeredRecord) -> dict[str, Any]:
     """The ``layers`` object of a layered record's index entry."""
     entry: dict[str, Any] = {}
+    if record.compact_mu:
+        entry["mu"] = MU_INT8
     if record.compact_sigma:
         entry["sigma"] = SIGMA_LOG2_U8
+    if record.shared_sigma:
+        entry["sigma"] = SIGMA_LOG2_U8_SHARED
     if record.basis is not None:
         entry["basis"] = record.basis.entry()
     if record.detail is not None:
@@ -116,8 +172,8 @@ def layers_entry(record: LayeredRecord) -> dict[str, Any]:
 
 
 def latent_values_stored(layers: Mapping[str, Any], latent_dim: int) -> int:
-    """Values a layered record stores in the latent dtype (its ``layers`` already validated): D or 2·D."""
-    return latent_dim if layers.get("sigma") == SIGMA_LOG2_U8 else 2 * latent_dim
+    """Values a layered record stores in the latent dtype (its ``layers`` already validated): 0, D or 2·D."""
+    return (0 if "mu" in layers else latent_dim) + (0 if "sigma" in layers else latent_dim)
 
 
 def layers_length(layers: object, where: str, latent_dim: int = 0) -> int:
@@ -132,19 +188,25 @@ def layers_length(layers: object, where: str, latent_dim: int = 0) -> int:
     """
     if not isinstance(layers, Mapping):
         raise ValueError(f"{where} field 'layers' is not a JSON object")
-    unknown = sorted(set(layers) - {"basis", "detail", "sigma"})
+    unknown = sorted(set(layers) - {"basis", "detail", "sigma", "mu"})
     if unknown:
         raise UnsupportedLayerError(f"{where} has layers {unknown}, unknown to this reader; upgrade brdfcodec")
     if "basis" not in layers and "detail" not in layers:
         raise ValueError(f"{where} layers hold neither 'basis' nor 'detail'")
     length = 0
-    if "sigma" in layers:
-        if layers["sigma"] != SIGMA_LOG2_U8:
+    if "mu" in layers:
+        if layers["mu"] != MU_INT8:
             raise UnsupportedLayerError(
-                f"{where} stores sigma as {layers['sigma']!r}, unknown to this reader ({SIGMA_LOG2_U8}); "
-                "upgrade brdfcodec"
+                f"{where} stores mu as {layers['mu']!r}, unknown to this reader ({MU_INT8}); upgrade brdfcodec"
             )
-        length += latent_dim
+        length += STEP_BYTES + latent_dim
+    if "sigma" in layers:
+        if layers["sigma"] not in _SIGMA_MODES:
+            raise UnsupportedLayerError(
+                f"{where} stores sigma as {layers['sigma']!r}, unknown to this reader "
+                f"({' or '.join(_SIGMA_MODES)}); upgrade brdfcodec"
+            )
+        length += 1 if layers["sigma"] == SIGMA_LOG2_U8_SHARED else latent_dim
     if "basis" in layers:
         length += _basis_length(layers["basis"], where)
     if "detail" in layers:
@@ -195,22 +257,40 @@ class UnsupportedLayerError(ValueError):
 
 
 def layered_from_payload(
-    name: str, mu: np.ndarray, sigma: np.ndarray, layers: Mapping[str, Any], tail: bytes, meta: Mapping[str, Any]
+    name: str, values: np.ndarray, latent_dim: int, layers: Mapping[str, Any], tail: bytes, meta: Mapping[str, Any]
 ) -> LayeredRecord:
-    """A layered record from its validated entry and the payload bytes after μ and σ."""
+    """A layered record from its validated entry, the values stored in the latent dtype (μ unless compact,
+    then σ unless stored as bytes: :func:`latent_values_stored` of them) and the payload bytes after them."""
     import zstandard
 
+    d = latent_dim
+    compact_mu = layers.get("mu") == MU_INT8
+    if compact_mu:
+        step = float(np.frombuffer(tail[:STEP_BYTES], dtype="<f2")[0])
+        if not (np.isfinite(step) and step > 0):
+            raise ValueError(f"compact mu step {step!r} is not a positive finite float16 value")
+        mu = np.float32(step) * np.frombuffer(tail[STEP_BYTES : STEP_BYTES + d], dtype=np.int8).astype(np.float32)
+        tail = tail[STEP_BYTES + d :]
+    else:
+        mu, values = values[:d], values[d:]
     compact = layers.get("sigma") == SIGMA_LOG2_U8
+    shared = layers.get("sigma") == SIGMA_LOG2_U8_SHARED
     if compact:
-        sigma = sigma_from_codes(np.frombuffer(tail[: len(mu)], dtype=np.uint8))
-        tail = tail[len(mu) :]
+        sigma = sigma_from_codes(np.frombuffer(tail[:d], dtype=np.uint8))
+        tail = tail[d:]
+    elif shared:
+        sigma = np.repeat(sigma_from_codes(np.frombuffer(tail[:1], dtype=np.uint8)), d)
+        tail = tail[1:]
+    else:
+        sigma = values[:d]
+    flags = {"compact_sigma": compact, "shared_sigma": shared, "compact_mu": compact_mu}
     basis = None
     if "basis" in layers:
         size = STEP_BYTES + int(layers["basis"]["count"])
         basis = basis_layer_from_bytes(layers["basis"], bytes(tail[:size]))
         tail = tail[size:]
     if "detail" not in layers:
-        return LayeredRecord(name, mu, sigma, meta, basis=basis, compact_sigma=compact)
+        return LayeredRecord(name, mu, sigma, meta, basis=basis, **flags)
     detail = layers["detail"]
     layer = DetailLayer(float(detail["step"]), str(detail["dtype"]), bytes(tail))
     expected = N_DETAIL_VALUES * _DTYPES[layer.dtype].itemsize
@@ -220,4 +300,4 @@ def layered_from_payload(
         raise ValueError(f"detail layer is not a zstandard frame ({error})") from None
     if declared != expected:
         raise ValueError(f"detail layer declares {declared} bytes of content, expected {expected}")
-    return LayeredRecord(name, mu, sigma, meta, detail=layer, basis=basis, compact_sigma=compact)
+    return LayeredRecord(name, mu, sigma, meta, detail=layer, basis=basis, **flags)

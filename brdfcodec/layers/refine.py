@@ -139,6 +139,8 @@ def fit_basis_coefficients(
     components: npt.ArrayLike,
     entries: npt.ArrayLike,
     effort: int,
+    *,
+    fit_latent: bool = True,
 ) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.float32]]:
     """Latent codes and basis coefficients fitted together (the basis layer's encoder).
 
@@ -162,6 +164,9 @@ def fit_basis_coefficients(
         Their flat positions in the ``(63, 90, 90)`` layout.
     effort : int
         0 to 3.
+    fit_latent : bool, default True
+        False keeps ``codes`` as they are and fits the coefficients alone (for a code already quantised as
+        it will be stored: the decoder then runs once).
 
     Returns
     -------
@@ -183,12 +188,18 @@ def fit_basis_coefficients(
     for p in decoder.parameters():
         p.requires_grad_(False)
 
+    fixed_base: torch.Tensor | None = None
+
     def decoded(z: torch.Tensor, c: torch.Tensor) -> torch.Tensor:
-        return decoder(z).clamp(0.0, MAPPED_MAX).flatten(1).index_add(1, where, c @ basis)
+        base = decoder(z).clamp(0.0, MAPPED_MAX).flatten(1) if fixed_base is None else fixed_base
+        return base.index_add(1, where, c @ basis)
 
     try:
         with torch.no_grad():
-            residual = (target - decoder(start).clamp(0.0, MAPPED_MAX).flatten(1)) * weight
+            start_base = decoder(start).clamp(0.0, MAPPED_MAX).flatten(1)
+            if not fit_latent:
+                fixed_base = start_base
+            residual = (target - start_base) * weight
             c0 = residual[:, where] @ basis.T
             # No coefficients at all is a candidate too: on a material unlike the training ones the projection
             # (best in L2) can raise the L1 error.
@@ -208,7 +219,8 @@ def fit_basis_coefficients(
                     break
                 z.grad = c.grad = None
                 error.sum().backward()
-                adam_z.step()
+                if fit_latent:
+                    adam_z.step()
                 adam_c.step()
     finally:
         for p, g in zip(decoder.parameters(), grads, strict=True):

@@ -207,6 +207,18 @@ def invalid_vectors() -> dict[str, tuple[bytes, str, str]]:
     zero_step = basis_payload[:10] + np.float16(0).astype("<f2").tobytes() + basis_payload[12:]
     add("basis-step-zero", basis_vector(basis_entry["layers"], zero_step), "malformed",
         "the basis step is 0 (record CRC valid)")
+    # Compact mu and the shared sigma byte (since 1.4): mu as a float16 step and int8 values, one sigma byte.
+    compact_payload = (np.float16(0.5).astype("<f2").tobytes() + bytes([2, 254]) + bytes([160])
+                       + basis_payload[10:])
+    compact_layers = {"mu": "int8", "sigma": "log2-u8-shared", "basis": basis_entry["layers"]["basis"]}
+    add("compact-mu-unknown", basis_vector({**compact_layers, "mu": "int4"}, compact_payload), "unsupported",
+        "mu stored as 'int4'")
+    add("compact-mu-step-nan", basis_vector(compact_layers, np.float16(np.nan).astype("<f2").tobytes()
+                                            + compact_payload[2:]), "malformed",
+        "the compact mu step is NaN (record CRC valid)")
+    add("compact-sigma-length", basis_vector(compact_layers, compact_payload[:5] + bytes([160])
+                                             + compact_payload[5:]), "malformed",
+        "a shared sigma (one byte) but two sigma bytes (record length as the payload)")
     short = detail_frame([1], 63 * 90 * 90 - 1)
     short_payload = lay_payload[:16] + short
     add("layered-content-size", assemble(*plain([({**lay_entry, "crc32": zlib.crc32(short_payload),
@@ -278,16 +290,17 @@ def layered_record(name: str, mu: np.ndarray, sigma: np.ndarray) -> LatentRecord
 
 
 def basis_record(name: str, mu: np.ndarray, sigma: np.ndarray, sha256: str, *, detail: bool = False,
-                 first: int = 0) -> LatentRecord:
+                 first: int = 0, compact_base: bool = False) -> LatentRecord:
     """A layered record (§4.4) with compact sigma and 5 coefficients on a shared basis from vector ``first``
-    (and a detail layer)."""
+    (and a detail layer); with ``compact_base``, compact mu and the shared sigma byte instead (since 1.4)."""
     from brdfcodec.layers.basis import BasisLayer
     from brdfcodec.layers.detail import N_DETAIL_VALUES, DetailLayer
     from brdfcodec.layers.record import LayeredRecord
 
     layer = DetailLayer(0.125, "int16", detail_frame([8, -4, 2], N_DETAIL_VALUES)) if detail else None
     basis = BasisLayer(sha256, 0.5, np.array([12, -7, 3, 0, -1], dtype=np.int8), first)
-    return LayeredRecord(name, mu, sigma, {"effort": 1}, detail=layer, basis=basis, compact_sigma=True)
+    storage = {"compact_mu": True, "shared_sigma": True} if compact_base else {"compact_sigma": True}
+    return LayeredRecord(name, mu, sigma, {"effort": 1}, detail=layer, basis=basis, **storage)
 
 
 def valid_records() -> dict[str, tuple[list, DecoderReference, str, bool | None]]:
@@ -315,12 +328,15 @@ def valid_records() -> dict[str, tuple[list, DecoderReference, str, bool | None]
                                      basis_record("reference.basis-detail", halves(8), sigma(8), SHIPPED_BASIS,
                                                   detail=True),
                                      basis_record("reference.basis-first", halves(8), sigma(8), SHIPPED_BASIS,
-                                                  first=8)],
+                                                  first=8),
+                                     basis_record("reference.basis-compact", halves(8), sigma(8), SHIPPED_BASIS,
+                                                  first=8, compact_base=True)],
                                     SHIPPED_DECODER, "float16", False),
         "layered": ([layered_record("gold.layered", halves(8), sigma(8)),
                      LatentRecord("gold", halves(8), sigma(8), {"effort": 0, "source_kind": "rgl-measured"}),
                      basis_record("gold.basis", halves(8), sigma(8), "cd" * 32, detail=True),
-                     basis_record("gold.basis-first", halves(8), sigma(8), "cd" * 32, first=8)],
+                     basis_record("gold.basis-first", halves(8), sigma(8), "cd" * 32, first=8),
+                     basis_record("gold.basis-compact", halves(8), sigma(8), "cd" * 32, first=8, compact_base=True)],
                     TEST_DECODER, "float32", False),
     }
 
@@ -356,7 +372,7 @@ def generate(folder: Path, *, with_reference: bool = True) -> dict[str, Any]:
     (folder / "valid").mkdir(parents=True, exist_ok=True)
     (folder / "invalid").mkdir(parents=True, exist_ok=True)
     manifest: dict[str, Any] = {
-        "format_version": "1.3",
+        "format_version": "1.4",
         "error_classes": {
             "malformed": "BvaeFormatError",
             "checksum": "BvaeChecksumError",
