@@ -21,12 +21,13 @@ from contextlib import contextmanager
 from typing import Any
 
 import numpy as np
-from basis_study import study_arguments  # sibling script: Python puts the running script's folder on sys.path
+
+# sibling script: Python puts the running script's folder on sys.path
+from basis_study import held_out_materials, study_arguments
 
 import brdfcodec.layers.encoding as encoding
 import brdfcodec.layers.rate as rate
 from brdfcodec.codec import BrdfEncoder
-from brdfcodec.dataset import BrdfDataset
 from brdfcodec.layers.record import LayeredRecord
 from brdfcodec.metrics import error_report
 
@@ -61,12 +62,8 @@ def policy(cap: int | None, search: bool) -> Iterator[None]:
 def main() -> None:
     args = study_arguments(__doc__, "reports/rd-study/basis-cap.json")
     start = time.perf_counter()
-    with BrdfDataset(args.dataset) as dataset:
-        held = dataset.indices("validation")
-        x, m = dataset.inputs(held), dataset.input_masks(held)
-        tables = [dataset.table(i) for i in held]
-        names = [dataset.names[i] for i in held]
-        description = dataset.description
+    held = held_out_materials(args.dataset)
+    x, m, tables, names, description = held.inputs, held.masks, held.tables, held.names, held.description
     rows: list[dict[str, Any]] = []
     for budget in BUDGETS:
         for label, (cap, search) in POLICIES.items():

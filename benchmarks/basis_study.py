@@ -23,7 +23,9 @@ from __future__ import annotations
 import argparse
 import json
 import time
+from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import torch
@@ -44,6 +46,25 @@ def study_arguments(doc: str, default_output: str) -> argparse.Namespace:
     args = parser.parse_args()
     torch.set_num_threads(1)
     return args
+
+
+@dataclass(frozen=True)
+class HeldOut:
+    """A dataset's held-out (validation) materials, as the study scripts use them."""
+
+    inputs: np.ndarray  # (N, 63, 90, 90) mapped kept slices
+    masks: np.ndarray  # (N, 63, 90, 90) validity
+    tables: list[Any]  # full source tables (MerlBRDF)
+    names: list[str]
+    description: str
+
+
+def held_out_materials(path: Path) -> HeldOut:
+    """The held-out materials of the dataset at ``path``, with their full tables."""
+    with BrdfDataset(path) as dataset:
+        held = dataset.indices("validation")
+        return HeldOut(dataset.inputs(held), dataset.input_masks(held), [dataset.table(i) for i in held],
+                       [dataset.names[i] for i in held], dataset.description)
 
 
 def kept_slice_relae(estimate: np.ndarray, inputs: np.ndarray, masks: np.ndarray) -> float:
