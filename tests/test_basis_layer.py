@@ -247,7 +247,15 @@ def test_the_basis_layer_follows_the_decoder_output_it_was_fitted_on(analytic_ta
     assert stored == record.meta["rate"]["payload_bytes"] == 64
     layered_error = measure(record, encoder.decoder, brdf).meta["relae"]["mapped"]
     assert layered_error < 0.9 * base_error
-    # The coefficients are fitted to the quantised μ the record stores: refitting them to it changes nothing.
+    # The coefficients are fitted to the quantised μ the record stores: refitting them to it gives the same ones.
+    from brdfcodec.layers.refine import fit_basis_coefficients
+    from brdfcodec.representation import network_input_from_table
+
+    inputs, masks = network_input_from_table(brdf.values, brdf.mask)
+    basis = encoder.decoder.shared_basis
+    _, refitted = fit_basis_coefficients(encoder.decoder.network, record.mu[None], inputs[None], masks[None],
+                                         basis.components[8:59], basis.entries, 1, fit_latent=False)
+    assert quantise_coefficients(basis.sha256, refitted[0], 8).q.tolist() == record.basis.q.tolist()
     tiny = BrdfEncoder(effort=1, bytes=14).encode(brdf, name="t")  # the smallest record: compact base, 1 coefficient
     assert tiny.basis.count == 1 and tiny.meta["rate"]["payload_bytes"] == 14
     no_basis = BrdfEncoder(effort=1, bytes=64, latent_dtype="float16", basis=False).encode(brdf, name="m")
