@@ -288,6 +288,14 @@ def test_cli_bytes_writes_the_basis_layer(red_plastic_file, tmp_path, capsys) ->
     assert main(["info", str(out)]) == 0
     shown = capsys.readouterr().out
     assert "64 B" in shown and "[μ int8 + σ shared + basis 51 (vectors 9–59)]" in shown
+    smallest = tmp_path / "s.bvae"
+    assert main(["compress", str(red_plastic_file), "-o", str(smallest), "--bytes", "14"]) == 0
+    capsys.readouterr()
+    assert main(["info", str(smallest)]) == 0
+    assert "[μ int8 + σ shared + basis 1 (vector 9)] 14 B" in capsys.readouterr().out
+    assert main(["compress", str(red_plastic_file), "-o", str(tmp_path / "t.bvae"), "--bytes", "13"]) != 0
+    assert "13 bytes is below the base record's 14 bytes" in capsys.readouterr().err
+    assert not (tmp_path / "t.bvae").exists()
 
 
 @pytest.mark.parametrize("step", [1e-4, 1.0, 60000.0])

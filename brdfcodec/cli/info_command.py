@@ -202,7 +202,8 @@ def _format_text(summary: dict[str, Any]) -> str:
                 if "basis" in layers:
                     count, first = layers["basis"]["count"], layers["basis"].get("first", 0)
                     # vectors numbered from 1, like every number the CLI shows
-                    span = f" (vectors {first + 1}–{first + count})" if first else ""
+                    vectors = f"vector {first + 1}" if count == 1 else f"vectors {first + 1}–{first + count}"
+                    span = f" ({vectors})" if first else ""
                     parts.append(f"basis {count}{span}")
                 if "detail" in layers:
                     parts.append(f"detail {layers['detail']['length']} B")
