@@ -9,7 +9,27 @@ import tempfile
 from collections.abc import Iterator
 from pathlib import Path
 
-__all__ = ["atomic_output", "check_output_path"]
+__all__ = ["atomic_output", "check_output_path", "remove_unfinished_outputs"]
+
+#: Temporary files of :func:`atomic_output` blocks not yet published or removed (paths as given by mkstemp).
+_UNFINISHED: set[str] = set()
+
+
+def remove_unfinished_outputs() -> list[str]:
+    """Remove the temporary files of every :func:`atomic_output` still open; return their paths.
+
+    For a process that is being interrupted or terminated: an exception normally removes a block's temporary
+    file itself, but one raised between two steps of the context manager's own machinery (entering or leaving
+    the block) can bypass that, and the process may exit before the generator is finalised. The ``bvae`` CLI
+    calls this when it is interrupted or terminated.
+    """
+    removed = []
+    for name in sorted(_UNFINISHED):
+        with contextlib.suppress(FileNotFoundError):
+            os.unlink(name)
+            removed.append(name)
+        _UNFINISHED.discard(name)
+    return removed
 
 
 def check_output_path(path: str | os.PathLike[str], *, overwrite: bool) -> Path:
@@ -119,15 +139,20 @@ def atomic_output(path: str | os.PathLike[str], *, overwrite: bool = False) -> I
         fd, tmp_name = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".part", dir=target.parent)
     except OSError as error:
         raise type(error)(error.errno, error.strerror, os.fspath(target)) from None
-    os.close(fd)
-    tmp = Path(tmp_name)
+    _UNFINISHED.add(tmp_name)
+    # From here on the temporary file exists: every step, even closing it, runs where an exception (a SIGTERM
+    # turned into one by the CLI can arrive between any two bytecodes) removes it.
     try:
+        os.close(fd)
+        tmp = Path(tmp_name)
         yield tmp
         os.chmod(tmp, 0o666 & ~_current_umask())
         _publish(tmp, target, overwrite=overwrite)
     except BaseException as error:
         with contextlib.suppress(FileNotFoundError):
-            tmp.unlink()
+            os.unlink(tmp_name)
         if isinstance(error, OSError):
-            _name_target(error, tmp, target)
+            _name_target(error, Path(tmp_name), target)
         raise
+    finally:
+        _UNFINISHED.discard(tmp_name)

@@ -370,3 +370,38 @@ def test_every_public_name_of_the_package_resolves() -> None:
     for name in brdfcodec.__all__:
         assert getattr(brdfcodec, name) is not None, name
     assert brdfcodec.ClampWarning is codec.ClampWarning and brdfcodec.prepare_source is codec.prepare_source
+
+
+def test_an_interruption_right_after_the_temporary_file_is_made_leaves_nothing(tmp_path, monkeypatch) -> None:
+    """A SIGTERM (an exception in the CLI) can land between creating the temporary file and writing it."""
+    import brdfcodec.atomic as atomic
+
+    class Interrupted(BaseException):
+        pass
+
+    real_close = os.close
+
+    def close_then_interrupt(fd: int) -> None:
+        real_close(fd)
+        raise Interrupted
+
+    monkeypatch.setattr(atomic.os, "close", close_then_interrupt)
+    with pytest.raises(Interrupted), atomic.atomic_output(tmp_path / "x.bin"):
+        pass
+    monkeypatch.undo()
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_unfinished_outputs_are_removed_when_the_block_is_never_left(tmp_path) -> None:
+    """An exception between the context manager's own steps can leave a block without its cleanup running (the
+    generator stays suspended): the CLI then removes every unfinished temporary file itself."""
+    from brdfcodec.atomic import atomic_output, remove_unfinished_outputs
+
+    block = atomic_output(tmp_path / "x.bin")
+    tmp = block.__enter__()
+    tmp.write_bytes(b"half")
+    assert remove_unfinished_outputs() == [str(tmp)]
+    assert list(tmp_path.iterdir()) == [] and remove_unfinished_outputs() == []
+    with atomic_output(tmp_path / "y.bin") as done:  # a finished block leaves nothing to remove
+        done.write_bytes(b"whole")
+    assert remove_unfinished_outputs() == [] and (tmp_path / "y.bin").read_bytes() == b"whole"

@@ -31,6 +31,7 @@ import sys
 import warnings
 from collections.abc import Iterator, Sequence
 
+from brdfcodec.atomic import remove_unfinished_outputs
 from brdfcodec.cli import (
     analytic_command,
     bench_command,
@@ -176,9 +177,11 @@ def main(argv: Sequence[str] | None = None) -> int:
             sys.stdout.flush()  # a closed pipe shows here, not in the interpreter's exit
             return code
     except KeyboardInterrupt:
+        remove_unfinished_outputs()
         print("bvae: interrupted", file=sys.stderr)
         return EXIT_INTERRUPTED
     except Terminated:
+        remove_unfinished_outputs()
         print("bvae: terminated", file=sys.stderr)
         return EXIT_TERMINATED
     except BrokenPipeError:
