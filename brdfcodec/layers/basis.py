@@ -51,8 +51,11 @@ __all__ = [
     "SharedBasis",
     "basis_layer_from_bytes",
     "basis_offset",
-    "int8_with_step",
+    "dequantise_int8",
     "fit_shared_basis",
+    "int8_from_step_bytes",
+    "int8_step_bytes",
+    "int8_with_step",
     "load_shared_basis",
     "quantise_coefficients",
     "write_shared_basis",
@@ -287,11 +290,11 @@ class BasisLayer:
     @property
     def data(self) -> bytes:
         """Payload bytes: the step as little-endian float16, then the k int8 coefficients."""
-        return np.float16(self.step).astype("<f2").tobytes() + self.q.tobytes()
+        return int8_step_bytes(self.step, self.q)
 
     def coefficients(self) -> npt.NDArray[np.float32]:
         """``s · q`` as float32."""
-        return np.float32(self.step) * self.q.astype(np.float32)
+        return dequantise_int8(self.step, self.q)
 
     def entry(self) -> dict[str, object]:
         """The ``layers.basis`` object of the record's index entry (``first`` only when it is not 0)."""
@@ -340,6 +343,30 @@ def int8_with_step(values: npt.ArrayLike, what: str = "values") -> tuple[float, 
     return float(step), q
 
 
+def dequantise_int8(step: float, q: npt.ArrayLike) -> npt.NDArray[np.float32]:
+    """``s · q`` in float32: the values an int8 code with a float16 step stands for."""
+    return np.float32(step) * np.asarray(q).astype(np.float32)
+
+
+def int8_step_bytes(step: float, q: npt.NDArray[np.int8]) -> bytes:
+    """The stored form of an int8 code: the step as a little-endian float16, then the int8 values."""
+    return np.float16(step).astype("<f2").tobytes() + np.asarray(q, dtype=np.int8).tobytes()
+
+
+def int8_from_step_bytes(data: bytes, what: str) -> tuple[float, npt.NDArray[np.int8]]:
+    """Inverse of :func:`int8_step_bytes`: ``(s, q)``, refused unless s is a positive finite number.
+
+    Raises
+    ------
+    ValueError
+        The step is zero, negative, infinite or NaN (``what`` names it in the message).
+    """
+    step = float(np.frombuffer(data[:STEP_BYTES], dtype="<f2")[0])
+    if not (np.isfinite(step) and step > 0):
+        raise ValueError(f"{what} {step} is not a positive finite number")
+    return step, np.frombuffer(data[STEP_BYTES:], dtype=np.int8).copy()
+
+
 def quantise_coefficients(sha256: str, coefficients: npt.ArrayLike, first: int = 0) -> BasisLayer:
     """A basis layer holding ``coefficients`` (of vectors ``first``, ``first + 1``, …) quantised to int8
     with one float16 step (max |c| / 127, :func:`int8_with_step`)."""
@@ -352,9 +379,6 @@ def basis_layer_from_bytes(entry: Mapping[str, Any], data: bytes) -> BasisLayer:
     count = int(entry["count"])
     if len(data) != STEP_BYTES + count:
         raise ValueError(f"basis layer holds {len(data)} bytes, expected {STEP_BYTES + count}")
-    step = float(np.frombuffer(data[:STEP_BYTES], dtype="<f2")[0])
-    if not (np.isfinite(step) and step > 0):
-        raise ValueError(f"basis step {step} is not a positive finite number")
-    return BasisLayer(str(entry["sha256"]), step, np.frombuffer(data[STEP_BYTES:], dtype=np.int8).copy(),
-                      int(entry.get("first", 0)))
+    step, q = int8_from_step_bytes(data, "basis step")
+    return BasisLayer(str(entry["sha256"]), step, q, int(entry.get("first", 0)))
 

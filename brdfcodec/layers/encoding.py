@@ -10,7 +10,14 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from brdfcodec.bvae_format import LatentRecord
-from brdfcodec.layers.basis import BasisLayer, SharedBasis, basis_offset, int8_with_step, quantise_coefficients
+from brdfcodec.layers.basis import (
+    BasisLayer,
+    SharedBasis,
+    basis_offset,
+    dequantise_int8,
+    int8_with_step,
+    quantise_coefficients,
+)
 from brdfcodec.layers.rate import BasisFit, Metric, encode_layers
 from brdfcodec.layers.refine import EFFORT_STEPS, fit_basis_coefficients, refine_latent
 
@@ -145,8 +152,7 @@ def _basis_fit(
         codes, coefficients = joint[k]
         if compact:
             # μ as a compact record stores it (int8), then the coefficients refitted to that code.
-            step, q = int8_with_step(codes[0], f"{base.name}: mu")
-            code = np.float32(step) * q.astype(np.float32)
+            code = dequantise_int8(*int8_with_step(codes[0], f"{base.name}: mu"))
             _, coefficients = fit_basis_coefficients(
                 decoder.network, code[None], inputs[None], masks[None], components, basis.entries, options.effort,
                 fit_latent=False,

@@ -113,9 +113,7 @@ class _Candidates:
         d = base.latent_dim
         self.plain_bytes = 2 * d * latent_itemsize  # a latent record: μ and σ in the latent dtype
         self.compact = compact
-        # A layered record: μ in the latent dtype and σ as one byte each, or (compact) μ as a float16 step and
-        # one byte each, and σ as one shared byte.
-        self.layered_bytes = _compact_base_bytes(d) if compact else d * latent_itemsize + d
+        self.layered_bytes = _layered_base_bytes(d, latent_itemsize, compact)
         self.basis_fit = basis_fit
         self.stages: dict[int, tuple[LatentRecord, BasisLayer | None, np.ndarray]] = {0: (base, None, base_mapped)}
         self.details: dict[tuple[int, float], DetailLayer] = {}
@@ -283,12 +281,14 @@ def compact_base_pays(bytes_budget: int, latent_dim: int, latent_itemsize: int, 
     found negligible beside them (``benchmarks/compact_base_study.py``, ``reports/rd-study/compact-base.json``).
     Above that, the bytes would go to the detail layer, where they buy little.
     """
-    return basis_count > 0 and bytes_budget < latent_dim * latent_itemsize + latent_dim + STEP_BYTES + basis_count
+    full_base = _layered_base_bytes(latent_dim, latent_itemsize, compact=False)
+    return basis_count > 0 and bytes_budget < full_base + STEP_BYTES + basis_count
 
 
-def _compact_base_bytes(latent_dim: int) -> int:
-    """Payload of a compact base: μ as a float16 step and D int8 values, σ as one shared byte."""
-    return STEP_BYTES + latent_dim + 1
+def _layered_base_bytes(latent_dim: int, latent_itemsize: int, compact: bool) -> int:
+    """Payload of a layered record's base: μ in the latent dtype and σ as one byte per dimension, or (compact) μ
+    as a float16 step and D int8 values and σ as one shared byte."""
+    return STEP_BYTES + latent_dim + 1 if compact else latent_dim * latent_itemsize + latent_dim
 
 
 @functools.cache

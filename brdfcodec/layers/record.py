@@ -18,7 +18,16 @@ import numpy as np
 
 from brdfcodec.bvae_format import LatentRecord
 from brdfcodec.hashing import is_sha256_hex
-from brdfcodec.layers.basis import MAX_BASIS_COUNT, STEP_BYTES, BasisLayer, basis_layer_from_bytes, int8_with_step
+from brdfcodec.layers.basis import (
+    MAX_BASIS_COUNT,
+    STEP_BYTES,
+    BasisLayer,
+    basis_layer_from_bytes,
+    dequantise_int8,
+    int8_from_step_bytes,
+    int8_step_bytes,
+    int8_with_step,
+)
 from brdfcodec.layers.detail import _DTYPES, DETAIL_TRANSFORM, MAX_STEP, MIN_STEP, N_DETAIL_VALUES, DetailLayer
 
 __all__ = [
@@ -115,8 +124,7 @@ class LayeredRecord(LatentRecord):
         if self.shared_sigma:
             self._hold("sigma", np.repeat(sigma_from_codes(shared_sigma_code(self.sigma)), len(self.mu)))
         if self.compact_mu:
-            step, q = self._mu_code()
-            self._hold("mu", np.float32(step) * q.astype(np.float32))
+            self._hold("mu", dequantise_int8(*self._mu_code()))
 
     def _hold(self, field_name: str, values: np.ndarray) -> None:
         """Replace ``mu`` or ``sigma`` by the values stored (float32, read-only like the base record's)."""
@@ -144,10 +152,7 @@ class LayeredRecord(LatentRecord):
     def layer_bytes(self) -> bytes:
         """The bytes that follow the latent values: compact μ, compact σ, the basis layer's, then the detail
         layer's."""
-        mu = b""
-        if self.compact_mu:
-            step, q = self._mu_code()
-            mu = np.float16(step).astype("<f2").tobytes() + q.tobytes()
+        mu = int8_step_bytes(*self._mu_code()) if self.compact_mu else b""
         sigma = quantise_sigma(self.sigma).tobytes() if self.compact_sigma else b""
         if self.shared_sigma:
             sigma = shared_sigma_code(self.sigma).tobytes()
@@ -266,10 +271,7 @@ def layered_from_payload(
     d = latent_dim
     compact_mu = layers.get("mu") == MU_INT8
     if compact_mu:
-        step = float(np.frombuffer(tail[:STEP_BYTES], dtype="<f2")[0])
-        if not (np.isfinite(step) and step > 0):
-            raise ValueError(f"compact mu step {step!r} is not a positive finite float16 value")
-        mu = np.float32(step) * np.frombuffer(tail[STEP_BYTES : STEP_BYTES + d], dtype=np.int8).astype(np.float32)
+        mu = dequantise_int8(*int8_from_step_bytes(tail[: STEP_BYTES + d], "compact mu step"))
         tail = tail[STEP_BYTES + d :]
     else:
         mu, values = values[:d], values[d:]
