@@ -273,7 +273,21 @@ def test_an_error_target_takes_the_smallest_candidate_that_meets_it(analytic_tab
     chosen = encoder.encode(brdf, name="m")
     assert measure(chosen, encoder.decoder, brdf).meta["relae"]["mapped"] <= reached * 1.05
     assert isinstance(chosen, LayeredRecord) and chosen.basis is not None and chosen.detail is None
-    assert chosen.meta["rate"]["payload_bytes"] <= 64 * 2
+    # a record without a detail layer stores its base compact, as a size budget does: at most 32 coefficients
+    assert chosen.compact_mu and chosen.shared_sigma
+    assert chosen.meta["rate"]["payload_bytes"] == 2 + 8 + 1 + 2 + chosen.basis.count <= 45
+    loose = BrdfEncoder(effort=0, max_relae=1.0, latent_dtype="float16").encode(brdf, name="m")
+    assert loose.compact_mu and loose.basis.count == 4 and loose.meta["rate"]["payload_bytes"] == 17
+
+
+def test_an_error_target_tries_candidates_from_small_to_large() -> None:
+    from brdfcodec.layers.rate import STEP_LADDER, error_target_sequence
+
+    sequence = error_target_sequence(75)
+    assert sequence[:5] == [(True, 4, None), (True, 8, None), (True, 16, None), (True, 32, None), (True, 75, None)]
+    assert sequence[5:] == [(False, 75, s) for s in STEP_LADDER]
+    assert error_target_sequence(20)[:4] == [(True, 4, None), (True, 8, None), (True, 16, None), (True, 20, None)]
+    assert error_target_sequence(0) == [(False, 0, None), *((False, 0, s) for s in STEP_LADDER)]
 
 
 def test_cli_bytes_writes_the_basis_layer(red_plastic_file, tmp_path, capsys) -> None:

@@ -16,10 +16,11 @@ halving every two rungs):
   Where a detail layer has room, the bytes of coefficients past the first
   few dozen buy more as detail, and each costs decode time
   (``reports/rd-study/basis-cap.json``); below that, all K coefficients win;
-- ``max_relae=X``: the first of base, 4, 8, 16 and K basis coefficients, then
-  K coefficients plus each rung from coarse to fine, whose decoded table has
-  a measured RelAE (mapped or linear, full table, valid entries) of at most
-  X — the smallest file that meets X.
+- ``max_relae=X``: the first of 4, 8, 16, 32 and K basis coefficients on a
+  compact base, then K coefficients plus each rung from coarse to fine,
+  whose decoded table has a measured RelAE (mapped or linear, full table,
+  valid entries) of at most X — the smallest file that meets X
+  (:func:`error_target_sequence`).
 
 Both searches bisect (size falls and error rises along the sequence), then
 bisect the step in log space between the two rungs that bracket the target
@@ -28,7 +29,8 @@ candidate actually tried, so the answer is the smallest tried file that
 meets the target even where the curve is not monotonic. The achieved RelAE
 is measured on the returned record. A layered record stores σ compactly
 (one byte per dimension, ``spec/bvae-format.md`` §4.5); under a budget too
-small for all K coefficients beside μ in the latent dtype, the base itself is
+small for all K coefficients beside μ in the latent dtype (and for an error
+target, in every record without a detail layer), the base itself is
 compact (μ as int8 with a float16 step, σ as one shared byte: 11 bytes for
 D = 8, :func:`compact_base_pays`), which makes budgets from 14 bytes possible.
 """
@@ -55,7 +57,7 @@ from brdfcodec.transforms import table_from_network_output
 __all__ = [
     "DECODE_TOLERANCE", "DETAIL_BASIS_COUNT", "STEP_LADDER", "BasisFit", "Metric", "RateResult", "compact_base_pays",
     "encode_layers",
-    "fewest_coefficients_within_tolerance", "layered_mapped",
+    "error_target_sequence", "fewest_coefficients_within_tolerance", "layered_mapped",
 ]
 
 Metric = Literal["mapped", "linear"]
@@ -88,7 +90,9 @@ class RateResult:
 #: the decoder's mapped output before the detail layer (clamped base decode plus the basis residual).
 BasisFit = Callable[[int, bool], tuple[LatentRecord, BasisLayer, np.ndarray]]
 #: Basis sizes tried by an error target below the basis' full size.
-_BASIS_COUNTS: Final = (4, 8, 16)
+_BASIS_COUNTS: Final = (4, 8, 16, 32)
+#: A candidate of an error target: compact base or not, basis coefficients, detail step (None: no detail layer).
+_Candidate = tuple[bool, int, float | None]
 #: The smaller basis size a size budget also tries under a detail layer (measured on held-out materials of the
 #: NBRDF proxy: at 1 KB and 16 KB, 32 coefficients plus detail beat 75 plus detail; at 256 B, 75 win).
 DETAIL_BASIS_COUNT: Final = 32
@@ -238,19 +242,21 @@ def encode_layers(
         raise ValueError(f"{base.name}: max_relae needs the source table to measure the error")
     if not max_relae > 0:
         raise ValueError(f"max_relae must be > 0, got {max_relae}")
-    errors: dict[tuple[int, float | None], float] = {}
+    # An error target's candidates: (compact base?, k coefficients, detail step or None).
+    pools = {False: cands, True: _Candidates(base, base_mapped, target, weights, latent_itemsize, basis_fit,
+                                             compact=True)}
+    errors: dict[tuple[bool, int, float | None], float] = {}
 
-    def error(candidate: tuple[int, float | None]) -> float:
+    def error(candidate: tuple[bool, int, float | None]) -> float:
         if candidate not in errors:
-            table = table_from_network_output(cands.mapped(*candidate)).astype(np.float64)
+            compact_base, k, s = candidate
+            table = table_from_network_output(pools[compact_base].mapped(k, s)).astype(np.float64)
             report = error_report(values, table, mask)
             errors[candidate] = (report.relae_mapped if metric == "mapped" else report.relae_linear).overall
-            tried.append((candidate[1], cands.size(*candidate), errors[candidate]))
+            tried.append((s, pools[compact_base].size(k, s), errors[candidate]))
         return errors[candidate]
 
-    sequence: list[tuple[int, float | None]] = [(0, None)]
-    sequence += [(n, None) for n in (*(n for n in _BASIS_COUNTS if n < full), full) if n > 0]
-    sequence += [(full, s) for s in STEP_LADDER]
+    sequence = error_target_sequence(full)
     bracket = _bisect(lambda c: error(c) <= max_relae, len(sequence), sequence)
     if bracket is None:
         best = min(errors.values())
@@ -258,18 +264,35 @@ def encode_layers(
             f"{base.name}: RelAE ({metric}) {max_relae} is not reachable; the finest step reaches {best:.4g}"
         )
     failing, meeting = bracket
-    if failing is not None and failing[1] is not None and meeting[1] is not None:
+    if failing is not None and failing[2] is not None and meeting[2] is not None:
         # between two rungs: look for a coarser step that still meets X
-        low, high = failing[1], meeting[1]
+        low, high = failing[2], meeting[2]
         for _ in range(_REFINE_ROUNDS - 1):
             mid_step = float(np.sqrt(low * high))
-            if error((full, mid_step)) <= max_relae:
+            if error((False, full, mid_step)) <= max_relae:
                 high = mid_step
             else:
                 low = mid_step
     candidates = [c for c in errors if errors[c] <= max_relae]
-    chosen = min(candidates, key=lambda c: cands.size(*c))
-    return RateResult(cands.record(*chosen), cands.size(*chosen), tried)
+    chosen = min(candidates, key=lambda c: pools[c[0]].size(*c[1:]))
+    return RateResult(pools[chosen[0]].record(*chosen[1:]), pools[chosen[0]].size(*chosen[1:]), tried)
+
+
+def error_target_sequence(basis_count: int) -> list[tuple[bool, int, float | None]]:
+    """The candidates an error target tries, smallest first: ``(compact base, k coefficients, detail step)``.
+
+    With a shared basis of K vectors: 4, 8, 16 and 32 coefficients (those below K), then all K, on a compact
+    base (the same rule as a size budget: a record too small for all K coefficients beside μ in the latent
+    dtype stores its base compact), then K coefficients on the latent-dtype base under each rung of
+    :data:`STEP_LADDER`, coarse to fine. Without a basis: the base alone, then the base under each rung.
+    The base alone is not tried where there is a basis: four coefficients on a compact base are smaller
+    (17 bytes for D = 8 against 24 or 40) and, fitted from no coefficients up, no worse on the material
+    beyond the int8 rounding of μ.
+    """
+    if basis_count <= 0:
+        return [(False, 0, None), *((False, 0, s) for s in STEP_LADDER)]
+    counts = [n for n in _BASIS_COUNTS if n < basis_count] + [basis_count]
+    return [*((True, n, None) for n in counts), *((False, basis_count, s) for s in STEP_LADDER)]
 
 
 def compact_base_pays(bytes_budget: int, latent_dim: int, latent_itemsize: int, basis_count: int) -> bool:
@@ -336,8 +359,8 @@ def _finest_fitting_steps(cands: _Candidates, k: int, bytes_budget: int,
 
 
 def _bisect(
-    ok: Callable[[tuple[int, float | None]], bool], n: int, sequence: list[tuple[int, float | None]]
-) -> tuple[tuple[int, float | None] | None, tuple[int, float | None]] | None:
+    ok: Callable[[_Candidate], bool], n: int, sequence: list[_Candidate]
+) -> tuple[_Candidate | None, _Candidate] | None:
     """Bracket the first candidate of ``sequence`` (ordered from smallest to largest) for which ``ok`` holds.
 
     Returns ``(last failing, first passing)`` — ``(None, first)`` when the first passes — or None when even the
