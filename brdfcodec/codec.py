@@ -63,7 +63,7 @@ from brdfcodec.errors import (
 from brdfcodec.inputs import read_measured
 from brdfcodec.mask import horizon_mask, kept_slice_horizon_mask
 from brdfcodec.merl import MerlBRDF
-from brdfcodec.metrics import error_report
+from brdfcodec.metrics import relae_both
 from brdfcodec.models.registry import default_model_folder, find_model
 from brdfcodec.models.store import ModelManifest, load_manifest, load_model
 from brdfcodec.representation import (
@@ -757,12 +757,12 @@ def measure(record: Record, decoder: BrdfDecoder, source: MerlBRDF) -> LatentRec
     """
     source = prepare_source(source, warn=False)
     estimate = decoder.decode(record, masked="keep").astype(np.float64)
-    report = error_report(source.values, estimate, source.mask)
+    linear, mapped = relae_both(source.values, estimate, source.mask)
     meta = {key: value for key, value in record.meta.items() if key not in ("relae", "source_kind")}
     meta["source_sha256"] = source.source_sha256 or source.sha256  # the provenance of what was measured against
     if source.source_kind is not None:
         meta["source_kind"] = source.source_kind
-    relae = {"mapped": report.relae_mapped.overall, "linear": report.relae_linear.overall}
+    relae = {"mapped": mapped.overall, "linear": linear.overall}
     if all(np.isfinite(v) for v in relae.values()):
         meta["relae"] = relae
     else:

@@ -8,7 +8,14 @@ import pytest
 from brdfcodec.conventions import MERL_COLOR_SCALE, TABLE_SHAPE
 from brdfcodec.mask import horizon_mask
 from brdfcodec.merl import MerlBRDF
-from brdfcodec.metrics import cosine_weighted_rmse, error_report, relae_linear, relae_mapped
+from brdfcodec.metrics import (
+    RelaeAgainst,
+    cosine_weighted_rmse,
+    error_report,
+    relae_both,
+    relae_linear,
+    relae_mapped,
+)
 from brdfcodec.representation import interpolate_slices, select_kept_slices
 
 
@@ -77,3 +84,24 @@ def test_bad_arguments() -> None:
 def test_zero_reference_gives_nan_not_an_exception() -> None:
     zeros = np.zeros(TABLE_SHAPE)
     assert np.isnan(relae_linear(zeros, zeros).overall)
+
+
+def test_one_reference_against_many_estimates_gives_the_same_numbers(analytic_tables: dict[str, MerlBRDF]) -> None:
+    values = analytic_tables["gold"].values
+    rng = np.random.default_rng(3)
+    mask = horizon_mask()[None] & (rng.random(TABLE_SHAPE) > 0.1)
+    reference = np.where(mask, values, np.nan)  # what lies off the mask must not matter
+    against = {metric: RelaeAgainst(reference, mask, metric) for metric in ("mapped", "linear")}
+    for scale in (0.02, 0.3):
+        estimate = np.where(mask, values * (1 + scale * rng.standard_normal(TABLE_SHAPE)), -1.0)
+        linear, mapped = relae_both(reference, estimate, mask)
+        assert linear == relae_linear(reference, estimate, mask) == against["linear"](estimate)
+        assert mapped == relae_mapped(reference, estimate, mask) == against["mapped"](estimate)
+        assert mapped.as_dict() == error_report(reference, estimate, mask).relae_mapped.as_dict()
+        assert 0 < mapped.overall < linear.overall
+    with pytest.raises(ValueError, match="NaN"):
+        against["mapped"](np.where(mask, np.inf, 0.0))
+    with pytest.raises(ValueError, match="shape"):
+        against["linear"](np.zeros((3, 2)))
+    with pytest.raises(ValueError, match="metric"):
+        RelaeAgainst(values, metric="log")

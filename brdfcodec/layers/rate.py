@@ -51,7 +51,7 @@ from brdfcodec.errors import RateTargetError
 from brdfcodec.layers.basis import STEP_BYTES, BasisLayer
 from brdfcodec.layers.detail import DetailLayer, decode_detail, encode_detail
 from brdfcodec.layers.record import LayeredRecord
-from brdfcodec.metrics import error_report
+from brdfcodec.metrics import RelaeAgainst
 from brdfcodec.transforms import table_from_network_output
 
 __all__ = [
@@ -246,13 +246,12 @@ def encode_layers(
     pools = {False: cands, True: _Candidates(base, base_mapped, target, weights, latent_itemsize, basis_fit,
                                              compact=True)}
     errors: dict[tuple[bool, int, float | None], float] = {}
+    relae = RelaeAgainst(values, mask, metric)  # the source mapped and summed once for all candidates
 
     def error(candidate: tuple[bool, int, float | None]) -> float:
         if candidate not in errors:
             compact_base, k, s = candidate
-            table = table_from_network_output(pools[compact_base].mapped(k, s)).astype(np.float64)
-            report = error_report(values, table, mask)
-            errors[candidate] = (report.relae_mapped if metric == "mapped" else report.relae_linear).overall
+            errors[candidate] = relae(table_from_network_output(pools[compact_base].mapped(k, s))).overall
             tried.append((s, pools[compact_base].size(k, s), errors[candidate]))
         return errors[candidate]
 
