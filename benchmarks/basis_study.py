@@ -23,6 +23,8 @@ from __future__ import annotations
 import argparse
 import json
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -46,6 +48,19 @@ def study_arguments(doc: str, default_output: str) -> argparse.Namespace:
     args = parser.parse_args()
     torch.set_num_threads(1)
     return args
+
+
+@contextmanager
+def replaced(module: Any, name: str, value: Any, active: bool = True) -> Iterator[None]:
+    """``module.name`` replaced by ``value`` inside the block (when ``active``), to compare an encoder rule with
+    another one in the same run."""
+    original = getattr(module, name)
+    if active:
+        setattr(module, name, value)
+    try:
+        yield
+    finally:
+        setattr(module, name, original)
 
 
 @dataclass(frozen=True)

@@ -20,14 +20,12 @@ from __future__ import annotations
 
 import json
 import time
-from collections.abc import Iterator
-from contextlib import contextmanager
 from typing import Any
 
 import numpy as np
 
 # sibling script: Python puts the running script's folder on sys.path
-from basis_study import held_out_materials, study_arguments
+from basis_study import held_out_materials, replaced, study_arguments
 
 import brdfcodec.layers.rate as rate
 from brdfcodec.codec import BrdfEncoder
@@ -36,18 +34,6 @@ from brdfcodec.layers.record import LayeredRecord, shared_sigma_code, sigma_from
 from brdfcodec.metrics import error_report
 
 BUDGETS = (16, 32, 64, 96)
-
-
-@contextmanager
-def compact_base(allowed: bool) -> Iterator[None]:
-    """Let the encoder choose a compact base (its own rule), or never."""
-    original = rate.compact_base_pays
-    if not allowed:
-        rate.compact_base_pays = lambda *args: False  # type: ignore[assignment]
-    try:
-        yield
-    finally:
-        rate.compact_base_pays = original  # type: ignore[assignment]
 
 
 def main() -> None:
@@ -76,7 +62,7 @@ def main() -> None:
     rows: list[dict[str, Any]] = []
     for budget in BUDGETS:
         for label, allowed in (("encoder", True), ("latent-dtype base", False)):
-            with compact_base(allowed):
+            with replaced(rate, "compact_base_pays", lambda *args: False, active=not allowed):
                 try:
                     records = BrdfEncoder(bytes=budget, latent_dtype="float16").encode_arrays(names, x, m, tables)
                 except ValueError as error:  # the budget is below what this base needs

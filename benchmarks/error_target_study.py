@@ -18,14 +18,12 @@ from __future__ import annotations
 
 import json
 import time
-from collections.abc import Iterator
-from contextlib import contextmanager
 from typing import Any
 
 import numpy as np
 
 # sibling script: Python puts the running script's folder on sys.path
-from basis_study import held_out_materials, study_arguments
+from basis_study import held_out_materials, replaced, study_arguments
 
 import brdfcodec.layers.rate as rate
 from brdfcodec.codec import BrdfEncoder, measure
@@ -33,22 +31,12 @@ from brdfcodec.codec import BrdfEncoder, measure
 TARGETS = (0.06, 0.05, 0.04, 0.03, 0.02)
 
 
-@contextmanager
-def latent_dtype_sequence(active: bool) -> Iterator[None]:
-    """Replace the encoder's error-target sequence by the one before compact bases (when ``active``)."""
-    original = rate.error_target_sequence
-
-    def before(basis_count: int) -> list[tuple[bool, int, float | None]]:
-        counts = [n for n in (4, 8, 16) if n < basis_count] + [basis_count]
-        return [(False, 0, None), *((False, n, None) for n in counts),
-                *((False, basis_count, s) for s in rate.STEP_LADDER)]
-
-    if active:
-        rate.error_target_sequence = before  # type: ignore[assignment]
-    try:
-        yield
-    finally:
-        rate.error_target_sequence = original  # type: ignore[assignment]
+def sequence_before(basis_count: int) -> list[tuple[bool, int, float | None]]:
+    """The error-target sequence before compact bases: the base alone, then 4, 8, 16 and K coefficients, then K
+    under each rung, all on the base in the latent dtype."""
+    counts = [n for n in (4, 8, 16) if n < basis_count] + [basis_count]
+    return [(False, 0, None), *((False, n, None) for n in counts),
+            *((False, basis_count, s) for s in rate.STEP_LADDER)]
 
 
 def main() -> None:
@@ -58,7 +46,7 @@ def main() -> None:
     rows: list[dict[str, Any]] = []
     for target in TARGETS:
         for label, old in (("encoder", False), ("latent-dtype base", True)):
-            with latent_dtype_sequence(old):
+            with replaced(rate, "error_target_sequence", sequence_before, active=old):
                 encoder = BrdfEncoder(max_relae=target, latent_dtype="float16")
                 records = encoder.encode_arrays(held.names, held.inputs, held.masks, held.tables)
             reached = [measure(r, encoder.decoder, t).meta["relae"]["mapped"]
