@@ -245,10 +245,10 @@ def encode_layers(
     # An error target's candidates: (compact base?, k coefficients, detail step or None).
     pools = {False: cands, True: _Candidates(base, base_mapped, target, weights, latent_itemsize, basis_fit,
                                              compact=True)}
-    errors: dict[tuple[bool, int, float | None], float] = {}
+    errors: dict[_Candidate, float] = {}
     relae = RelaeAgainst(values, mask, metric)  # the source mapped and summed once for all candidates
 
-    def error(candidate: tuple[bool, int, float | None]) -> float:
+    def error(candidate: _Candidate) -> float:
         if candidate not in errors:
             compact_base, k, s = candidate
             errors[candidate] = relae(table_from_network_output(pools[compact_base].mapped(k, s))).overall
@@ -277,7 +277,7 @@ def encode_layers(
     return RateResult(pools[chosen[0]].record(*chosen[1:]), pools[chosen[0]].size(*chosen[1:]), tried)
 
 
-def error_target_sequence(basis_count: int) -> list[tuple[bool, int, float | None]]:
+def error_target_sequence(basis_count: int) -> list[_Candidate]:
     """The candidates an error target tries, smallest first: ``(compact base, k coefficients, detail step)``.
 
     With a shared basis of K vectors: 4, 8, 16 and 32 coefficients (those below K), then all K, on a compact
