@@ -1,4 +1,4 @@
-"""Why a layered decode stays above 1.5× a base-only one: the basis sum is memory-bound (issue 14).
+"""Where a layered decode's time goes, against a base-only decode (issue 14's 1.5× target).
 
 Usage::
 
@@ -6,19 +6,23 @@ Usage::
 
 On the analytic ``gold`` material encoded at 16 KB (75 basis coefficients
 and a detail layer, the ``decode-layered`` benchmark's record), times (median
-and minimum of 30 calls, milliseconds) of: the whole table decoded base-only
-and layered; the layers alone as the decoder computes them; the basis sum
-``c @ B`` of the shipped basis in float32 with numpy's BLAS on one thread
-and on all, and with torch in float32, float16 and bfloat16; and the basis
-sum split between the main thread and the detail layer's thread (the share
-of the sum the main thread does). Run it on an idle machine.
+and minimum of 30 calls, milliseconds) of: the whole table decoded base-only;
+layered as the decoder does it (the layers on a thread of their own beside
+the network on all cores but one, ``brdfcodec.torch_threads``); layered with
+the layers first and the network after (one after the other, each on every
+core); the layers alone (basis sum, then detail layer, one thread); the
+detail layer alone, inverted plane by plane over its nonzero blocks (the
+decoder's choice here) and batched over all planes; and the basis sum
+``c @ B`` of the shipped basis in float32 with numpy's BLAS on one thread and
+on all, and with torch in float32, float16 and bfloat16. The basis sum reads
+116 MB per decode and is bound by memory bandwidth; the detail layer and the
+network are bound by compute. Run it on an idle machine.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
-import threading
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -26,11 +30,14 @@ from typing import Any
 
 import numpy as np
 import torch
+from basis_study import replaced
 
 from brdfcodec.analytic import ANALYTIC_PRESETS
 from brdfcodec.blas_threads import single_blas_thread
 from brdfcodec.codec import BrdfEncoder
+from brdfcodec.layers import detail as detail_module
 from brdfcodec.layers.detail import decode_detail
+from brdfcodec.representation import table_from_mapped
 
 CALLS = 30
 
@@ -61,37 +68,29 @@ def main() -> None:
         "coefficients": len(c), "basis_entries": int(vectors.shape[1]),
         "basis_megabytes_float32": vectors.nbytes / 1e6,
         "table base-only": timed(lambda: decoder.table(record.base())),
-        "table layered": timed(lambda: decoder.table(record)),
+        "table layered (decoder: layers beside the network)": timed(lambda: decoder.table(record)),
     }
+
+    def one_after_the_other() -> None:
+        residuals = decoder._layer_residuals(record)
+        mapped = decoder._with_layers(record, decoder.decode_mapped(record.mu), residuals=residuals)
+        table_from_mapped(mapped)
+
     with single_blas_thread():
-        rows["layers (decoder)"] = timed(lambda: decoder._layer_residuals(record))
+        rows["table layered, layers then network"] = timed(one_after_the_other)
+        rows["layers (one thread: basis sum, then detail layer)"] = timed(lambda: decoder._layer_residuals(record))
+        rows["detail layer alone (decoder: nonzero blocks)"] = timed(lambda: decode_detail(record.detail))
+        with replaced(detail_module, "_DENSE_SHARE", 0.0):
+            rows["detail layer alone, batched over all planes"] = timed(lambda: decode_detail(record.detail))
         rows["basis sum numpy, 1 BLAS thread"] = timed(lambda: c @ vectors)
     rows["basis sum numpy, all BLAS threads"] = timed(lambda: c @ vectors)
     for dtype in (torch.float32, torch.float16, torch.bfloat16):
         tv, tc = torch.from_numpy(vectors).to(dtype), torch.from_numpy(c).to(dtype)
         rows[f"basis sum torch {str(dtype).removeprefix('torch.')}"] = timed(lambda tv=tv, tc=tc: tc @ tv)
-
-    def split(share: float) -> Callable[[], None]:
-        cut = int(vectors.shape[1] * share)
-
-        def run() -> None:
-            out = np.empty(vectors.shape[1], dtype=np.float32)
-
-            def detail_then_tail() -> None:
-                decode_detail(record.detail)
-                np.matmul(c, vectors[:, cut:], out=out[cut:])
-
-            thread = threading.Thread(target=detail_then_tail)
-            thread.start()
-            np.matmul(c, vectors[:, :cut], out=out[:cut])
-            thread.join()
-
-        return run
-
-    with single_blas_thread():
-        for share in (1.0, 0.8, 0.6):
-            rows[f"basis sum {share:.0%} on the main thread, rest after the detail layer"] = timed(split(share))
-    rows["layered / base-only (medians)"] = rows["table layered"]["median_ms"] / rows["table base-only"]["median_ms"]
+    base = rows["table base-only"]["median_ms"]
+    layered = rows["table layered (decoder: layers beside the network)"]["median_ms"]
+    rows["layered / base-only (medians)"] = layered / base
+    rows["layers then network / base-only (medians)"] = rows["table layered, layers then network"]["median_ms"] / base
     for key, value in rows.items():
         print(key, value, flush=True)
     args.output.parent.mkdir(parents=True, exist_ok=True)

@@ -25,6 +25,7 @@ float32, and entries whose bin lies below the horizon set to ``-1``
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import itertools
 import os
@@ -33,7 +34,7 @@ import warnings
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import TYPE_CHECKING, Literal
+from typing import TYPE_CHECKING, Generic, Literal, TypeVar
 
 import numpy as np
 import numpy.typing as npt
@@ -79,6 +80,7 @@ from brdfcodec.representation import (
     unmap_values,
     validate_phi_d_bins,
 )
+from brdfcodec.torch_threads import one_core_left
 
 if TYPE_CHECKING:
     from brdfcodec.layers.basis import SharedBasis
@@ -179,26 +181,29 @@ def _invalid_bins() -> np.ndarray:
     return invalid
 
 
-class _BackgroundCall:
+_T = TypeVar("_T")
+
+
+class _BackgroundCall(Generic[_T]):
     """``function(*args)`` run on a new thread; :meth:`result` joins it and returns its value or raises its error.
 
     A thread per call (about 0.1 ms) rather than a pool, so that a process forked after a decode
     (multiprocessing) has nothing stale to wait on.
     """
 
-    def __init__(self, function: Callable[..., np.ndarray], *args: object) -> None:
-        self._value: np.ndarray | None = None
+    def __init__(self, function: Callable[..., _T], *args: object) -> None:
+        self._value: _T | None = None
         self._error: BaseException | None = None
         self._thread = threading.Thread(target=self._run, args=(function, args), daemon=True)
         self._thread.start()
 
-    def _run(self, function: Callable[..., np.ndarray], args: tuple[object, ...]) -> None:
+    def _run(self, function: Callable[..., _T], args: tuple[object, ...]) -> None:
         try:
             self._value = function(*args)
         except BaseException as error:  # noqa: BLE001 - handed to the caller by result()
             self._error = error
 
-    def result(self) -> np.ndarray:
+    def result(self) -> _T:
         self._thread.join()
         if self._error is not None:
             raise self._error
@@ -411,21 +416,16 @@ class BrdfDecoder:
     def _layer_residuals(self, record: Record, slots: Sequence[int] | None = None) -> list[np.ndarray]:
         """A record's layers decoded to mapped residuals, in the order they are added (basis, then detail).
 
-        Each has shape ``(63, 90, 90)``, or (partial decoding) the channels of the kept ``slots`` only, in
-        :func:`~brdfcodec.representation.network_channels_for_slots` order; empty for a base-only record.
-        The detail layer's inverse DCT (compute-bound) runs on a second thread beside the basis sum
-        (memory-bound).
+        Empty for a base-only record. A full decode gets one ``(63, 90, 90)`` residual, both layers summed on
+        the calling thread (:func:`~brdfcodec.layers.layer_sum.layered_residual`). A partial decode gets each
+        layer's channels of the kept ``slots`` only, in
+        :func:`~brdfcodec.representation.network_channels_for_slots` order; the detail layer's inverse DCT
+        (compute-bound) runs on a second thread beside the basis sum (memory-bound).
         """
         basis_layer, detail = getattr(record, "basis", None), getattr(record, "detail", None)
         if basis_layer is None and detail is None:
             return []
-        channels = None if slots is None else network_channels_for_slots(slots)
-        residuals = []
-        detail_residual = None
-        if detail is not None:
-            from brdfcodec.layers.detail import decode_detail
-
-            detail_residual = _BackgroundCall(decode_detail, detail, slots)
+        basis = None
         if basis_layer is not None:
             basis = self.shared_basis
             if basis is None or basis.sha256 != basis_layer.sha256:
@@ -434,11 +434,20 @@ class BrdfDecoder:
                     f"{record.name}: the record's basis layer needs shared basis {basis_layer.sha256}, but this "
                     f"decoder's model has {own}; decode it with the model that wrote it"
                 )
-            coefficients, first = basis_layer.coefficients(), basis_layer.first
-            if channels is None:
-                residuals.append(basis.residual(coefficients, first))
-            else:
-                residuals.append(basis.residual_channels(coefficients, channels, first))
+        if slots is None:
+            from brdfcodec.layers.layer_sum import layered_residual
+
+            residual = layered_residual(basis, basis_layer, detail)
+            return [] if residual is None else [residual]
+        channels = network_channels_for_slots(slots)
+        residuals = []
+        detail_residual = None
+        if detail is not None:
+            from brdfcodec.layers.detail import decode_detail
+
+            detail_residual = _BackgroundCall(decode_detail, detail, slots)
+        if basis_layer is not None and basis is not None:
+            residuals.append(basis.residual_channels(basis_layer.coefficients(), channels, basis_layer.first))
         if detail_residual is not None:
             residuals.append(detail_residual.result().reshape(-1, *NETWORK_INPUT_SHAPE[1:]))
         return residuals
@@ -471,9 +480,14 @@ class BrdfDecoder:
                 out = self.decode_mapped(record.mu)
                 out[GREEN_BLOCK] = self.decode_mapped(record.second_code())[RED_BLOCK]
                 return out
-            # The layers first: the numpy work then does not share the cores with torch's still-spinning threads.
-            residuals = self._layer_residuals(record)
-            return self._with_layers(record, self.decode_mapped(record.mu), residuals=residuals)
+            if getattr(record, "basis", None) is None and getattr(record, "detail", None) is None:
+                return self.decode_mapped(record.mu)
+            # The layers (numpy) on a thread of their own, beside the network on all cores but one.
+            with one_core_left() if self.device.type == "cpu" else contextlib.nullcontext():
+                layers = _BackgroundCall(self._layer_residuals, record)
+                mapped = self.decode_mapped(record.mu)
+                residuals = layers.result()
+            return self._with_layers(record, mapped, residuals=residuals)
 
     def decode(
         self,

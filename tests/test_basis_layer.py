@@ -176,7 +176,9 @@ def test_the_shipped_model_has_a_basis_and_partial_decoding_matches() -> None:
     part = decoder.decode(record, phi_d_bins=[3, 90], masked="zero")
     np.testing.assert_allclose(part, full[..., [3, 90]], rtol=1e-5, atol=1e-5)
     batched = next(decoder.decode_many([record], masked="zero"))
-    np.testing.assert_allclose(batched, full, rtol=1e-6, atol=1e-6)
+    # A single layered decode runs the network on one torch thread fewer (the layers take the last core):
+    # float32 rounding may differ in the last bits, far inside the spec's rtol of 1e-3.
+    np.testing.assert_allclose(batched, full, rtol=1e-5, atol=1e-6)
     with pytest.raises(BasisMismatchError, match=SHA):
         decoder.decode(basis_record("other"))  # made for another basis
     too_long = LayeredRecord("long", record.mu, record.sigma,

@@ -186,7 +186,8 @@ def invalid_vectors() -> dict[str, tuple[bytes, str, str]]:
     add("basis-unknown-sigma", basis_vector({**basis_entry["layers"], "sigma": "log2-u4"}), "unsupported",
         "sigma stored as 'log2-u4'")
     add("basis-unknown-field", basis_vector({**basis_entry["layers"], "basis": {
-        **basis_entry["layers"]["basis"], "transform": "ica"}}), "unsupported", "a basis layer with a field 'transform'")
+        **basis_entry["layers"]["basis"], "transform": "ica"}}), "unsupported",
+        "a basis layer with a field 'transform'")
     add("basis-count-zero", basis_vector({**basis_entry["layers"], "basis": {"sha256": "cd" * 32, "count": 0}},
                                          basis_payload[:12]), "malformed", "a basis layer of 0 coefficients")
     add("basis-sha-upper", basis_vector({**basis_entry["layers"], "basis": {"sha256": "CD" * 32, "count": 3}}),
