@@ -10,24 +10,20 @@ need next: on 2 cores a layered decode took 27.3 ms with BLAS threaded and
 (``python -m pytest benchmarks/test_bench_codec.py -k layered``; measured
 before the layers ran beside the network). The limit
 is set for the duration of a decode only, through threadpoolctl, and the
-caller's own BLAS setting is restored afterwards.
+caller's own BLAS setting is restored afterwards; decodes that overlap on
+several threads share one limit (:class:`~brdfcodec.shared_limit.SharedLimit`).
 """
 
 from __future__ import annotations
 
 import contextlib
 import functools
-import threading
-from collections.abc import Iterator
+from collections.abc import Callable
 from typing import Any
 
-__all__ = ["single_blas_thread"]
+from brdfcodec.shared_limit import SharedLimit
 
-# The BLAS thread count is one setting for the whole process, so overlapping decodes on several threads
-# share one limit: the first to enter saves the setting and applies the limit, the last to leave restores it.
-_lock = threading.Lock()
-_holders = 0
-_limiter: Any = None
+__all__ = ["single_blas_thread"]
 
 
 @functools.cache
@@ -43,7 +39,7 @@ def _release_openblas_control() -> None:
     threadpoolctl ≥ 3.6 lets only one "controlling" Python thread change a
     process-wide OpenBLAS pool (others are silently ignored), and a limit not
     used as a ``with`` block keeps that control. Our sets and restores are
-    serialised by ``_lock``, so control is released around each of them.
+    serialised by :class:`~brdfcodec.shared_limit.SharedLimit`'s lock, so control is released around each of them.
     """
     import threadpoolctl
 
@@ -52,28 +48,27 @@ def _release_openblas_control() -> None:
         clear(force=True)
 
 
-@contextlib.contextmanager
-def single_blas_thread() -> Iterator[None]:
+def _limit_blas_to_one_thread() -> Callable[[], None]:
+    _release_openblas_control()
+    limiter = _controller().limit(limits=1, user_api="blas")
+    _release_openblas_control()
+
+    def restore() -> None:
+        _release_openblas_control()
+        limiter.restore_original_limits()
+        _release_openblas_control()
+
+    return restore
+
+
+_ONE_BLAS_THREAD = SharedLimit(_limit_blas_to_one_thread)
+
+
+def single_blas_thread() -> contextlib.AbstractContextManager[None]:
     """Run the enclosed block with numpy's BLAS limited to one thread (torch's threads are untouched).
 
     Safe to nest and to enter from several threads at once: the BLAS setting
     found when the first block began is restored when the last one ends.
     The BLAS libraries are those loaded at the first call (numpy's).
     """
-    global _holders, _limiter
-    with _lock:
-        if _holders == 0:
-            _release_openblas_control()
-            _limiter = _controller().limit(limits=1, user_api="blas")
-            _release_openblas_control()
-        _holders += 1
-    try:
-        yield
-    finally:
-        with _lock:
-            _holders -= 1
-            if _holders == 0:
-                _release_openblas_control()
-                _limiter.restore_original_limits()
-                _release_openblas_control()
-                _limiter = None
+    return _ONE_BLAS_THREAD.held()

@@ -12,45 +12,37 @@ alone: 12.4–12.9 ms). With torch keeping both cores while the layers ran on a
 third thread, it took 21.5 ms: the threads fought for the cores. See
 ``python benchmarks/basis_sum_study.py``.
 
-torch's intra-op thread count is one setting for the whole process, so this
-module follows :mod:`brdfcodec.blas_threads`: overlapping blocks share one
-limit, the first to enter saves the count, and the last to leave restores it.
+torch's intra-op thread count is one setting for the whole process, so
+overlapping blocks share one limit (:class:`~brdfcodec.shared_limit.SharedLimit`):
+the first to enter saves the count, and the last to leave restores it.
 """
 
 from __future__ import annotations
 
 import contextlib
-import threading
-from collections.abc import Iterator
+from collections.abc import Callable
 
 import torch
 
+from brdfcodec.shared_limit import SharedLimit
+
 __all__ = ["one_core_left"]
 
-_lock = threading.Lock()
-_holders = 0
-_saved: int | None = None
+
+def _one_thread_fewer() -> Callable[[], None]:
+    saved = torch.get_num_threads()
+    torch.set_num_threads(max(1, saved - 1))
+    return lambda: torch.set_num_threads(saved)
 
 
-@contextlib.contextmanager
-def one_core_left() -> Iterator[None]:
+_ONE_CORE_LEFT = SharedLimit(_one_thread_fewer)
+
+
+def one_core_left() -> contextlib.AbstractContextManager[None]:
     """Run the enclosed block with torch on one intra-op thread fewer (at least one).
 
     Safe to nest and to enter from several threads at once: the count found
     when the first block began is restored when the last one ends, also when
     the block raises.
     """
-    global _holders, _saved
-    with _lock:
-        if _holders == 0:
-            _saved = torch.get_num_threads()
-            torch.set_num_threads(max(1, _saved - 1))
-        _holders += 1
-    try:
-        yield
-    finally:
-        with _lock:
-            _holders -= 1
-            if _holders == 0 and _saved is not None:
-                torch.set_num_threads(_saved)
-                _saved = None
+    return _ONE_CORE_LEFT.held()
