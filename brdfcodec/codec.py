@@ -212,6 +212,10 @@ class _BackgroundCall(Generic[_T]):
         return self._value
 
 
+def _has_layers(record: Record) -> bool:
+    return getattr(record, "basis", None) is not None or getattr(record, "detail", None) is not None
+
+
 def _apply_mask(table: np.ndarray, bins: Sequence[int] | None, masked: MaskedEntries) -> np.ndarray:
     if masked == "keep":
         return table
@@ -480,14 +484,25 @@ class BrdfDecoder:
                 out = self.decode_mapped(record.mu)
                 out[GREEN_BLOCK] = self.decode_mapped(record.second_code())[RED_BLOCK]
                 return out
-            if getattr(record, "basis", None) is None and getattr(record, "detail", None) is None:
-                return self.decode_mapped(record.mu)
-            # The layers (numpy) on a thread of their own, beside the network on all cores but one.
-            with one_core_left() if self.device.type == "cpu" else contextlib.nullcontext():
-                layers = _BackgroundCall(self._layer_residuals, record)
-                mapped = self.decode_mapped(record.mu)
-                residuals = layers.result()
-            return self._with_layers(record, mapped, residuals=residuals)
+            mapped, (residuals,) = self._network_beside_layers([record])
+            return self._with_layers(record, mapped[0], residuals=residuals)
+
+    def _network_beside_layers(
+        self, records: Sequence[LatentRecord], batch_size: int = 16
+    ) -> tuple[np.ndarray, list[list[np.ndarray]]]:
+        """The network's clamped mapped slices for the records' codes, ``(B, 63, 90, 90)``, and each record's
+        layer residuals (:meth:`_layer_residuals`).
+
+        When a record has layers, they (numpy) are computed on a thread of their own while the network runs on
+        all cores but one (:mod:`brdfcodec.torch_threads`). Call it with numpy's BLAS on one thread.
+        """
+        codes = np.stack([record.mu for record in records])
+        if not any(_has_layers(record) for record in records):
+            return self.decode_mapped(codes, batch_size=batch_size), [[] for _ in records]
+        with one_core_left() if self.device.type == "cpu" else contextlib.nullcontext():
+            layers = _BackgroundCall(lambda: [self._layer_residuals(record) for record in records])
+            mapped = self.decode_mapped(codes, batch_size=batch_size)
+            return mapped, layers.result()
 
     def decode(
         self,
@@ -530,12 +545,17 @@ class BrdfDecoder:
             self._check_record(record)
         for start in range(0, len(records), batch_size):
             chunk = records[start : start + batch_size]
-            codes = [r.mu for r in chunk if isinstance(r, LatentRecord)]
-            batch = iter(self.decode_mapped(np.stack(codes), batch_size=batch_size) if codes else ())
+            latent = [r for r in chunk if isinstance(r, LatentRecord)]
+            batch: Iterator[tuple[np.ndarray, list[np.ndarray]]] = iter(())
+            if latent:
+                with single_blas_thread():
+                    mapped_rows, residuals = self._network_beside_layers(latent, batch_size)
+                batch = zip(mapped_rows, residuals, strict=True)
             for record in chunk:  # grafts need two codes each: decoded on their own
                 with single_blas_thread():
                     if isinstance(record, LatentRecord):
-                        mapped = self._with_layers(record, next(batch))
+                        rows, layers = next(batch)
+                        mapped = self._with_layers(record, rows, residuals=layers)
                     else:
                         mapped = self.mapped_record(record)
                     table = _apply_mask(table_from_mapped(mapped), None, masked)

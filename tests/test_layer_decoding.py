@@ -154,3 +154,30 @@ def test_a_layered_decode_gives_torch_its_threads_back_also_when_a_layer_fails()
     with pytest.raises(ValueError, match="detail layer declares 10 bytes"):
         decoder.mapped_record(dataclasses.replace(record, detail=broken_detail()))
     assert torch.get_num_threads() == before
+
+
+def test_decode_many_gives_each_record_its_own_layers() -> None:
+    """A batch mixing base-only, layered and graft records: the batched network, with the layers beside it."""
+    from brdfcodec.bvae_format import GraftRecord, LatentRecord
+    from brdfcodec.codec import BrdfDecoder
+    from brdfcodec.layers.record import LayeredRecord
+
+    decoder = BrdfDecoder()
+    basis = decoder.shared_basis
+    assert basis is not None
+    rng = np.random.default_rng(7)
+    records = [
+        LayeredRecord("both", rng.normal(size=8), np.ones(8),
+                      basis=BasisLayer(basis.sha256, 0.25, rng.integers(-127, 128, size=12).astype(np.int8)),
+                      detail=layer_of(sparse_coefficients(4, 0.01), 0.05)),
+        LatentRecord("plain", rng.normal(size=8), np.ones(8)),
+        GraftRecord("graft", rng.normal(size=8), np.ones(8), (0, 1), [2.0, -1.0]),
+        LayeredRecord("detail", rng.normal(size=8), np.ones(8), detail=layer_of(sparse_coefficients(5, 0.01), 0.05)),
+    ]
+    before = torch.get_num_threads()
+    batched = list(decoder.decode_many(records, masked="zero", batch_size=3))
+    assert torch.get_num_threads() == before
+    for record, table in zip(records, batched, strict=True):
+        np.testing.assert_allclose(table, decoder.decode(record, masked="zero"), rtol=1e-5, atol=1e-6,
+                                   err_msg=record.name)
+    assert np.abs(batched[0] - decoder.decode(records[0].base(), masked="zero")).max() > 1e-3
