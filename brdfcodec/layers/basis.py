@@ -143,14 +143,14 @@ class SharedBasis:
     ) -> npt.NDArray[np.float32]:
         """Only some channels of :meth:`residual`, shape ``(len(channels), 90, 90)`` (partial decoding)."""
         c = np.asarray(coefficients, dtype=np.float32).reshape(-1)
-        rows = self._rows(first, len(c))
+        vectors = self.vectors(first, len(c))
         wanted = np.asarray(channels, dtype=np.int64)
         out = np.zeros((len(wanted), _ENTRIES_PER_CHANNEL), dtype=np.float32)
         for row, channel in enumerate(wanted):
             start, stop = np.searchsorted(self._channel_of_entry, [channel, channel + 1])
             if stop > start:
                 out[row, self.entries[start:stop] - channel * _ENTRIES_PER_CHANNEL] = (
-                    c @ self._float32[rows, start:stop]
+                    c @ vectors[:, start:stop]
                 )
         return out.reshape(len(wanted), *NETWORK_INPUT_SHAPE[1:])
 

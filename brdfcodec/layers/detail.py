@@ -54,6 +54,9 @@ _DTYPES = {"int16": np.dtype("<i2"), "int32": np.dtype("<i4")}
 _ZSTD_LEVEL = 19
 #: Smallest and largest quantisation step a file may declare (mapped units).
 MIN_STEP, MAX_STEP = 1e-5, 100.0
+#: A plane-by-plane inverse is taken when its multiply-adds are at most this share of the batched inverse's
+#: (the loop costs more per multiply-add; measured on the analytic gold material at 16 KB and 256 KB).
+_DENSE_SHARE: Final = 0.5
 
 
 @functools.cache
@@ -145,19 +148,14 @@ def _forward(block: np.ndarray) -> np.ndarray:
     return np.einsum("ed,afgd->afge", _dct_matrix(_SHAPE[3]), y)
 
 
-def decoded_integers(layer: DetailLayer, path: str = "<detail>") -> np.ndarray:
-    """The quantised coefficients of a layer as float32 in the (3, 21, 90, 90) layout.
+def _stored_integers(layer: DetailLayer, path: str = "<detail>") -> np.ndarray:
+    """The quantised coefficients of a layer as stored (int16 or int32), flat in the (3, 21, 90, 90) C order.
 
     Raises
     ------
     ValueError
         The frame does not decompress to exactly ``63·90·90`` integers.
     """
-    return _stored_integers(layer, path).astype(np.float32).reshape(_SHAPE)
-
-
-def _stored_integers(layer: DetailLayer, path: str = "<detail>") -> np.ndarray:
-    """The quantised coefficients as stored (int16 or int32), flat; see :func:`decoded_integers`."""
     import zstandard
 
     expected = N_DETAIL_VALUES * _DTYPES[layer.dtype].itemsize
@@ -230,11 +228,6 @@ def decode_detail(layer: DetailLayer, slots: Sequence[int] | None = None) -> npt
     colour_inverse = (COLOUR_MATRIX.T * layer.step).astype(np.float32)
     np.matmul(colour_inverse, by_colour, out=out.reshape(N_CHANNELS, -1))
     return out
-
-
-#: A plane-by-plane inverse is taken when its multiply-adds are at most this share of the batched inverse's
-#: (the loop costs more per multiply-add; measured on the analytic gold material at 16 KB and 256 KB).
-_DENSE_SHARE: Final = 0.5
 
 
 @functools.cache

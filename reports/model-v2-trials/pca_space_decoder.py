@@ -25,6 +25,7 @@ import time
 import numpy as np
 import torch
 
+from brdfcodec.baselines.pca import fit_pca
 from brdfcodec.codec import BrdfEncoder
 from brdfcodec.dataset import BrdfDataset
 from brdfcodec.layers.refine import refine_latent
@@ -37,14 +38,6 @@ def relae(estimate: np.ndarray, x: np.ndarray) -> float:
     """Kept-slice mapped RelAE over the valid entries, mean over materials."""
     estimate = np.clip(estimate, 0, 5)
     return float((np.abs(estimate - x).sum(1) / np.abs(x).sum(1)).mean())
-
-
-def pca(x: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
-    """Mean and the first k principal components (rows) of the rows of x."""
-    centred = x - x.mean(0)
-    w, v = np.linalg.eigh(centred @ centred.T)
-    order = np.argsort(w)[::-1][:k]
-    return x.mean(0), (v[:, order].T @ centred) / np.sqrt(np.maximum(w[order], 1e-12))[:, None]
 
 
 class AutoEncoder(torch.nn.Module):
@@ -117,12 +110,14 @@ def main() -> None:
     x_aug = np.concatenate([blocks[:, list(p)].reshape(len(xt), -1)[:, entries]
                             for p in itertools.permutations(range(3))]).astype(np.float64)
     results: dict[str, object] = {}
-    mean0, basis0 = pca(x_train, 75)
+    pca_train = fit_pca(x_train, 75)
+    mean0, basis0 = pca_train.mean, pca_train.components
     for k in (8, 16, 32, 64, 75):
         c = (x_held - mean0) @ basis0[:k].T
         results[f"pca-{k} (L2 projection)"] = relae(mean0 + c @ basis0[:k], x_held)
     print(results, flush=True)
-    mean_a, basis_a = pca(x_aug, COMPONENTS)
+    pca_aug = fit_pca(x_aug, COMPONENTS)
+    mean_a, basis_a = pca_aug.mean, pca_aug.components
     results[f"pca-aug-{COMPONENTS} floor"] = relae(mean_a + ((x_held - mean_a) @ basis_a.T) @ basis_a, x_held)
     coefficients = (x_aug - mean_a) @ basis_a.T
     scale = coefficients.std(0) + 1e-9
