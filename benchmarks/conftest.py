@@ -5,6 +5,13 @@ to ``"baseline"`` or ``"candidate"``. After the run, the terminal summary
 prints, per group, the candidate's median time divided by the baseline's
 (the number to compare across machines), and checks it against the group's
 target in ``TARGETS``. Run with ``python -m pytest benchmarks``.
+
+PAIRED: a candidate may time its baseline itself, alternating the two round
+by round, and store ``extra_info["paired_baseline_s"]`` (the baseline's
+median) and ``extra_info["paired_ratio"]`` (the median of the per-round
+ratios); its group then needs no baseline benchmark, and the ratio checked
+is the paired one, on which drift of a shared machine between the two
+benchmarks' phases does not fall.
 """
 
 from __future__ import annotations
@@ -74,19 +81,24 @@ def _ratios(config: pytest.Config) -> dict[str, dict[str, float]]:
     if session is None or getattr(session, "disabled", True):
         return {}
     by_group: dict[str, dict[str, float]] = {}
+    paired: dict[str, float] = {}
     for bench in session.benchmarks:
         role = bench.extra_info.get("role")
         if role in ("baseline", "candidate") and bench.stats.rounds:
             # work_scale: a benchmark timed on a smaller workload reports its time scaled to the full one
             scale = float(bench.extra_info.get("work_scale", 1.0))
             by_group.setdefault(bench.group, {})[role] = bench.stats.median * scale
+            if role == "candidate" and "paired_ratio" in bench.extra_info:
+                # a paired benchmark timed its baseline round by round beside it (see PAIRED above)
+                by_group[bench.group]["baseline"] = float(bench.extra_info["paired_baseline_s"]) * scale
+                paired[bench.group] = float(bench.extra_info["paired_ratio"])
     report = {}
     for group, times in sorted(by_group.items()):
         if {"baseline", "candidate"} <= times.keys():
-            ratio = times["candidate"] / times["baseline"]
+            ratio = paired.get(group, times["candidate"] / times["baseline"])
             report[group] = {
                 "baseline_s": times["baseline"], "candidate_s": times["candidate"],
-                "ratio": ratio, "target": TARGETS.get(group, float("nan")),
+                "ratio": ratio, "paired": group in paired, "target": TARGETS.get(group, float("nan")),
                 "absolute_target_s": ABSOLUTE_TARGETS.get(group),
             }
     return report
@@ -109,7 +121,7 @@ def pytest_terminal_summary(terminalreporter: pytest.TerminalReporter, config: p
         )
         terminalreporter.write_line(
             f"{group:<14} {row['candidate_s'] * 1e3:9.1f} ms / {row['baseline_s'] * 1e3:9.1f} ms = "
-            f"{row['ratio']:6.2f}  (target ≤ {row['target']:g}) {'ok' if ok else 'MISSED'}{note}"
+            f"{row['ratio']:6.2f}{' (paired)' if row['paired'] else ''}  (target ≤ {row['target']:g}) {'ok' if ok else 'MISSED'}{note}"
         )
     session = getattr(config, "_benchmarksession", None)
     for bench in getattr(session, "benchmarks", []):  # measurements a benchmark reports besides its timing
