@@ -121,7 +121,8 @@ def pytest_terminal_summary(terminalreporter: pytest.TerminalReporter, config: p
         )
         terminalreporter.write_line(
             f"{group:<14} {row['candidate_s'] * 1e3:9.1f} ms / {row['baseline_s'] * 1e3:9.1f} ms = "
-            f"{row['ratio']:6.2f}{' (paired)' if row['paired'] else ''}  (target ≤ {row['target']:g}) {'ok' if ok else 'MISSED'}{note}"
+            f"{row['ratio']:6.2f}{' (paired)' if row['paired'] else ''}  "
+            f"(target ≤ {row['target']:g}) {'ok' if ok else 'MISSED'}{note}"
         )
     session = getattr(config, "_benchmarksession", None)
     for bench in getattr(session, "benchmarks", []):  # measurements a benchmark reports besides its timing
