@@ -203,6 +203,10 @@ class _BackgroundCall(Generic[_T]):
         except BaseException as error:  # noqa: BLE001 - handed to the caller by result()
             self._error = error
 
+    def join(self) -> None:
+        """Wait for the call to end, without raising its error (:meth:`result` raises it)."""
+        self._thread.join()
+
     def result(self) -> _T:
         self._thread.join()
         if self._error is not None:
@@ -450,8 +454,12 @@ class BrdfDecoder:
             from brdfcodec.layers.detail import decode_detail
 
             detail_residual = _BackgroundCall(decode_detail, detail, slots)
-        if basis_layer is not None and basis is not None:
-            residuals.append(basis.residual_channels(basis_layer.coefficients(), channels, basis_layer.first))
+        try:
+            if basis_layer is not None and basis is not None:
+                residuals.append(basis.residual_channels(basis_layer.coefficients(), channels, basis_layer.first))
+        finally:
+            if detail_residual is not None:
+                detail_residual.join()  # the caller's thread limits must outlast it, also on error
         if detail_residual is not None:
             residuals.append(detail_residual.result().reshape(-1, *NETWORK_INPUT_SHAPE[1:]))
         return residuals
@@ -501,7 +509,10 @@ class BrdfDecoder:
             return self.decode_mapped(codes, batch_size=batch_size), [[] for _ in records]
         with one_core_left() if self.device.type == "cpu" else contextlib.nullcontext():
             layers = _BackgroundCall(lambda: [self._layer_residuals(record) for record in records])
-            mapped = self.decode_mapped(codes, batch_size=batch_size)
+            try:
+                mapped = self.decode_mapped(codes, batch_size=batch_size)
+            finally:
+                layers.join()  # also when the network failed: the thread limits must outlast the layers' thread
             return mapped, layers.result()
 
     def decode(

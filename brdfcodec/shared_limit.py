@@ -1,9 +1,9 @@
 """A process-wide setting changed while any caller needs it, restored when the last one is done.
 
-Thread counts (numpy's BLAS, torch's intra-op pool) are one setting for the
-whole process, so decodes that overlap on several threads must share one
-change: the first to enter applies it and keeps what restores it, the last to
-leave restores it, also when its block raises.
+numpy's BLAS thread count (OpenBLAS) is one setting for the whole process, so
+decodes that overlap on several threads must share one change: the first to
+enter applies it and keeps what restores it, the last to leave restores it,
+also when its block raises.
 """
 
 from __future__ import annotations

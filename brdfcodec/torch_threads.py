@@ -12,37 +12,44 @@ alone: 12.4–12.9 ms). With torch keeping both cores while the layers ran on a
 third thread, it took 21.5 ms: the threads fought for the cores. See
 ``python benchmarks/basis_sum_study.py``.
 
-torch's intra-op thread count is one setting for the whole process, so
-overlapping blocks share one limit (:class:`~brdfcodec.shared_limit.SharedLimit`):
-the first to enter saves the count, and the last to leave restores it.
+torch's intra-op thread count (OpenMP build) belongs to each thread: lowering
+it on the decoding thread leaves the others alone, so each thread keeps and
+restores its own count (nested blocks on one thread: the outermost one). The
+call also sets the default a thread takes at its first parallel torch call, so
+a thread that first uses torch while another thread is inside such a block
+starts with one thread fewer; the block on the decoding thread lasts one
+network pass (about 15 ms).
 """
 
 from __future__ import annotations
 
 import contextlib
-from collections.abc import Callable
+import threading
+from collections.abc import Iterator
 
 import torch
 
-from brdfcodec.shared_limit import SharedLimit
-
 __all__ = ["one_core_left"]
 
-
-def _one_thread_fewer() -> Callable[[], None]:
-    saved = torch.get_num_threads()
-    torch.set_num_threads(max(1, saved - 1))
-    return lambda: torch.set_num_threads(saved)
+_NESTING = threading.local()
 
 
-_ONE_CORE_LEFT = SharedLimit(_one_thread_fewer)
+@contextlib.contextmanager
+def one_core_left() -> Iterator[None]:
+    """Run the enclosed block with torch on one intra-op thread fewer (at least one) on this thread.
 
-
-def one_core_left() -> contextlib.AbstractContextManager[None]:
-    """Run the enclosed block with torch on one intra-op thread fewer (at least one).
-
-    Safe to nest and to enter from several threads at once: the count found
-    when the first block began is restored when the last one ends, also when
-    the block raises.
+    Safe to nest and to enter from several threads at once: each thread's count
+    is restored, on that thread, when its outermost block ends, also when the
+    block raises. With one thread already, nothing is changed.
     """
-    return _ONE_CORE_LEFT.held()
+    depth = getattr(_NESTING, "depth", 0)
+    saved = torch.get_num_threads() if depth == 0 else 1
+    if saved > 1:
+        torch.set_num_threads(saved - 1)
+    _NESTING.depth = depth + 1
+    try:
+        yield
+    finally:
+        _NESTING.depth = depth
+        if saved > 1:
+            torch.set_num_threads(saved)

@@ -127,7 +127,7 @@ def test_one_core_left_lowers_torch_threads_and_restores_them(monkeypatch) -> No
     monkeypatch.setattr(torch, "set_num_threads", counts.append)
     with one_core_left():
         assert counts[-1] == 3
-        with one_core_left():  # nested (or from another thread): one limit, restored once
+        with one_core_left():  # nested on one thread: lowered once, restored once
             assert counts[-1] == 3
         assert counts[-1] == 3
     assert counts == [4, 3, 4]
@@ -137,6 +137,64 @@ def test_one_core_left_lowers_torch_threads_and_restores_them(monkeypatch) -> No
     counts[:] = [1]
     with one_core_left():
         assert counts[-1] == 1  # never below one thread
+
+
+def test_overlapping_blocks_on_two_threads_restore_each_threads_own_count() -> None:
+    """torch keeps the count per thread: the thread that entered first must get its own back, whoever leaves last."""
+    import threading
+
+    if torch.get_num_threads() < 2:
+        pytest.skip("needs torch on at least 2 threads")
+    entered, main_left = threading.Event(), threading.Event()
+    seen: dict[str, int] = {}
+
+    def worker() -> None:
+        seen["start"] = torch.get_num_threads()
+        with one_core_left():
+            seen["inside"] = torch.get_num_threads()
+            entered.set()
+            main_left.wait(10)
+        seen["after"] = torch.get_num_threads()
+
+    before = torch.get_num_threads()
+    thread = threading.Thread(target=worker)
+    thread.start()
+    assert entered.wait(10)
+    with one_core_left():
+        assert torch.get_num_threads() == before - 1
+    assert torch.get_num_threads() == before
+    main_left.set()
+    thread.join(10)
+    assert seen["inside"] == seen["start"] - 1
+    assert seen["after"] == seen["start"]
+
+
+def test_a_failing_network_waits_for_the_layers_thread(monkeypatch) -> None:
+    """The thread limits are given back only after the layers' thread has ended, also when the network raises."""
+    import time
+
+    from brdfcodec.codec import BrdfDecoder
+    from brdfcodec.layers.record import LayeredRecord
+
+    decoder = BrdfDecoder()
+    done: list[bool] = []
+
+    def slow_layers(record, slots=None):  # noqa: ARG001
+        time.sleep(0.2)
+        done.append(True)
+        return []
+
+    def failing_network(*args, **kwargs):  # noqa: ARG001
+        raise RuntimeError("network failed")
+
+    monkeypatch.setattr(decoder, "_layer_residuals", slow_layers)
+    monkeypatch.setattr(decoder, "decode_mapped", failing_network)
+    before = torch.get_num_threads()
+    record = LayeredRecord("d", np.zeros(8), np.ones(8), detail=layer_of(sparse_coefficients(2, 0.01), 0.05))
+    with pytest.raises(RuntimeError, match="network failed"):
+        decoder.mapped_record(record)
+    assert done == [True]
+    assert torch.get_num_threads() == before
 
 
 def test_a_layered_decode_gives_torch_its_threads_back_also_when_a_layer_fails() -> None:
@@ -181,3 +239,11 @@ def test_decode_many_gives_each_record_its_own_layers() -> None:
         np.testing.assert_allclose(table, decoder.decode(record, masked="zero"), rtol=1e-5, atol=1e-6,
                                    err_msg=record.name)
     assert np.abs(batched[0] - decoder.decode(records[0].base(), masked="zero")).max() > 1e-3
+
+
+def test_a_basis_with_unordered_entries_is_refused_before_it_is_scattered() -> None:
+    from brdfcodec.layers.basis import BasisError, SharedBasis
+
+    basis = SharedBasis(np.eye(2, dtype=np.float16), np.array([5, 3], dtype=np.int64), "0" * 64)
+    with pytest.raises(BasisError, match="strictly increasing"):
+        basis.on_grid(np.ones(2, dtype=np.float32))

@@ -109,6 +109,8 @@ class SharedBasis:
     @functools.cached_property
     def _entry_mask(self) -> npt.NDArray[np.bool_]:
         """``entries`` as a flat boolean mask (scattering through it is twice as fast as through the indices)."""
+        if np.any(np.diff(self.entries) <= 0):  # a mask scatters in increasing order only
+            raise BasisError(f"shared basis {self.sha256[:12]}: 'entries' must be strictly increasing")
         mask = np.zeros(_N_ENTRIES, dtype=bool)
         mask[self.entries] = True
         return mask
