@@ -62,6 +62,11 @@ def test_analytic_then_info_then_dataset(capsys: pytest.CaptureFixture[str], tmp
     assert "3 materials (analytic)" in out
     code, out, _ = run(capsys, "info", str(ds))
     assert code == 0 and "brdfcodec dataset (analytic)" in out and "3 (" in out
+    # --random alone: random materials without the presets (it used to be ignored without --analytic)
+    code, out, err = run(capsys, "dataset", "build", "--random", "2", "-o", str(tmp_path / "r.h5"), "--quiet",
+                         "--no-tables")
+    assert code == 0, err
+    assert "2 materials (analytic)" in out
 
 
 @pytest.mark.parametrize(

@@ -40,10 +40,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
                        help="folder of RGL .bsdf files, tabulated with Mitsuba 3 (family rgl; extra brdfcodec[rgl])")
     build.add_argument("--nbrdf-zip", type=Path, action="append", default=[], metavar="ZIP",
                        help="NBRDF proxy archive (merl-nbrdf-90.zip, rgl-nbrdf-30.zip; family from the archive)")
-    build.add_argument("--analytic", action="store_true", help="analytic Lambert + GGX materials (family analytic)")
+    build.add_argument("--analytic", action="store_true",
+                       help="the analytic Lambert + GGX presets (family analytic)")
     build.add_argument("-o", "--output", type=Path, required=True, help="output .h5 file")
     build.add_argument("--materials", help="comma-separated subset of names (--nbrdf-zip, --analytic presets)")
-    build.add_argument("--random", type=int, default=0, metavar="N", help="extra random analytic materials")
+    build.add_argument("--random", type=int, default=0, metavar="N",
+                       help="N random analytic Lambert + GGX materials (family analytic), with or without "
+                            "--analytic's presets")
     build.add_argument("--validation-fraction", type=float, default=0.15,
                        help="share of each family held out (default 0.15)")
     build.add_argument("--seed", type=int, default=0, help="seed of the split and random materials (default 0)")
@@ -97,6 +100,8 @@ def collect_sources(args: argparse.Namespace) -> list[MaterialSource]:
         presets = subset if subset is None or only_analytic else [n for n in subset if n in ANALYTIC_PRESETS]
         unmatched -= set(presets or ())
         sources += analytic_sources(presets, random_count=args.random, seed=args.seed)
+    elif args.random:
+        sources += analytic_sources([], random_count=args.random, seed=args.seed)  # random ones, no preset
     if unmatched:
         raise ValueError(f"--materials names no material of the given sources: {', '.join(sorted(unmatched))}")
     if not sources:
@@ -108,9 +113,9 @@ def run_build(args: argparse.Namespace) -> int:
     """Build the dataset and report its size and time."""
     from brdfcodec.dataset import MIXED_SOURCE_KIND, build_dataset
 
-    if not (args.merl or args.rgl or args.nbrdf_zip or args.analytic):  # a usage error: exit 2
-        print("bvae dataset build: error: give at least one source: --merl DIR, --rgl DIR, --nbrdf-zip ZIP "
-              "or --analytic", file=sys.stderr)
+    if not (args.merl or args.rgl or args.nbrdf_zip or args.analytic or args.random):  # a usage error: exit 2
+        print("bvae dataset build: error: give at least one source: --merl DIR, --rgl DIR, --nbrdf-zip ZIP, "
+              "--analytic or --random N", file=sys.stderr)
         return 2
     sources = collect_sources(args)
     start = time.perf_counter()
