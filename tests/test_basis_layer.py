@@ -381,3 +381,39 @@ def test_coefficients_fitted_to_a_fixed_code_leave_it_and_lower_the_error(analyt
         return float((np.abs(mapped - inputs) * masks).sum())
 
     assert l1(fitted[0]) < l1(start)
+
+
+def test_a_fit_minimises_the_error_it_is_given(analytic_tables) -> None:
+    """``error=``: the fit keeps, of the pairs it visits, the best under the objective it was given (here L2),
+    which need not be the default L1's best."""
+    import torch
+
+    from brdfcodec.codec import BrdfDecoder, BrdfEncoder
+    from brdfcodec.conventions import MAPPED_MAX
+    from brdfcodec.layers.refine import fit_basis_coefficients
+    from brdfcodec.representation import network_input_from_table
+
+    decoder = BrdfDecoder()
+    basis = decoder.shared_basis
+    brdf = analytic_tables["red-plastic"]
+    inputs, masks = network_input_from_table(brdf.values, brdf.mask)
+    code = BrdfEncoder(effort=0).encode(brdf).mu
+    components = basis.components[8:20]
+
+    def squared(decoded: torch.Tensor, target: torch.Tensor, weight: torch.Tensor) -> torch.Tensor:
+        return ((decoded - target) * weight).square().sum(1)
+
+    def fitted(**kwargs) -> tuple[np.ndarray, np.ndarray]:
+        codes, coefficients = fit_basis_coefficients(decoder.network, code[None], inputs[None], masks[None],
+                                                     components, basis.entries, 1, **kwargs)
+        return codes[0], coefficients[0]
+
+    def errors(z: np.ndarray, c: np.ndarray) -> tuple[float, float]:
+        mapped = np.clip(decoder.decode_mapped(z), 0.0, MAPPED_MAX) + basis.residual(c, 8)
+        difference = (mapped - inputs) * masks
+        return float(np.abs(difference).sum()), float(np.square(difference).sum())
+
+    l1_fit, l2_fit = errors(*fitted()), errors(*fitted(error=squared))
+    assert l2_fit[1] <= l1_fit[1] * (1 + 1e-4)  # the L2 objective's own measure
+    assert l1_fit[0] <= l2_fit[0] * (1 + 1e-4)  # and the default's
+    assert l1_fit != l2_fit

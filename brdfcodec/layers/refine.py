@@ -11,6 +11,7 @@ with L2.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Final
 
 import numpy as np
@@ -131,6 +132,10 @@ BASIS_LEARNING_RATE: Final = 0.05
 JOINT_LATENT_RATE: Final = 0.02
 
 
+def _mapped_l1(decoded: torch.Tensor, target: torch.Tensor, weight: torch.Tensor) -> torch.Tensor:
+    return ((decoded - target) * weight).abs().sum(1)
+
+
 def fit_basis_coefficients(
     decoder: torch.nn.Module,
     codes: npt.ArrayLike,
@@ -141,6 +146,7 @@ def fit_basis_coefficients(
     effort: int,
     *,
     fit_latent: bool = True,
+    error: Callable[[torch.Tensor, torch.Tensor, torch.Tensor], torch.Tensor] | None = None,
 ) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.float32]]:
     """Latent codes and basis coefficients fitted together (the basis layer's encoder).
 
@@ -167,6 +173,10 @@ def fit_basis_coefficients(
     fit_latent : bool, default True
         False keeps ``codes`` as they are and fits the coefficients alone (for a code already quantised as
         it will be stored: the decoder then runs once).
+    error : callable, optional
+        ``error(decoded, target, weight)`` → per-material error ``(B,)`` to minimise, all three ``(B, 63·90·90)``
+        tensors (mapped kept slices; validity as 0/1); the mapped L1 error over valid entries by default.
+        For studies of other objectives (``benchmarks/full_table_fit_study.py``).
 
     Returns
     -------
@@ -177,6 +187,7 @@ def fit_basis_coefficients(
 
     if effort not in BASIS_STEPS:
         raise ValueError(f"effort must be one of {sorted(BASIS_STEPS)}, got {effort!r}")
+    error = _mapped_l1 if error is None else error
     parameter = next(decoder.parameters())
     device, dtype = parameter.device, parameter.dtype
     start = torch.as_tensor(np.array(codes, dtype=np.float32, ndmin=2), device=device, dtype=dtype)
@@ -203,7 +214,7 @@ def fit_basis_coefficients(
             c0 = residual[:, where] @ basis.T
             # No coefficients at all is a candidate too: on a material unlike the training ones the projection
             # (best in L2) can raise the L1 error.
-            best_error = ((decoded(start, torch.zeros_like(c0)) - target) * weight).abs().sum(1)
+            best_error = error(decoded(start, torch.zeros_like(c0)), target, weight)
         z = start.clone().requires_grad_(True)
         c = c0.clone().requires_grad_(True)
         best_z, best_c = start.clone(), torch.zeros_like(c0)
@@ -211,14 +222,14 @@ def fit_basis_coefficients(
         adam_z, adam_c = _Adam(z, JOINT_LATENT_RATE), _Adam(c, BASIS_LEARNING_RATE)
         with torch.enable_grad():
             for step in range(steps + 1):
-                error = ((decoded(z, c) - target) * weight).abs().sum(1)
-                better = error.detach() < best_error
+                current = error(decoded(z, c), target, weight)
+                better = current.detach() < best_error
                 best_z[better], best_c[better] = z.detach()[better], c.detach()[better]
-                best_error = torch.minimum(best_error, error.detach())
+                best_error = torch.minimum(best_error, current.detach())
                 if step == steps:
                     break
                 z.grad = c.grad = None
-                error.sum().backward()
+                current.sum().backward()
                 if fit_latent:
                     adam_z.step()
                 adam_c.step()
