@@ -32,6 +32,13 @@ from brdfcodec.representation import map_values
 from brdfcodec.representation.layout import interpolation_plan
 
 BUDGETS = (32, 64)
+#: For each φd bin: left kept slot, right kept slot, weight of the right one (the decoder's interpolation).
+_LEFT, _RIGHT, _WEIGHT = (torch.as_tensor(np.array(a)) for a in interpolation_plan())
+
+
+def as_fitted(values: np.ndarray) -> torch.Tensor:
+    """A full table ``(3, 90, 90, 180)`` as float32 ``(1, 3, 180, 90, 90)`` (colour, φd, θh, θd)."""
+    return torch.as_tensor(np.ascontiguousarray(np.moveaxis(np.asarray(values, dtype=np.float32), 3, 1)))[None]
 
 
 def full_table_l1(decoded: torch.Tensor, target: torch.Tensor, weight: torch.Tensor, *,
@@ -41,10 +48,9 @@ def full_table_l1(decoded: torch.Tensor, target: torch.Tensor, weight: torch.Ten
     ``truth`` and ``valid``: ``(1, 3, 180, 90, 90)`` (colour, φd, θh, θd); ``target`` and ``weight`` are unused.
     """
     del target, weight
-    left, right, w = (torch.as_tensor(np.array(a)) for a in interpolation_plan())
     kept = decoded.view(len(decoded), 3, N_KEPT_SLICES, 90, 90)
-    w = w.to(decoded.dtype).view(1, 1, N_PHI_D, 1, 1)
-    full = (kept[:, :, left] * (1 - w) + kept[:, :, right] * w).clamp(0.0, MAPPED_MAX)
+    w = _WEIGHT.to(decoded.dtype).view(1, 1, N_PHI_D, 1, 1)
+    full = (kept[:, :, _LEFT] * (1 - w) + kept[:, :, _RIGHT] * w).clamp(0.0, MAPPED_MAX)
     return ((full - truth) * valid).abs().flatten(1).sum(1)
 
 
@@ -59,8 +65,6 @@ def main() -> None:
             errors = []
             for i, name in enumerate(held.names):
                 table = held.tables[i]
-                as_fitted = lambda values: torch.as_tensor(  # noqa: E731 - (3, 90, 90, 180) → (1, 3, 180, 90, 90)
-                    np.ascontiguousarray(np.moveaxis(np.asarray(values, dtype=np.float32), 3, 1)))[None]
                 truth = np.where(table.mask, map_values(np.maximum(table.values, 0.0)), 0.0)
                 error = functools.partial(full_table_l1, truth=as_fitted(truth), valid=as_fitted(table.mask))
                 fit = functools.partial(fit_basis_coefficients, error=error)
