@@ -79,7 +79,10 @@ __all__ = [
     "Offender",
     "PlausibilityCriteria",
     "PlausibilityReport",
+    "albedo_weights",
+    "cell_valid_mask",
     "decompose_output",
+    "entry_valid_mask",
     "inverted_cells",
     "measure_plausibility",
     "new_holes",
@@ -134,7 +137,7 @@ def _split(mapped: npt.ArrayLike) -> np.ndarray:
 
 
 @functools.cache
-def _cell_valid() -> BoolArray:
+def cell_valid_mask() -> BoolArray:
     """(21, 90): kept slot × θd bin cells whose near and off θh entries are all above the horizon."""
     from brdfcodec.mask import kept_slice_horizon_mask
 
@@ -145,7 +148,7 @@ def _cell_valid() -> BoolArray:
 
 
 @functools.cache
-def _entry_valid() -> BoolArray:
+def entry_valid_mask() -> BoolArray:
     """(21, θh 90, θd 90): entries of one colour block that are above the horizon."""
     from brdfcodec.mask import kept_slice_horizon_mask
 
@@ -173,7 +176,7 @@ def specular_deficit(mapped: npt.ArrayLike) -> FloatArray:
     near = blocks[..., list(NEAR_THETA_H_BINS), :].max(axis=-2)
     off = blocks[..., list(OFF_THETA_H_BINS), :].max(axis=-2)
     deficit = (off - near).astype(np.result_type(blocks.dtype, np.float32), copy=False)
-    return np.where(_cell_valid(), deficit, np.nan)
+    return np.where(cell_valid_mask(), deficit, np.nan)
 
 
 def inverted_cells(mapped: npt.ArrayLike, tolerance: float = 0.1) -> BoolArray:
@@ -184,7 +187,7 @@ def inverted_cells(mapped: npt.ArrayLike, tolerance: float = 0.1) -> BoolArray:
     deficit = specular_deficit(mapped)
     blocks = _split(mapped)
     rows = blocks[..., list(NEAR_THETA_H_BINS + OFF_THETA_H_BINS), :]
-    broken = ~np.isfinite(rows).all(axis=-2) & _cell_valid()
+    broken = ~np.isfinite(rows).all(axis=-2) & cell_valid_mask()
     with np.errstate(invalid="ignore"):
         return (deficit > tolerance) | broken
 
@@ -215,12 +218,12 @@ def new_holes(source: npt.ArrayLike, edited: npt.ArrayLike) -> BoolArray:
     blocks = _split(edited)
     out = blocks[..., near, :]
     flank = blocks[..., list(OFF_THETA_H_BINS), :].max(axis=-2)[..., None, :]
-    valid = _entry_valid()[:, near, :]
+    valid = entry_valid_mask()[:, near, :]
     return (out <= 0) & (flank > 0) & (src > 0) & valid
 
 
 @functools.cache
-def _albedo_weights() -> np.ndarray:
+def albedo_weights() -> np.ndarray:
     """Quadrature weights (21, θh 90, θd 90) of :func:`white_sky_albedo` on the kept slices, 0 below the horizon."""
     from brdfcodec.coords import directions_from_half_diff
     from brdfcodec.mask import kept_slice_horizon_mask
@@ -266,7 +269,7 @@ def white_sky_albedo(mapped: npt.ArrayLike) -> FloatArray:
     """
     blocks = _split(mapped).astype(np.float64)
     reflectance = np.expm1(blocks * LOG_RANGE) * EPSILON  # physical 1/sr, the inverse of the log mapping
-    return np.einsum("...cshd,shd->...c", reflectance, _albedo_weights())
+    return np.einsum("...cshd,shd->...c", reflectance, albedo_weights())
 
 
 def _invalid_counts(mapped: np.ndarray) -> np.ndarray:

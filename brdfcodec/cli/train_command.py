@@ -34,6 +34,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
                         help="decoupled (AdamW) decay of the weights, per unit of learning rate (0: Adam)")
     parser.add_argument("--decoder-dropout", type=float,
                         help="probability of dropping a hidden unit of the decoder's first fully connected layer")
+    parser.add_argument("--traversal-weight", type=float,
+                        help="weight of the traversal plausibility penalty (0: none; see TrainConfig)")
+    parser.add_argument("--traversal-range", type=float,
+                        help="largest traversal offset of that penalty, prior σ units (default 3)")
     parser.add_argument("--beta", type=float)
     parser.add_argument("--recon", choices=("l2", "l1"))
     parser.add_argument("--permute-colours", type=float, help="probability of a colour permutation")

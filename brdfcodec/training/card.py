@@ -69,7 +69,9 @@ def render_model_card(manifest: dict[str, Any]) -> str:
         f"{train['epochs']} epochs; weights of epoch {info['best_epoch']} (best validation RelAE).",
         f"- Augmentation: colour permutation with probability {train['permute_colours']}, reflectance blend of two "
         f"materials with probability {train['mix_probability']}"
-        + (f"; decoder dropout {train['decoder_dropout']:g}." if train.get("decoder_dropout") else "."),
+        + (f"; decoder dropout {train['decoder_dropout']:g}" if train.get("decoder_dropout") else "")
+        + (f"; traversal plausibility penalty, weight {train['traversal_weight']:g}, offsets up to "
+           f"±{train['traversal_range']:g} σ" if train.get("traversal_weight") else "") + ".",
         f"- Training time: {info['training_seconds'] / 60:.1f} min on {info['device']} "
         f"({info['world_size']} process(es)).",
         f"- Reproduce: `{info['command']}`",

@@ -36,6 +36,17 @@ class TrainConfig:
         layer is dropped in a training step (inverted dropout; none at
         evaluation). 0 (the default) draws no mask, so runs without it keep
         their random stream.
+    traversal_weight : float
+        Weight of the traversal plausibility penalty
+        (:class:`brdfcodec.training.traversal.TraversalPenalty`): each step
+        also decodes ``μ + t·e_d`` for every material (d uniform, t uniform in
+        ``[−traversal_range, traversal_range]``) and penalises new inverted
+        specular peaks, near-specular output below the floor and albedo above
+        the training materials'. 0 (the default) decodes nothing more and
+        draws nothing, so runs without it keep their random stream.
+    traversal_range : float
+        Largest traversal offset of the penalty, prior σ units (3: the span
+        ``bvae model plausibility`` checks).
     beta : float
         β of the objective (β_norm = β·M/N; 12 in the paper).
     recon : {"l2", "l1"}
@@ -63,6 +74,8 @@ class TrainConfig:
     min_learning_rate: float = 1e-5
     weight_decay: float = 0.0
     decoder_dropout: float = 0.0
+    traversal_weight: float = 0.0
+    traversal_range: float = 3.0
     warmup_epochs: int = 2
     beta: float = 12.0
     recon: Literal["l2", "l1"] = "l1"
@@ -85,6 +98,9 @@ class TrainConfig:
             raise ValueError("learning rates must be positive and beta ≥ 0")
         if not 0 <= self.weight_decay < float("inf"):
             raise ValueError(f"weight_decay must be finite and ≥ 0, got {self.weight_decay}")
+        if not (0 <= self.traversal_weight < float("inf") and 0 < self.traversal_range < float("inf")):
+            raise ValueError(f"traversal_weight must be finite and ≥ 0 and traversal_range finite and > 0, got "
+                             f"{self.traversal_weight}, {self.traversal_range}")
         if not 0 <= self.decoder_dropout < 1:
             raise ValueError(f"decoder_dropout must be in [0, 1), got {self.decoder_dropout}")
 

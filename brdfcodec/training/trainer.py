@@ -38,6 +38,7 @@ from brdfcodec.training.augment import COLOUR_PERMUTATIONS, mix_physical, permut
 from brdfcodec.training.config import TrainConfig
 from brdfcodec.training.dropout import DecoderHiddenDropout
 from brdfcodec.training.evaluation import MappedReference, reconstruct_mapped
+from brdfcodec.training.traversal import TraversalPenalty, traversed_codes
 from brdfcodec.version import __version__
 
 __all__ = ["TrainResult", "train"]
@@ -104,8 +105,10 @@ def _global_batches(
 ) -> Iterator[dict[str, torch.Tensor]]:
     """Every random draw of one epoch, for the global batches, identical on every rank.
 
-    A decoder dropout mask ``(size, dropout_width)`` is drawn last, and only
-    when ``config.decoder_dropout`` > 0, so runs without dropout keep their stream.
+    A decoder dropout mask ``(size, dropout_width)`` is drawn after the
+    noise, and only when ``config.decoder_dropout`` > 0; the traversal
+    penalty's dimensions and offsets last, and only when
+    ``config.traversal_weight`` > 0: runs without them keep their stream.
     """
     generator = _epoch_generator(config.seed, epoch)
     order = torch.randperm(n_train, generator=generator)
@@ -122,6 +125,9 @@ def _global_batches(
         draw = {"rows": rows, "permutation": permutation, "partner": partner, "weight": weight, "noise": noise}
         if config.decoder_dropout > 0:
             draw["keep"] = torch.rand(size, dropout_width, generator=generator) >= config.decoder_dropout
+        if config.traversal_weight > 0:
+            draw["traverse_dim"] = torch.randint(0, latent_dim, (size,), generator=generator)
+            draw["traverse_offset"] = (2 * torch.rand(size, generator=generator) - 1) * config.traversal_range
         yield draw
 
 
@@ -147,6 +153,7 @@ class _TrainingData:
     monitored_inputs: Any
     train_reference: MappedReference | None
     info: dict[str, Any]
+    traversal_penalty: TraversalPenalty | None = None
 
 
 @dataclass
@@ -249,12 +256,13 @@ def _train_epoch(model: BetaVAE, forward: torch.nn.Module, optimizer: torch.opti
     n_train = len(data.inputs)
     local = train_config.batch_size // world.size
     steps_per_epoch = max(1, n_train // train_config.batch_size)
-    sums = torch.zeros(3, dtype=torch.float64)  # loss, recon, kl (sums over samples)
+    sums = torch.zeros(4, dtype=torch.float64)  # loss, recon, kl, traversal penalty (sums over samples)
     kl_dims = torch.zeros(model_config.latent_dim, dtype=torch.float64)
     count = 0
     dropout = (DecoderHiddenDropout(model.decoder, train_config.decoder_dropout)
                if train_config.decoder_dropout > 0 else None)
     width = dropout.width if dropout is not None else 0
+    penalty = data.traversal_penalty if train_config.traversal_weight > 0 else None
     for draw in _global_batches(n_train, train_config, epoch, model_config.latent_dim, width):
         part = slice(world.rank * local, (world.rank + 1) * local)
         if dropout is not None:
@@ -268,12 +276,20 @@ def _train_epoch(model: BetaVAE, forward: torch.nn.Module, optimizer: torch.opti
             group["lr"] = _learning_rate(progress.step, steps_per_epoch, train_config)
         recon, mu, logvar = forward(x, draw["noise"][part].to(world.device))
         terms = beta_vae_loss(recon, x, m, mu, logvar, beta=train_config.beta, recon=train_config.recon)
+        loss, traversal = terms.loss, torch.zeros(())
+        if penalty is not None:
+            # The module itself, not the DDP wrapper: autograd sums both uses of a weight before DDP's hook runs.
+            edited = model.decoder.unbounded(
+                traversed_codes(mu, draw["traverse_dim"][part], draw["traverse_offset"][part]))
+            traversal = penalty(edited, x).total().mean()
+            loss = loss + train_config.traversal_weight * traversal
         optimizer.zero_grad(set_to_none=True)
-        terms.loss.backward()
+        loss.backward()
         optimizer.step()
         progress.step += 1
         n = len(rows)
-        sums += torch.tensor([terms.loss.item(), terms.recon.item(), terms.kl.item()], dtype=torch.float64) * n
+        sums += torch.tensor([loss.item(), terms.recon.item(), terms.kl.item(), traversal.item()],
+                             dtype=torch.float64) * n
         kl_dims += kl_per_dimension(mu.detach(), logvar.detach()).sum(0).double().cpu()
         count += n
     if dropout is not None:
@@ -288,7 +304,8 @@ def _train_epoch(model: BetaVAE, forward: torch.nn.Module, optimizer: torch.opti
         "loss": totals[0].item() / count_all,
         "recon": totals[1].item() / count_all,
         "kl": totals[2].item() / count_all,
-        "kl_per_dim": [v / count_all for v in totals[3:-1].tolist()],
+        "traversal": totals[3].item() / count_all,
+        "kl_per_dim": [v / count_all for v in totals[4:-1].tolist()],
         "seconds": time.perf_counter() - epoch_start,
     }
 
@@ -364,6 +381,8 @@ def train(
     run_info = _run_info(dataset_path, model_config, train_config, world)
     _check_run_folder(out, run_info, resume)
     data = _load_training_data(dataset_path, world)
+    if train_config.traversal_weight > 0:
+        data.traversal_penalty = TraversalPenalty(data.inputs)
     run_info["data"] = data.info
     model, optimizer, state = _build_model(model_config, train_config, data, world, out, resume)
     if world.is_main and not resume:
