@@ -103,9 +103,11 @@ def test_gradient_reaches_only_the_offending_entries(flat, penalty) -> None:
 
 
 def test_penalty_stays_finite_for_extreme_outputs(flat, penalty) -> None:
-    extreme = torch.cat([flat * 0 - 50.0, flat * 0 + 50.0, flat.half().float()])
-    terms = penalty(extreme, torch.cat([flat] * 3))
-    assert all(torch.isfinite(t).all() for t in (terms.inversion, terms.holes, terms.energy))
+    extreme = torch.cat([flat * 0 - 50.0, flat * 0 + 50.0, flat + 4.0])
+    for dtype in (torch.float32, torch.float16):
+        terms = penalty(extreme.to(dtype), torch.cat([flat] * 3).to(dtype))
+        assert all(torch.isfinite(t).all() for t in (terms.inversion, terms.holes, terms.energy)), dtype
+        assert float(terms.energy[1]) > 0 and float(terms.holes[0]) == 0  # all black: no hole
 
 
 def test_traversed_codes_move_one_dimension_and_detach_mu() -> None:

@@ -153,10 +153,11 @@ class TraversalPenalty:
         -------
         TraversalTerms
         """
-        device, dtype = edited.device, edited.dtype
+        # In float32 whatever the decoder's dtype: the albedo's exponentials overflow float16.
+        device, dtype = edited.device, torch.float32
         cells = self._cells.to(device)
         near_valid = self._near.to(device)
-        out, src = _blocks(edited), _blocks(material.to(dtype))
+        out, src = _blocks(edited.to(dtype)), _blocks(material.to(dtype))
         allowed = _deficit(src).clamp(min=0.0) + self.margin
         # Below the floor the clamp makes a whole region black alike: the deficit is judged on the floored output.
         inversion = torch.relu(_deficit(out.clamp(min=0.0)) - allowed) * cells
