@@ -262,7 +262,7 @@ def _train_epoch(model: BetaVAE, forward: torch.nn.Module, optimizer: torch.opti
     dropout = (DecoderHiddenDropout(model.decoder, train_config.decoder_dropout)
                if train_config.decoder_dropout > 0 else None)
     width = dropout.width if dropout is not None else 0
-    penalty = data.traversal_penalty if train_config.traversal_weight > 0 else None
+    penalty = data.traversal_penalty  # built only when traversal_weight > 0
     for draw in _global_batches(n_train, train_config, epoch, model_config.latent_dim, width):
         part = slice(world.rank * local, (world.rank + 1) * local)
         if dropout is not None:
@@ -278,7 +278,8 @@ def _train_epoch(model: BetaVAE, forward: torch.nn.Module, optimizer: torch.opti
         terms = beta_vae_loss(recon, x, m, mu, logvar, beta=train_config.beta, recon=train_config.recon)
         loss, traversal = terms.loss, torch.zeros(())
         if penalty is not None:
-            # The module itself, not the DDP wrapper: autograd sums both uses of a weight before DDP's hook runs.
+            # Through the module, not the DDP wrapper: autograd adds this use of a weight to the wrapper's before
+            # DDP reduces the gradient (reasoned, not yet tested under torchrun with the penalty).
             edited = model.decoder.unbounded(
                 traversed_codes(mu, draw["traverse_dim"][part], draw["traverse_offset"][part]))
             traversal = penalty(edited, x).total().mean()
