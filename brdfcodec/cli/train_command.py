@@ -38,6 +38,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
                         help="weight of the traversal plausibility penalty (0: none; see TrainConfig)")
     parser.add_argument("--traversal-range", type=float,
                         help="largest traversal offset of that penalty, prior σ units (default 3)")
+    parser.add_argument("--linear-path-rate", type=float,
+                        help="learning rate of the decoder's linear (PCA) path as a fraction of the network's "
+                             "(0: frozen, the default)")
     parser.add_argument("--beta", type=float)
     parser.add_argument("--recon", choices=("l2", "l1"))
     parser.add_argument("--permute-colours", type=float, help="probability of a colour permutation")

@@ -17,7 +17,7 @@ from brdfcodec.mask import kept_slice_horizon_mask
 from brdfcodec.models.config import ModelConfig
 from brdfcodec.representation import to_network_layout
 
-__all__ = ["BetaVAE", "Decoder", "Encoder", "initialise_linear_basis", "valid_input_index"]
+__all__ = ["BetaVAE", "Decoder", "Encoder", "initialise_linear_basis", "linear_path_trainable", "valid_input_index"]
 
 _IN_CHANNELS = NETWORK_INPUT_SHAPE[0]
 _BOTTLENECK = 12  # 90 → 45 → 23 → 12 with three 3×3 stride-2 convolutions
@@ -248,3 +248,35 @@ def initialise_linear_basis(model: BetaVAE, train_inputs: torch.Tensor) -> None:
     model.encoder.basis_projection.copy_((components / scale[:, None]).float())
     model.decoder.basis_mean.copy_(mean.half())
     model.decoder.basis_components.copy_((components * scale[:, None]).half())
+
+
+def linear_path_trainable(decoder: Decoder) -> list[nn.Parameter]:
+    """Make the decoder's linear path (``basis_mean``, ``basis_components``) trainable, in float32.
+
+    The two float16 buffers become float32 parameters under the same names,
+    so the state dict keeps its keys: loading it into a fresh decoder (whose
+    buffers are float16, as exported) rounds them back to float16.
+
+    Returns
+    -------
+    list of nn.Parameter
+        The two new parameters (mean, components), for their own optimiser group.
+
+    Raises
+    ------
+    ValueError
+        The decoder has no linear path.
+    """
+    if not decoder.config.linear_basis:
+        raise ValueError("the model has no linear path to train (ModelConfig.linear_basis is False)")
+    made = []
+    for name in ("basis_mean", "basis_components"):
+        value = getattr(decoder, name)
+        if isinstance(value, nn.Parameter):
+            made.append(value)
+            continue
+        parameter = nn.Parameter(value.detach().float().clone())
+        delattr(decoder, name)
+        decoder.register_parameter(name, parameter)
+        made.append(parameter)
+    return made

@@ -47,6 +47,13 @@ class TrainConfig:
     traversal_range : float
         Largest traversal offset of the penalty, prior σ units (3: the span
         ``bvae model plausibility`` checks).
+    linear_path_rate : float
+        Learning rate of the decoder's linear path (its PCA mean and
+        components, ``ModelConfig.linear_basis``) as a fraction of the
+        network's. 0 (the default, v1's recipe) keeps the path frozen at its
+        PCA fit; > 0 trains it in float32 (stored in float16 as before, so
+        the decoder's size does not change) and needs a model with a linear
+        path.
     beta : float
         β of the objective (β_norm = β·M/N; 12 in the paper).
     recon : {"l2", "l1"}
@@ -76,6 +83,7 @@ class TrainConfig:
     decoder_dropout: float = 0.0
     traversal_weight: float = 0.0
     traversal_range: float = 3.0
+    linear_path_rate: float = 0.0
     warmup_epochs: int = 2
     beta: float = 12.0
     recon: Literal["l2", "l1"] = "l1"
@@ -101,6 +109,8 @@ class TrainConfig:
         if not (0 <= self.traversal_weight < float("inf") and 0 < self.traversal_range < float("inf")):
             raise ValueError(f"traversal_weight must be finite and ≥ 0 and traversal_range finite and > 0, got "
                              f"{self.traversal_weight}, {self.traversal_range}")
+        if not 0 <= self.linear_path_rate < float("inf"):
+            raise ValueError(f"linear_path_rate must be finite and ≥ 0, got {self.linear_path_rate}")
         if not 0 <= self.decoder_dropout < 1:
             raise ValueError(f"decoder_dropout must be in [0, 1), got {self.decoder_dropout}")
 

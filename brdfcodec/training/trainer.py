@@ -33,7 +33,7 @@ from tqdm.auto import tqdm
 from brdfcodec.dataset import BrdfDataset
 from brdfcodec.models.config import ModelConfig
 from brdfcodec.models.loss import beta_vae_loss, kl_per_dimension
-from brdfcodec.models.network import BetaVAE, initialise_linear_basis
+from brdfcodec.models.network import BetaVAE, initialise_linear_basis, linear_path_trainable
 from brdfcodec.training.augment import COLOUR_PERMUTATIONS, mix_physical, permute_colours
 from brdfcodec.training.config import TrainConfig
 from brdfcodec.training.dropout import DecoderHiddenDropout
@@ -224,6 +224,8 @@ def _build_model(model_config: ModelConfig, train_config: TrainConfig, data: _Tr
     model = BetaVAE(model_config)
     if model_config.linear_basis and not resume:
         initialise_linear_basis(model, data.inputs)
+    if train_config.linear_path_rate > 0:
+        linear_path_trainable(model.decoder)  # before loading a checkpoint, whose path is float32 then
     model = model.to(world.device)
     optimizer = _optimizer(model, train_config)
     progress = _Progress()
@@ -236,13 +238,23 @@ def _build_model(model_config: ModelConfig, train_config: TrainConfig, data: _Tr
 
 
 def _optimizer(model: BetaVAE, train_config: TrainConfig) -> torch.optim.Optimizer:
-    """Adam, or AdamW decaying only the weight matrices and kernels when ``weight_decay`` > 0."""
+    """Adam, or AdamW decaying only the weight matrices and kernels when ``weight_decay`` > 0.
+
+    A trainable linear path (``linear_path_rate`` > 0) gets its own group, never decayed, whose learning rate is
+    the schedule's times ``lr_scale`` (:func:`_train_epoch` applies it).
+    """
+    linear = [getattr(model.decoder, name) for name in ("basis_mean", "basis_components")
+              if isinstance(getattr(model.decoder, name, None), torch.nn.Parameter)]
+    linear_ids = {id(p) for p in linear}
+    parameters = [p for p in model.parameters() if p.requires_grad and id(p) not in linear_ids]
+    path_group = ([{"params": linear, "weight_decay": 0.0, "lr_scale": train_config.linear_path_rate}]
+                  if linear else [])
     if train_config.weight_decay == 0:
-        return torch.optim.Adam(model.parameters(), lr=train_config.learning_rate)
-    parameters = [p for p in model.parameters() if p.requires_grad]
+        return torch.optim.Adam([{"params": parameters}, *path_group], lr=train_config.learning_rate)
     groups = [
         {"params": [p for p in parameters if p.ndim >= 2], "weight_decay": train_config.weight_decay},
         {"params": [p for p in parameters if p.ndim < 2], "weight_decay": 0.0},
+        *path_group,
     ]
     return torch.optim.AdamW(groups, lr=train_config.learning_rate)
 
@@ -272,8 +284,9 @@ def _train_epoch(model: BetaVAE, forward: torch.nn.Module, optimizer: torch.opti
         m = data.masks[rows] & data.masks[partner]
         x = permute_colours(x, draw["permutation"][part]).to(world.device)
         m = permute_colours(m, draw["permutation"][part]).to(world.device)
+        rate = _learning_rate(progress.step, steps_per_epoch, train_config)
         for group in optimizer.param_groups:
-            group["lr"] = _learning_rate(progress.step, steps_per_epoch, train_config)
+            group["lr"] = rate * group.get("lr_scale", 1.0)
         recon, mu, logvar = forward(x, draw["noise"][part].to(world.device))
         terms = beta_vae_loss(recon, x, m, mu, logvar, beta=train_config.beta, recon=train_config.recon)
         loss, traversal = terms.loss, torch.zeros(())
