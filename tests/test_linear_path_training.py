@@ -51,9 +51,14 @@ def test_trainable_path_keeps_its_keys_and_rounds_back_to_float16() -> None:
     assert torch.equal(exported.decoder.basis_components, made[1].detach().half())
 
 
-def test_a_model_without_a_linear_path_is_refused() -> None:
+def test_a_model_without_a_linear_path_is_refused(tmp_path: Path) -> None:
     with pytest.raises(ValueError, match="no linear path"):
         linear_path_trainable(BetaVAE(TINY_CONFIG).decoder)
+    # The trainer refuses it before it reads the data or makes the run folder.
+    with pytest.raises(ValueError, match="needs a model with a linear path"):
+        train(tmp_path / "absent.h5", tmp_path / "run", model_config=TINY_CONFIG,
+              train_config=TrainConfig(linear_path_rate=0.1), progress=False)
+    assert not (tmp_path / "run").exists()
 
 
 @pytest.fixture(scope="module")

@@ -392,6 +392,8 @@ def train(
     out = Path(run_dir)
     if train_config.batch_size % world.size:
         raise ValueError(f"batch_size {train_config.batch_size} is not divisible by {world.size} processes")
+    if train_config.linear_path_rate > 0 and not model_config.linear_basis:
+        raise ValueError("linear_path_rate > 0 needs a model with a linear path (ModelConfig.linear_basis)")
     run_info = _run_info(dataset_path, model_config, train_config, world)
     _check_run_folder(out, run_info, resume)
     data = _load_training_data(dataset_path, world)
