@@ -71,6 +71,19 @@ def test_resume_continues_exactly(tiny_dataset: Path, tmp_path: Path) -> None:
         assert rb["val_relae_mapped"] == pytest.approx(ra["val_relae_mapped"], rel=1e-5)
 
 
+def test_resume_after_a_kill_drops_the_log_records_past_the_checkpoint(tiny_dataset: Path, tmp_path: Path) -> None:
+    run = tmp_path / "run"
+    first = TrainConfig(**{**TINY_TRAIN.to_dict(), "time_limit_s": 0.0})
+    train(tiny_dataset, run, model_config=TINY_CONFIG, train_config=first, progress=False)
+    # As if the process had been killed after logging epoch 2 but before its checkpoint.
+    with open(run / "log.jsonl", "a", encoding="utf-8") as log:
+        log.write(json.dumps({"epoch": 2, "loss": -1.0}) + "\n")
+    train(tiny_dataset, run, model_config=TINY_CONFIG, train_config=TINY_TRAIN, resume=True, progress=False)
+    log = read_log(run)
+    assert [r["epoch"] for r in log] == [1, 2, 3]
+    assert all(r["loss"] > 0 for r in log)
+
+
 def test_resume_refuses_a_different_config(tiny_dataset: Path, tmp_path: Path) -> None:
     run = tmp_path / "run"
     train(tiny_dataset, run, model_config=TINY_CONFIG, train_config=TINY_TRAIN, progress=False)

@@ -136,6 +136,19 @@ def _trajectory(config: dict[str, Any]) -> dict[str, Any]:
     return {k: v for k, v in config.items() if k not in _RUN_CONTROL}
 
 
+def _log_up_to(path: Path, epochs: int) -> None:
+    """Drop the log records of epochs after the checkpoint's (a run killed between checkpoints wrote them; the
+    resumed run writes them again)."""
+    if not path.exists():
+        return
+    lines = path.read_text(encoding="utf-8").splitlines(keepends=True)
+    kept = [line for line in lines if line.strip() and json.loads(line).get("epoch", 0) <= epochs]
+    if len(kept) != len(lines):
+        tmp = path.with_name(path.name + ".part")
+        tmp.write_text("".join(kept), encoding="utf-8")
+        os.replace(tmp, path)
+
+
 def _atomic_save(obj: Any, path: Path) -> None:
     tmp = path.with_name(path.name + ".part")
     torch.save(obj, tmp)
@@ -404,6 +417,8 @@ def train(
     if world.is_main and not resume:
         out.mkdir(parents=True, exist_ok=True)
         (out / "run.json").write_text(json.dumps(run_info, indent=2))
+    if world.is_main and resume:
+        _log_up_to(out / LOG, state.first_epoch)
     ddp = DistributedDataParallel(model) if world.size > 1 else None
     forward = ddp if ddp is not None else model
 
