@@ -30,6 +30,7 @@ import torch.distributed as dist
 from torch.nn.parallel import DistributedDataParallel
 from tqdm.auto import tqdm
 
+from brdfcodec.atomic import atomic_output
 from brdfcodec.dataset import BrdfDataset
 from brdfcodec.models.config import ModelConfig
 from brdfcodec.models.loss import beta_vae_loss, kl_per_dimension
@@ -144,9 +145,8 @@ def _log_up_to(path: Path, epochs: int) -> None:
     lines = path.read_text(encoding="utf-8").splitlines(keepends=True)
     kept = [line for line in lines if line.strip() and json.loads(line).get("epoch", 0) <= epochs]
     if len(kept) != len(lines):
-        tmp = path.with_name(path.name + ".part")
-        tmp.write_text("".join(kept), encoding="utf-8")
-        os.replace(tmp, path)
+        with atomic_output(path, overwrite=True) as tmp:
+            tmp.write_text("".join(kept), encoding="utf-8")
 
 
 def _atomic_save(obj: Any, path: Path) -> None:
