@@ -41,6 +41,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     parser.add_argument("--linear-path-rate", type=float,
                         help="learning rate of the decoder's linear (PCA) path as a fraction of the network's "
                              "(0: frozen, the default)")
+    parser.add_argument("--average-from-epoch", type=int,
+                        help="average the weights of every step from this epoch on (stochastic weight averaging; "
+                             "validation, best.pt and the export use the average; 0: never, the default)")
     parser.add_argument("--beta", type=float)
     parser.add_argument("--recon", choices=("l2", "l1"))
     parser.add_argument("--permute-colours", type=float, help="probability of a colour permutation")

@@ -66,7 +66,9 @@ def render_model_card(manifest: dict[str, Any]) -> str:
         f"- {_optimizer_words(train.get('weight_decay', 0.0))}, batch {train['batch_size']}, "
         f"learning rate {train['learning_rate']:g} with {train['warmup_epochs']} "
         f"warm-up epochs and cosine decay to {train['min_learning_rate']:g}, {info['epochs_done']} of "
-        f"{train['epochs']} epochs; weights of epoch {info['best_epoch']} (best validation RelAE).",
+        f"{train['epochs']} epochs; weights of epoch {info['best_epoch']} (best validation RelAE"
+        + (f"; equal-weight average of every step's weights from epoch {train['average_from_epoch']} on"
+           if 0 < train.get("average_from_epoch", 0) <= info["best_epoch"] else "") + ").",
         f"- Augmentation: colour permutation with probability {train['permute_colours']}, reflectance blend of two "
         f"materials with probability {train['mix_probability']}"
         + (f"; decoder dropout {train['decoder_dropout']:g}" if train.get("decoder_dropout") else "")

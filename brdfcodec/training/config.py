@@ -54,6 +54,14 @@ class TrainConfig:
         PCA fit; > 0 trains it in float32 (stored in float16 as before, so
         the decoder's size does not change) and needs a model with a linear
         path.
+    average_from_epoch : int
+        Stochastic weight averaging: from this epoch on (counted from 1; 0,
+        the default, never) the weights after every optimiser step enter an
+        equal-weight running average
+        (:class:`torch.optim.swa_utils.AveragedModel`), which the validation
+        evaluations, ``best.pt`` and so the exported model use. Buffers (a
+        frozen linear path, batch-normalisation statistics) are the live
+        model's. Must not exceed ``epochs``.
     beta : float
         β of the objective (β_norm = β·M/N; 12 in the paper).
     recon : {"l2", "l1"}
@@ -84,6 +92,7 @@ class TrainConfig:
     traversal_weight: float = 0.0
     traversal_range: float = 3.0
     linear_path_rate: float = 0.0
+    average_from_epoch: int = 0
     warmup_epochs: int = 2
     beta: float = 12.0
     recon: Literal["l2", "l1"] = "l1"
@@ -111,6 +120,8 @@ class TrainConfig:
                              f"{self.traversal_weight}, {self.traversal_range}")
         if not 0 <= self.linear_path_rate < float("inf"):
             raise ValueError(f"linear_path_rate must be finite and ≥ 0, got {self.linear_path_rate}")
+        if not 0 <= self.average_from_epoch <= self.epochs:
+            raise ValueError(f"average_from_epoch must be in [0, epochs={self.epochs}], got {self.average_from_epoch}")
         if not 0 <= self.decoder_dropout < 1:
             raise ValueError(f"decoder_dropout must be in [0, 1), got {self.decoder_dropout}")
 

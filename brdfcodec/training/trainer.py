@@ -2,8 +2,9 @@
 
 A run directory holds ``run.json`` (configs, dataset, world size),
 ``log.jsonl`` (one JSON object per epoch), ``checkpoint.pt`` (everything
-needed to resume), ``best.pt`` (weights with the best validation RelAE) and
-``summary.json`` at the end.
+needed to resume), ``best.pt`` (weights with the best validation RelAE: the
+running average of the weights once ``TrainConfig.average_from_epoch`` is
+reached) and ``summary.json`` at the end.
 
 Reproducibility across process counts: every random draw of a step (batch
 order, augmentation, reparameterisation noise) is made for the *global*
@@ -28,6 +29,7 @@ from typing import Any
 import torch
 import torch.distributed as dist
 from torch.nn.parallel import DistributedDataParallel
+from torch.optim.swa_utils import AveragedModel
 from tqdm.auto import tqdm
 
 from brdfcodec.atomic import atomic_output
@@ -231,8 +233,9 @@ def _load_training_data(dataset_path: str | os.PathLike[str], world: _World) -> 
 
 
 def _build_model(model_config: ModelConfig, train_config: TrainConfig, data: _TrainingData, world: _World,
-                 out: Path, resume: bool) -> tuple[BetaVAE, torch.optim.Optimizer, _Progress]:
-    """A fresh model (linear basis fitted) or the one of the checkpoint, with its optimiser and progress."""
+                 out: Path, resume: bool) -> tuple[BetaVAE, torch.optim.Optimizer, _Progress, AveragedModel | None]:
+    """A fresh model (linear basis fitted) or the one of the checkpoint, with its optimiser, progress and weight
+    average (None unless ``average_from_epoch`` is set)."""
     torch.manual_seed(train_config.seed)
     model = BetaVAE(model_config)
     if model_config.linear_basis and not resume:
@@ -241,13 +244,28 @@ def _build_model(model_config: ModelConfig, train_config: TrainConfig, data: _Tr
         linear_path_trainable(model.decoder)  # before loading a checkpoint, whose path is float32 then
     model = model.to(world.device)
     optimizer = _optimizer(model, train_config)
+    average = AveragedModel(model, use_buffers=False) if train_config.average_from_epoch else None
     progress = _Progress()
     if resume:
         state = torch.load(out / CHECKPOINT, map_location=world.device, weights_only=False)
         model.load_state_dict(state["model"])
         optimizer.load_state_dict(state["optimizer"])
+        if average is not None:
+            average.load_state_dict(state["average"])
         progress = _Progress(state["epoch"], state["best"], state["best_epoch"], state["step"])
-    return model, optimizer, progress
+    return model, optimizer, progress, average
+
+
+def _evaluated_model(model: BetaVAE, average: AveragedModel | None) -> BetaVAE:
+    """The weights that validation measures and ``best.pt`` keeps: the running average once it holds a step (with
+    the live model's buffers), else the live model."""
+    if average is None or int(average.n_averaged) == 0:
+        return model
+    averaged: BetaVAE = average.module
+    with torch.no_grad():
+        for kept, live in zip(averaged.buffers(), model.buffers(), strict=True):
+            kept.copy_(live)
+    return averaged
 
 
 def _optimizer(model: BetaVAE, train_config: TrainConfig) -> torch.optim.Optimizer:
@@ -274,8 +292,11 @@ def _optimizer(model: BetaVAE, train_config: TrainConfig) -> torch.optim.Optimiz
 
 def _train_epoch(model: BetaVAE, forward: torch.nn.Module, optimizer: torch.optim.Optimizer, data: _TrainingData,
                  model_config: ModelConfig, train_config: TrainConfig, epoch: int, world: _World,
-                 progress: _Progress) -> dict[str, Any]:
-    """One epoch of optimisation; returns the epoch's log record (losses averaged over every rank)."""
+                 progress: _Progress, average: AveragedModel | None = None) -> dict[str, Any]:
+    """One epoch of optimisation; returns the epoch's log record (losses averaged over every rank).
+
+    ``average``, when given, takes the weights after every step of this epoch.
+    """
     epoch_start = time.perf_counter()
     model.train()
     n_train = len(data.inputs)
@@ -313,6 +334,8 @@ def _train_epoch(model: BetaVAE, forward: torch.nn.Module, optimizer: torch.opti
         optimizer.zero_grad(set_to_none=True)
         loss.backward()
         optimizer.step()
+        if average is not None:
+            average.update_parameters(model)
         progress.step += 1
         n = len(rows)
         sums += torch.tensor([loss.item(), terms.recon.item(), terms.kl.item(), traversal.item()],
@@ -413,7 +436,7 @@ def train(
     if train_config.traversal_weight > 0:
         data.traversal_penalty = TraversalPenalty(data.inputs)
     run_info["data"] = data.info
-    model, optimizer, state = _build_model(model_config, train_config, data, world, out, resume)
+    model, optimizer, state, average = _build_model(model_config, train_config, data, world, out, resume)
     if world.is_main and not resume:
         out.mkdir(parents=True, exist_ok=True)
         (out / "run.json").write_text(json.dumps(run_info, indent=2))
@@ -428,11 +451,16 @@ def train(
                desc="epochs", unit="ep", disable=not (progress and world.is_main))
     epoch = first_epoch
     for epoch in bar:
-        record = _train_epoch(model, forward, optimizer, data, model_config, train_config, epoch, world, state)
+        averaging = average if average is not None and epoch + 1 >= train_config.average_from_epoch else None
+        record = _train_epoch(model, forward, optimizer, data, model_config, train_config, epoch, world, state,
+                              averaging)
         done = epoch + 1
+        if averaging is not None:
+            record["averaged_steps"] = int(averaging.n_averaged)
         if data.reference is not None and (done % train_config.eval_every == 0 or done == train_config.epochs):
-            record.update(_evaluate(model, data, world))
-            _keep_if_best(model, model_config, record, state, out)
+            evaluated = _evaluated_model(model, average)
+            record.update(_evaluate(evaluated, data, world))
+            _keep_if_best(evaluated, model_config, record, state, out)
         stop = _stop_reason(train_config, state, done, time.perf_counter() - start_time)
         stop_flag = torch.tensor([1.0 if stop else 0.0])
         if world.size > 1:
@@ -442,9 +470,11 @@ def train(
                 log.write(json.dumps(record) + "\n")
             bar.set_postfix(loss=f"{record['loss']:.4g}", val=f"{state.best:.4f}", refresh=False)
             if done % train_config.checkpoint_every == 0 or stop_flag.item() or done == train_config.epochs:
-                _atomic_save({"model": model.state_dict(), "optimizer": optimizer.state_dict(), "epoch": done,
-                              "best": state.best, "best_epoch": state.best_epoch, "step": state.step},
-                             out / CHECKPOINT)
+                checkpoint = {"model": model.state_dict(), "optimizer": optimizer.state_dict(), "epoch": done,
+                              "best": state.best, "best_epoch": state.best_epoch, "step": state.step}
+                if average is not None:
+                    checkpoint["average"] = average.state_dict()
+                _atomic_save(checkpoint, out / CHECKPOINT)
         if stop_flag.item():
             stop_reason = stop or "stopped by rank 0"
             break
