@@ -48,6 +48,18 @@ def red_plastic_file(tmp_path_factory: pytest.TempPathFactory, analytic_tables: 
 
 
 @pytest.fixture(scope="session")
+def analytic_training_set(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A dataset of 12 random analytic materials (a fifth held out) for short training runs."""
+    from brdfcodec.dataset import build_dataset
+    from brdfcodec.sources import analytic_sources
+
+    path = tmp_path_factory.mktemp("analytic-training") / "analytic.h5"
+    build_dataset(path, analytic_sources(random_count=12), source_kind="analytic", description="analytic test set",
+                  validation_fraction=0.2, seed=0, progress=False)
+    return path
+
+
+@pytest.fixture(scope="session")
 def tiny_model_folder(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A randomly initialised tiny model (with a linear basis path), exported like a trained one."""
     import dataclasses

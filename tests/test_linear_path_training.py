@@ -8,10 +8,8 @@ from pathlib import Path
 import pytest
 import torch
 
-from brdfcodec.dataset import build_dataset
 from brdfcodec.models.config import TINY_CONFIG
 from brdfcodec.models.network import BetaVAE, linear_path_trainable
-from brdfcodec.sources import analytic_sources
 from brdfcodec.training.config import TrainConfig
 from brdfcodec.training.trainer import train
 
@@ -61,16 +59,10 @@ def test_a_model_without_a_linear_path_is_refused(tmp_path: Path) -> None:
     assert not (tmp_path / "run").exists()
 
 
-@pytest.fixture(scope="module")
-def dataset(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    path = tmp_path_factory.mktemp("linear-path") / "analytic.h5"
-    build_dataset(path, analytic_sources(random_count=12), source_kind="analytic", description="analytic test set",
-                  validation_fraction=0.2, seed=0, progress=False)
-    return path
-
-
 @pytest.mark.slow  # > 10 s on 2 cores
-def test_the_path_moves_only_when_trained_at_its_own_rate_and_resumes(dataset: Path, tmp_path: Path) -> None:
+def test_the_path_moves_only_when_trained_at_its_own_rate_and_resumes(
+        analytic_training_set: Path, tmp_path: Path) -> None:
+    dataset = analytic_training_set
     base = TrainConfig(epochs=2, batch_size=4, learning_rate=1e-3, warmup_epochs=1, eval_every=1,
                        checkpoint_every=1, seed=7)
     trained = TrainConfig(**{**base.to_dict(), "linear_path_rate": 0.5})

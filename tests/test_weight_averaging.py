@@ -9,9 +9,7 @@ from pathlib import Path
 import pytest
 import torch
 
-from brdfcodec.dataset import build_dataset
 from brdfcodec.models.config import TINY_CONFIG
-from brdfcodec.sources import analytic_sources
 from brdfcodec.training.card import render_model_card
 from brdfcodec.training.config import TrainConfig
 from brdfcodec.training.trainer import train
@@ -38,20 +36,14 @@ def test_the_card_names_the_average_only_when_the_kept_weights_are_one() -> None
     assert "average of every step" not in render_model_card(manifest)
 
 
-@pytest.fixture(scope="module")
-def dataset(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    path = tmp_path_factory.mktemp("averaging") / "analytic.h5"
-    build_dataset(path, analytic_sources(random_count=12), source_kind="analytic", description="analytic test set",
-                  validation_fraction=0.2, seed=0, progress=False)
-    return path
-
-
 def _log(run: Path) -> list[dict]:
     return [json.loads(line) for line in (run / "log.jsonl").read_text().splitlines()]
 
 
 @pytest.mark.slow  # > 10 s on 2 cores
-def test_the_average_counts_steps_from_its_epoch_is_what_best_keeps_and_resumes(dataset: Path, tmp_path: Path) -> None:
+def test_the_average_counts_steps_from_its_epoch_is_what_best_keeps_and_resumes(
+        analytic_training_set: Path, tmp_path: Path) -> None:
+    dataset = analytic_training_set
     config = TrainConfig(epochs=3, batch_size=4, learning_rate=3e-3, warmup_epochs=1, eval_every=1,
                          checkpoint_every=1, seed=3, average_from_epoch=2)
     whole = tmp_path / "whole"
