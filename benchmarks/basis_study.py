@@ -23,7 +23,7 @@ from __future__ import annotations
 import argparse
 import json
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
@@ -40,11 +40,16 @@ from brdfcodec.layers.refine import fit_basis_coefficients, refine_latent
 COUNTS = (4, 8, 16, 30, 48, 64)
 
 
-def study_arguments(doc: str, default_output: str) -> argparse.Namespace:
-    """The command line every study script shares: a dataset file and ``-o OUTPUT.json``; torch on one thread."""
+def study_arguments(
+    doc: str, default_output: str, extra: Callable[[argparse.ArgumentParser], None] | None = None
+) -> argparse.Namespace:
+    """The command line every study script shares: a dataset file and ``-o OUTPUT.json`` (and what ``extra``
+    adds); torch on one thread."""
     parser = argparse.ArgumentParser(description=doc.splitlines()[0])
     parser.add_argument("dataset", type=Path)
     parser.add_argument("-o", "--output", type=Path, default=Path(default_output))
+    if extra is not None:
+        extra(parser)
     args = parser.parse_args()
     torch.set_num_threads(1)
     return args

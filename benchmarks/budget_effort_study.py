@@ -3,15 +3,23 @@
 Usage::
 
     python benchmarks/budget_effort_study.py DATASET.h5 [-o reports/rd-study/budget-effort.json]
+        [--budgets 16,32,64] [--efforts 1,2,3]
 
 Encodes the dataset's held-out (validation) materials as the report's
 ``bvae-layered@N`` points do (``BrdfEncoder(bytes=N)``, float16 latents) at
 16 B, 32 B and 64 B, with refinement effort 1 (the default), 2 and 3, and
 records the mean full-table mapped RelAE, payload and encode time of each.
+
+Other budgets answer other questions: ``--budgets 32,35,64,67 --efforts 1``
+(``reports/rd-study/base-overhead.json``) measures what the 3 bytes of a
+compact base's own overhead (μ's float16 step and the shared σ byte) would
+buy if a record dropped them: the 32 B and 64 B points with 3 more bytes of
+coefficients.
 """
 
 from __future__ import annotations
 
+import argparse
 import json
 import time
 
@@ -27,13 +35,26 @@ BUDGETS = (16, 32, 64)
 EFFORTS = (1, 2, 3)
 
 
+def _integers(text: str) -> tuple[int, ...]:
+    """A comma-separated list of integers, as ``--budgets`` and ``--efforts`` take them."""
+    try:
+        return tuple(int(x) for x in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected comma-separated integers, got {text!r}") from None
+
+
+def _options(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--budgets", type=_integers, default=BUDGETS, help="payload budgets in bytes (16,32,64)")
+    parser.add_argument("--efforts", type=_integers, default=EFFORTS, help="refinement efforts (1,2,3)")
+
+
 def main() -> None:
-    args = study_arguments(__doc__, "reports/rd-study/budget-effort.json")
+    args = study_arguments(__doc__, "reports/rd-study/budget-effort.json", _options)
     start = time.perf_counter()
     held = held_out_materials(args.dataset)
     rows = []
-    for effort in EFFORTS:
-        for budget in BUDGETS:
+    for effort in args.efforts:
+        for budget in args.budgets:
             encoder = BrdfEncoder(bytes=budget, latent_dtype="float16", effort=effort)
             began = time.perf_counter()
             records = encoder.encode_arrays(held.names, held.inputs, held.masks, held.tables)
@@ -49,7 +70,9 @@ def main() -> None:
     args.output.write_text(json.dumps({
         "data": held.description, "materials": held.names, "latent_dtype": "float16",
         "metric": "full-table mapped RelAE, held-out mean",
-        "command": f"python benchmarks/budget_effort_study.py {args.dataset}",
+        "command": " ".join(["python benchmarks/budget_effort_study.py", str(args.dataset),
+                             "--budgets", ",".join(map(str, args.budgets)),
+                             "--efforts", ",".join(map(str, args.efforts))]),
         "rows": rows, "seconds": time.perf_counter() - start,
     }, indent=1) + "\n")
 
