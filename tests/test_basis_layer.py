@@ -13,6 +13,7 @@ from brdfcodec.layers.basis import (
     fit_shared_basis,
     load_shared_basis,
     quantise_coefficients,
+    with_colour_permutations,
     write_shared_basis,
 )
 from brdfcodec.layers.record import LayeredRecord, quantise_sigma, sigma_from_codes
@@ -161,6 +162,69 @@ def test_fitted_basis_is_orthonormal_over_the_valid_entries(tmp_path) -> None:
         load_shared_basis(path, "0" * 64)
     with pytest.raises(BasisError, match="strictly increasing"):
         write_shared_basis(tmp_path / "bad.safetensors", components, entries[::-1].copy())
+
+
+def coloured_inputs(n: int = 3) -> tuple[np.ndarray, np.ndarray]:
+    """Materials whose R, G and B blocks differ (a shape per colour, scaled per material)."""
+    rng = np.random.default_rng(1)
+    h = np.linspace(0, 1, 90)
+    shapes = [np.outer(np.sin((c + 1) * h), np.cos((c + 3) * h)) for c in range(3)]
+    inputs = np.concatenate([np.stack([rng.uniform(0.5, 2.0) * shapes[c][None].repeat(21, 0) + 0.1 * c
+                                       for c in range(3)]).reshape(63, 90, 90)[None] for _ in range(n)])
+    return inputs.astype(np.float32), np.ones(inputs.shape, dtype=bool)
+
+
+def test_colour_permutations_exchange_whole_colour_blocks() -> None:
+    inputs, _ = coloured_inputs(2)
+    stacked = with_colour_permutations(inputs)
+    assert stacked.shape == (12, 63, 90, 90)
+    np.testing.assert_array_equal(stacked[:2], inputs)  # the materials as given come first
+    # Order (R, B, G), the second of itertools.permutations: G's block holds B's and B's holds G's.
+    np.testing.assert_array_equal(stacked[2:4, 21:42], inputs[:, 42:63])
+    np.testing.assert_array_equal(stacked[2:4, 42:63], inputs[:, 21:42])
+    np.testing.assert_array_equal(stacked[2:4, :21], inputs[:, :21])
+    # Every order appears once: each colour block of a material goes to each position twice over 6 orders.
+    blocks = stacked.reshape(6, 2, 3, 21, 90, 90)[:, 0, :, 0, 0, 10]
+    assert len({tuple(row) for row in blocks.tolist()}) == 6
+    with pytest.raises(ValueError, match="shape"):
+        with_colour_permutations(inputs[:, :62])
+
+
+def test_a_basis_fitted_with_colour_permutations_spans_the_permuted_materials() -> None:
+    inputs, masks = coloured_inputs(3)
+    permuted = with_colour_permutations(inputs)
+
+    def worst_projection_error(components: np.ndarray, entries: np.ndarray) -> float:
+        flat = permuted.reshape(len(permuted), -1)[:, entries].astype(np.float64)
+        centred = flat - flat[:3].mean(0)  # a basis codes residuals: the mean is the decoder's business
+        b = components.astype(np.float64)
+        return float(np.abs(centred - centred @ b.T @ b).max() / np.abs(centred).max())
+
+    plain = fit_shared_basis(inputs, masks, 2)
+    both = fit_shared_basis(inputs, masks, 17, colour_permutations=True)
+    assert both[0].shape == (17, 63 * 90 * 90) and np.array_equal(both[1], plain[1])
+    gram = both[0].astype(np.float64) @ both[0].astype(np.float64).T
+    np.testing.assert_allclose(gram, np.eye(17), atol=3e-3)
+    # Colours the measured materials lack are in the permuted basis' span, not in the plain one's.
+    assert worst_projection_error(*both) < 5e-3
+    assert worst_projection_error(*plain) > 0.1
+    with pytest.raises(ValueError, match=r"\[1, 17\] for 18 materials"):
+        fit_shared_basis(inputs, masks, 18, colour_permutations=True)
+
+
+def test_fit_basis_keeps_a_models_basis_unless_told_to_replace_it(tmp_path, capsys) -> None:
+    import shutil
+
+    from brdfcodec.cli.main import main
+    from brdfcodec.models.registry import default_model_folder
+
+    folder = tmp_path / "model"
+    shutil.copytree(default_model_folder(), folder)
+    before = (folder / "basis.safetensors").read_bytes(), (folder / "model.json").read_bytes()
+    assert main(["model", "fit-basis", str(folder), "--dataset", str(tmp_path / "absent.h5")]) == 1
+    err = capsys.readouterr().err
+    assert "already has a shared basis" in err and "--replace" in err and "Traceback" not in err
+    assert ((folder / "basis.safetensors").read_bytes(), (folder / "model.json").read_bytes()) == before
 
 
 def test_the_shipped_model_has_a_basis_and_partial_decoding_matches() -> None:

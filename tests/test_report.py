@@ -79,3 +79,33 @@ def test_rate_distortion_points_are_held_out_only_and_meet_their_budgets(small_d
     assert "train" not in layered["errors"]
     text = rd_markdown(list(records.values()))
     assert "| 1 KB |" in text and "bvae-layered@2KB" in text
+
+
+
+def test_the_report_compares_with_pca_of_colour_permuted_training_materials() -> None:
+    from brdfcodec.baselines.pca import fit_pca
+    from brdfcodec.layers.basis import with_colour_permutations
+    from brdfcodec.layers.points import PcaPacked, rate_distortion_points
+    from brdfcodec.report.points import Material
+    from brdfcodec.transforms import table_from_network_output
+
+    rng = np.random.default_rng(5)
+    train = rng.uniform(0.0, 1.0, size=(3, 63, 90, 90)).astype(np.float32)
+    points = {p.name: p for p in rate_distortion_points(train)}
+    # 18 fitted materials: at most 17 components, so 8 and 16 as float16 and 14 as int8, nothing larger.
+    perm = sorted(name for name in points if name.startswith("pca-perm-"))
+    assert perm == ["pca-perm-14-int8", "pca-perm-16-float16", "pca-perm-8-float16"]
+    assert points["pca-perm-14-int8"].family == "pca-perm-int8"
+    assert "colour orders" in points["pca-perm-14-int8"].description
+    points["pca-2-float16"] = PcaPacked(fit_pca(train, 2), 2, "float16")  # of the materials as measured
+    # A training material with its colours exchanged is in the permuted PCA's span, not in the plain one's.
+    swapped = with_colour_permutations(train)[5 * 3]  # order (B, G, R) of the first material
+    truth = table_from_network_output(swapped)
+    material = Material("swapped", truth.astype(np.float64), np.ones(truth.shape, dtype=bool), swapped, "validation")
+
+    def worst_error(name: str) -> float:
+        point = points[name]
+        return float(np.abs(point.decode(point.encode(material)) - truth).max() / np.abs(truth).max())
+
+    assert worst_error("pca-perm-16-float16") < 0.01
+    assert worst_error("pca-2-float16") > 0.05

@@ -33,17 +33,26 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
                         help="an exported model to show beside this one in the card (repeatable)")
     export.add_argument("--basis-count", type=int, default=None, metavar="K",
                         help="vectors of the shared basis fitted on the training split "
-                        "(default 75, at most the training materials − 1; 0: none)")
+                        "(default 75, at most the fitted materials − 1; 0: none)")
+    export.add_argument("--basis-colour-permutations", action=argparse.BooleanOptionalAction, default=True,
+                        help="fit the shared basis on the training materials in all 6 orders of their colour "
+                        "channels (default; at most 6 × materials − 1 vectors), or as measured only")
     export.set_defaults(handler=run_export)
     fit = actions.add_parser(
         "fit-basis", help="fit a shared basis (the basis layer's) for an exported model",
         description="Fit the shared basis of the basis layer (principal components of the training split's "
-        "mapped kept slices) for a model folder that lacks one, and name it in model.json. The weights "
-        "are not touched: the decoder hash, and every file made with the model, stay valid.",
+        "mapped kept slices, by default in all 6 orders of their colour channels) for a model folder that "
+        "lacks one, and name it in model.json. The weights are not touched: the decoder hash, and every file "
+        "made with the model, stay valid. A model that has a basis keeps it unless --replace is given.",
     )
     fit.add_argument("folder", type=Path, help="model folder")
     fit.add_argument("--dataset", type=Path, required=True, help="dataset whose training split the model used")
     fit.add_argument("--count", type=int, default=None, metavar="K", help="vectors (default 75)")
+    fit.add_argument("--replace", action="store_true",
+                     help="replace the model's basis if it has one (files with basis layers made with it "
+                     "will no longer decode)")
+    fit.add_argument("--colour-permutations", action=argparse.BooleanOptionalAction, default=True,
+                     help="fit on the training materials in all 6 orders of their colour channels (default)")
     fit.set_defaults(handler=run_fit_basis)
     compact = actions.add_parser(
         "compact-encoder", help="store an exported model's encoder compactly (float16, basis from the decoder)",
@@ -116,7 +125,8 @@ def run_export(args: argparse.Namespace) -> int:
     if count < 0:
         raise ValueError(f"--basis-count must be ≥ 0, got {count}")
     manifest = export_run(args.run_dir, args.output, name=args.name, dataset_path=args.dataset, command=command,
-                          comparisons=comparisons, basis_count=count)
+                          comparisons=comparisons, basis_count=count,
+                          basis_colour_permutations=args.basis_colour_permutations)
     print(f"wrote {args.output}: {manifest.name}, decoder sha256 {manifest.decoder_sha256}")
     return 0
 
@@ -130,7 +140,8 @@ def run_fit_basis(args: argparse.Namespace) -> int:
     count = DEFAULT_BASIS_COUNT if args.count is None else args.count
     if count < 1:
         raise ValueError(f"--count must be ≥ 1, got {count}")
-    manifest = add_shared_basis(args.folder, args.dataset, count)
+    manifest = add_shared_basis(args.folder, args.dataset, count, colour_permutations=args.colour_permutations,
+                                replace=args.replace)
     print(f"wrote {args.folder}/basis.safetensors: {count} vectors, sha256 {manifest.basis_sha256}")
     return 0
 

@@ -32,6 +32,7 @@ This module does not import torch (the encoder's joint fit is in
 from __future__ import annotations
 
 import functools
+import itertools
 import os
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
@@ -41,7 +42,7 @@ from typing import Any, Final
 import numpy as np
 import numpy.typing as npt
 
-from brdfcodec.conventions import NETWORK_INPUT_SHAPE
+from brdfcodec.conventions import N_CHANNELS, N_KEPT_SLICES, NETWORK_INPUT_SHAPE
 from brdfcodec.hashing import is_sha256_hex
 
 __all__ = [
@@ -58,6 +59,7 @@ __all__ = [
     "int8_with_step",
     "load_shared_basis",
     "quantise_coefficients",
+    "with_colour_permutations",
     "write_shared_basis",
 ]
 
@@ -167,7 +169,7 @@ class SharedBasis:
 
 
 def fit_shared_basis(
-    inputs: npt.ArrayLike, masks: npt.ArrayLike, count: int
+    inputs: npt.ArrayLike, masks: npt.ArrayLike, count: int, *, colour_permutations: bool = False
 ) -> tuple[npt.NDArray[np.float16], npt.NDArray[np.int64]]:
     """Principal components of training materials' mapped kept slices, over the entries valid in all of them.
 
@@ -178,21 +180,58 @@ def fit_shared_basis(
     masks : array_like of bool, shape (N, 63, 90, 90)
         Their valid entries; the basis covers the entries valid in every material.
     count : int
-        K, in [1, N − 1] (the centred data has rank at most N − 1).
+        K, in [1, M − 1] where M is the number of fitted materials (the centred
+        data has rank at most M − 1): N, or 6N with ``colour_permutations``.
+    colour_permutations : bool, default False
+        Fit on the materials in all 6 orders of their colour channels
+        (:func:`with_colour_permutations`) instead of as measured.
 
     Returns
     -------
     components : ndarray of float16, shape (K, E)
     entries : ndarray of int64, shape (E,)
     """
-    flat = np.asarray(inputs, dtype=np.float64).reshape(len(inputs), -1)
-    valid = np.asarray(masks, dtype=bool).reshape(len(flat), -1).all(axis=0)
-    if not 1 <= count <= min(len(flat) - 1, MAX_BASIS_COUNT):
-        raise ValueError(f"count must be in [1, {min(len(flat) - 1, MAX_BASIS_COUNT)}] for {len(flat)} materials")
+    inputs, masks = np.asarray(inputs), np.asarray(masks, dtype=bool)
+    if colour_permutations:
+        inputs, masks = with_colour_permutations(inputs), with_colour_permutations(masks)
+    n = len(inputs)
+    valid = masks.reshape(n, -1).all(axis=0)
+    if not 1 <= count <= min(n - 1, MAX_BASIS_COUNT):
+        raise ValueError(f"count must be in [1, {min(n - 1, MAX_BASIS_COUNT)}] for {n} materials")
     entries = np.flatnonzero(valid).astype(np.int64)
-    data = flat[:, entries]
-    _, _, vt = np.linalg.svd(data - data.mean(axis=0), full_matrices=False)
+    data = inputs.reshape(n, -1)[:, entries].astype(np.float64)
+    data -= data.mean(axis=0)
+    _, _, vt = np.linalg.svd(data, full_matrices=False)
     return vt[:count].astype(np.float16), entries
+
+
+def with_colour_permutations(stack: npt.ArrayLike) -> np.ndarray:
+    """Materials in the network layout followed by their 5 other colour orders.
+
+    Because the log mapping is the same function of reflectance in every
+    channel, exchanging the mapped R, G and B blocks (channel ``k`` is colour
+    ``k // 21``) exchanges reflectances exactly: each permuted material is a
+    valid one with other colours (the augmentation training uses,
+    :func:`brdfcodec.training.augment.permute_colours`).
+
+    Parameters
+    ----------
+    stack : array_like, shape (N, 63, 90, 90)
+        Mapped inputs or their masks.
+
+    Returns
+    -------
+    ndarray, shape (6N, 63, 90, 90)
+        Order (R, G, B) first (the materials as given), then the other 5 orders in
+        :func:`itertools.permutations` order, N materials each.
+    """
+    stack = np.asarray(stack)
+    if stack.ndim != 4 or stack.shape[1:] != NETWORK_INPUT_SHAPE:
+        raise ValueError(f"expected a stack of shape (N, {', '.join(map(str, NETWORK_INPUT_SHAPE))}), "
+                         f"got {stack.shape}")
+    grouped = stack.reshape(len(stack), N_CHANNELS, N_KEPT_SLICES, *NETWORK_INPUT_SHAPE[1:])
+    return np.concatenate([grouped[:, list(order)].reshape(stack.shape)
+                           for order in itertools.permutations(range(N_CHANNELS))])
 
 
 def write_shared_basis(

@@ -16,6 +16,10 @@ which codec is better on materials it has not seen". Points of one family
   the training split), coefficients (orthogonal projection) as float16, or
   as int8 with one float16 scale per material (k + 2 bytes; also k = 14, 30
   and 62, which fill 16 B, 32 B and 64 B exactly);
+- ``pca-perm-k-float16`` / ``pca-perm-k-int8``: the same PCA fitted on the
+  training materials in all 6 orders of their colour channels (up to 126
+  coefficients: 128 B as int8), a stronger baseline than PCA of the
+  materials as measured (``reports/rd-study/colour-permutations.json``);
 - ``zstd-slices@Δ``: the mapped kept slices quantised at step Δ, int16,
   zstandard level 19 (the plain "quantise and zip" codec);
 - ``dct-slices@Δ``: the detail layer's own coder (colour decorrelation, 3-D
@@ -99,15 +103,21 @@ def _input_mask(material: Material) -> np.ndarray:
 
 
 class PcaPacked(OperatingPoint):
-    """PCA-k of the mapped kept slices with float16 or int8 (+ a float16 scale) coefficients."""
+    """PCA-k of the mapped kept slices with float16 or int8 (+ a float16 scale) coefficients.
+
+    ``variant`` names a PCA fitted on other data than the training materials as measured (``"perm"``: with
+    their colour permutations); it goes into the point's name and family.
+    """
 
     held_out_only = True
 
-    def __init__(self, basis: Any, k: int, storage: str) -> None:
+    def __init__(self, basis: Any, k: int, storage: str, variant: str = "") -> None:
         self.basis, self.k, self.storage = basis, k, storage
-        self.family = f"pca-{storage}"
-        self.name = f"pca-{k}-{storage}"
-        self.description = f"PCA of mapped kept slices, {k} coefficients as {storage}" + (
+        prefix = f"pca-{variant}" if variant else "pca"
+        self.family = f"{prefix}-{storage}"
+        self.name = f"{prefix}-{k}-{storage}"
+        fitted = " (fitted on the training materials in all 6 colour orders)" if variant == "perm" else ""
+        self.description = f"PCA of mapped kept slices{fitted}, {k} coefficients as {storage}" + (
             " with one float16 scale per material" if storage == "int8" else ""
         )
 
@@ -195,6 +205,7 @@ class DctSlices(OperatingPoint):
 def rate_distortion_points(train_inputs: np.ndarray, model: Any = None) -> list[OperatingPoint]:
     """The report's rate–distortion points (held-out materials only)."""
     from brdfcodec.baselines.pca import fit_pca
+    from brdfcodec.layers.basis import with_colour_permutations
 
     points: list[OperatingPoint] = [LayeredBvae(bytes_budget=n, model=model) for n in LAYERED_BUDGETS]
     points.append(LayeredBvae(max_relae=0.02, model=model))
@@ -204,6 +215,11 @@ def rate_distortion_points(train_inputs: np.ndarray, model: Any = None) -> list[
     # int8 also at k = N − 2, so that each budget of the comparison (16 B, 32 B, 64 B) is filled exactly.
     int8_sizes = sorted({*sizes, *(k for k in (14, 30, 62) if k <= basis.n_components)})
     points += [PcaPacked(basis, k, "int8") for k in int8_sizes]
+    # The same PCA fitted on the training materials in all 6 orders of their colour channels: the stronger
+    # baseline, since the basis then spans colours the training set lacks (as the basis layer's own can).
+    permuted = fit_pca(with_colour_permutations(train_inputs), min(126, 6 * len(train_inputs) - 1))
+    points += [PcaPacked(permuted, k, "float16", "perm") for k in (8, 16, 32, 64) if k <= permuted.n_components]
+    points += [PcaPacked(permuted, k, "int8", "perm") for k in (14, 30, 62, 126) if k <= permuted.n_components]
     points += [ZstdSlices(step) for step in (0.004, 0.016, 0.064, 0.25, 1.0)]
     points += [DctSlices(step) for step in (0.01, 0.04, 0.16, 0.64, 2.56, 10.24)]
     return points
