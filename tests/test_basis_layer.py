@@ -13,6 +13,7 @@ from brdfcodec.layers.basis import (
     fit_shared_basis,
     load_shared_basis,
     quantise_coefficients,
+    shared_basis_rank,
     with_colour_permutations,
     write_shared_basis,
 )
@@ -201,15 +202,30 @@ def test_a_basis_fitted_with_colour_permutations_spans_the_permuted_materials() 
         return float(np.abs(centred - centred @ b.T @ b).max() / np.abs(centred).max())
 
     plain = fit_shared_basis(inputs, masks, 2)
-    both = fit_shared_basis(inputs, masks, 17, colour_permutations=True)
-    assert both[0].shape == (17, 63 * 90 * 90) and np.array_equal(both[1], plain[1])
+    both = fit_shared_basis(inputs, masks, 14, colour_permutations=True)
+    assert both[0].shape == (14, 63 * 90 * 90) and np.array_equal(both[1], plain[1])
     gram = both[0].astype(np.float64) @ both[0].astype(np.float64).T
-    np.testing.assert_allclose(gram, np.eye(17), atol=3e-3)
+    np.testing.assert_allclose(gram, np.eye(14), atol=3e-3)
     # Colours the measured materials lack are in the permuted basis' span, not in the plain one's.
     assert worst_projection_error(*both) < 5e-3
     assert worst_projection_error(*plain) > 0.1
-    with pytest.raises(ValueError, match=r"\[1, 17\] for 18 materials"):
-        fit_shared_basis(inputs, masks, 18, colour_permutations=True)
+    # 6 colour orders of 3 materials span 5 · 3 − 1 = 14 dimensions, not 17: a 15th vector would be noise.
+    assert shared_basis_rank(3, colour_permutations=True) == 14 and shared_basis_rank(3) == 2
+    with pytest.raises(ValueError, match=r"\[1, 14\] for 3 materials in 6 colour orders"):
+        fit_shared_basis(inputs, masks, 15, colour_permutations=True)
+
+
+def test_a_permuted_basis_covers_only_entries_valid_in_every_colour() -> None:
+    inputs, masks = coloured_inputs(3)
+    masks[1, 30, 4, 7] = False  # G, kept slot 9: invalid in one material
+    inputs = inputs * masks
+    plain = fit_shared_basis(inputs, masks, 2)[1]
+    permuted = fit_shared_basis(inputs, masks, 4, colour_permutations=True)[1]
+    position = 4 * 90 + 7
+    same_place = [c * 21 * 8100 + 9 * 8100 + position for c in range(3)]
+    assert [e in set(plain.tolist()) for e in same_place] == [True, False, True]
+    assert not set(same_place) & set(permuted.tolist())  # it moves to R and B in other orders
+    assert len(permuted) == 63 * 90 * 90 - 3
 
 
 def test_fit_basis_keeps_a_models_basis_unless_told_to_replace_it(tmp_path, capsys) -> None:
@@ -225,6 +241,29 @@ def test_fit_basis_keeps_a_models_basis_unless_told_to_replace_it(tmp_path, caps
     err = capsys.readouterr().err
     assert "already has a shared basis" in err and "--replace" in err and "Traceback" not in err
     assert ((folder / "basis.safetensors").read_bytes(), (folder / "model.json").read_bytes()) == before
+
+
+def test_fit_basis_replace_fits_a_new_basis_and_names_it(analytic_training_set, tmp_path, capsys) -> None:
+    import json
+    import shutil
+
+    from brdfcodec.cli.main import main
+    from brdfcodec.codec import BrdfDecoder
+    from brdfcodec.models.registry import default_model_folder
+
+    folder = tmp_path / "model"
+    shutil.copytree(default_model_folder(), folder)
+    old_sha = json.loads((folder / "model.json").read_text())["basis_sha256"]
+    assert main(["model", "fit-basis", str(folder), "--dataset", str(analytic_training_set), "--replace",
+                 "--count", "500"]) == 0
+    stored = json.loads((folder / "model.json").read_text())
+    info = stored["info"]["basis"]
+    # 9 or 10 training materials in 6 colour orders: at most 5N − 1 vectors, and the message says how many.
+    assert info["colour_permutations"] is True and info["count"] == 5 * info["materials"] - 1
+    assert f"{info['count']} vectors" in capsys.readouterr().out
+    basis = BrdfDecoder(folder).shared_basis
+    assert basis is not None and basis.sha256 == stored["basis_sha256"] != old_sha and basis.count == info["count"]
+    assert sorted(p.name for p in folder.iterdir() if "basis" in p.name) == ["basis.safetensors"]  # nothing staged
 
 
 def test_the_shipped_model_has_a_basis_and_partial_decoding_matches() -> None:

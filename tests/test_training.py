@@ -147,9 +147,9 @@ def test_export_card_store_and_registry(tiny_dataset: Path, tmp_path: Path) -> N
     stored = json.loads((folder / "model.json").read_text())
     assert stored["encoder_storage"] == "compact"  # exported encoders are stored compactly (spec/model.md §3)
     assert basis is not None and basis.count == stored["info"]["basis"]["count"]
-    # fitted on the training materials in their 6 colour orders: at most 6N − 1 vectors
+    # fitted on the training materials in their 6 colour orders: at most 5N − 1 vectors (their rank)
     assert stored["info"]["basis"]["colour_permutations"] is True
-    assert basis.count == min(75, 6 * len(stored["info"]["data"]["train"]) - 1)
+    assert basis.count == min(75, 5 * len(stored["info"]["data"]["train"]) - 1)
     card = (folder / "MODEL_CARD.md").read_text()
     for heading in ("## Data", "## Training", "## Reconstruction error", "PCA-8", "## Latent dimensions",
                     "## Known limits", manifest.decoder_sha256):

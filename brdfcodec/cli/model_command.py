@@ -36,14 +36,15 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
                         "(default 75, at most the fitted materials − 1; 0: none)")
     export.add_argument("--basis-colour-permutations", action=argparse.BooleanOptionalAction, default=True,
                         help="fit the shared basis on the training materials in all 6 orders of their colour "
-                        "channels (default; at most 6 × materials − 1 vectors), or as measured only")
+                        "channels (default; at most 5 × materials − 1 vectors), or as measured only")
     export.set_defaults(handler=run_export)
     fit = actions.add_parser(
         "fit-basis", help="fit a shared basis (the basis layer's) for an exported model",
         description="Fit the shared basis of the basis layer (principal components of the training split's "
         "mapped kept slices, by default in all 6 orders of their colour channels) for a model folder that "
         "lacks one, and name it in model.json. The weights are not touched: the decoder hash, and every file "
-        "made with the model, stay valid. A model that has a basis keeps it unless --replace is given.",
+        "made with the model, stay valid. A model that has a basis keeps it unless --replace is given (files "
+        "with basis layers made with the old basis then no longer decode).",
     )
     fit.add_argument("folder", type=Path, help="model folder")
     fit.add_argument("--dataset", type=Path, required=True, help="dataset whose training split the model used")
@@ -142,7 +143,8 @@ def run_fit_basis(args: argparse.Namespace) -> int:
         raise ValueError(f"--count must be ≥ 1, got {count}")
     manifest = add_shared_basis(args.folder, args.dataset, count, colour_permutations=args.colour_permutations,
                                 replace=args.replace)
-    print(f"wrote {args.folder}/basis.safetensors: {count} vectors, sha256 {manifest.basis_sha256}")
+    fitted = manifest.info.get("basis", {}).get("count", count)
+    print(f"wrote {args.folder}/basis.safetensors: {fitted} vectors, sha256 {manifest.basis_sha256}")
     return 0
 
 

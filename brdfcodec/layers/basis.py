@@ -59,6 +59,7 @@ __all__ = [
     "int8_with_step",
     "load_shared_basis",
     "quantise_coefficients",
+    "shared_basis_rank",
     "with_colour_permutations",
     "write_shared_basis",
 ]
@@ -178,10 +179,11 @@ def fit_shared_basis(
     inputs : array_like, shape (N, 63, 90, 90)
         Mapped kept slices (network inputs) of the training materials.
     masks : array_like of bool, shape (N, 63, 90, 90)
-        Their valid entries; the basis covers the entries valid in every material.
+        Their valid entries; the basis covers the entries valid in every material
+        (with ``colour_permutations``, valid in every colour of every material).
     count : int
-        K, in [1, M − 1] where M is the number of fitted materials (the centred
-        data has rank at most M − 1): N, or 6N with ``colour_permutations``.
+        K, in [1, :func:`shared_basis_rank` (N, colour_permutations)]: no more
+        vectors than the centred data has dimensions.
     colour_permutations : bool, default False
         Fit on the materials in all 6 orders of their colour channels
         (:func:`with_colour_permutations`) instead of as measured.
@@ -192,17 +194,31 @@ def fit_shared_basis(
     entries : ndarray of int64, shape (E,)
     """
     inputs, masks = np.asarray(inputs), np.asarray(masks, dtype=bool)
-    if colour_permutations:
-        inputs, masks = with_colour_permutations(inputs), with_colour_permutations(masks)
     n = len(inputs)
+    limit = min(shared_basis_rank(n, colour_permutations), MAX_BASIS_COUNT)
+    if not 1 <= count <= limit:
+        orders = " in 6 colour orders" if colour_permutations else ""
+        raise ValueError(f"count must be in [1, {limit}] for {n} materials{orders}")
     valid = masks.reshape(n, -1).all(axis=0)
-    if not 1 <= count <= min(n - 1, MAX_BASIS_COUNT):
-        raise ValueError(f"count must be in [1, {min(n - 1, MAX_BASIS_COUNT)}] for {n} materials")
+    if colour_permutations:  # an entry is kept where it is valid in all three colours (permutations move them)
+        inputs = with_colour_permutations(inputs)
+        valid = np.tile(valid.reshape(N_CHANNELS, -1).all(axis=0), N_CHANNELS)
     entries = np.flatnonzero(valid).astype(np.int64)
-    data = inputs.reshape(n, -1)[:, entries].astype(np.float64)
+    data = inputs.reshape(len(inputs), -1)[:, entries].astype(np.float64)
     data -= data.mean(axis=0)
     _, _, vt = np.linalg.svd(data, full_matrices=False)
     return vt[:count].astype(np.float16), entries
+
+
+def shared_basis_rank(materials: int, colour_permutations: bool = False) -> int:
+    """Most vectors a shared basis fitted on ``materials`` training materials can have: the rank of the centred data.
+
+    N − 1 for the materials as measured. With their 6 colour orders, 5N − 1, not 6N − 1: at each entry the
+    permutations of a material's (R, G, B) span its grey part and the 2-D space of colour differences, and the
+    6 orders of one material span at most 1 + 2 × 2 = 5 dimensions (the permutation representation of the
+    symmetric group on 3 colours holds no sign representation).
+    """
+    return max(0, (5 * materials if colour_permutations else materials) - 1)
 
 
 def with_colour_permutations(stack: npt.ArrayLike) -> np.ndarray:

@@ -17,9 +17,10 @@ which codec is better on materials it has not seen". Points of one family
   as int8 with one float16 scale per material (k + 2 bytes; also k = 14, 30
   and 62, which fill 16 B, 32 B and 64 B exactly);
 - ``pca-perm-k-float16`` / ``pca-perm-k-int8``: the same PCA fitted on the
-  training materials in all 6 orders of their colour channels (up to 126
-  coefficients: 128 B as int8), a stronger baseline than PCA of the
-  materials as measured (``reports/rd-study/colour-permutations.json``);
+  training materials in all 6 orders of their colour channels (up to its
+  rank, 5N − 1 coefficients: 379 for 76 materials), a stronger baseline than
+  PCA of the materials as measured
+  (``reports/rd-study/colour-permutations.json``);
 - ``zstd-slices@Δ``: the mapped kept slices quantised at step Δ, int16,
   zstandard level 19 (the plain "quantise and zip" codec);
 - ``dct-slices@Δ``: the detail layer's own coder (colour decorrelation, 3-D
@@ -205,7 +206,7 @@ class DctSlices(OperatingPoint):
 def rate_distortion_points(train_inputs: np.ndarray, model: Any = None) -> list[OperatingPoint]:
     """The report's rate–distortion points (held-out materials only)."""
     from brdfcodec.baselines.pca import fit_pca
-    from brdfcodec.layers.basis import with_colour_permutations
+    from brdfcodec.layers.basis import shared_basis_rank, with_colour_permutations
 
     points: list[OperatingPoint] = [LayeredBvae(bytes_budget=n, model=model) for n in LAYERED_BUDGETS]
     points.append(LayeredBvae(max_relae=0.02, model=model))
@@ -217,9 +218,12 @@ def rate_distortion_points(train_inputs: np.ndarray, model: Any = None) -> list[
     points += [PcaPacked(basis, k, "int8") for k in int8_sizes]
     # The same PCA fitted on the training materials in all 6 orders of their colour channels: the stronger
     # baseline, since the basis then spans colours the training set lacks (as the basis layer's own can).
-    permuted = fit_pca(with_colour_permutations(train_inputs), min(126, 6 * len(train_inputs) - 1))
-    points += [PcaPacked(permuted, k, "float16", "perm") for k in (8, 16, 32, 64) if k <= permuted.n_components]
-    points += [PcaPacked(permuted, k, "int8", "perm") for k in (14, 30, 62, 126) if k <= permuted.n_components]
+    # Up to its rank (5N − 1), so that it is as good as PCA can be within 1 KB too (379 int8 coefficients: 381 B).
+    rank = shared_basis_rank(len(train_inputs), colour_permutations=True)
+    permuted = fit_pca(with_colour_permutations(train_inputs), min(rank, 512))
+    points += [PcaPacked(permuted, k, "float16", "perm") for k in (8, 16, 32, 64, 128, 256, 512) if k <= rank]
+    int8_counts = sorted({k for k in (14, 30, 62, 126, 254, 510) if k <= rank} | {min(rank, 510)})
+    points += [PcaPacked(permuted, k, "int8", "perm") for k in int8_counts]
     points += [ZstdSlices(step) for step in (0.004, 0.016, 0.064, 0.25, 1.0)]
     points += [DctSlices(step) for step in (0.01, 0.04, 0.16, 0.64, 2.56, 10.24)]
     return points

@@ -26,8 +26,8 @@ from brdfcodec.version import __version__
 __all__ = ["CARD", "DEFAULT_BASIS_COUNT", "add_shared_basis", "export_run", "store_info"]
 
 CARD = "MODEL_CARD.md"
-#: Vectors of the shared basis that ``bvae model export`` fits (at most the training materials − 1; 75 float16
-#: vectors over the 387,378 valid entries: 61.2 MB).
+#: Vectors of the shared basis that ``bvae model export`` fits (at most the rank of the fitted data,
+#: :func:`~brdfcodec.layers.basis.shared_basis_rank`; 75 float16 vectors over the 387,378 valid entries: 61.2 MB).
 DEFAULT_BASIS_COUNT = 75
 
 _LIMITS = [
@@ -74,9 +74,9 @@ def export_run(
         of ``spec/bvae-format.md`` §4.4); 0 for none.
     basis_colour_permutations : bool, default True
         Fit that basis on the training materials in all 6 orders of their colour channels (at most
-        6N − 1 vectors), not as measured only: it spans new materials better (held-out NBRDF proxy of
-        MERL, ``bvae compress --bytes``: 0.0348 against 0.0357 at 32 B, 0.0286 against 0.0298 at 64 B;
-        ``reports/rd-study/colour-permutations.json``).
+        5N − 1 vectors, :func:`~brdfcodec.layers.basis.shared_basis_rank`), not as measured only: it spans
+        new materials better (held-out NBRDF proxy of MERL, ``bvae compress --bytes``: 0.0348 against
+        0.0357 at 32 B, 0.0286 against 0.0298 at 64 B; ``reports/rd-study/colour-permutations.json``).
     """
     run = Path(run_dir)
     run_info = json.loads((run / "run.json").read_text())
@@ -143,24 +143,26 @@ def export_run(
     return write_manifest(out, manifest)  # last: a folder with a model.json is a complete model
 
 
-def _fit_basis(folder: Path, dataset: BrdfDataset, count: int, colour_permutations: bool) -> dict[str, Any]:
-    """Fit the shared basis on the dataset's training split and write ``basis.safetensors`` into ``folder``."""
-    from brdfcodec.layers.basis import BASIS_FILE, fit_shared_basis, write_shared_basis
+def _fit_basis(folder: Path, dataset: BrdfDataset, count: int, colour_permutations: bool,
+               file_name: str | None = None) -> dict[str, Any]:
+    """Fit the shared basis on the dataset's training split and write it into ``folder``
+    (as ``basis.safetensors``, or ``file_name``)."""
+    from brdfcodec.layers.basis import BASIS_FILE, fit_shared_basis, shared_basis_rank, write_shared_basis
 
     rows = dataset.indices("train")
-    fitted = len(rows) * (6 if colour_permutations else 1)
-    count = min(count, fitted - 1)  # the centred data has rank at most (materials fitted) − 1
     if len(rows) < 2:
         raise ValueError(f"{dataset.path}: a shared basis needs at least 2 training materials")
+    count = min(count, shared_basis_rank(len(rows), colour_permutations))  # no more vectors than the data's rank
     components, entries = fit_shared_basis(dataset.inputs(rows), dataset.input_masks(rows), count,
                                            colour_permutations=colour_permutations)
-    sha = write_shared_basis(folder / BASIS_FILE, components, entries)
+    path = folder / (file_name or BASIS_FILE)
+    sha = write_shared_basis(path, components, entries)
     kind = "principal components of the training split's mapped kept slices (valid entries)"
     if colour_permutations:
         kind += " in all 6 orders of their colour channels"
     return {"sha256": sha, "count": int(count), "entries": len(entries), "fitted_on": "train",
             "materials": len(rows), "colour_permutations": colour_permutations,
-            "bytes": (folder / BASIS_FILE).stat().st_size, "kind": kind}
+            "bytes": path.stat().st_size, "kind": kind}
 
 
 def add_shared_basis(folder: str | os.PathLike[str], dataset_path: str | os.PathLike[str],
@@ -169,8 +171,9 @@ def add_shared_basis(folder: str | os.PathLike[str], dataset_path: str | os.Path
     """Fit a shared basis for an exported model (on a dataset's training split) and name it in ``model.json``.
 
     For a model exported before shared bases existed (:func:`export_run` fits one itself). The weights are
-    not touched, so the model's identity (its decoder hash) is unchanged; files written before keep decoding.
-    ``colour_permutations`` as in :func:`export_run`.
+    not touched, so the model's identity (its decoder hash) is unchanged; files written before keep decoding
+    (unless ``replace`` drops a basis their layers need). ``colour_permutations`` as in :func:`export_run`.
+    The new basis is fitted and written under a temporary name first: a failed fit leaves the model as it was.
 
     Raises
     ------
@@ -178,14 +181,22 @@ def add_shared_basis(folder: str | os.PathLike[str], dataset_path: str | os.Path
         The model already has a shared basis and ``replace`` is false: records with a basis layer name
         their basis by its hash, so files made with the old one would no longer decode.
     """
-    existing = json.loads((Path(folder) / MANIFEST).read_text()).get("basis_sha256")
+    from brdfcodec.layers.basis import BASIS_FILE
+
+    out = Path(folder)
+    existing = json.loads((out / MANIFEST).read_text()).get("basis_sha256")
     if existing and not replace:
         raise FileExistsError(
             f"{folder}: the model already has a shared basis ({existing[:12]}…); files with basis layers made "
             "with it need it to decode. Fit a new one only if no such file matters (--replace)"
         )
-    with BrdfDataset(dataset_path) as dataset:
-        basis = _fit_basis(Path(folder), dataset, count, colour_permutations)
+    staged = f".{BASIS_FILE}.new"
+    try:
+        with BrdfDataset(dataset_path) as dataset:
+            basis = _fit_basis(out, dataset, count, colour_permutations, staged)
+        os.replace(out / staged, out / BASIS_FILE)
+    finally:
+        (out / staged).unlink(missing_ok=True)
 
     def add(stored: dict[str, Any]) -> None:
         stored["basis_sha256"] = basis.pop("sha256")
