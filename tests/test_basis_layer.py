@@ -263,7 +263,7 @@ def test_fit_basis_replace_fits_a_new_basis_and_names_it(analytic_training_set, 
     assert f"{info['count']} vectors" in capsys.readouterr().out
     basis = BrdfDecoder(folder).shared_basis
     assert basis is not None and basis.sha256 == stored["basis_sha256"] != old_sha and basis.count == info["count"]
-    assert sorted(p.name for p in folder.iterdir() if "basis" in p.name) == ["basis.safetensors"]  # nothing staged
+    assert sorted(p.name for p in folder.iterdir() if "basis" in p.name) == ["basis.safetensors"]  # no other file
 
 
 def test_the_shipped_model_has_a_basis_and_partial_decoding_matches() -> None:

@@ -143,8 +143,8 @@ def run_fit_basis(args: argparse.Namespace) -> int:
         raise ValueError(f"--count must be ≥ 1, got {count}")
     manifest = add_shared_basis(args.folder, args.dataset, count, colour_permutations=args.colour_permutations,
                                 replace=args.replace)
-    fitted = manifest.info.get("basis", {}).get("count", count)
-    print(f"wrote {args.folder}/basis.safetensors: {fitted} vectors, sha256 {manifest.basis_sha256}")
+    print(f"wrote {args.folder}/basis.safetensors: {manifest.info['basis']['count']} vectors, "
+          f"sha256 {manifest.basis_sha256}")
     return 0
 
 

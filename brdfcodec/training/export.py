@@ -143,10 +143,9 @@ def export_run(
     return write_manifest(out, manifest)  # last: a folder with a model.json is a complete model
 
 
-def _fit_basis(folder: Path, dataset: BrdfDataset, count: int, colour_permutations: bool,
-               file_name: str | None = None) -> dict[str, Any]:
-    """Fit the shared basis on the dataset's training split and write it into ``folder``
-    (as ``basis.safetensors``, or ``file_name``)."""
+def _fit_basis(folder: Path, dataset: BrdfDataset, count: int, colour_permutations: bool) -> dict[str, Any]:
+    """Fit the shared basis on the dataset's training split, then write ``basis.safetensors`` into ``folder``
+    (atomically: a failed fit leaves any basis there as it was)."""
     from brdfcodec.layers.basis import BASIS_FILE, fit_shared_basis, shared_basis_rank, write_shared_basis
 
     rows = dataset.indices("train")
@@ -155,7 +154,7 @@ def _fit_basis(folder: Path, dataset: BrdfDataset, count: int, colour_permutatio
     count = min(count, shared_basis_rank(len(rows), colour_permutations))  # no more vectors than the data's rank
     components, entries = fit_shared_basis(dataset.inputs(rows), dataset.input_masks(rows), count,
                                            colour_permutations=colour_permutations)
-    path = folder / (file_name or BASIS_FILE)
+    path = folder / BASIS_FILE
     sha = write_shared_basis(path, components, entries)
     kind = "principal components of the training split's mapped kept slices (valid entries)"
     if colour_permutations:
@@ -173,7 +172,7 @@ def add_shared_basis(folder: str | os.PathLike[str], dataset_path: str | os.Path
     For a model exported before shared bases existed (:func:`export_run` fits one itself). The weights are
     not touched, so the model's identity (its decoder hash) is unchanged; files written before keep decoding
     (unless ``replace`` drops a basis their layers need). ``colour_permutations`` as in :func:`export_run`.
-    The new basis is fitted and written under a temporary name first: a failed fit leaves the model as it was.
+    The basis file is written only once the fit has succeeded: a failed fit leaves the model as it was.
 
     Raises
     ------
@@ -181,8 +180,6 @@ def add_shared_basis(folder: str | os.PathLike[str], dataset_path: str | os.Path
         The model already has a shared basis and ``replace`` is false: records with a basis layer name
         their basis by its hash, so files made with the old one would no longer decode.
     """
-    from brdfcodec.layers.basis import BASIS_FILE
-
     out = Path(folder)
     existing = json.loads((out / MANIFEST).read_text()).get("basis_sha256")
     if existing and not replace:
@@ -190,13 +187,8 @@ def add_shared_basis(folder: str | os.PathLike[str], dataset_path: str | os.Path
             f"{folder}: the model already has a shared basis ({existing[:12]}…); files with basis layers made "
             "with it need it to decode. Fit a new one only if no such file matters (--replace)"
         )
-    staged = f".{BASIS_FILE}.new"
-    try:
-        with BrdfDataset(dataset_path) as dataset:
-            basis = _fit_basis(out, dataset, count, colour_permutations, staged)
-        os.replace(out / staged, out / BASIS_FILE)
-    finally:
-        (out / staged).unlink(missing_ok=True)
+    with BrdfDataset(dataset_path) as dataset:
+        basis = _fit_basis(out, dataset, count, colour_permutations)
 
     def add(stored: dict[str, Any]) -> None:
         stored["basis_sha256"] = basis.pop("sha256")
