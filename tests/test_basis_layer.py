@@ -93,6 +93,34 @@ def test_compact_mu_and_shared_sigma_round_trip_in_eleven_bytes(dtype: str) -> N
         LayeredRecord("x", mu, sigma, basis=layer, compact_sigma=True, shared_sigma=True)
 
 
+@pytest.mark.parametrize("dtype", ["float32", "float16"])
+def test_compact_mu_on_the_fixed_grid_round_trips_in_nine_bytes(dtype: str) -> None:
+    from brdfcodec.layers.basis import FIXED_MU_LIMIT, fits_fixed_mu_grid
+
+    rng = np.random.default_rng(6)
+    mu, sigma = rng.uniform(-3.9, 3.9, size=8), np.exp(rng.normal(-6, 0.6, size=8))
+    layer = quantise_coefficients(SHA, rng.normal(0, 4, size=21), 8)
+    record = LayeredRecord("g", mu, sigma, basis=layer, compact_mu=True, shared_sigma=True, fixed_mu_grid=True)
+    assert np.abs(record.mu - mu).max() <= 1 / 64 + 1e-7  # within half the grid's step
+    assert np.array_equal(record.mu * 32, np.rint(mu * 32))  # μ = q / 32, exactly
+    data = encode_bvae([record], DECODER, latent_dtype=dtype)  # type: ignore[arg-type]
+    parsed = parse_bvae(data)
+    entry = parsed.header.entries[0]
+    assert entry.length == 8 + 1 + 2 + 21 == 32  # no step: 2 more coefficients than the 11-byte base holds
+    assert entry.layers == {"mu": "int8-fixed", "sigma": "log2-u8-shared", "basis": layer.entry()}
+    back = parsed.records[0]
+    assert isinstance(back, LayeredRecord) and back.fixed_mu_grid and back.compact_mu
+    np.testing.assert_array_equal(back.mu, record.mu)
+    assert encode_bvae([back], DECODER, latent_dtype=dtype) == data  # type: ignore[arg-type]
+    # Past ±3.97 a value is stored as the grid's end (an encoder uses the grid only where μ fits it).
+    assert fits_fixed_mu_grid(mu) and not fits_fixed_mu_grid([4.0]) and not fits_fixed_mu_grid([np.nan])
+    clipped = LayeredRecord("c", np.array([-9.0, 9.0, 0.0, 0, 0, 0, 0, 0]), sigma, basis=layer, compact_mu=True,
+                            fixed_mu_grid=True)
+    assert clipped.mu[:2].tolist() == [-FIXED_MU_LIMIT, FIXED_MU_LIMIT]
+    with pytest.raises(ValueError, match="fixed mu grid is a compact mu"):
+        LayeredRecord("x", mu, sigma, basis=layer, fixed_mu_grid=True)
+
+
 @pytest.mark.parametrize("step", [0.0, float("inf"), float("nan"), -0.5])
 def test_a_compact_mu_step_that_is_not_positive_and_finite_is_malformed(step: float, monkeypatch) -> None:
     record = LayeredRecord("c", np.ones(8), np.ones(8), basis=quantise_coefficients(SHA, [1.0]), compact_mu=True,
@@ -344,9 +372,12 @@ def test_the_basis_layer_follows_the_decoder_output_it_was_fitted_on(analytic_ta
     base_error = measure(base.encode(brdf, name="m"), base.decoder, brdf).meta["relae"]["mapped"]
     encoder = BrdfEncoder(effort=1, bytes=64, latent_dtype="float16")
     record = encoder.encode(brdf, name="m")
-    # 64 B cannot hold all 75 coefficients beside a float16 μ, so the base is compact: 2 + 8 bytes of μ, 1 of σ.
+    # 64 B cannot hold all 75 coefficients beside a float16 μ, so the base is compact: 8 bytes of μ on the fixed
+    # grid (its μ fits ±3.97), 1 of σ.
     assert isinstance(record, LayeredRecord) and record.compact_mu and record.shared_sigma and record.detail is None
-    assert record.basis is not None and record.basis.count == 64 - 11 - 2
+    assert record.fixed_mu_grid and np.abs(record.mu).max() <= 127 / 32
+    assert np.array_equal(record.mu * 32, np.rint(record.mu * 32))  # on the grid
+    assert record.basis is not None and record.basis.count == 64 - 9 - 2
     assert record.basis.first == 8  # the shipped decoder's linear path spans the basis' first 8 vectors
     stored = parse_bvae(encode_bvae([record], encoder.reference, latent_dtype="float16")).header.entries[0].length
     assert stored == record.meta["rate"]["payload_bytes"] == 64
@@ -359,10 +390,10 @@ def test_the_basis_layer_follows_the_decoder_output_it_was_fitted_on(analytic_ta
     inputs, masks = network_input_from_table(brdf.values, brdf.mask)
     basis = encoder.decoder.shared_basis
     _, refitted = fit_basis_coefficients(encoder.decoder.network, record.mu[None], inputs[None], masks[None],
-                                         basis.components[8:59], basis.entries, 1, fit_latent=False)
+                                         basis.components[8:61], basis.entries, 1, fit_latent=False)
     assert quantise_coefficients(basis.sha256, refitted[0], 8).q.tolist() == record.basis.q.tolist()
-    tiny = BrdfEncoder(effort=1, bytes=14).encode(brdf, name="t")  # the smallest record: compact base, 1 coefficient
-    assert tiny.basis.count == 1 and tiny.meta["rate"]["payload_bytes"] == 14
+    tiny = BrdfEncoder(effort=1, bytes=12).encode(brdf, name="t")  # the smallest record: compact base, 1 coefficient
+    assert tiny.basis.count == 1 and tiny.meta["rate"]["payload_bytes"] == 12
     no_basis = BrdfEncoder(effort=1, bytes=64, latent_dtype="float16", basis=False).encode(brdf, name="m")
     assert getattr(no_basis, "basis", None) is None
 
@@ -379,10 +410,10 @@ def test_an_error_target_takes_the_smallest_candidate_that_meets_it(analytic_tab
     assert measure(chosen, encoder.decoder, brdf).meta["relae"]["mapped"] <= reached * 1.05
     assert isinstance(chosen, LayeredRecord) and chosen.basis is not None and chosen.detail is None
     # a record without a detail layer stores its base compact, as a size budget does: at most 32 coefficients
-    assert chosen.compact_mu and chosen.shared_sigma
-    assert chosen.meta["rate"]["payload_bytes"] == 2 + 8 + 1 + 2 + chosen.basis.count <= 45
+    assert chosen.compact_mu and chosen.shared_sigma and chosen.fixed_mu_grid
+    assert chosen.meta["rate"]["payload_bytes"] == 8 + 1 + 2 + chosen.basis.count <= 43
     loose = BrdfEncoder(effort=0, max_relae=1.0, latent_dtype="float16").encode(brdf, name="m")
-    assert loose.compact_mu and loose.basis.count == 4 and loose.meta["rate"]["payload_bytes"] == 17
+    assert loose.compact_mu and loose.basis.count == 4 and loose.meta["rate"]["payload_bytes"] == 15
 
 
 def test_an_error_target_tries_candidates_from_small_to_large() -> None:
@@ -401,19 +432,19 @@ def test_cli_bytes_writes_the_basis_layer(red_plastic_file, tmp_path, capsys) ->
     out = tmp_path / "r.bvae"
     assert main(["compress", str(red_plastic_file), "-o", str(out), "--bytes", "64", "--float16"]) == 0
     entry = parse_bvae(out.read_bytes()).header.entries[0]
-    assert entry.kind == "layered" and entry.length == 64 and entry.layers["basis"]["count"] == 51
+    assert entry.kind == "layered" and entry.length == 64 and entry.layers["basis"]["count"] == 53
     assert entry.meta["relae"]["mapped"] > 0  # measured on the record that was written
     capsys.readouterr()
     assert main(["info", str(out)]) == 0
     shown = capsys.readouterr().out
-    assert "64 B" in shown and "[μ int8 + σ shared + basis 51 (vectors 9–59)]" in shown
+    assert "64 B" in shown and "[μ int8 fixed grid + σ shared + basis 53 (vectors 9–61)]" in shown
     smallest = tmp_path / "s.bvae"
-    assert main(["compress", str(red_plastic_file), "-o", str(smallest), "--bytes", "14"]) == 0
+    assert main(["compress", str(red_plastic_file), "-o", str(smallest), "--bytes", "12"]) == 0
     capsys.readouterr()
     assert main(["info", str(smallest)]) == 0
-    assert "[μ int8 + σ shared + basis 1 (vector 9)] 14 B" in capsys.readouterr().out
-    assert main(["compress", str(red_plastic_file), "-o", str(tmp_path / "t.bvae"), "--bytes", "13"]) != 0
-    assert "13 bytes is below the base record's 14 bytes" in capsys.readouterr().err
+    assert "[μ int8 fixed grid + σ shared + basis 1 (vector 9)] 12 B" in capsys.readouterr().out
+    assert main(["compress", str(red_plastic_file), "-o", str(tmp_path / "t.bvae"), "--bytes", "11"]) != 0
+    assert "11 bytes is below the base record's 12 bytes" in capsys.readouterr().err
     assert not (tmp_path / "t.bvae").exists()
 
 

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from brdfcodec.bvae_format import read_bvae
+from brdfcodec.bvae_format import FORMAT_MINOR, read_bvae
 from brdfcodec.cli import main
 from brdfcodec.exr import read_exr_rgb
 from brdfcodec.merl import MerlBRDF, read_merl, write_merl
@@ -45,7 +45,7 @@ def test_compress_decompress_round_trip(capsys, merl_folder: Path, tmp_path: Pat
 
     code, out, err = run(capsys, "info", str(lib))
     assert code == 0, err
-    assert "tiny-test-model" in out and "format 1.4" in out and "gold" in out
+    assert "tiny-test-model" in out and f"format 1.{FORMAT_MINOR}" in out and "gold" in out
 
     code, _, err = run(capsys, "decompress", str(lib), "--material", "gold", "-o", str(tmp_path / "gold.binary"),
                        "--reference", str(merl_folder / "gold.binary"))

@@ -68,7 +68,7 @@ def test_layered_records_round_trip_with_plain_ones(dtype: str) -> None:
     record = layered()
     data = encode_bvae([plain, record], DECODER, latent_dtype=dtype)  # type: ignore[arg-type]
     library = parse_bvae(data)
-    assert library.header.minor == FORMAT_MINOR == 4
+    assert library.header.minor == FORMAT_MINOR == 5
     back = library.record("layered-0")
     assert isinstance(back, LayeredRecord) and back.detail == record.detail
     assert library.header.entries[1].length == 2 * 8 * (2 if dtype == "float16" else 4) + record.detail.nbytes
@@ -133,9 +133,17 @@ def _with_compact_base() -> LayeredRecord:
         "cd" * 32, 0.25, np.arange(-2, 3, dtype=np.int8), 8), compact_mu=True, shared_sigma=True)
 
 
-# A detail layer, (format 1.3) a basis layer starting at vector 8, and (1.4) compact μ with the shared σ byte:
-# mutations hit every entry.
-_VALID = encode_bvae([layered(0.5), _with_basis_from_vector_8(), _with_compact_base()], DECODER)
+def _with_fixed_grid_base() -> LayeredRecord:
+    from brdfcodec.layers.basis import BasisLayer
+
+    return LayeredRecord("fixed", np.linspace(-3, 3, 8), np.full(8, 0.003), basis=BasisLayer(
+        "cd" * 32, 0.25, np.arange(-2, 3, dtype=np.int8), 8), compact_mu=True, shared_sigma=True, fixed_mu_grid=True)
+
+
+# A detail layer, (format 1.3) a basis layer starting at vector 8, (1.4) compact μ with the shared σ byte and
+# (1.5) compact μ on the fixed grid: mutations hit every entry.
+_VALID = encode_bvae([layered(0.5), _with_basis_from_vector_8(), _with_compact_base(), _with_fixed_grid_base()],
+                     DECODER)
 
 
 @settings(max_examples=150, suppress_health_check=[HealthCheck.too_slow], deadline=None)
@@ -164,7 +172,7 @@ def test_rate_control_meets_budgets_and_targets(analytic_tables) -> None:
     record = measure(encoder.encode(brdf, name="m"), encoder.decoder, brdf)
     assert record.meta["relae"]["mapped"] <= 0.02
     with pytest.raises(RateTargetError):
-        BrdfEncoder(effort=0, bytes=13).encode(brdf)
+        BrdfEncoder(effort=0, bytes=11).encode(brdf)  # below the smallest layered record (12 B)
 
 
 def test_refinement_never_worsens_and_edits_drop_the_layers(analytic_tables) -> None:
@@ -327,8 +335,8 @@ def test_size_budget_tries_a_smaller_basis_under_the_detail_layer(better: int) -
     base = LatentRecord("m", np.zeros(8), np.ones(8))
     fitted: list[int] = []
 
-    def fit(k: int, compact: bool):  # noqa: ANN202 - the BasisFit callable
-        assert not compact  # 4096 B hold all 75 coefficients beside μ in float32
+    def fit(k: int, mu_storage: str | None):  # noqa: ANN202 - the BasisFit callable
+        assert mu_storage is None  # 4096 B hold all 75 coefficients beside μ in float32
         fitted.append(k)
         share = 0.9 if k == better else 0.5  # how much of the material k coefficients explain
         return base, quantise_coefficients("cd" * 32, np.ones(k)), (target * share).astype(np.float32)
@@ -341,40 +349,49 @@ def test_size_budget_tries_a_smaller_basis_under_the_detail_layer(better: int) -
     assert result.record.basis.count == better and result.payload_bytes <= budget
 
 
-@pytest.mark.parametrize(("budget", "itemsize", "compact", "count"), [
-    (14, 4, True, 1),  # the smallest layered record: 11 B of compact base, the step, one coefficient
-    (32, 2, True, 19),
-    (64, 4, True, 51),  # compact whatever the latent dtype
-    (88, 4, True, 75),  # 75 coefficients only fit beside a compact base (40 + 2 + 75 = 117 B otherwise)
-    (117, 4, False, 75),  # all 75 fit beside μ in float32 and σ bytes: the base keeps its full precision
-    (101, 2, False, 75),
+@pytest.mark.parametrize(("budget", "itemsize", "mu_max", "storage", "count"), [
+    (12, 4, 1.0, "int8-fixed", 1),  # the smallest layered record: 9 B of compact base, the step, one coefficient
+    (14, 4, 5.0, "int8", 1),  # μ past the fixed grid's ±3.97: its own step, 2 bytes more
+    (32, 2, 1.0, "int8-fixed", 21),
+    (32, 2, 5.0, "int8", 19),
+    (64, 4, 1.0, "int8-fixed", 53),  # compact whatever the latent dtype
+    (88, 4, 1.0, "int8-fixed", 75),  # 75 coefficients only fit beside a compact base (40 + 2 + 75 = 117 B otherwise)
+    (117, 4, 1.0, None, 75),  # all 75 fit beside μ in float32 and σ bytes: the base keeps its full precision
+    (101, 2, 5.0, None, 75),
 ])
 def test_a_budget_too_small_for_every_coefficient_stores_a_compact_base(
-    budget: int, itemsize: int, compact: bool, count: int
+    budget: int, itemsize: int, mu_max: float, storage: str | None, count: int
 ) -> None:
     from brdfcodec.layers.basis import quantise_coefficients
     from brdfcodec.layers.rate import encode_layers
 
     target = np.full(NETWORK_INPUT_SHAPE, 0.5, dtype=np.float32)
     masks = np.ones(NETWORK_INPUT_SHAPE, dtype=np.float32)
-    base = LatentRecord("m", np.linspace(-1, 1, 8), np.full(8, 0.003))
-    fitted: list[tuple[int, bool]] = []
+    base = LatentRecord("m", np.linspace(-mu_max, mu_max, 8), np.full(8, 0.003))
+    fitted: list[tuple[int, str | None]] = []
 
-    def fit(k: int, compact_base: bool):  # noqa: ANN202 - the BasisFit callable
-        fitted.append((k, compact_base))
+    def fit(k: int, mu_storage: str | None):  # noqa: ANN202 - the BasisFit callable
+        fitted.append((k, mu_storage))
         return base, quantise_coefficients("cd" * 32, np.ones(k)), target * 0.9
 
     result = encode_layers(base, np.zeros_like(target), target, masks, bytes_budget=budget, basis_fit=fit,
                            basis_count=75, latent_itemsize=itemsize)
     record = result.record
+    compact = storage is not None
     assert isinstance(record, LayeredRecord) and record.basis.count == count
     assert record.compact_mu == record.shared_sigma == compact and record.compact_sigma != compact
+    assert record.fixed_mu_grid == (storage == "int8-fixed")
     # One basis size only: beside 32 coefficients none of these budgets has room for a detail layer (49 B at least).
-    assert fitted == [(count, compact)]
+    assert fitted == [(count, storage)]
     stored = parse_bvae(encode_bvae([record], DECODER, latent_dtype="float32" if itemsize == 4 else "float16"))
     assert stored.header.entries[0].length == result.payload_bytes <= budget
-    with pytest.raises(RateTargetError, match="13 bytes is below the base record's 14 bytes"):
-        encode_layers(base, np.zeros_like(target), target, masks, bytes_budget=13, basis_fit=fit, basis_count=75)
+    if compact:  # a compact μ holds what is stored
+        assert stored.records[0].mu.tolist() == record.mu.tolist()
+    smallest = budget if count == 1 else None
+    if smallest is not None:
+        with pytest.raises(RateTargetError, match=f"{smallest - 1} bytes is below the base record's {smallest} bytes"):
+            encode_layers(base, np.zeros_like(target), target, masks, bytes_budget=smallest - 1, basis_fit=fit,
+                          basis_count=75)
 
 
 def test_fewer_coefficients_are_kept_within_the_decode_tolerance() -> None:

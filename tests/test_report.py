@@ -110,3 +110,36 @@ def test_the_report_compares_with_pca_of_colour_permuted_training_materials() ->
 
     assert worst_error("pca-perm-14-float16") < 0.01
     assert worst_error("pca-2-float16") > 0.05
+
+
+def test_plot_styles_tell_twenty_curves_apart_by_colour_and_more_by_line_style() -> None:
+    from brdfcodec.report.styles import distinct_colour_index, distinct_line_style
+
+    first = [distinct_colour_index(k) for k in range(20)]
+    assert sorted(first) == list(range(20))  # every tab20 colour once
+    assert first[:10] == list(range(0, 20, 2))  # dark shades first
+    styles = {(distinct_colour_index(k), distinct_line_style(k)) for k in range(80)}
+    assert len(styles) == 80
+    with pytest.raises(ValueError, match="curve index"):
+        distinct_colour_index(-1)
+
+
+def test_rate_distortion_plot_draws_every_family_in_its_own_style(monkeypatch: pytest.MonkeyPatch,
+                                                                  tmp_path: Path) -> None:
+    import matplotlib.pyplot as plt
+
+    from brdfcodec.layers.rd_report import write_rd_plots
+
+    families = [f"family-{k:02d}" for k in range(23)]
+    records = [{"name": f, "family": f, "bytes_per_material": 2.0**b, "lossless": False,
+                "data": {"description": "test"},
+                "errors": {"validation": {m: {"mean": 0.1 / (b + 1)} for m in
+                                          ("relae_mapped", "relae_linear", "delta_e_itp")}}}
+               for f in families for b in range(3)]
+    figures = []
+    monkeypatch.setattr(plt, "close", figures.append)
+    write_rd_plots(records, tmp_path)
+    lines = figures[0].axes[0].get_lines()
+    drawn = [line for line in lines if line.get_label() in families]
+    assert len(drawn) == len(families)
+    assert len({(line.get_color(), line.get_linestyle()) for line in drawn}) == len(families)

@@ -21,9 +21,9 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from brdfcodec.conventions import NETWORK_INPUT_SHAPE
+from brdfcodec.conventions import N_CHANNELS, NETWORK_INPUT_SHAPE
 
-__all__ = ["PcaBasis", "fit_pca"]
+__all__ = ["PcaBasis", "fit_pca", "fit_pca_colour_orders"]
 
 
 @dataclass(frozen=True)
@@ -100,3 +100,34 @@ def fit_pca(inputs: npt.ArrayLike, n_components: int, *, entries: Sequence[int] 
     _, singular, vt = np.linalg.svd(flat - mean, full_matrices=False)
     scale = np.maximum(singular[:n_components] / max(1, flat.shape[0] - 1) ** 0.5, 1e-12)
     return PcaBasis(mean.astype(np.float32), vt[:n_components].astype(np.float32), scale.astype(np.float32), chosen)
+
+
+def fit_pca_colour_orders(inputs: npt.ArrayLike, n_components: int) -> PcaBasis:
+    """Fit a PCA basis to mapped inputs taken in all 6 orders of their colour channels (all entries).
+
+    The same basis as :func:`fit_pca` of
+    :func:`~brdfcodec.layers.basis.with_colour_permutations` ``(inputs)``, up to
+    rotations within pairs of equal singular values, found without making the
+    6N permuted inputs (:func:`~brdfcodec.colour_orders_pca.colour_orders_pca`).
+
+    Parameters
+    ----------
+    inputs : array_like, shape (N, 63, 90, 90)
+        Training inputs (invalid entries 0, as in datasets).
+    n_components : int
+        k, in [1, 5N − 1].
+
+    Returns
+    -------
+    PcaBasis
+        ``scale`` is each coefficient's standard deviation over the 6N permuted inputs.
+    """
+    from brdfcodec.colour_orders_pca import colour_orders_pca
+
+    x = np.asarray(inputs)
+    n = len(x)
+    if not 1 <= n_components <= 5 * n - 1:
+        raise ValueError(f"n_components must be in [1, {5 * n - 1}], got {n_components}")
+    pca = colour_orders_pca(x.reshape(n, N_CHANNELS, -1), n_components)
+    scale = np.maximum(pca.singular / max(1, 6 * n - 1) ** 0.5, 1e-12)
+    return PcaBasis(pca.mean.astype(np.float32), pca.components.astype(np.float32), scale.astype(np.float32))

@@ -57,8 +57,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     target = parser.add_mutually_exclusive_group()
     target.add_argument("--bytes", type=int, metavar="N",
                         help="largest quality within N bytes of record payload per material (adds enhancement "
-                        "layers: basis coefficients, then a detail layer; from 14 B, where the base is stored "
-                        "compact: μ as int8, one σ byte)")
+                        "layers: basis coefficients, then a detail layer; from 12 B, where the base is stored "
+                        "compact: μ as int8 on a fixed grid, or with a step where it does not fit, one σ byte)")
     target.add_argument("--max-relae", type=float, metavar="X",
                         help="smallest record whose measured RelAE on its material is at most X (adds enhancement "
                         "layers)")

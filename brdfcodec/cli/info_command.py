@@ -195,8 +195,8 @@ def _format_text(summary: dict[str, Any]) -> str:
             layers = item.get("layers") or {}
             if layers:
                 parts = []
-                if "mu" in layers:  # a compact base (format 1.4): μ as int8 with a step
-                    parts.append("μ int8")
+                if "mu" in layers:  # a compact base: μ as int8 with a step (1.4) or on the fixed grid (1.5)
+                    parts.append("μ int8 fixed grid" if layers["mu"] == "int8-fixed" else "μ int8")
                 if layers.get("sigma") == "log2-u8-shared":
                     parts.append("σ shared")
                 if "basis" in layers:

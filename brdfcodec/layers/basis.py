@@ -42,11 +42,14 @@ from typing import Any, Final
 import numpy as np
 import numpy.typing as npt
 
+from brdfcodec.colour_orders_pca import colour_orders_pca
 from brdfcodec.conventions import N_CHANNELS, N_KEPT_SLICES, NETWORK_INPUT_SHAPE
 from brdfcodec.hashing import is_sha256_hex
 
 __all__ = [
     "BASIS_FILE",
+    "FIXED_MU_LIMIT",
+    "FIXED_MU_STEP",
     "MAX_BASIS_COUNT",
     "BasisLayer",
     "SharedBasis",
@@ -54,7 +57,9 @@ __all__ = [
     "basis_offset",
     "dequantise_int8",
     "fit_shared_basis",
+    "fits_fixed_mu_grid",
     "int8_from_step_bytes",
+    "int8_on_fixed_grid",
     "int8_step_bytes",
     "int8_with_step",
     "load_shared_basis",
@@ -186,7 +191,10 @@ def fit_shared_basis(
         vectors than the centred data has dimensions.
     colour_permutations : bool, default False
         Fit on the materials in all 6 orders of their colour channels
-        (:func:`with_colour_permutations`) instead of as measured.
+        (:func:`with_colour_permutations`) instead of as measured. The 6N
+        materials are not made: :func:`~brdfcodec.colour_orders_pca.colour_orders_pca`
+        finds their components from the colour sums and deviations (the same
+        components up to rotations within pairs of equal singular values).
 
     Returns
     -------
@@ -201,8 +209,12 @@ def fit_shared_basis(
         raise ValueError(f"count must be in [1, {limit}] for {n} materials{orders}")
     valid = masks.reshape(n, -1).all(axis=0)
     if colour_permutations:  # an entry is kept where it is valid in all three colours (permutations move them)
-        inputs = with_colour_permutations(inputs)
-        valid = np.tile(valid.reshape(N_CHANNELS, -1).all(axis=0), N_CHANNELS)
+        per_colour = np.flatnonzero(valid.reshape(N_CHANNELS, -1).all(axis=0))
+        per_colour_size = valid.size // N_CHANNELS
+        entries = np.concatenate([c * per_colour_size + per_colour for c in range(N_CHANNELS)]).astype(np.int64)
+        values = inputs.reshape(n, N_CHANNELS, -1)[:, :, per_colour]
+        # The 6 orders' principal components, found without making them (brdfcodec.colour_orders_pca).
+        return colour_orders_pca(values, count).components.astype(np.float16), entries
     entries = np.flatnonzero(valid).astype(np.int64)
     data = inputs.reshape(len(inputs), -1)[:, entries].astype(np.float64)
     data -= data.mean(axis=0)
@@ -414,6 +426,33 @@ def int8_with_step(values: npt.ArrayLike, what: str = "values") -> tuple[float, 
         step = np.nextafter(step, np.float16(np.inf))
     q = np.clip(np.rint(v / float(step)), -127, 127).astype(np.int8)
     return float(step), q
+
+
+#: Step of a compact μ on the fixed grid (``layers.mu = "int8-fixed"``, ``spec/bvae-format.md`` §4.5): μ = q / 32.
+FIXED_MU_STEP: Final = 1.0 / 32.0
+#: Largest |μ| the fixed grid holds: 127 steps (−127 … 127, the same range as :func:`int8_with_step`).
+FIXED_MU_LIMIT: Final = 127.0 * FIXED_MU_STEP
+
+
+def fits_fixed_mu_grid(values: npt.ArrayLike) -> bool:
+    """Whether every value is finite and within ±:data:`FIXED_MU_LIMIT` (3.97), the fixed μ grid's range."""
+    v = np.asarray(values, dtype=np.float64)
+    return bool(np.isfinite(v).all() and (np.abs(v) <= FIXED_MU_LIMIT).all())
+
+
+def int8_on_fixed_grid(values: npt.ArrayLike, what: str = "values") -> npt.NDArray[np.int8]:
+    """Values as int8 codes on the fixed μ grid: q = round(32 · v), clipped to −127…127 (so a value past
+    ±3.97 is stored as the grid's end; an encoder fits the layers to the stored code).
+
+    Raises
+    ------
+    ValueError
+        A value is not finite.
+    """
+    v = np.asarray(values, dtype=np.float64).reshape(-1)
+    if not np.isfinite(v).all():
+        raise ValueError(f"{what} must be finite")
+    return np.clip(np.rint(v / FIXED_MU_STEP), -127, 127).astype(np.int8)
 
 
 def dequantise_int8(step: float, q: npt.ArrayLike) -> npt.NDArray[np.float32]:

@@ -11,14 +11,17 @@ import numpy as np
 
 from brdfcodec.bvae_format import LatentRecord
 from brdfcodec.layers.basis import (
+    FIXED_MU_STEP,
     BasisLayer,
     SharedBasis,
     basis_offset,
     dequantise_int8,
+    int8_on_fixed_grid,
     int8_with_step,
     quantise_coefficients,
 )
-from brdfcodec.layers.rate import BasisFit, Metric, encode_layers
+from brdfcodec.layers.rate import BasisFit, Metric, MuStorage, encode_layers
+from brdfcodec.layers.record import MU_INT8_FIXED
 from brdfcodec.layers.refine import EFFORT_STEPS, fit_basis_coefficients, refine_latent
 
 if TYPE_CHECKING:
@@ -142,7 +145,7 @@ def _basis_fit(
 
     joint: dict[int, tuple[np.ndarray, np.ndarray]] = {}
 
-    def fit(k: int, compact: bool) -> tuple[LatentRecord, BasisLayer, np.ndarray]:
+    def fit(k: int, mu_storage: MuStorage) -> tuple[LatentRecord, BasisLayer, np.ndarray]:
         first = basis_offset(linear_rank, basis.count, k)
         components = basis.components[first : first + k]
         if k not in joint:
@@ -150,9 +153,13 @@ def _basis_fit(
                 decoder.network, base.mu[None], inputs[None], masks[None], components, basis.entries, options.effort,
             )
         codes, coefficients = joint[k]
-        if compact:
-            # μ as a compact record stores it (int8), then the coefficients refitted to that code.
-            code = dequantise_int8(*int8_with_step(codes[0], f"{base.name}: mu"))
+        if mu_storage is not None:
+            # μ as a compact record stores it (int8 on the fixed grid or with a step), then the coefficients
+            # refitted to that code.
+            if mu_storage == MU_INT8_FIXED:
+                code = dequantise_int8(FIXED_MU_STEP, int8_on_fixed_grid(codes[0], f"{base.name}: mu"))
+            else:
+                code = dequantise_int8(*int8_with_step(codes[0], f"{base.name}: mu"))
             _, coefficients = fit_basis_coefficients(
                 decoder.network, code[None], inputs[None], masks[None], components, basis.entries, options.effort,
                 fit_latent=False,

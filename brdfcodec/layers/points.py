@@ -205,8 +205,8 @@ class DctSlices(OperatingPoint):
 
 def rate_distortion_points(train_inputs: np.ndarray, model: Any = None) -> list[OperatingPoint]:
     """The report's rate–distortion points (held-out materials only)."""
-    from brdfcodec.baselines.pca import fit_pca
-    from brdfcodec.layers.basis import shared_basis_rank, with_colour_permutations
+    from brdfcodec.baselines.pca import fit_pca, fit_pca_colour_orders
+    from brdfcodec.layers.basis import shared_basis_rank
 
     points: list[OperatingPoint] = [LayeredBvae(bytes_budget=n, model=model) for n in LAYERED_BUDGETS]
     points.append(LayeredBvae(max_relae=0.02, model=model))
@@ -220,7 +220,7 @@ def rate_distortion_points(train_inputs: np.ndarray, model: Any = None) -> list[
     # baseline, since the basis then spans colours the training set lacks (as the basis layer's own can).
     # Up to its rank (5N − 1), so that it is as good as PCA can be within 1 KB too (379 int8 coefficients: 381 B).
     rank = shared_basis_rank(len(train_inputs), colour_permutations=True)
-    permuted = fit_pca(with_colour_permutations(train_inputs), min(rank, 512))
+    permuted = fit_pca_colour_orders(train_inputs, min(rank, 512))
     points += [PcaPacked(permuted, k, "float16", "perm") for k in (8, 16, 32, 64, 128, 256, 512) if k <= rank]
     int8_counts = sorted({k for k in (14, 30, 62, 126, 254, 510) if k <= rank} | {min(rank, 510)})
     points += [PcaPacked(permuted, k, "int8", "perm") for k in int8_counts]

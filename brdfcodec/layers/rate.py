@@ -31,8 +31,10 @@ is measured on the returned record. A layered record stores σ compactly
 (one byte per dimension, ``spec/bvae-format.md`` §4.5); under a budget too
 small for all K coefficients beside μ in the latent dtype (and for an error
 target, in every record without a detail layer), the base itself is
-compact (μ as int8 with a float16 step, σ as one shared byte: 11 bytes for
-D = 8, :func:`compact_base_pays`), which makes budgets from 14 bytes possible.
+compact (μ as int8 on the fixed grid μ = q / 32 where it fits ±3.97, else
+with a float16 step; σ as one shared byte: 9 or 11 bytes for D = 8,
+:func:`compact_base_pays`, :func:`compact_mu_storage`), which makes budgets
+from 12 bytes possible.
 """
 
 from __future__ import annotations
@@ -48,14 +50,15 @@ import numpy.typing as npt
 from brdfcodec.bvae_format import LatentRecord
 from brdfcodec.conventions import MAPPED_MAX, NETWORK_INPUT_SHAPE
 from brdfcodec.errors import RateTargetError
-from brdfcodec.layers.basis import STEP_BYTES, BasisLayer
+from brdfcodec.layers.basis import STEP_BYTES, BasisLayer, fits_fixed_mu_grid
 from brdfcodec.layers.detail import DetailLayer, decode_detail, encode_detail
-from brdfcodec.layers.record import LayeredRecord
+from brdfcodec.layers.record import MU_INT8, MU_INT8_FIXED, LayeredRecord
 from brdfcodec.metrics import RelaeAgainst
 from brdfcodec.transforms import table_from_network_output
 
 __all__ = [
-    "DECODE_TOLERANCE", "DETAIL_BASIS_COUNT", "STEP_LADDER", "BasisFit", "Metric", "RateResult", "compact_base_pays",
+    "DECODE_TOLERANCE", "DETAIL_BASIS_COUNT", "STEP_LADDER", "BasisFit", "Metric", "MuStorage", "RateResult",
+    "compact_base_pays", "compact_mu_storage",
     "encode_layers",
     "error_target_sequence", "fewest_coefficients_within_tolerance", "layered_mapped",
 ]
@@ -85,10 +88,13 @@ class RateResult:
     tried: list[tuple[float | None, int, float | None]]
 
 
-#: What a basis fit returns for k coefficients and whether μ is stored compact (then the code it returns is the
+#: How a record stores μ: None in the file's latent dtype, else compact (``layers.mu``): ``"int8"`` (a float16
+#: step and D int8 values) or ``"int8-fixed"`` (D int8 values on the fixed grid μ = q / 32).
+MuStorage = str | None
+#: What a basis fit returns for k coefficients and how μ is stored (when compact, the code it returns is the
 #: quantised one, and the coefficients are fitted to it): the base with its jointly refined μ, the layer, and
 #: the decoder's mapped output before the detail layer (clamped base decode plus the basis residual).
-BasisFit = Callable[[int, bool], tuple[LatentRecord, BasisLayer, np.ndarray]]
+BasisFit = Callable[[int, MuStorage], tuple[LatentRecord, BasisLayer, np.ndarray]]
 #: Basis sizes tried by an error target below the basis' full size.
 _BASIS_COUNTS: Final = (4, 8, 16, 32)
 #: A candidate of an error target: compact base or not, basis coefficients, detail step (None: no detail layer).
@@ -116,8 +122,8 @@ class _Candidates:
         self.base, self.inputs, self.masks = base, inputs, masks
         d = base.latent_dim
         self.plain_bytes = 2 * d * latent_itemsize  # a latent record: μ and σ in the latent dtype
-        self.compact = compact
-        self.layered_bytes = _layered_base_bytes(d, latent_itemsize, compact)
+        self.mu_storage = compact_mu_storage(base.mu) if compact else None
+        self.layered_bytes = _layered_base_bytes(d, latent_itemsize, self.mu_storage)
         self.basis_fit = basis_fit
         self.stages: dict[int, tuple[LatentRecord, BasisLayer | None, np.ndarray]] = {0: (base, None, base_mapped)}
         self.details: dict[tuple[int, float], DetailLayer] = {}
@@ -125,7 +131,7 @@ class _Candidates:
     def stage(self, k: int) -> tuple[LatentRecord, BasisLayer | None, np.ndarray]:
         if k not in self.stages:
             assert self.basis_fit is not None and k > 0
-            self.stages[k] = self.basis_fit(k, self.compact)
+            self.stages[k] = self.basis_fit(k, self.mu_storage)
         return self.stages[k]
 
     def detail(self, k: int, s: float) -> DetailLayer:
@@ -139,7 +145,9 @@ class _Candidates:
         if basis is None and s is None:
             return base
         detail = None if s is None else self.detail(k, s)
-        storage = {"compact_mu": True, "shared_sigma": True} if self.compact else {"compact_sigma": True}
+        storage: dict[str, bool] = {"compact_sigma": True}
+        if self.mu_storage is not None:
+            storage = {"compact_mu": True, "shared_sigma": True, "fixed_mu_grid": self.mu_storage == MU_INT8_FIXED}
         return LayeredRecord(base.name, base.mu, base.sigma, base.meta, detail=detail, basis=basis, **storage)
 
     def size(self, k: int, s: float | None) -> int:
@@ -298,19 +306,35 @@ def compact_base_pays(bytes_budget: int, latent_dim: int, latent_itemsize: int, 
     """Whether a size budget stores the base compact: when it cannot hold all K basis coefficients beside μ in
     the latent dtype (and σ as one byte each).
 
-    A compact base (μ as int8 with a float16 step, one shared σ byte: 11 bytes for D = 8 instead of 24 in
-    float16 or 40 in float32) frees 13 or 29 bytes for coefficients, at a cost in error that the measurement
-    found negligible beside them (``benchmarks/compact_base_study.py``, ``reports/rd-study/compact-base.json``).
+    A compact base (μ as int8 on the fixed grid or with a float16 step, one shared σ byte: 9 or 11 bytes for
+    D = 8 instead of 24 in float16 or 40 in float32) frees 13 to 31 bytes for coefficients, at a cost in error
+    that the measurement found negligible beside them (``benchmarks/compact_base_study.py``,
+    ``reports/rd-study/compact-base.json``).
     Above that, the bytes would go to the detail layer, where they buy little.
     """
-    full_base = _layered_base_bytes(latent_dim, latent_itemsize, compact=False)
+    full_base = _layered_base_bytes(latent_dim, latent_itemsize, None)
     return basis_count > 0 and bytes_budget < full_base + STEP_BYTES + basis_count
 
 
-def _layered_base_bytes(latent_dim: int, latent_itemsize: int, compact: bool) -> int:
+def compact_mu_storage(mu: npt.ArrayLike) -> str:
+    """How a compact base stores μ: on the fixed grid (D bytes) where every value is within its ±3.97, else
+    with its own float16 step (2 + D bytes).
+
+    The 2 bytes saved go to basis coefficients. On the held-out NBRDF proxy of MERL (full-table mapped RelAE,
+    effort 1, float16 latents, ``benchmarks/compact_mu_study.py``, ``reports/rd-study/compact-mu.json``)
+    that lowered the error at 16 B from 0.0480 to 0.0441, at 24 B from 0.0404 to 0.0395 and at 32 B from
+    0.0357 to 0.0352; at 64 B the coarser μ costs about as much as 2 more coefficients gain
+    (0.0298 against 0.0299).
+    """
+    return MU_INT8_FIXED if fits_fixed_mu_grid(mu) else MU_INT8
+
+
+def _layered_base_bytes(latent_dim: int, latent_itemsize: int, mu_storage: MuStorage) -> int:
     """Payload of a layered record's base: μ in the latent dtype and σ as one byte per dimension, or (compact) μ
-    as a float16 step and D int8 values and σ as one shared byte."""
-    return STEP_BYTES + latent_dim + 1 if compact else latent_dim * latent_itemsize + latent_dim
+    as D int8 values (after a float16 step unless on the fixed grid) and σ as one shared byte."""
+    if mu_storage is None:
+        return latent_dim * latent_itemsize + latent_dim
+    return latent_dim + 1 + (STEP_BYTES if mu_storage == MU_INT8 else 0)
 
 
 @functools.cache

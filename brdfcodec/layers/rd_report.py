@@ -7,6 +7,7 @@ from pathlib import Path
 from typing import Any
 
 from brdfcodec.atomic import atomic_output
+from brdfcodec.report.styles import distinct_colour_index, distinct_line_style
 
 __all__ = ["TARGET_SIZES", "rd_markdown", "write_rd_plots"]
 
@@ -87,7 +88,8 @@ def write_rd_plots(records: Sequence[dict[str, Any]], folder: str | Path) -> lis
             ys = [max(_held(r, metric) or 0.0, 1e-7) for r in members]
             ours = family.startswith("bvae")
             ax.plot(xs, ys, marker="*" if ours else "o", markersize=9 if ours else 4, linewidth=2.2 if ours else 1,
-                    color=plt.get_cmap("tab20").colors[(2 * k) % 20], label=family)
+                    color=plt.get_cmap("tab20").colors[distinct_colour_index(k)], linestyle=distinct_line_style(k),
+                    label=family)
         for size in TARGET_SIZES:
             ax.axvline(size, color="grey", linewidth=0.5, alpha=0.5)
         ax.set_xscale("log")

@@ -19,12 +19,14 @@ import numpy as np
 from brdfcodec.bvae_format import LatentRecord
 from brdfcodec.hashing import is_sha256_hex
 from brdfcodec.layers.basis import (
+    FIXED_MU_STEP,
     MAX_BASIS_COUNT,
     STEP_BYTES,
     BasisLayer,
     basis_layer_from_bytes,
     dequantise_int8,
     int8_from_step_bytes,
+    int8_on_fixed_grid,
     int8_step_bytes,
     int8_with_step,
 )
@@ -33,6 +35,7 @@ from brdfcodec.layers.detail import _DTYPES, DETAIL_TRANSFORM, MAX_STEP, MIN_STE
 __all__ = [
     "LAYERED_KIND",
     "MU_INT8",
+    "MU_INT8_FIXED",
     "SIGMA_LOG2_U8",
     "SIGMA_LOG2_U8_SHARED",
     "LayeredRecord",
@@ -54,6 +57,9 @@ SIGMA_LOG2_U8 = "log2-u8"
 SIGMA_LOG2_U8_SHARED = "log2-u8-shared"
 #: ``layers.mu`` of a record that stores μ as a float16 step s and D int8 values q: μ = s · q (since 1.4).
 MU_INT8 = "int8"
+#: ``layers.mu`` of a record that stores μ as D int8 values q on the fixed grid: μ = q / 32 (since 1.5).
+MU_INT8_FIXED = "int8-fixed"
+_MU_MODES = (MU_INT8, MU_INT8_FIXED)
 _SIGMA_LOG2_MIN, _SIGMA_STEPS_PER_OCTAVE = -12.0, 16.0
 _SIGMA_MODES = (SIGMA_LOG2_U8, SIGMA_LOG2_U8_SHARED)
 
@@ -99,6 +105,9 @@ class LayeredRecord(LatentRecord):
         Store μ as a float16 step and one signed byte per dimension (``layers.mu = "int8"``: 2 + D bytes,
         each value within half a step, max |μ| / 254) instead of in the file's latent dtype. ``mu`` then
         holds the stored (quantised) code.
+    fixed_mu_grid : bool
+        With ``compact_mu``: store μ as one signed byte per dimension on the fixed grid μ = q / 32
+        (``layers.mu = "int8-fixed"``: D bytes, no step; values past ±3.97 are stored as the grid's end).
     """
 
     detail: DetailLayer | None = None
@@ -107,6 +116,7 @@ class LayeredRecord(LatentRecord):
     compact_sigma: bool = False
     shared_sigma: bool = False
     compact_mu: bool = False
+    fixed_mu_grid: bool = False
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -118,6 +128,8 @@ class LayeredRecord(LatentRecord):
             raise ValueError(f"{self.name}: basis must be a BasisLayer, got {type(self.basis).__name__}")
         if self.compact_sigma and self.shared_sigma:
             raise ValueError(f"{self.name}: sigma is stored either per dimension or shared, not both")
+        if self.fixed_mu_grid and not self.compact_mu:
+            raise ValueError(f"{self.name}: the fixed mu grid is a compact mu (compact_mu=True)")
         # What is stored is what the record holds, so writing and reading agree.
         if self.compact_sigma:
             self._hold("sigma", sigma_from_codes(quantise_sigma(self.sigma)))
@@ -133,6 +145,8 @@ class LayeredRecord(LatentRecord):
         object.__setattr__(self, field_name, array)
 
     def _mu_code(self) -> tuple[float, np.ndarray]:
+        if self.fixed_mu_grid:
+            return FIXED_MU_STEP, int8_on_fixed_grid(self.mu, f"{self.name}: mu")
         return int8_with_step(self.mu, f"{self.name}: mu")
 
     @property
@@ -152,7 +166,9 @@ class LayeredRecord(LatentRecord):
     def layer_bytes(self) -> bytes:
         """The bytes that follow the latent values: compact μ, compact σ, the basis layer's, then the detail
         layer's."""
-        mu = int8_step_bytes(*self._mu_code()) if self.compact_mu else b""
+        mu = b""
+        if self.compact_mu:
+            mu = self._mu_code()[1].tobytes() if self.fixed_mu_grid else int8_step_bytes(*self._mu_code())
         sigma = quantise_sigma(self.sigma).tobytes() if self.compact_sigma else b""
         if self.shared_sigma:
             sigma = shared_sigma_code(self.sigma).tobytes()
@@ -164,7 +180,7 @@ def layers_entry(record: LayeredRecord) -> dict[str, Any]:
     """The ``layers`` object of a layered record's index entry."""
     entry: dict[str, Any] = {}
     if record.compact_mu:
-        entry["mu"] = MU_INT8
+        entry["mu"] = MU_INT8_FIXED if record.fixed_mu_grid else MU_INT8
     if record.compact_sigma:
         entry["sigma"] = SIGMA_LOG2_U8
     if record.shared_sigma:
@@ -200,11 +216,12 @@ def layers_length(layers: object, where: str, latent_dim: int = 0) -> int:
         raise ValueError(f"{where} layers hold neither 'basis' nor 'detail'")
     length = 0
     if "mu" in layers:
-        if layers["mu"] != MU_INT8:
+        if layers["mu"] not in _MU_MODES:
             raise UnsupportedLayerError(
-                f"{where} stores mu as {layers['mu']!r}, unknown to this reader ({MU_INT8}); upgrade brdfcodec"
+                f"{where} stores mu as {layers['mu']!r}, unknown to this reader ({' or '.join(_MU_MODES)}); "
+                "upgrade brdfcodec"
             )
-        length += STEP_BYTES + latent_dim
+        length += latent_dim + (STEP_BYTES if layers["mu"] == MU_INT8 else 0)
     if "sigma" in layers:
         if layers["sigma"] not in _SIGMA_MODES:
             raise UnsupportedLayerError(
@@ -269,8 +286,12 @@ def layered_from_payload(
     import zstandard
 
     d = latent_dim
-    compact_mu = layers.get("mu") == MU_INT8
-    if compact_mu:
+    compact_mu = layers.get("mu") in _MU_MODES
+    fixed_mu_grid = layers.get("mu") == MU_INT8_FIXED
+    if fixed_mu_grid:
+        mu = dequantise_int8(FIXED_MU_STEP, np.frombuffer(tail[:d], dtype=np.int8))
+        tail = tail[d:]
+    elif compact_mu:
         mu = dequantise_int8(*int8_from_step_bytes(tail[: STEP_BYTES + d], "compact mu step"))
         tail = tail[STEP_BYTES + d :]
     else:
@@ -285,7 +306,8 @@ def layered_from_payload(
         tail = tail[1:]
     else:
         sigma = values[:d]
-    flags = {"compact_sigma": compact, "shared_sigma": shared, "compact_mu": compact_mu}
+    flags = {"compact_sigma": compact, "shared_sigma": shared, "compact_mu": compact_mu,
+             "fixed_mu_grid": fixed_mu_grid}
     basis = None
     if "basis" in layers:
         size = STEP_BYTES + int(layers["basis"]["count"])

@@ -9,6 +9,7 @@ from pathlib import Path
 from typing import Any
 
 from brdfcodec.atomic import atomic_output
+from brdfcodec.report.styles import distinct_colour_index
 
 __all__ = ["markdown_table", "write_report"]
 
@@ -75,7 +76,7 @@ def _plot(records: Sequence[dict[str, Any]], x_key: str, x_label: str, path: Pat
         bvae = r["name"].startswith("bvae")
         label = r["name"] + (" (lossless, drawn at 1e-7)" if relae <= _FLOOR else "")
         ax.scatter([max(r[x_key], 1e-3)], [relae], s=110 if bvae else 40, marker="*" if bvae else markers[k % 11],
-                   color=colours[(2 * k) % 20], edgecolors="black", linewidths=0.4, zorder=3, label=label)
+                   color=colours[distinct_colour_index(k)], edgecolors="black", linewidths=0.4, zorder=3, label=label)
     ax.legend(loc="center left", bbox_to_anchor=(1.01, 0.5), fontsize=7, frameon=False)
     ax.set_xscale("log")
     ax.set_yscale("log")

@@ -220,6 +220,9 @@ def invalid_vectors() -> dict[str, tuple[bytes, str, str]]:
     add("compact-sigma-length", basis_vector(compact_layers, compact_payload[:5] + bytes([160])
                                              + compact_payload[5:]), "malformed",
         "a shared sigma (one byte) but two sigma bytes (record length as the payload)")
+    # Compact mu on the fixed grid (since 1.5): D int8 values and no step; a step in front is 2 bytes too many.
+    add("compact-mu-fixed-with-step", basis_vector({**compact_layers, "mu": "int8-fixed"}, compact_payload),
+        "malformed", "mu on the fixed grid (no step) followed by a step's 2 bytes (record length as the payload)")
     short = detail_frame([1], 63 * 90 * 90 - 1)
     short_payload = lay_payload[:16] + short
     add("layered-content-size", assemble(*plain([({**lay_entry, "crc32": zlib.crc32(short_payload),
@@ -291,16 +294,18 @@ def layered_record(name: str, mu: np.ndarray, sigma: np.ndarray) -> LatentRecord
 
 
 def basis_record(name: str, mu: np.ndarray, sigma: np.ndarray, sha256: str, *, detail: bool = False,
-                 first: int = 0, compact_base: bool = False) -> LatentRecord:
+                 first: int = 0, compact_base: bool = False, fixed_grid: bool = False) -> LatentRecord:
     """A layered record (§4.4) with compact sigma and 5 coefficients on a shared basis from vector ``first``
-    (and a detail layer); with ``compact_base``, compact mu and the shared sigma byte instead (since 1.4)."""
+    (and a detail layer); with ``compact_base``, compact mu and the shared sigma byte instead (since 1.4),
+    with ``fixed_grid`` too, mu on the fixed grid (since 1.5)."""
     from brdfcodec.layers.basis import BasisLayer
     from brdfcodec.layers.detail import N_DETAIL_VALUES, DetailLayer
     from brdfcodec.layers.record import LayeredRecord
 
     layer = DetailLayer(0.125, "int16", detail_frame([8, -4, 2], N_DETAIL_VALUES)) if detail else None
     basis = BasisLayer(sha256, 0.5, np.array([12, -7, 3, 0, -1], dtype=np.int8), first)
-    storage = {"compact_mu": True, "shared_sigma": True} if compact_base else {"compact_sigma": True}
+    storage = {"compact_mu": True, "shared_sigma": True, "fixed_mu_grid": fixed_grid} if compact_base else {
+        "compact_sigma": True}
     return LayeredRecord(name, mu, sigma, {"effort": 1}, detail=layer, basis=basis, **storage)
 
 
@@ -309,6 +314,9 @@ def valid_records() -> dict[str, tuple[list, DecoderReference, str, bool | None]
     rng = np.random.default_rng(2026)
     halves = lambda size: (np.round(rng.normal(size=size) * 8) / 8).astype(np.float32)  # noqa: E731 - exact in f16
     sigma = lambda size: (2.0 ** -rng.integers(1, 6, size=size)).astype(np.float32)  # noqa: E731
+    # Records added since 1.5 draw from their own generator, so the earlier vectors keep their values.
+    later = np.random.default_rng(2027)
+    halves15 = lambda size: (np.round(later.normal(size=size) * 8) / 8).astype(np.float32)  # noqa: E731
     lib = [LatentRecord(f"material-{i}", halves(8), sigma(8),
                         {"source_sha256": f"{i:x}" * 64, "relae": {"mapped": 0.03125 * (i + 1), "linear": 0.25}})
            for i in range(3)]
@@ -331,13 +339,17 @@ def valid_records() -> dict[str, tuple[list, DecoderReference, str, bool | None]
                                      basis_record("reference.basis-first", halves(8), sigma(8), SHIPPED_BASIS,
                                                   first=8),
                                      basis_record("reference.basis-compact", halves(8), sigma(8), SHIPPED_BASIS,
-                                                  first=8, compact_base=True)],
+                                                  first=8, compact_base=True),
+                                     basis_record("reference.basis-fixed-grid", halves15(8), np.full(8, 0.125),
+                                                  SHIPPED_BASIS, first=8, compact_base=True, fixed_grid=True)],
                                     SHIPPED_DECODER, "float16", False),
         "layered": ([layered_record("gold.layered", halves(8), sigma(8)),
                      LatentRecord("gold", halves(8), sigma(8), {"effort": 0, "source_kind": "rgl-measured"}),
                      basis_record("gold.basis", halves(8), sigma(8), "cd" * 32, detail=True),
                      basis_record("gold.basis-first", halves(8), sigma(8), "cd" * 32, first=8),
-                     basis_record("gold.basis-compact", halves(8), sigma(8), "cd" * 32, first=8, compact_base=True)],
+                     basis_record("gold.basis-compact", halves(8), sigma(8), "cd" * 32, first=8, compact_base=True),
+                     basis_record("gold.basis-fixed-grid", halves15(8), np.full(8, 0.125), "cd" * 32, first=8,
+                                  compact_base=True, fixed_grid=True)],
                     TEST_DECODER, "float32", False),
     }
 
