@@ -11,17 +11,13 @@ import numpy as np
 
 from brdfcodec.bvae_format import LatentRecord
 from brdfcodec.layers.basis import (
-    FIXED_MU_STEP,
     BasisLayer,
     SharedBasis,
     basis_offset,
-    dequantise_int8,
-    int8_on_fixed_grid,
-    int8_with_step,
     quantise_coefficients,
 )
 from brdfcodec.layers.rate import BasisFit, Metric, MuStorage, encode_layers
-from brdfcodec.layers.record import MU_INT8_FIXED
+from brdfcodec.layers.record import MU_INT8_FIXED, compact_mu_values
 from brdfcodec.layers.refine import EFFORT_STEPS, fit_basis_coefficients, refine_latent
 
 if TYPE_CHECKING:
@@ -156,10 +152,7 @@ def _basis_fit(
         if mu_storage is not None:
             # μ as a compact record stores it (int8 on the fixed grid or with a step), then the coefficients
             # refitted to that code.
-            if mu_storage == MU_INT8_FIXED:
-                code = dequantise_int8(FIXED_MU_STEP, int8_on_fixed_grid(codes[0], f"{base.name}: mu"))
-            else:
-                code = dequantise_int8(*int8_with_step(codes[0], f"{base.name}: mu"))
+            code = compact_mu_values(codes[0], mu_storage == MU_INT8_FIXED, f"{base.name}: mu")
             _, coefficients = fit_basis_coefficients(
                 decoder.network, code[None], inputs[None], masks[None], components, basis.entries, options.effort,
                 fit_latent=False,

@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 from typing import Any, Literal
 
 import numpy as np
+import numpy.typing as npt
 
 from brdfcodec.bvae_format import LatentRecord
 from brdfcodec.hashing import is_sha256_hex
@@ -39,6 +40,8 @@ __all__ = [
     "SIGMA_LOG2_U8",
     "SIGMA_LOG2_U8_SHARED",
     "LayeredRecord",
+    "compact_mu_code",
+    "compact_mu_values",
     "latent_values_stored",
     "layered_from_payload",
     "layers_entry",
@@ -79,6 +82,19 @@ def shared_sigma_code(sigma: np.ndarray) -> np.ndarray:
 def sigma_from_codes(codes: np.ndarray) -> np.ndarray:
     """Inverse of :func:`quantise_sigma`: σ = 2^(q/16 − 12), float32 (exact for every code)."""
     return np.exp2(np.asarray(codes, dtype=np.float64) / _SIGMA_STEPS_PER_OCTAVE + _SIGMA_LOG2_MIN).astype(np.float32)
+
+
+def compact_mu_code(mu: npt.ArrayLike, fixed_grid: bool, what: str = "mu") -> tuple[float, np.ndarray]:
+    """A compact μ as stored: ``(step, q)``, μ ≈ step · q with q int8 — on the fixed grid (step 1/32,
+    ``layers.mu = "int8-fixed"``) or with its own float16 step (``"int8"``)."""
+    if fixed_grid:
+        return FIXED_MU_STEP, int8_on_fixed_grid(mu, what)
+    return int8_with_step(mu, what)
+
+
+def compact_mu_values(mu: npt.ArrayLike, fixed_grid: bool, what: str = "mu") -> npt.NDArray[np.float32]:
+    """The float32 values a compact μ decodes to (what an encoder fits the layers to)."""
+    return dequantise_int8(*compact_mu_code(mu, fixed_grid, what))
 
 
 @dataclass(frozen=True)
@@ -136,7 +152,7 @@ class LayeredRecord(LatentRecord):
         if self.shared_sigma:
             self._hold("sigma", np.repeat(sigma_from_codes(shared_sigma_code(self.sigma)), len(self.mu)))
         if self.compact_mu:
-            self._hold("mu", dequantise_int8(*self._mu_code()))
+            self._hold("mu", compact_mu_values(self.mu, self.fixed_mu_grid, f"{self.name}: mu"))
 
     def _hold(self, field_name: str, values: np.ndarray) -> None:
         """Replace ``mu`` or ``sigma`` by the values stored (float32, read-only like the base record's)."""
@@ -145,9 +161,7 @@ class LayeredRecord(LatentRecord):
         object.__setattr__(self, field_name, array)
 
     def _mu_code(self) -> tuple[float, np.ndarray]:
-        if self.fixed_mu_grid:
-            return FIXED_MU_STEP, int8_on_fixed_grid(self.mu, f"{self.name}: mu")
-        return int8_with_step(self.mu, f"{self.name}: mu")
+        return compact_mu_code(self.mu, self.fixed_mu_grid, f"{self.name}: mu")
 
     @property
     def sigma_bytes_stored(self) -> bool:
