@@ -122,11 +122,12 @@ def test_query_decoded_material(benchmark, decoder: BrdfDecoder, record: LatentR
 
 
 #: Benchmark group → (encoder options, has a detail layer): the high-rate record with all three parts
-#: (75 basis coefficients + a 16 KB detail layer), and the low-rate one (a 64 B record: compact base + 51 basis
-#: coefficients).
+#: (75 basis coefficients + a 16 KB detail layer), and the low-rate one (a 64 B record: compact base + 53 basis
+#: coefficients), also with its base projected on the shared basis (format 1.6, ``--project-base``).
 _LAYERED_CASES = {
     "decode-layered": ({"bytes": 16384}, True),
     "decode-layered-64B": ({"bytes": 64, "latent_dtype": "float16"}, False),
+    "decode-layered-64B-projected": ({"bytes": 64, "latent_dtype": "float16", "project_base": True}, False),
 }
 
 

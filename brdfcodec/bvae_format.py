@@ -71,7 +71,7 @@ FORMAT_MAJOR = 1
 #: 1.2 added the basis layer and compact sigma of layered records; a 1.1 reader refuses them as unknown layers.
 #: 1.3 added the basis layer's ``first`` vector; a 1.2 reader refuses it as an unknown basis field.
 #: 1.4 added compact μ and shared σ of layered records; a 1.3 reader refuses them as an unknown layer / sigma mode.
-FORMAT_MINOR = 5
+FORMAT_MINOR = 6
 #: Largest stored header, in bytes (compressed size when compressed).
 MAX_HEADER_BYTES = 1 << 20
 #: Largest decompressed header, in bytes.

@@ -220,6 +220,12 @@ def _has_layers(record: Record) -> bool:
     return getattr(record, "basis", None) is not None or getattr(record, "detail", None) is not None
 
 
+def _projected_vectors(record: Record) -> int:
+    """P of a record whose base decode is projected on the shared basis (format 1.6), else 0."""
+    layer = getattr(record, "basis", None)
+    return 0 if layer is None else int(layer.project)
+
+
 def _apply_mask(table: np.ndarray, bins: Sequence[int] | None, masked: MaskedEntries) -> np.ndarray:
     if masked == "keep":
         return table
@@ -399,7 +405,7 @@ class BrdfDecoder:
     def mapped_for_bins(self, record: Record, phi_d_bins: Sequence[int]) -> npt.NDArray[np.float32]:
         """Mapped slices (63, 90, 90) with only the kept slices that ``phi_d_bins`` need filled (others 0)."""
         slots = kept_slots_for_bins(phi_d_bins)
-        if len(slots) > N_KEPT_SLICES // 2:
+        if len(slots) > N_KEPT_SLICES // 2 or _projected_vectors(record):  # a projection needs every entry
             return self.mapped_record(record)
         out = np.zeros(NETWORK_INPUT_SHAPE, dtype=np.float32)
         if isinstance(record, GraftRecord):
@@ -420,6 +426,47 @@ class BrdfDecoder:
         from brdfcodec.layers.basis import BASIS_FILE, load_shared_basis
 
         return load_shared_basis(self.manifest.folder / BASIS_FILE, self.manifest.basis_sha256)
+
+    @functools.cached_property
+    def projection_centre(self) -> npt.NDArray[np.float32]:
+        """The centre of a projected base (``spec/bvae-format.md`` §4.5): the decoder's linear-path mean
+        (``basis_mean``, float16 widened) at the shared basis' entries, shape (E,).
+
+        Raises
+        ------
+        BasisError
+            The model has no shared basis, its decoder no linear path, or the linear path does not cover
+            every entry of the basis.
+        """
+        from brdfcodec.layers.basis import BasisError
+
+        basis = self.shared_basis
+        if basis is None:
+            raise BasisError("a projected base needs the model's shared basis; this model has none")
+        mean, index = getattr(self.network, "basis_mean", None), getattr(self.network, "valid_index", None)
+        if mean is None or index is None:
+            raise BasisError("a projected base is centred on the decoder's linear-path mean; this decoder has none")
+        index_np = index.cpu().numpy()
+        position = np.minimum(np.searchsorted(index_np, basis.entries), len(index_np) - 1)
+        if not np.array_equal(index_np[position], basis.entries):
+            raise BasisError("the decoder's linear path does not cover every entry of the shared basis")
+        return mean.float().cpu().numpy()[position]
+
+    def project_base(self, record: Record, mapped: np.ndarray) -> None:
+        """Replace, in place, a clamped base decode ``mapped`` (63, 90, 90) by its projection when the record's
+        basis layer asks for one (``layers.basis.project``, format 1.6); nothing otherwise."""
+        count = _projected_vectors(record)
+        if not count:
+            return
+        basis = self.shared_basis
+        if basis is None or count > basis.count:
+            from brdfcodec.layers.basis import BasisError
+
+            held = 0 if basis is None else basis.count
+            raise BasisError(f"{record.name}: the record projects its base on {count} basis vectors, but this "
+                             f"model's shared basis holds {held}")
+        flat = mapped.reshape(-1)
+        flat[basis.entries] = basis.project(flat[basis.entries], self.projection_centre, count)
 
     def _layer_residuals(self, record: Record, slots: Sequence[int] | None = None) -> list[np.ndarray]:
         """A record's layers decoded to mapped residuals, in the order they are added (basis, then detail).
@@ -480,6 +527,8 @@ class BrdfDecoder:
             residuals = self._layer_residuals(record, slots)
         if not residuals:
             return mapped
+        if slots is None:
+            self.project_base(record, mapped)
         for residual in residuals:
             mapped += residual
         return clamp_mapped(mapped, out=mapped)
@@ -635,6 +684,11 @@ class BrdfEncoder:
     basis : bool, default True
         Whether rate control may add a basis layer (coefficients on the model's shared basis,
         ``spec/bvae-format.md`` §4.5) when the model has one.
+    project_base : bool, default False
+        Whether records with a basis layer project their base decode on the shared basis (format 1.6,
+        ``layers.basis.project``): lower error at equal size, slower decoding
+        (:data:`~brdfcodec.layers.encoding.PROJECTED_BASE_VECTORS`). Ignored where the model's decoder has
+        no linear path to centre the projection on.
     """
 
     manifest: ModelManifest | None
@@ -651,12 +705,13 @@ class BrdfEncoder:
         detail_step: float | None = None,
         latent_dtype: LatentDtype = "float32",
         basis: bool = True,
+        project_base: bool = False,
     ) -> None:
         from brdfcodec.layers.encoding import EncodeOptions
 
         self.options = EncodeOptions(
             effort=effort, bytes_budget=bytes, max_relae=max_relae, metric=metric, detail_step=detail_step,
-            latent_itemsize=2 if latent_dtype == "float16" else 4, basis=basis,
+            latent_itemsize=2 if latent_dtype == "float16" else 4, basis=basis, project_base=project_base,
         )
         manifest = resolve_model(model)
         network, _, loaded = load_model(manifest.folder, parts=("encoder",), device=str(device))

@@ -68,7 +68,7 @@ def test_layered_records_round_trip_with_plain_ones(dtype: str) -> None:
     record = layered()
     data = encode_bvae([plain, record], DECODER, latent_dtype=dtype)  # type: ignore[arg-type]
     library = parse_bvae(data)
-    assert library.header.minor == FORMAT_MINOR == 5
+    assert library.header.minor == FORMAT_MINOR == 6
     back = library.record("layered-0")
     assert isinstance(back, LayeredRecord) and back.detail == record.detail
     assert library.header.entries[1].length == 2 * 8 * (2 if dtype == "float16" else 4) + record.detail.nbytes
@@ -140,10 +140,18 @@ def _with_fixed_grid_base() -> LayeredRecord:
         "cd" * 32, 0.25, np.arange(-2, 3, dtype=np.int8), 8), compact_mu=True, shared_sigma=True, fixed_mu_grid=True)
 
 
-# A detail layer, (format 1.3) a basis layer starting at vector 8, (1.4) compact μ with the shared σ byte and
-# (1.5) compact μ on the fixed grid: mutations hit every entry.
-_VALID = encode_bvae([layered(0.5), _with_basis_from_vector_8(), _with_compact_base(), _with_fixed_grid_base()],
-                     DECODER)
+def _with_projected_base() -> LayeredRecord:
+    from brdfcodec.layers.basis import BasisLayer
+
+    return LayeredRecord("projected", np.linspace(-1, 1, 8), np.full(8, 0.003), basis=BasisLayer(
+        "cd" * 32, 0.25, np.arange(-2, 3, dtype=np.int8), 8, 50), compact_mu=True, shared_sigma=True,
+        fixed_mu_grid=True)
+
+
+# A detail layer, (format 1.3) a basis layer starting at vector 8, (1.4) compact μ with the shared σ byte,
+# (1.5) compact μ on the fixed grid and (1.6) a projected base: mutations hit every entry.
+_VALID = encode_bvae([layered(0.5), _with_basis_from_vector_8(), _with_compact_base(), _with_fixed_grid_base(),
+                      _with_projected_base()], DECODER)
 
 
 @settings(max_examples=150, suppress_health_check=[HealthCheck.too_slow], deadline=None)

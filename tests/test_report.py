@@ -143,3 +143,14 @@ def test_rate_distortion_plot_draws_every_family_in_its_own_style(monkeypatch: p
     drawn = [line for line in lines if line.get_label() in families]
     assert len(drawn) == len(families)
     assert len({(line.get_color(), line.get_linestyle()) for line in drawn}) == len(families)
+
+
+def test_the_report_has_projected_base_points_up_to_256_bytes() -> None:
+    from brdfcodec.layers.points import LayeredBvae, rate_distortion_points
+
+    train = np.random.default_rng(6).uniform(0.0, 1.0, size=(3, 63, 90, 90)).astype(np.float32)
+    projected = [p for p in rate_distortion_points(train) if p.name.startswith("bvae-projected")]
+    assert [p.name for p in projected] == [f"bvae-projected@{n}B" for n in (16, 32, 64, 128, 256)]
+    assert all(p.family == "bvae-projected" and p.encoder.options.project_base for p in projected)
+    with pytest.raises(ValueError, match="size budget"):
+        LayeredBvae(max_relae=0.02, project_base=True)

@@ -44,6 +44,11 @@ def test_manifest_covers_what_the_spec_asks_for() -> None:
     assert {"basis-first-negative", "basis-first-string", "basis-first-range"} <= invalid
     # ... and compact mu and the shared sigma byte (1.4).
     assert {"compact-mu-unknown", "compact-mu-step-nan", "compact-sigma-length"} <= invalid
+    # ... and the projected base (1.6).
+    assert {"basis-project-zero", "basis-project-bool"} <= invalid
+    projected = [r for v in MANIFEST["valid"] for r in v["records"]
+                 if "project" in r.get("layers", {}).get("basis", {})]
+    assert len(projected) == 2 and all(r["layers"]["basis"]["project"] == 50 for r in projected)
     compact = [r for v in MANIFEST["valid"] for r in v["records"] if r.get("layers", {}).get("mu") == "int8"]
     assert len(compact) == 2 and all(r["layers"]["sigma"] == "log2-u8-shared" for r in compact)
     assert MANIFEST["decode"]["values"] and MANIFEST["decode"]["rtol"] == 1e-3
@@ -54,7 +59,7 @@ def test_manifest_covers_what_the_spec_asks_for() -> None:
 def test_valid_vector_reads_as_listed(vector: dict[str, Any]) -> None:
     parsed = parse_bvae((VECTORS / vector["file"]).read_bytes(), vector["file"])
     header = parsed.header
-    assert (header.major, header.minor) == (1, 5)
+    assert (header.major, header.minor) == (1, 6)
     assert header.decoder.sha256 == vector["decoder_sha256"]
     assert header.latent_dtype == vector["latent_dtype"]
     assert bool(header.flags & FLAG_HEADER_ZSTD) == vector["header_compressed"]

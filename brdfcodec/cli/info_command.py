@@ -205,6 +205,8 @@ def _format_text(summary: dict[str, Any]) -> str:
                     vectors = f"vector {first + 1}" if count == 1 else f"vectors {first + 1}–{first + count}"
                     span = f" ({vectors})" if first else ""
                     parts.append(f"basis {count}{span}")
+                    if "project" in layers["basis"]:  # a projected base (1.6)
+                        parts.append(f"base projected on {layers['basis']['project']}")
                 if "detail" in layers:
                     parts.append(f"detail {layers['detail']['length']} B")
                 kind = f"[{' + '.join(parts)}] "

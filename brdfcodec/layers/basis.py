@@ -164,6 +164,28 @@ class SharedBasis:
                 )
         return out.reshape(len(wanted), *NETWORK_INPUT_SHAPE[1:])
 
+    def project(self, values: npt.ArrayLike, centre: npt.ArrayLike, count: int) -> npt.NDArray[np.float32]:
+        """Values over ``entries`` projected around ``centre`` on the first ``count`` vectors (a projected base,
+        ``spec/bvae-format.md`` §4.5): ``m + Σⱼ ((y − m) · b_j) b_j``, j = 0 … count − 1.
+
+        Parameters
+        ----------
+        values : array_like, shape (E,) or (B, E)
+            y: a clamped base decode at the basis' entries, mapped units.
+        centre : array_like, shape (E,)
+            m: the decoder's linear-path mean at the same entries.
+        count : int
+            P, in [1, K].
+
+        Returns
+        -------
+        ndarray of float32, the shape of ``values``
+        """
+        vectors = self.vectors(0, count)
+        m = np.asarray(centre, dtype=np.float32)
+        y = np.asarray(values, dtype=np.float32)
+        return m + ((y - m) @ vectors.T) @ vectors
+
     def _rows(self, first: int, k: int) -> slice:
         """The vectors ``first … first + k − 1``, refused unless they exist."""
         if not (1 <= k and 0 <= first and first + k <= self.count):
@@ -340,12 +362,17 @@ class BasisLayer:
         ``Σᵢ s·qᵢ · b_(first+i)`` (format 1.3; 0 in older files). An encoder
         skips the leading vectors that its decoder's linear path already
         spans (:func:`basis_offset`).
+    project : int, default 0
+        P > 0: the base decode is projected on the basis' first P vectors
+        around the decoder's linear-path mean before the layer is added
+        (format 1.6, :meth:`SharedBasis.project`); 0: it is not.
     """
 
     sha256: str
     step: float
     q: npt.NDArray[np.int8]
     first: int = 0
+    project: int = 0
 
     def __post_init__(self) -> None:
         if not is_sha256_hex(self.sha256):
@@ -361,6 +388,10 @@ class BasisLayer:
         ):
             raise ValueError(f"basis first vector must be an integer with first + count ≤ {MAX_BASIS_COUNT}, "
                              f"got {self.first!r}")
+        if isinstance(self.project, bool) or not isinstance(self.project, int | np.integer) or not (
+            0 <= self.project <= MAX_BASIS_COUNT
+        ):
+            raise ValueError(f"basis projection must be an integer in [0, {MAX_BASIS_COUNT}], got {self.project!r}")
 
     @property
     def count(self) -> int:
@@ -382,10 +413,12 @@ class BasisLayer:
         return dequantise_int8(self.step, self.q)
 
     def entry(self) -> dict[str, object]:
-        """The ``layers.basis`` object of the record's index entry (``first`` only when it is not 0)."""
+        """The ``layers.basis`` object of the record's index entry (``first`` and ``project`` only when not 0)."""
         entry: dict[str, object] = {"sha256": self.sha256, "count": self.count}
         if self.first:
             entry["first"] = int(self.first)
+        if self.project:
+            entry["project"] = int(self.project)
         return entry
 
 
@@ -479,11 +512,12 @@ def int8_from_step_bytes(data: bytes, what: str) -> tuple[float, npt.NDArray[np.
     return step, np.frombuffer(data[STEP_BYTES:], dtype=np.int8).copy()
 
 
-def quantise_coefficients(sha256: str, coefficients: npt.ArrayLike, first: int = 0) -> BasisLayer:
+def quantise_coefficients(sha256: str, coefficients: npt.ArrayLike, first: int = 0, project: int = 0) -> BasisLayer:
     """A basis layer holding ``coefficients`` (of vectors ``first``, ``first + 1``, …) quantised to int8
-    with one float16 step (max |c| / 127, :func:`int8_with_step`)."""
+    with one float16 step (max |c| / 127, :func:`int8_with_step`), over a base projected on ``project``
+    vectors (0: not projected)."""
     step, q = int8_with_step(coefficients, "basis coefficients")
-    return BasisLayer(sha256, step, q, int(first))
+    return BasisLayer(sha256, step, q, int(first), int(project))
 
 
 def basis_layer_from_bytes(entry: Mapping[str, Any], data: bytes) -> BasisLayer:
@@ -492,5 +526,5 @@ def basis_layer_from_bytes(entry: Mapping[str, Any], data: bytes) -> BasisLayer:
     if len(data) != STEP_BYTES + count:
         raise ValueError(f"basis layer holds {len(data)} bytes, expected {STEP_BYTES + count}")
     step, q = int8_from_step_bytes(data, "basis step")
-    return BasisLayer(str(entry["sha256"]), step, q, int(entry.get("first", 0)))
+    return BasisLayer(str(entry["sha256"]), step, q, int(entry.get("first", 0)), int(entry.get("project", 0)))
 

@@ -12,6 +12,9 @@ which codec is better on materials it has not seen". Points of one family
   layer;
 - ``bvae-max-relae-X``: the same with ``--max-relae X`` (the smallest tried
   record meeting X on each material);
+- ``bvae-projected@N``: the same as ``bvae-layered@N`` with the base decode
+  projected on the shared basis (``bvae compress --project-base``, format
+  1.6), up to 256 B, where the basis layer is what the bytes buy;
 - ``pca-k-float16`` / ``pca-k-int8``: PCA of the mapped kept slices (basis of
   the training split), coefficients (orthogonal projection) as float16, or
   as int8 with one float16 scale per material (k + 2 bytes; also k = 14, 30
@@ -43,6 +46,8 @@ __all__ = ["rate_distortion_points"]
 
 #: Payload budgets of the layered points, bytes per material.
 LAYERED_BUDGETS = (16, 32, 64, 128, 256, 1024, 4096, 16384, 65536, 262144)
+#: Payload budgets of the points with a projected base (an encoder option, slower to decode).
+PROJECTED_BUDGETS = (16, 32, 64, 128, 256)
 
 
 def _size_label(n: int) -> str:
@@ -55,12 +60,21 @@ class LayeredBvae(OperatingPoint):
     held_out_only = True
     family = "bvae-layered"
 
-    def __init__(self, *, bytes_budget: int | None = None, max_relae: float | None = None, model: Any = None) -> None:
+    def __init__(self, *, bytes_budget: int | None = None, max_relae: float | None = None, model: Any = None,
+                 project_base: bool = False) -> None:
         from brdfcodec.codec import BrdfEncoder
 
-        self.encoder = BrdfEncoder(model, effort=1, bytes=bytes_budget, max_relae=max_relae, latent_dtype="float16")
+        self.encoder = BrdfEncoder(model, effort=1, bytes=bytes_budget, max_relae=max_relae, latent_dtype="float16",
+                                   project_base=project_base)
         self.decoder = self.encoder.decoder
-        if bytes_budget is not None:
+        if project_base:
+            if bytes_budget is None:
+                raise ValueError("a projected-base point needs a size budget")
+            self.family = "bvae-projected"
+            self.name = f"bvae-projected@{_size_label(bytes_budget)}"
+            self.description = (f"β-VAE (effort 1, float16) + basis layer over the base projected on the shared "
+                                f"basis (--project-base), at most {bytes_budget} B of payload")
+        elif bytes_budget is not None:
             self.name = f"bvae-layered@{_size_label(bytes_budget)}"
             self.description = (
                 f"β-VAE (effort 1, float16) + basis and detail layers, at most {bytes_budget} B of payload"
@@ -210,6 +224,7 @@ def rate_distortion_points(train_inputs: np.ndarray, model: Any = None) -> list[
 
     points: list[OperatingPoint] = [LayeredBvae(bytes_budget=n, model=model) for n in LAYERED_BUDGETS]
     points.append(LayeredBvae(max_relae=0.02, model=model))
+    points += [LayeredBvae(bytes_budget=n, model=model, project_base=True) for n in PROJECTED_BUDGETS]
     basis = fit_pca(train_inputs, min(75, len(train_inputs)))
     sizes = [k for k in (8, 16, 32, 64, 75) if k <= basis.n_components]
     points += [PcaPacked(basis, k, "float16") for k in sizes]

@@ -253,12 +253,13 @@ def layers_length(layers: object, where: str, latent_dim: int = 0) -> int:
 def _basis_length(basis: object, where: str) -> int:
     if not isinstance(basis, Mapping):
         raise ValueError(f"{where} layers.basis is not a JSON object")
-    unknown = sorted(set(basis) - {"sha256", "count", "first"})
+    unknown = sorted(set(basis) - {"sha256", "count", "first", "project"})
     if unknown:
         raise UnsupportedLayerError(
             f"{where} basis layer has fields {unknown}, unknown to this reader; upgrade brdfcodec"
         )
     sha, count, first = basis.get("sha256"), basis.get("count"), basis.get("first", 0)
+    project = basis.get("project", 1)  # absent: no projection
     if not is_sha256_hex(sha):
         raise ValueError(f"{where} basis sha256 {sha!r} is not 64 lower-case hex digits")
     if not isinstance(count, int) or isinstance(count, bool) or not 1 <= count <= MAX_BASIS_COUNT:
@@ -267,6 +268,8 @@ def _basis_length(basis: object, where: str) -> int:
         raise ValueError(
             f"{where} basis first {first!r} is not an integer in [0, {MAX_BASIS_COUNT} − count]"
         )
+    if not isinstance(project, int) or isinstance(project, bool) or not 1 <= project <= MAX_BASIS_COUNT:
+        raise ValueError(f"{where} basis project {project!r} is not an integer in [1, {MAX_BASIS_COUNT}]")
     return STEP_BYTES + count
 
 

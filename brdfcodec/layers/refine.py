@@ -147,6 +147,7 @@ def fit_basis_coefficients(
     *,
     fit_latent: bool = True,
     error: Callable[[torch.Tensor, torch.Tensor, torch.Tensor], torch.Tensor] | None = None,
+    projection: tuple[npt.ArrayLike, npt.ArrayLike] | None = None,
 ) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.float32]]:
     """Latent codes and basis coefficients fitted together (the basis layer's encoder).
 
@@ -177,6 +178,10 @@ def fit_basis_coefficients(
         ``error(decoded, target, weight)`` → per-material error ``(B,)`` to minimise, all three ``(B, 63·90·90)``
         tensors (mapped kept slices; validity as 0/1); the mapped L1 error over valid entries by default.
         For studies of other objectives (``benchmarks/full_table_fit_study.py``).
+    projection : (vectors, centre), optional
+        Project the clamped base decode at ``entries`` on ``vectors`` ``(P, E)`` (the shared basis' first P)
+        around ``centre`` ``(E,)`` before the coefficients are added: a projected base (format 1.6,
+        :meth:`~brdfcodec.layers.basis.SharedBasis.project`).
 
     Returns
     -------
@@ -200,14 +205,24 @@ def fit_basis_coefficients(
         p.requires_grad_(False)
 
     fixed_base: torch.Tensor | None = None
+    if projection is not None:
+        p_vectors = torch.as_tensor(np.array(projection[0], dtype=np.float32), device=device, dtype=dtype)
+        p_centre = torch.as_tensor(np.array(projection[1], dtype=np.float32), device=device, dtype=dtype)
+
+    def base_of(z: torch.Tensor) -> torch.Tensor:
+        base = decoder(z).clamp(0.0, MAPPED_MAX).flatten(1)
+        if projection is None:
+            return base
+        centred = base[:, where] - p_centre
+        return base.index_copy(1, where, p_centre + (centred @ p_vectors.T) @ p_vectors)
 
     def decoded(z: torch.Tensor, c: torch.Tensor) -> torch.Tensor:
-        base = decoder(z).clamp(0.0, MAPPED_MAX).flatten(1) if fixed_base is None else fixed_base
+        base = base_of(z) if fixed_base is None else fixed_base
         return base.index_add(1, where, c @ basis)
 
     try:
         with torch.no_grad():
-            start_base = decoder(start).clamp(0.0, MAPPED_MAX).flatten(1)
+            start_base = base_of(start)
             if not fit_latent:
                 fixed_base = start_base
             residual = (target - start_base) * weight

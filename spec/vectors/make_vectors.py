@@ -205,6 +205,13 @@ def invalid_vectors() -> dict[str, tuple[bytes, str, str]]:
     add("basis-first-range", basis_vector({**basis_entry["layers"], "basis": {
         **basis_entry["layers"]["basis"], "first": 4094}}), "malformed",
         "first 4094 with count 3 runs past the 4096 vectors a basis may hold")
+    # A projected base (since 1.6): P in [1, 4096].
+    add("basis-project-zero", basis_vector({**basis_entry["layers"], "basis": {
+        **basis_entry["layers"]["basis"], "project": 0}}), "malformed",
+        "a basis layer projecting its base on 0 vectors (absent means no projection)")
+    add("basis-project-bool", basis_vector({**basis_entry["layers"], "basis": {
+        **basis_entry["layers"]["basis"], "project": True}}), "malformed",
+        "a basis layer whose projection is true, not a number of vectors")
     zero_step = basis_payload[:10] + np.float16(0).astype("<f2").tobytes() + basis_payload[12:]
     add("basis-step-zero", basis_vector(basis_entry["layers"], zero_step), "malformed",
         "the basis step is 0 (record CRC valid)")
@@ -294,16 +301,18 @@ def layered_record(name: str, mu: np.ndarray, sigma: np.ndarray) -> LatentRecord
 
 
 def basis_record(name: str, mu: np.ndarray, sigma: np.ndarray, sha256: str, *, detail: bool = False,
-                 first: int = 0, compact_base: bool = False, fixed_grid: bool = False) -> LatentRecord:
+                 first: int = 0, compact_base: bool = False, fixed_grid: bool = False, project: int = 0
+                 ) -> LatentRecord:
     """A layered record (§4.4) with compact sigma and 5 coefficients on a shared basis from vector ``first``
     (and a detail layer); with ``compact_base``, compact mu and the shared sigma byte instead (since 1.4),
-    with ``fixed_grid`` too, mu on the fixed grid (since 1.5)."""
+    with ``fixed_grid`` too, mu on the fixed grid (since 1.5); with ``project``, the base projected on that
+    many basis vectors (since 1.6)."""
     from brdfcodec.layers.basis import BasisLayer
     from brdfcodec.layers.detail import N_DETAIL_VALUES, DetailLayer
     from brdfcodec.layers.record import LayeredRecord
 
     layer = DetailLayer(0.125, "int16", detail_frame([8, -4, 2], N_DETAIL_VALUES)) if detail else None
-    basis = BasisLayer(sha256, 0.5, np.array([12, -7, 3, 0, -1], dtype=np.int8), first)
+    basis = BasisLayer(sha256, 0.5, np.array([12, -7, 3, 0, -1], dtype=np.int8), first, project)
     storage = {"compact_mu": True, "shared_sigma": True, "fixed_mu_grid": fixed_grid} if compact_base else {
         "compact_sigma": True}
     return LayeredRecord(name, mu, sigma, {"effort": 1}, detail=layer, basis=basis, **storage)
@@ -317,6 +326,9 @@ def valid_records() -> dict[str, tuple[list, DecoderReference, str, bool | None]
     # Records added since 1.5 draw from their own generator, so the earlier vectors keep their values.
     later = np.random.default_rng(2027)
     halves15 = lambda size: (np.round(later.normal(size=size) * 8) / 8).astype(np.float32)  # noqa: E731
+    # ... and those added since 1.6 from theirs.
+    latest = np.random.default_rng(2028)
+    halves16 = lambda size: (np.round(latest.normal(size=size) * 8) / 8).astype(np.float32)  # noqa: E731
     lib = [LatentRecord(f"material-{i}", halves(8), sigma(8),
                         {"source_sha256": f"{i:x}" * 64, "relae": {"mapped": 0.03125 * (i + 1), "linear": 0.25}})
            for i in range(3)]
@@ -341,7 +353,10 @@ def valid_records() -> dict[str, tuple[list, DecoderReference, str, bool | None]
                                      basis_record("reference.basis-compact", halves(8), sigma(8), SHIPPED_BASIS,
                                                   first=8, compact_base=True),
                                      basis_record("reference.basis-fixed-grid", halves15(8), np.full(8, 0.125),
-                                                  SHIPPED_BASIS, first=8, compact_base=True, fixed_grid=True)],
+                                                  SHIPPED_BASIS, first=8, compact_base=True, fixed_grid=True),
+                                     basis_record("reference.basis-projected", halves16(8), np.full(8, 0.125),
+                                                  SHIPPED_BASIS, first=8, compact_base=True, fixed_grid=True,
+                                                  project=50)],
                                     SHIPPED_DECODER, "float16", False),
         "layered": ([layered_record("gold.layered", halves(8), sigma(8)),
                      LatentRecord("gold", halves(8), sigma(8), {"effort": 0, "source_kind": "rgl-measured"}),
@@ -349,7 +364,9 @@ def valid_records() -> dict[str, tuple[list, DecoderReference, str, bool | None]
                      basis_record("gold.basis-first", halves(8), sigma(8), "cd" * 32, first=8),
                      basis_record("gold.basis-compact", halves(8), sigma(8), "cd" * 32, first=8, compact_base=True),
                      basis_record("gold.basis-fixed-grid", halves15(8), np.full(8, 0.125), "cd" * 32, first=8,
-                                  compact_base=True, fixed_grid=True)],
+                                  compact_base=True, fixed_grid=True),
+                     basis_record("gold.basis-projected", halves16(8), np.full(8, 0.125), "cd" * 32, first=8,
+                                  compact_base=True, fixed_grid=True, project=50)],
                     TEST_DECODER, "float32", False),
     }
 
@@ -385,7 +402,7 @@ def generate(folder: Path, *, with_reference: bool = True) -> dict[str, Any]:
     (folder / "valid").mkdir(parents=True, exist_ok=True)
     (folder / "invalid").mkdir(parents=True, exist_ok=True)
     manifest: dict[str, Any] = {
-        "format_version": "1.4",
+        "format_version": "1.6",
         "error_classes": {
             "malformed": "BvaeFormatError",
             "checksum": "BvaeChecksumError",
