@@ -427,10 +427,25 @@ class BrdfDecoder:
 
         return load_shared_basis(self.manifest.folder / BASIS_FILE, self.manifest.basis_sha256)
 
-    @functools.cached_property
+    def basis_named(self, sha256: str) -> SharedBasis | None:
+        """The model's shared basis with this SHA-256: its current one (:attr:`shared_basis`) or one it had before
+        (``previous_bases`` in ``model.json``, checked against its hash when first read); None if it has none."""
+        basis = self.shared_basis
+        if basis is not None and basis.sha256 == sha256:
+            return basis
+        if self.manifest is None or sha256 not in self.manifest.previous_bases:
+            return None
+        cache = self.__dict__.setdefault("_previous_bases", {})
+        if sha256 not in cache:
+            from brdfcodec.layers.basis import load_shared_basis
+
+            cache[sha256] = load_shared_basis(self.manifest.folder / self.manifest.previous_bases[sha256], sha256)
+        return cache[sha256]
+
+    @property
     def projection_centre(self) -> npt.NDArray[np.float32]:
-        """The centre of a projected base (``spec/bvae-format.md`` §4.5): the decoder's linear-path mean
-        (``basis_mean``, float16 widened) at the shared basis' entries, shape (E,).
+        """The centre of a projected base (``spec/bvae-format.md`` §4.5) over the current shared basis' entries:
+        the decoder's linear-path mean (``basis_mean``, float16 widened) there, shape (E,).
 
         Raises
         ------
@@ -443,14 +458,23 @@ class BrdfDecoder:
         basis = self.shared_basis
         if basis is None:
             raise BasisError("a projected base needs the model's shared basis; this model has none")
-        mean, index = getattr(self.network, "basis_mean", None), getattr(self.network, "valid_index", None)
-        if mean is None or index is None:
-            raise BasisError("a projected base is centred on the decoder's linear-path mean; this decoder has none")
-        index_np = index.cpu().numpy()
-        position = np.minimum(np.searchsorted(index_np, basis.entries), len(index_np) - 1)
-        if not np.array_equal(index_np[position], basis.entries):
-            raise BasisError("the decoder's linear path does not cover every entry of the shared basis")
-        return mean.float().cpu().numpy()[position]
+        return self._centre_on(basis)
+
+    def _centre_on(self, basis: SharedBasis) -> npt.NDArray[np.float32]:
+        from brdfcodec.layers.basis import BasisError
+
+        cache = self.__dict__.setdefault("_centres", {})
+        if basis.sha256 not in cache:
+            mean, index = getattr(self.network, "basis_mean", None), getattr(self.network, "valid_index", None)
+            if mean is None or index is None:
+                raise BasisError("a projected base is centred on the decoder's linear-path mean; this decoder has "
+                                 "none")
+            index_np = index.cpu().numpy()
+            position = np.minimum(np.searchsorted(index_np, basis.entries), len(index_np) - 1)
+            if not np.array_equal(index_np[position], basis.entries):
+                raise BasisError("the decoder's linear path does not cover every entry of the shared basis")
+            cache[basis.sha256] = mean.float().cpu().numpy()[position]
+        return cache[basis.sha256]
 
     def project_base(self, record: Record, mapped: np.ndarray) -> None:
         """Replace, in place, a clamped base decode ``mapped`` (63, 90, 90) by its projection when the record's
@@ -458,7 +482,7 @@ class BrdfDecoder:
         count = _projected_vectors(record)
         if not count:
             return
-        basis = self.shared_basis
+        basis = self.basis_named(record.basis.sha256)  # type: ignore[union-attr]
         if basis is None or count > basis.count:
             from brdfcodec.layers.basis import BasisError
 
@@ -466,7 +490,7 @@ class BrdfDecoder:
             raise BasisError(f"{record.name}: the record projects its base on {count} basis vectors, but this "
                              f"model's shared basis holds {held}")
         flat = mapped.reshape(-1)
-        flat[basis.entries] = basis.project(flat[basis.entries], self.projection_centre, count)
+        flat[basis.entries] = basis.project(flat[basis.entries], self._centre_on(basis), count)
 
     def _layer_residuals(self, record: Record, slots: Sequence[int] | None = None) -> list[np.ndarray]:
         """A record's layers decoded to mapped residuals, in the order they are added (basis, then detail).
@@ -482,9 +506,10 @@ class BrdfDecoder:
             return []
         basis = None
         if basis_layer is not None:
-            basis = self.shared_basis
-            if basis is None or basis.sha256 != basis_layer.sha256:
-                own = "none" if basis is None else basis.sha256
+            basis = self.basis_named(basis_layer.sha256)
+            if basis is None:
+                current = self.shared_basis
+                own = "none" if current is None else current.sha256
                 raise BasisMismatchError(
                     f"{record.name}: the record's basis layer needs shared basis {basis_layer.sha256}, but this "
                     f"decoder's model has {own}; decode it with the model that wrote it"

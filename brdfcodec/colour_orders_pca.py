@@ -33,11 +33,13 @@ import numpy.typing as npt
 
 from brdfcodec.conventions import N_CHANNELS
 
-__all__ = ["ColourOrdersPca", "colour_orders_pca"]
+__all__ = ["COLOUR_VECTORS", "ColourOrdersPca", "colour_orders_pca"]
 
 #: Orthonormal colour vectors: grey, then the two sum-zero (chroma) directions.
 _GREY = np.full(N_CHANNELS, 1.0 / np.sqrt(3.0))
 _CHROMA = (np.array([1.0, -1.0, 0.0]) / np.sqrt(2.0), np.array([1.0, 1.0, -2.0]) / np.sqrt(6.0))
+#: The colour vector of each kind of component: index 0 grey, 1 and 2 the chroma directions.
+COLOUR_VECTORS = np.stack([_GREY, *_CHROMA])
 
 
 @dataclass(frozen=True)
@@ -53,11 +55,20 @@ class ColourOrdersPca:
         descending singular value.
     singular : ndarray of float64, shape (K,)
         Singular values of the centred 6N × 3P data along each component.
+    colours : ndarray of int64, shape (K,)
+        Each component's colour vector (a row of :data:`COLOUR_VECTORS`: 0 grey, 1 or 2 chroma).
+    factors : ndarray of float64, shape (F, P)
+        The distinct per-colour vectors ``u`` (a chroma pair shares one).
+    factor_of : ndarray of int64, shape (K,)
+        Each component's row of ``factors``: component k is ``COLOUR_VECTORS[colours[k]] ⊗ factors[factor_of[k]]``.
     """
 
     mean: npt.NDArray[np.float64]
     components: npt.NDArray[np.float64]
     singular: npt.NDArray[np.float64]
+    colours: npt.NDArray[np.int64]
+    factors: npt.NDArray[np.float64]
+    factor_of: npt.NDArray[np.int64]
 
 
 def colour_orders_pca(values: npt.ArrayLike, count: int | None = None) -> ColourOrdersPca:
@@ -107,9 +118,18 @@ def colour_orders_pca(values: npt.ArrayLike, count: int | None = None) -> Colour
     if not 0 <= count <= rank:
         raise ValueError(f"count must be in [0, {rank}] (5N − 1 for N = {n} materials, at most), got {count}")
     components = np.empty((count, N_CHANNELS * p))
+    factor_rows: dict[tuple[bool, int], int] = {}  # (grey, row of its SVD) → row of `factors`
+    colours, factor_of, factors = [], [], []
     for row, (_, kind, i) in enumerate(found[:count]):
-        colour = _GREY if kind < 0 else _CHROMA[kind]
         source = u_grey[i] if kind < 0 else u_chroma[i]
-        components[row] = np.kron(colour, source)
+        components[row] = np.kron(COLOUR_VECTORS[kind + 1], source)
+        key = (kind < 0, i)
+        if key not in factor_rows:
+            factor_rows[key] = len(factors)
+            factors.append(source)
+        colours.append(kind + 1)
+        factor_of.append(factor_rows[key])
     mean = np.tile(mean_sum / N_CHANNELS, N_CHANNELS)
-    return ColourOrdersPca(mean, components, np.array([f[0] for f in found[:count]]))
+    return ColourOrdersPca(mean, components, np.array([f[0] for f in found[:count]]),
+                           np.array(colours, dtype=np.int64),
+                           np.array(factors).reshape(len(factors), p), np.array(factor_of, dtype=np.int64))

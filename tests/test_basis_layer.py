@@ -281,17 +281,30 @@ def test_fit_basis_replace_fits_a_new_basis_and_names_it(analytic_training_set, 
 
     folder = tmp_path / "model"
     shutil.copytree(default_model_folder(), folder)
-    old_sha = json.loads((folder / "model.json").read_text())["basis_sha256"]
+    original = json.loads((folder / "model.json").read_text())
+    old_sha, previous = original["basis_sha256"], original.get("previous_bases", {})
     assert main(["model", "fit-basis", str(folder), "--dataset", str(analytic_training_set), "--replace",
                  "--count", "500"]) == 0
     stored = json.loads((folder / "model.json").read_text())
     info = stored["info"]["basis"]
     # 9 or 10 training materials in 6 colour orders: at most 5N − 1 vectors, and the message says how many.
     assert info["colour_permutations"] is True and info["count"] == 5 * info["materials"] - 1
-    assert f"{info['count']} vectors" in capsys.readouterr().out
-    basis = BrdfDecoder(folder).shared_basis
+    printed = capsys.readouterr().out
+    assert f"{info['count']} vectors" in printed and f"kept {folder}/basis-{old_sha[:16]}.safetensors" in printed
+    decoder = BrdfDecoder(folder)
+    basis = decoder.shared_basis
     assert basis is not None and basis.sha256 == stored["basis_sha256"] != old_sha and basis.count == info["count"]
-    assert sorted(p.name for p in folder.iterdir() if "basis" in p.name) == ["basis.safetensors"]  # no other file
+    # The old basis stays, renamed and listed, so records made with it decode as before (projected or not).
+    kept = f"basis-{old_sha[:16]}.safetensors"
+    assert sorted(p.name for p in folder.iterdir() if "basis" in p.name) == sorted(
+        [kept, "basis.safetensors", *previous.values()])
+    assert stored["previous_bases"] == {**previous, old_sha: kept}  # bases kept before stay listed
+    shipped = BrdfDecoder()
+    for project in (0, 50):
+        old = LayeredRecord("old", np.linspace(-1, 1, 8), np.ones(8), basis=BasisLayer(
+            old_sha, 0.25, np.arange(-3, 4, dtype=np.int8), 8, project), compact_sigma=True)
+        np.testing.assert_array_equal(decoder.decode(old), shipped.decode(old))
+    assert decoder.basis_named("ef" * 32) is None
 
 
 def test_the_shipped_model_has_a_basis_and_partial_decoding_matches() -> None:

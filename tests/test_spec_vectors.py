@@ -48,7 +48,7 @@ def test_manifest_covers_what_the_spec_asks_for() -> None:
     assert {"basis-project-zero", "basis-project-bool"} <= invalid
     projected = [r for v in MANIFEST["valid"] for r in v["records"]
                  if "project" in r.get("layers", {}).get("basis", {})]
-    assert len(projected) == 2 and all(r["layers"]["basis"]["project"] == 50 for r in projected)
+    assert len(projected) == 3 and all(r["layers"]["basis"]["project"] == 50 for r in projected)
     compact = [r for v in MANIFEST["valid"] for r in v["records"] if r.get("layers", {}).get("mu") == "int8"]
     assert len(compact) == 2 and all(r["layers"]["sigma"] == "log2-u8-shared" for r in compact)
     assert MANIFEST["decode"]["values"] and MANIFEST["decode"]["rtol"] == 1e-3

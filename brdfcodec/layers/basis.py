@@ -52,10 +52,12 @@ __all__ = [
     "FIXED_MU_STEP",
     "MAX_BASIS_COUNT",
     "BasisLayer",
+    "FactorisedBasis",
     "SharedBasis",
     "basis_layer_from_bytes",
     "basis_offset",
     "dequantise_int8",
+    "fit_factorised_basis",
     "fit_shared_basis",
     "fits_fixed_mu_grid",
     "int8_from_step_bytes",
@@ -66,6 +68,7 @@ __all__ = [
     "quantise_coefficients",
     "shared_basis_rank",
     "with_colour_permutations",
+    "write_factorised_basis",
     "write_shared_basis",
 ]
 
@@ -230,18 +233,71 @@ def fit_shared_basis(
         orders = " in 6 colour orders" if colour_permutations else ""
         raise ValueError(f"count must be in [1, {limit}] for {n} materials{orders}")
     valid = masks.reshape(n, -1).all(axis=0)
-    if colour_permutations:  # an entry is kept where it is valid in all three colours (permutations move them)
-        per_colour = np.flatnonzero(valid.reshape(N_CHANNELS, -1).all(axis=0))
-        per_colour_size = valid.size // N_CHANNELS
-        entries = np.concatenate([c * per_colour_size + per_colour for c in range(N_CHANNELS)]).astype(np.int64)
-        values = inputs.reshape(n, N_CHANNELS, -1)[:, :, per_colour]
-        # The 6 orders' principal components, found without making them (brdfcodec.colour_orders_pca).
-        return colour_orders_pca(values, count).components.astype(np.float16), entries
+    if colour_permutations:
+        return fit_factorised_basis(inputs, masks, count).expand()
     entries = np.flatnonzero(valid).astype(np.int64)
     data = inputs.reshape(len(inputs), -1)[:, entries].astype(np.float64)
     data -= data.mean(axis=0)
     _, _, vt = np.linalg.svd(data, full_matrices=False)
     return vt[:count].astype(np.float16), entries
+
+
+@dataclass(frozen=True)
+class FactorisedBasis:
+    """A shared basis fitted on colour-permuted materials, stored as its factors (``spec/model.md`` §5).
+
+    Every vector of such a basis is a colour vector times a vector over one colour's entries
+    (:mod:`brdfcodec.colour_orders_pca`), and the two vectors of a chroma pair share the latter, so the
+    factors take about a third of the dense vectors' bytes.
+
+    Attributes
+    ----------
+    factors : ndarray of float16, shape (F, P)
+        Vectors over one colour's entries.
+    colours : ndarray of int64, shape (K,)
+        Each basis vector's colour vector, a row of
+        :data:`~brdfcodec.colour_orders_pca.COLOUR_VECTORS` (0: (1, 1, 1)/√3, 1: (1, −1, 0)/√2,
+        2: (1, 1, −2)/√6).
+    factor_of : ndarray of int64, shape (K,)
+        Each basis vector's row of ``factors``.
+    colour_entries : ndarray of int64, shape (P,)
+        Strictly increasing positions within one colour's block of the network layout
+        (``21 · 90 · 90`` entries); the basis covers them in every colour.
+    """
+
+    factors: npt.NDArray[np.float16]
+    colours: npt.NDArray[np.int64]
+    factor_of: npt.NDArray[np.int64]
+    colour_entries: npt.NDArray[np.int64]
+
+    def expand(self) -> tuple[npt.NDArray[np.float16], npt.NDArray[np.int64]]:
+        """The dense basis: vector k is ``COLOUR_VECTORS[colours[k]] ⊗ factors[factor_of[k]]``, each product
+        taken in float32 and rounded to float16, over the entries ``c · 21 · 90 · 90 + colour_entries``
+        (colour c = 0, 1, 2, in that order)."""
+        from brdfcodec.colour_orders_pca import COLOUR_VECTORS
+
+        colour_vectors = COLOUR_VECTORS.astype(np.float32)[self.colours]  # (K, 3)
+        factors = self.factors.astype(np.float32)[self.factor_of]  # (K, P)
+        components = (colour_vectors[:, :, None] * factors[:, None, :]).reshape(len(self.colours), -1)
+        block = _N_ENTRIES // N_CHANNELS
+        entries = np.concatenate([c * block + self.colour_entries for c in range(N_CHANNELS)]).astype(np.int64)
+        return components.astype(np.float16), entries
+
+
+def fit_factorised_basis(inputs: npt.ArrayLike, masks: npt.ArrayLike, count: int) -> FactorisedBasis:
+    """:func:`fit_shared_basis` with ``colour_permutations``, as factors (what ``bvae model export`` writes).
+
+    An entry is kept where it is valid in all three colours of every training material (permutations move
+    colours onto each other's entries).
+    """
+    inputs, masks = np.asarray(inputs), np.asarray(masks, dtype=bool)
+    n = len(inputs)
+    valid = masks.reshape(n, -1).all(axis=0)
+    colour_entries = np.flatnonzero(valid.reshape(N_CHANNELS, -1).all(axis=0)).astype(np.int64)
+    values = inputs.reshape(n, N_CHANNELS, -1)[:, :, colour_entries]
+    # The 6 orders' principal components, found without making them (brdfcodec.colour_orders_pca).
+    fit = colour_orders_pca(values, count)
+    return FactorisedBasis(fit.factors.astype(np.float16), fit.colours, fit.factor_of, colour_entries)
 
 
 def shared_basis_rank(materials: int, colour_permutations: bool = False) -> int:
@@ -323,11 +379,62 @@ def load_shared_basis(path: str | os.PathLike[str], expected_sha256: str) -> Sha
         tensors = load(data)
     except SafetensorError as error:
         raise BasisError(f"{path}: not a readable safetensors file ({error})") from None
-    components, entries = tensors.get("components"), tensors.get("entries")
-    if components is None or entries is None:
-        raise BasisError(f"{path}: a basis file needs the tensors 'components' and 'entries'")
+    if "factors" in tensors:
+        components, entries = _factorised(tensors, str(path)).expand()
+    else:
+        components, entries = tensors.get("components"), tensors.get("entries")
+        if components is None or entries is None:
+            raise BasisError(f"{path}: a basis file needs the tensors 'components' and 'entries', or 'factors', "
+                             "'colours', 'factor_of' and 'colour_entries'")
     _validate(components, entries, str(path))
     return SharedBasis(components, entries.astype(np.int64), actual)
+
+
+_FACTORISED_TENSORS = ("factors", "colours", "factor_of", "colour_entries")
+
+
+def _factorised(tensors: Mapping[str, np.ndarray], where: str) -> FactorisedBasis:
+    """A factorised basis from a file's tensors, refused unless every index is in range."""
+    missing = [name for name in _FACTORISED_TENSORS if name not in tensors]
+    if missing:
+        raise BasisError(f"{where}: a factorised basis file also needs the tensors {missing}")
+    factors, colours, factor_of, colour_entries = (tensors[name] for name in _FACTORISED_TENSORS)
+    if factors.dtype != np.float16 or factors.ndim != 2 or factors.shape[0] == 0:
+        raise BasisError(f"{where}: 'factors' must be a 2-D float16 tensor, got {factors.dtype} {factors.shape}")
+    integer = all(t.ndim == 1 and t.dtype.kind in "iu" for t in (colours, factor_of, colour_entries))
+    if not integer or colours.shape != factor_of.shape or colour_entries.shape[0] != factors.shape[1]:
+        raise BasisError(f"{where}: 'colours' and 'factor_of' must be 1-D integers, one per vector, and "
+                         "'colour_entries' 1-D integers, one per factor column")
+    if colours.size and (colours.min() < 0 or colours.max() > 2):
+        raise BasisError(f"{where}: 'colours' must be 0 (grey), 1 or 2 (chroma)")
+    if factor_of.size and (factor_of.min() < 0 or factor_of.max() >= factors.shape[0]):
+        raise BasisError(f"{where}: 'factor_of' must name rows of 'factors' (0 to {factors.shape[0] - 1})")
+    block = _N_ENTRIES // N_CHANNELS
+    if colour_entries.min() < 0 or colour_entries.max() >= block or np.any(np.diff(colour_entries) <= 0):
+        raise BasisError(f"{where}: 'colour_entries' must be strictly increasing positions in [0, {block})")
+    if not np.isfinite(factors).all():
+        raise BasisError(f"{where}: 'factors' holds non-finite values")
+    return FactorisedBasis(factors, colours.astype(np.int64), factor_of.astype(np.int64),
+                           colour_entries.astype(np.int64))
+
+
+def write_factorised_basis(path: str | os.PathLike[str], basis: FactorisedBasis) -> str:
+    """Write a factorised basis file atomically and return its SHA-256."""
+    from safetensors.numpy import save_file
+
+    from brdfcodec.atomic import atomic_output
+    from brdfcodec.hashing import sha256_of_file
+
+    tensors = {
+        "factors": np.ascontiguousarray(basis.factors, dtype=np.float16),
+        "colours": np.ascontiguousarray(basis.colours, dtype=np.int64),
+        "factor_of": np.ascontiguousarray(basis.factor_of, dtype=np.int64),
+        "colour_entries": np.ascontiguousarray(basis.colour_entries, dtype=np.int64),
+    }
+    _validate(*_factorised(tensors, str(path)).expand(), str(path))
+    with atomic_output(Path(path), overwrite=True) as tmp:
+        save_file(tensors, str(tmp))
+    return sha256_of_file(path)
 
 
 def _validate(components: np.ndarray, entries: np.ndarray, where: str) -> None:

@@ -143,23 +143,39 @@ def export_run(
     return write_manifest(out, manifest)  # last: a folder with a model.json is a complete model
 
 
-def _fit_basis(folder: Path, dataset: BrdfDataset, count: int, colour_permutations: bool) -> dict[str, Any]:
-    """Fit the shared basis on the dataset's training split, then write ``basis.safetensors`` into ``folder``
-    (atomically: a failed fit leaves any basis there as it was)."""
-    from brdfcodec.layers.basis import BASIS_FILE, fit_shared_basis, shared_basis_rank, write_shared_basis
+def _fit_basis(folder: Path, dataset: BrdfDataset, count: int, colour_permutations: bool,
+               name: str | None = None) -> dict[str, Any]:
+    """Fit the shared basis on the dataset's training split, then write it into ``folder`` as ``name``
+    (``basis.safetensors`` by default; atomically: a failed fit leaves any basis there as it was).
+
+    With ``colour_permutations`` the file holds the basis' factors (``spec/model.md`` §5), a third of the
+    dense vectors' size."""
+    from brdfcodec.layers.basis import (
+        BASIS_FILE,
+        fit_factorised_basis,
+        fit_shared_basis,
+        shared_basis_rank,
+        write_factorised_basis,
+        write_shared_basis,
+    )
 
     rows = dataset.indices("train")
     if len(rows) < 2:
         raise ValueError(f"{dataset.path}: a shared basis needs at least 2 training materials")
     count = min(count, shared_basis_rank(len(rows), colour_permutations))  # no more vectors than the data's rank
-    components, entries = fit_shared_basis(dataset.inputs(rows), dataset.input_masks(rows), count,
-                                           colour_permutations=colour_permutations)
-    path = folder / BASIS_FILE
-    sha = write_shared_basis(path, components, entries)
+    path = folder / (name or BASIS_FILE)
+    if colour_permutations:
+        factorised = fit_factorised_basis(dataset.inputs(rows), dataset.input_masks(rows), count)
+        sha = write_factorised_basis(path, factorised)
+        n_entries = 3 * len(factorised.colour_entries)
+    else:
+        components, entries = fit_shared_basis(dataset.inputs(rows), dataset.input_masks(rows), count)
+        sha = write_shared_basis(path, components, entries)
+        n_entries = len(entries)
     kind = "principal components of the training split's mapped kept slices (valid entries)"
     if colour_permutations:
-        kind += " in all 6 orders of their colour channels"
-    return {"sha256": sha, "count": int(count), "entries": len(entries), "fitted_on": "train",
+        kind += " in all 6 orders of their colour channels, stored as factors"
+    return {"sha256": sha, "count": int(count), "entries": n_entries, "fitted_on": "train",
             "materials": len(rows), "colour_permutations": colour_permutations,
             "bytes": path.stat().st_size, "kind": kind}
 
@@ -169,30 +185,42 @@ def add_shared_basis(folder: str | os.PathLike[str], dataset_path: str | os.Path
                      replace: bool = False) -> ModelManifest:
     """Fit a shared basis for an exported model (on a dataset's training split) and name it in ``model.json``.
 
-    For a model exported before shared bases existed (:func:`export_run` fits one itself). The weights are
-    not touched, so the model's identity (its decoder hash) is unchanged; files written before keep decoding
-    (unless ``replace`` drops a basis their layers need). ``colour_permutations`` as in :func:`export_run`.
-    The basis file is written only once the fit has succeeded: a failed fit leaves the model as it was.
+    For a model exported before shared bases existed (:func:`export_run` fits one itself), or, with
+    ``replace``, to give a model a new basis: the new one becomes the basis encoders use
+    (``basis.safetensors``) and the old one is kept beside it, renamed ``basis-<first 16 hex digits of its
+    hash>.safetensors`` and listed in ``previous_bases``, so files with basis layers made with it keep decoding.
+    The weights are not touched, so the model's identity (its decoder hash) is unchanged.
+    ``colour_permutations`` as in :func:`export_run`. The basis file is written only once the fit has
+    succeeded: a failed fit leaves the model as it was.
 
     Raises
     ------
     FileExistsError
-        The model already has a shared basis and ``replace`` is false: records with a basis layer name
-        their basis by its hash, so files made with the old one would no longer decode.
+        The model already has a shared basis and ``replace`` is false.
     """
+    from brdfcodec.layers.basis import BASIS_FILE
+
     out = Path(folder)
     existing = json.loads((out / MANIFEST).read_text()).get("basis_sha256")
     if existing and not replace:
         raise FileExistsError(
-            f"{folder}: the model already has a shared basis ({existing[:12]}…); files with basis layers made "
-            "with it need it to decode. Fit a new one only if no such file matters (--replace)"
+            f"{folder}: the model already has a shared basis ({existing[:12]}…). --replace fits a new one for "
+            "encoders and keeps this one for the files made with it"
         )
+    fitting = ".basis-fitting.safetensors"
     with BrdfDataset(dataset_path) as dataset:
-        basis = _fit_basis(out, dataset, count, colour_permutations)
+        basis = _fit_basis(out, dataset, count, colour_permutations, name=fitting)
+    kept: dict[str, str] = {}
+    if existing and basis["sha256"] != existing and (out / BASIS_FILE).is_file():
+        kept[existing] = f"basis-{existing[:16]}.safetensors"
+        os.replace(out / BASIS_FILE, out / kept[existing])
+    os.replace(out / fitting, out / BASIS_FILE)
 
     def add(stored: dict[str, Any]) -> None:
         stored["basis_sha256"] = basis.pop("sha256")
         stored.setdefault("info", {})["basis"] = basis
+        if kept:
+            stored["previous_bases"] = {**stored.get("previous_bases", {}), **kept}
 
     return _rewrite_manifest(folder, add)
 

@@ -30,8 +30,10 @@ SHIPPED_DECODER = DecoderReference(
     "e1e3ed1e24dc5a8746abbfb9194725e1a9d02808c2e81125c64f3d9e37b39491", "bvae-nbrdf-proxy-small-v1"
 )
 TEST_DECODER = DecoderReference("ab" * 32, "conformance-test-decoder")
-#: SHA-256 of the shipped default model's shared basis (``basis.safetensors``).
+#: SHA-256 of the shipped default model's first shared basis (a previous basis since 1.6, kept for decoding).
 SHIPPED_BASIS = "4fb0b97752edc3049cba46a0fb0cfcf5fa51a0575136efeab3d2bc1e391296b1"
+#: SHA-256 of its current shared basis (``basis.safetensors``: fitted on colour-permuted materials, factorised).
+CURRENT_BASIS = "b15a34554d6f7c923269dff4ccf19c66f6bac0f38d3993d7ba59e6738825fc47"
 #: Relative and absolute tolerance of expected decoded values (stored MERL units).
 DECODE_RTOL = 1e-3
 DECODE_ATOL = 1e-6
@@ -356,6 +358,9 @@ def valid_records() -> dict[str, tuple[list, DecoderReference, str, bool | None]
                                                   SHIPPED_BASIS, first=8, compact_base=True, fixed_grid=True),
                                      basis_record("reference.basis-projected", halves16(8), np.full(8, 0.125),
                                                   SHIPPED_BASIS, first=8, compact_base=True, fixed_grid=True,
+                                                  project=50),
+                                     basis_record("reference.basis-current", halves16(8), np.full(8, 0.125),
+                                                  CURRENT_BASIS, first=8, compact_base=True, fixed_grid=True,
                                                   project=50)],
                                     SHIPPED_DECODER, "float16", False),
         "layered": ([layered_record("gold.layered", halves(8), sigma(8)),
