@@ -564,3 +564,66 @@ def test_a_fit_minimises_the_error_it_is_given(analytic_tables) -> None:
     assert l2_fit[1] <= l1_fit[1] * (1 + 1e-4)  # the L2 objective's own measure
     assert l1_fit[0] <= l2_fit[0] * (1 + 1e-4)  # and the default's
     assert l1_fit != l2_fit
+
+
+def test_a_factorised_basis_file_expands_to_the_dense_basis_it_stands_for(tmp_path) -> None:
+    from brdfcodec.colour_orders_pca import COLOUR_VECTORS
+    from brdfcodec.layers.basis import fit_factorised_basis, write_factorised_basis
+
+    x, m = coloured_inputs(4)
+    factorised = fit_factorised_basis(x, m, 12)
+    components, entries = factorised.expand()
+    dense, dense_entries = fit_shared_basis(x, m, 12, colour_permutations=True)
+    np.testing.assert_array_equal(components, dense)
+    np.testing.assert_array_equal(entries, dense_entries)
+    # The spec's rule, written out: w_c · u_e in binary32, rounded to binary16, colour-major.
+    k = 5
+    w = COLOUR_VECTORS.astype(np.float32)[factorised.colours[k]]
+    u = factorised.factors[factorised.factor_of[k]].astype(np.float32)
+    np.testing.assert_array_equal(components[k], np.concatenate([w[c] * u for c in range(3)]).astype(np.float16))
+    assert len(factorised.factors) < 12  # chroma pairs share a factor
+    path = tmp_path / "basis.safetensors"
+    sha = write_factorised_basis(path, factorised)
+    loaded = load_shared_basis(path, sha)
+    np.testing.assert_array_equal(loaded.components, dense)
+    assert path.stat().st_size < 0.5 * dense.nbytes
+    from safetensors.numpy import save_file
+
+    from brdfcodec.hashing import sha256_of_file
+
+    good = {"factors": factorised.factors, "colours": factorised.colours, "factor_of": factorised.factor_of,
+            "colour_entries": factorised.colour_entries}
+    bad = [
+        ({"colours": factorised.colours + 3}, "'colours' must be 0"),
+        ({"factor_of": factorised.factor_of + 40}, "'factor_of' must name rows"),
+        ({"colour_entries": factorised.colour_entries[::-1].copy()}, "strictly increasing"),
+        ({"factors": factorised.factors.astype(np.float32)}, "float16"),
+        ({"factors": np.full_like(factorised.factors, np.inf)}, "non-finite"),
+        ({"colours": factorised.colours[:-1]}, "one per vector"),
+    ]
+    for change, message in bad:  # a hostile file is refused when read, whatever wrote it
+        broken = tmp_path / "bad.safetensors"
+        save_file({**good, **change}, str(broken))
+        with pytest.raises(BasisError, match=message):
+            load_shared_basis(broken, sha256_of_file(broken))
+    save_file({k: v for k, v in good.items() if k != "factor_of"}, str(broken))
+    with pytest.raises(BasisError, match="factor_of"):
+        load_shared_basis(broken, sha256_of_file(broken))
+
+
+def test_a_manifest_lists_previous_bases_as_hashes_and_plain_file_names(tmp_path) -> None:
+    import json
+    import shutil
+
+    from brdfcodec.errors import BrdfcodecError
+    from brdfcodec.models.manifest import load_manifest
+    from brdfcodec.models.registry import default_model_folder
+
+    folder = tmp_path / "model"
+    shutil.copytree(default_model_folder(), folder)
+    assert load_manifest(folder).previous_bases  # the shipped model keeps its first basis
+    stored = json.loads((folder / "model.json").read_text())
+    for bad in ({"ab" * 32: "../basis.safetensors"}, {"AB" * 32: "b.safetensors"}, {"ab" * 32: 3}, ["x"]):
+        (folder / "model.json").write_text(json.dumps({**stored, "previous_bases": bad}))
+        with pytest.raises(BrdfcodecError, match="previous_bases"):
+            load_manifest(folder)
