@@ -27,7 +27,8 @@ __all__ = ["CARD", "DEFAULT_BASIS_COUNT", "add_shared_basis", "export_run", "sto
 
 CARD = "MODEL_CARD.md"
 #: Vectors of the shared basis that ``bvae model export`` fits (at most the rank of the fitted data,
-#: :func:`~brdfcodec.layers.basis.shared_basis_rank`; 75 float16 vectors over the 387,378 valid entries: 61.2 MB).
+#: :func:`~brdfcodec.layers.basis.shared_basis_rank`; 75 float16 vectors over the 387,378 valid entries:
+#: 61.2 MB dense, 17.6 MB as factors).
 DEFAULT_BASIS_COUNT = 75
 
 _LIMITS = [
