@@ -84,6 +84,7 @@ from brdfcodec.torch_threads import one_core_left
 
 if TYPE_CHECKING:
     from brdfcodec.layers.basis import SharedBasis
+    from brdfcodec.layers.record import LayeredRecord
 
 __all__ = [
     "BrdfDecoder",
@@ -214,6 +215,76 @@ class _BackgroundCall(Generic[_T]):
         if self._value is None:
             raise RuntimeError("background call ended without a result")
         return self._value
+
+
+@dataclass(frozen=True)
+class _ProjectionPlan:
+    """Precomputed terms of a projected base's dot products ``aⱼ = (y − m) · vⱼ``, j < P (format 1.6).
+
+    On the basis' entries the clamped decode is y = u + δ, and the unclamped output is
+    u = m + W⋆h + b + z·C (the last transposed convolution W of the hidden activations h, its bias b, and
+    the linear path: the mean m and the components C). So aⱼ = (Wᵀvⱼ)·h + b·vⱼ + z·(C vⱼ) + δ·vⱼ, where Wᵀ,
+    the adjoint of the transposed convolution, is a convolution with the same weights. ``adjoint`` holds
+    Wᵀvⱼ (P × 32·45·45, a sixth of the vectors' size), ``bias`` b·vⱼ, ``linear`` C vⱼ; δ is 0 except where
+    the clamp acted.
+    """
+
+    adjoint: np.ndarray  # (P, C·45·45) float32
+    bias: np.ndarray  # (P,)
+    linear: np.ndarray  # (latent_dim, P)
+    vectors: np.ndarray  # (P, E) float32, read-only view of the basis
+    centre: np.ndarray  # (E,)
+
+    @classmethod
+    def build(cls, network: torch.nn.Module, basis: SharedBasis, count: int, centre: np.ndarray) -> _ProjectionPlan:
+        vectors = basis.vectors(0, count)
+        last = network.upsample[-1]
+        weight = last.weight.detach().float().cpu()
+        grid_size = int(np.prod(NETWORK_INPUT_SHAPE))
+        adjoint = []
+        with torch.no_grad():
+            for start in range(0, count, 8):  # 8 vectors on the grid at a time: 16 MB each
+                grid = torch.zeros(min(8, count - start), grid_size)
+                grid[:, torch.from_numpy(np.array(basis.entries))] = torch.from_numpy(np.array(
+                    vectors[start : start + 8]))
+                pulled = torch.nn.functional.conv2d(grid.view(-1, *NETWORK_INPUT_SHAPE), weight,
+                                                    stride=last.stride, padding=last.padding)
+                adjoint.append(pulled.flatten(1).numpy())
+        channel_bias = last.bias.detach().float().cpu().numpy()
+        plane = NETWORK_INPUT_SHAPE[1] * NETWORK_INPUT_SHAPE[2]
+        bias = vectors @ channel_bias[basis.entries // plane]
+        index = network.valid_index.cpu().numpy()
+        position = np.searchsorted(index, basis.entries)
+        components = network.basis_components.float().cpu().numpy()[:, position]
+        return cls(np.concatenate(adjoint), bias.astype(np.float32), (components @ vectors.T).astype(np.float32),
+                   vectors, np.asarray(centre, dtype=np.float32))
+
+    def reconstruct(self, weights: np.ndarray, vectors: np.ndarray) -> np.ndarray:
+        """``centre + weights @ vectors`` over the entries, as two halves, one on a second thread: the pass is
+        bound by memory bandwidth, which one core does not use up."""
+        out = np.empty_like(self.centre)
+        middle = len(out) // 2
+
+        def half(part: slice) -> np.ndarray:
+            np.matmul(weights, vectors[:, part], out=out[part])
+            out[part] += self.centre[part]
+            return out[part]
+
+        other = _BackgroundCall(half, slice(0, middle))
+        try:
+            half(slice(middle, len(out)))
+        finally:
+            other.join()
+        other.result()
+        return out
+
+    def dot_products(self, hidden: np.ndarray, z: np.ndarray, moved: np.ndarray) -> np.ndarray:
+        """aⱼ for one material: ``hidden`` flat (C·45·45,), ``z`` (latent_dim,), ``moved`` = δ on the entries."""
+        a = self.adjoint @ hidden + self.bias + np.asarray(z, dtype=np.float32) @ self.linear
+        where = np.flatnonzero(moved)
+        if where.size:
+            a += self.vectors[:, where] @ moved[where]
+        return a
 
 
 def _has_layers(record: Record) -> bool:
@@ -476,6 +547,66 @@ class BrdfDecoder:
             cache[basis.sha256] = mean.float().cpu().numpy()[position]
         return cache[basis.sha256]
 
+    def _projection_plan(self, basis: SharedBasis, count: int) -> _ProjectionPlan:
+        """What a fast projected decode needs for ``count`` vectors of ``basis``, computed once per decoder."""
+        cache = self.__dict__.setdefault("_projection_plans", {})
+        key = (basis.sha256, count)
+        if key not in cache:
+            cache[key] = _ProjectionPlan.build(self.network, basis, count, self._centre_on(basis))
+        return cache[key]
+
+    def _projected_mapped(self, record: LayeredRecord) -> npt.NDArray[np.float32]:
+        """The mapped slices of a record whose basis layer projects its base (format 1.6), all 63 channels.
+
+        The same sum as :meth:`project_base` followed by the layers (``spec/bvae-format.md`` §4.5), taken
+        the fast way: the projection's dot products ``(y − m) · v_j`` go through the network's last layer,
+        ``G h`` with ``G`` its adjoint applied to the vectors (:class:`_ProjectionPlan`), plus the linear
+        path's ``z · (C vⱼ)``, the last layer's bias, and the entries the clamp moved; then one pass over the
+        vectors adds the projection and the basis layer together. The network runs on every core: nothing
+        but a detail layer runs beside it.
+        """
+        layer = record.basis
+        assert layer is not None
+        basis = self.basis_named(layer.sha256)
+        if basis is None or layer.project > basis.count:
+            from brdfcodec.layers.basis import BasisError
+
+            held = 0 if basis is None else basis.count
+            raise BasisError(f"{record.name}: the record projects its base on {layer.project} basis vectors, but "
+                             f"this model's shared basis holds {held}")
+        count, c, first = layer.project, layer.coefficients(), layer.first
+        if first + len(c) > basis.count:
+            basis.vectors(first, len(c))  # refused with the sizes (BasisError)
+        plan = self._projection_plan(basis, count)
+        from brdfcodec.layers.detail import decode_detail
+
+        detail = _BackgroundCall(decode_detail, record.detail) if record.detail is not None else None
+        try:
+            batch, _ = self._codes(record.mu)
+            with torch.inference_mode(), _EvalMode(self.network):
+                z = torch.from_numpy(batch).to(self.device, self.dtype)
+                hidden, unbounded = self.network.hidden_and_unbounded(z)
+                h = hidden.float().cpu().numpy().reshape(-1)
+                u = unbounded.float().cpu().numpy()[0]
+        finally:
+            if detail is not None:
+                detail.join()
+        mapped = clamp_mapped(u.copy(), out=None)
+        on_basis = basis.entry_mask  # boolean: gathers and scatters faster than the index array
+        unclamped = u.reshape(-1)[on_basis]
+        moved = mapped.reshape(-1)[on_basis] - unclamped  # the clamp's change (0 almost everywhere)
+        if not np.isfinite(moved).all():  # a non-finite network output: the direct sum
+            self.project_base(record, mapped)
+            mapped.reshape(-1)[on_basis] += c @ basis.vectors(first, len(c))
+        else:
+            weights = np.zeros(max(count, first + len(c)), dtype=np.float32)
+            weights[:count] = plan.dot_products(h, batch[0], moved)
+            weights[first : first + len(c)] += c
+            mapped.reshape(-1)[on_basis] = plan.reconstruct(weights, basis.vectors(0, len(weights)))
+        if detail is not None:
+            mapped += detail.result().reshape(mapped.shape)
+        return clamp_mapped(mapped, out=mapped)
+
     def project_base(self, record: Record, mapped: np.ndarray) -> None:
         """Replace, in place, a clamped base decode ``mapped`` (63, 90, 90) by its projection when the record's
         basis layer asks for one (``layers.basis.project``, format 1.6); nothing otherwise."""
@@ -566,6 +697,8 @@ class BrdfDecoder:
                 out = self.decode_mapped(record.mu)
                 out[GREEN_BLOCK] = self.decode_mapped(record.second_code())[RED_BLOCK]
                 return out
+            if _projected_vectors(record):
+                return self._projected_mapped(record)  # type: ignore[arg-type]
             mapped, (residuals,) = self._network_beside_layers([record])
             return self._with_layers(record, mapped[0], residuals=residuals)
 
@@ -630,7 +763,8 @@ class BrdfDecoder:
             self._check_record(record)
         for start in range(0, len(records), batch_size):
             chunk = records[start : start + batch_size]
-            latent = [r for r in chunk if isinstance(r, LatentRecord)]
+            # Projected records decode on their own (their network pass also yields the projection's terms).
+            latent = [r for r in chunk if isinstance(r, LatentRecord) and not _projected_vectors(r)]
             batch: Iterator[tuple[np.ndarray, list[np.ndarray]]] = iter(())
             if latent:
                 with single_blas_thread():
@@ -638,7 +772,7 @@ class BrdfDecoder:
                 batch = zip(mapped_rows, residuals, strict=True)
             for record in chunk:  # grafts need two codes each: decoded on their own
                 with single_blas_thread():
-                    if isinstance(record, LatentRecord):
+                    if isinstance(record, LatentRecord) and not _projected_vectors(record):
                         rows, layers = next(batch)
                         mapped = self._with_layers(record, rows, residuals=layers)
                     else:

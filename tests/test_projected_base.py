@@ -193,3 +193,20 @@ def test_the_joint_fit_codes_the_residual_of_the_projected_base(analytic_tables)
     _, unprojected = fit_basis_coefficients(decoder.network, code[None], inputs[None], masks[None], vectors,
                                             basis.entries, 0, fit_latent=False, error=l2)
     assert np.abs(unprojected[0] - c[0]).max() > 1e-2
+
+
+def test_a_projected_record_with_a_detail_layer_decodes_as_the_spec_says(analytic_tables) -> None:
+    """The fast projected decode (dot products through the network's last layer, one pass over the vectors,
+    the detail layer beside the network) against the spec's sum written out."""
+    from brdfcodec.codec import BrdfEncoder
+    from brdfcodec.layers.detail import decode_detail
+
+    encoder = BrdfEncoder(effort=0, bytes=4096, project_base=True)
+    decoder = encoder.decoder
+    record = encoder.encode(analytic_tables["gold"], name="g")
+    assert record.basis is not None and record.basis.project == 50 and record.detail is not None
+    expected = decoder.decode_mapped(record.mu)
+    decoder.project_base(record, expected)
+    expected += decoder.shared_basis.residual(record.basis.coefficients(), record.basis.first)
+    expected += decode_detail(record.detail).reshape(expected.shape)
+    np.testing.assert_allclose(decoder.mapped_record(record), np.clip(expected, 0.0, 5.0), atol=5e-5)

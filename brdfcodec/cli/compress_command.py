@@ -68,7 +68,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
                         help="with --bytes/--max-relae: no basis layer, only the detail layer")
     parser.add_argument("--project-base", action="store_true",
                         help="with --bytes/--max-relae: project the base decode on the shared basis in records with "
-                        "a basis layer (format 1.6; about 5 %% lower error at 32-128 B, about 4.5 ms slower to "
+                        "a basis layer (format 1.6; about 5 %% lower error at 32-128 B, about 3-4 ms slower to "
                         "decode per material)")
     parser.set_defaults(handler=run)
 

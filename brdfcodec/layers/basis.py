@@ -117,6 +117,11 @@ class SharedBasis:
     def _channel_of_entry(self) -> npt.NDArray[np.int64]:
         return self.entries // _ENTRIES_PER_CHANNEL
 
+    @property
+    def entry_mask(self) -> npt.NDArray[np.bool_]:
+        """``entries`` as a flat boolean mask over the ``(63, 90, 90)`` layout (read-only)."""
+        return self._entry_mask
+
     @functools.cached_property
     def _entry_mask(self) -> npt.NDArray[np.bool_]:
         """``entries`` as a flat boolean mask (scattering through it is twice as fast as through the indices)."""
@@ -124,6 +129,7 @@ class SharedBasis:
             raise BasisError(f"shared basis {self.sha256[:12]}: 'entries' must be strictly increasing")
         mask = np.zeros(_N_ENTRIES, dtype=bool)
         mask[self.entries] = True
+        mask.setflags(write=False)
         return mask
 
     def vectors(self, first: int, k: int) -> npt.NDArray[np.float32]:

@@ -32,8 +32,8 @@ __all__ = ["PROJECTED_BASE_VECTORS", "EncodeOptions", "layer_records", "projecte
 #: in the leading principal components; past them it adds its own errors, larger on new materials than the mean's.
 #: Measured on the held-out NBRDF proxy of MERL (``benchmarks/projected_base_study.py``,
 #: ``reports/rd-study/projected-base.json``): 50 and 75 vectors gain alike at 16 to 128 B. Not the default: the
-#: projection runs after the network, two passes over 50 vectors of 387,378 floats (about 4.5 ms on the 2-core
-#: development machine, memory-bound), which takes a 64 B record's decode past 1.5× a base-only decode.
+#: projection runs after the network and needs a pass over the vectors (memory-bound, about 2.4 ms for a 64 B
+#: record on the 2-core development machine), which takes a 64 B record's decode to about 1.8× a base-only one.
 PROJECTED_BASE_VECTORS = 50
 
 
@@ -69,7 +69,7 @@ class EncodeOptions:
         Whether layered records may use the model's shared basis (when it has one).
     project_base : bool
         Whether a record with a basis layer projects its base decode on the basis (format 1.6,
-        :data:`PROJECTED_BASE_VECTORS`): 3 to 6 % lower error at 16 to 128 B, about 4.5 ms more to decode.
+        :data:`PROJECTED_BASE_VECTORS`): 3 to 6 % lower error at 16 to 128 B, about 3–4 ms more to decode.
     """
 
     effort: int = 1

@@ -149,6 +149,21 @@ class Decoder(nn.Module):
         """Mapped slices in [0, MAPPED_MAX]."""
         return self.unbounded(z).clamp(0.0, MAPPED_MAX)
 
+    def hidden_and_unbounded(self, z: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """The last layer's input ``(B, C, 45, 45)`` and :meth:`unbounded` ``(B, 63, 90, 90)``, from one pass.
+
+        For decoders that need what the output owes to each hidden activation (the projected base of
+        ``spec/bvae-format.md`` §4.5 takes its dot products through the last layer's adjoint).
+        """
+        c0 = self.config.decoder_channels[0]
+        hidden = self.upsample[:-1](self.blocks(self.fc(z).view(-1, c0, _BOTTLENECK, _BOTTLENECK)))
+        out = self.upsample[-1](hidden)
+        if not self.config.linear_basis:
+            return hidden, MAPPED_MAX * torch.sigmoid(out)
+        dtype = out.dtype
+        linear = self.basis_mean.to(dtype) + z @ self.basis_components.to(dtype)
+        return hidden, out.flatten(1).index_add(1, self.valid_index, linear).view_as(out)
+
     def forward_channels(self, z: torch.Tensor, channels: tuple[int, ...]) -> torch.Tensor:
         """Only some output channels, ``(B, len(channels), 90, 90)`` in [0, MAPPED_MAX].
 
