@@ -225,18 +225,19 @@ class _ProjectionPlan:
     u = m + W⋆h + b + z·C (the last transposed convolution W of the hidden activations h, its bias b, and
     the linear path: the mean m and the components C). So aⱼ = (Wᵀvⱼ)·h + b·vⱼ + z·(C vⱼ) + δ·vⱼ, where Wᵀ,
     the adjoint of the transposed convolution, is a convolution with the same weights. ``adjoint`` holds
-    Wᵀvⱼ (P × 32·45·45, a sixth of the vectors' size), ``bias`` b·vⱼ, ``linear`` C vⱼ; δ is 0 except where
-    the clamp acted.
+    Wᵀvⱼ for every vector of the basis (K × 32·45·45, a sixth of the vectors' size; a record that projects
+    on P vectors uses the first P rows), ``bias`` b·vⱼ, ``linear`` C vⱼ; δ is 0 except where the clamp acted.
     """
 
-    adjoint: np.ndarray  # (P, C·45·45) float32
-    bias: np.ndarray  # (P,)
-    linear: np.ndarray  # (latent_dim, P)
-    vectors: np.ndarray  # (P, E) float32, read-only view of the basis
+    adjoint: np.ndarray  # (K, C·45·45) float32, one row per basis vector
+    bias: np.ndarray  # (K,)
+    linear: np.ndarray  # (latent_dim, K)
+    vectors: np.ndarray  # (K, E) float32, read-only view of the basis
     centre: np.ndarray  # (E,)
 
     @classmethod
-    def build(cls, network: torch.nn.Module, basis: SharedBasis, count: int, centre: np.ndarray) -> _ProjectionPlan:
+    def build(cls, network: torch.nn.Module, basis: SharedBasis, centre: np.ndarray) -> _ProjectionPlan:
+        count = basis.count
         vectors = basis.vectors(0, count)
         last = network.upsample[-1]
         weight = last.weight.detach().float().cpu()
@@ -278,12 +279,13 @@ class _ProjectionPlan:
         other.result()
         return out
 
-    def dot_products(self, hidden: np.ndarray, z: np.ndarray, moved: np.ndarray) -> np.ndarray:
-        """aⱼ for one material: ``hidden`` flat (C·45·45,), ``z`` (latent_dim,), ``moved`` = δ on the entries."""
-        a = self.adjoint @ hidden + self.bias + np.asarray(z, dtype=np.float32) @ self.linear
+    def dot_products(self, count: int, hidden: np.ndarray, z: np.ndarray, moved: np.ndarray) -> np.ndarray:
+        """aⱼ, j < ``count``, for one material: ``hidden`` flat (C·45·45,), ``z`` (latent_dim,), ``moved`` = δ
+        on the entries."""
+        a = self.adjoint[:count] @ hidden + self.bias[:count] + np.asarray(z, dtype=np.float32) @ self.linear[:, :count]
         where = np.flatnonzero(moved)
         if where.size:
-            a += self.vectors[:, where] @ moved[where]
+            a += self.vectors[:count, where] @ moved[where]
         return a
 
 
@@ -547,13 +549,13 @@ class BrdfDecoder:
             cache[basis.sha256] = mean.float().cpu().numpy()[position]
         return cache[basis.sha256]
 
-    def _projection_plan(self, basis: SharedBasis, count: int) -> _ProjectionPlan:
-        """What a fast projected decode needs for ``count`` vectors of ``basis``, computed once per decoder."""
+    def _projection_plan(self, basis: SharedBasis) -> _ProjectionPlan:
+        """What a fast projected decode needs for every vector of ``basis``, computed once per decoder and basis
+        (records that project on fewer vectors use its first rows)."""
         cache = self.__dict__.setdefault("_projection_plans", {})
-        key = (basis.sha256, count)
-        if key not in cache:
-            cache[key] = _ProjectionPlan.build(self.network, basis, count, self._centre_on(basis))
-        return cache[key]
+        if basis.sha256 not in cache:
+            cache[basis.sha256] = _ProjectionPlan.build(self.network, basis, self._centre_on(basis))
+        return cache[basis.sha256]
 
     def _projected_mapped(self, record: LayeredRecord) -> npt.NDArray[np.float32]:
         """The mapped slices of a record whose basis layer projects its base (format 1.6), all 63 channels.
@@ -577,7 +579,7 @@ class BrdfDecoder:
         count, c, first = layer.project, layer.coefficients(), layer.first
         if first + len(c) > basis.count:
             basis.vectors(first, len(c))  # refused with the sizes (BasisError)
-        plan = self._projection_plan(basis, count)
+        plan = self._projection_plan(basis)
         from brdfcodec.layers.detail import decode_detail
 
         detail = _BackgroundCall(decode_detail, record.detail) if record.detail is not None else None
@@ -591,7 +593,7 @@ class BrdfDecoder:
         finally:
             if detail is not None:
                 detail.join()
-        mapped = clamp_mapped(u.copy(), out=None)
+        mapped = clamp_mapped(u)  # a new array: u is still needed
         on_basis = basis.entry_mask  # boolean: gathers and scatters faster than the index array
         unclamped = u.reshape(-1)[on_basis]
         moved = mapped.reshape(-1)[on_basis] - unclamped  # the clamp's change (0 almost everywhere)
@@ -600,7 +602,7 @@ class BrdfDecoder:
             mapped.reshape(-1)[on_basis] += c @ basis.vectors(first, len(c))
         else:
             weights = np.zeros(max(count, first + len(c)), dtype=np.float32)
-            weights[:count] = plan.dot_products(h, batch[0], moved)
+            weights[:count] = plan.dot_products(count, h, batch[0], moved)
             weights[first : first + len(c)] += c
             mapped.reshape(-1)[on_basis] = plan.reconstruct(weights, basis.vectors(0, len(weights)))
         if detail is not None:
@@ -683,8 +685,6 @@ class BrdfDecoder:
             residuals = self._layer_residuals(record, slots)
         if not residuals:
             return mapped
-        if slots is None:
-            self.project_base(record, mapped)
         for residual in residuals:
             mapped += residual
         return clamp_mapped(mapped, out=mapped)

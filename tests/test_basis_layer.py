@@ -600,6 +600,9 @@ def test_a_factorised_basis_file_expands_to_the_dense_basis_it_stands_for(tmp_pa
         ({"factors": factorised.factors.astype(np.float32)}, "float16"),
         ({"factors": np.full_like(factorised.factors, np.inf)}, "non-finite"),
         ({"colours": factorised.colours[:-1]}, "one per vector"),
+        # 4097 vectors are refused before the expansion would allocate them
+        ({"colours": np.zeros(4097, np.int64), "factor_of": np.zeros(4097, np.int64)},
+         "'colours' lists 4097 vectors"),
     ]
     for change, message in bad:  # a hostile file is refused when read, whatever wrote it
         broken = tmp_path / "bad.safetensors"

@@ -88,6 +88,10 @@ def test_the_shipped_decoder_projects_the_base_as_the_spec_says() -> None:
     batched = next(decoder.decode_many([projected], masked="zero"))
     np.testing.assert_allclose(batched, full, rtol=1e-5, atol=1e-6)
     assert np.isfinite(full).all()
+    fewer = LayeredRecord("p25", mu, np.ones(8), basis=BasisLayer(basis.sha256, 0.25, q, 8, 25))
+    decoder.mapped_record(fewer)
+    # One plan per basis, whatever the records' P: a file's counts cannot multiply the decoder's memory.
+    assert list(decoder.__dict__["_projection_plans"]) == [basis.sha256]
     too_many = LayeredRecord("t", mu, np.ones(8), basis=BasisLayer(basis.sha256, 0.25, q, 8, 76))
     with pytest.raises(BasisError, match="projects its base on 76 basis vectors, but this model's shared basis "
                                          "holds 75"):

@@ -238,10 +238,9 @@ def fit_shared_basis(
     if not 1 <= count <= limit:
         orders = " in 6 colour orders" if colour_permutations else ""
         raise ValueError(f"count must be in [1, {limit}] for {n} materials{orders}")
-    valid = masks.reshape(n, -1).all(axis=0)
     if colour_permutations:
         return fit_factorised_basis(inputs, masks, count).expand()
-    entries = np.flatnonzero(valid).astype(np.int64)
+    entries = np.flatnonzero(masks.reshape(n, -1).all(axis=0)).astype(np.int64)
     data = inputs.reshape(len(inputs), -1)[:, entries].astype(np.float64)
     data -= data.mean(axis=0)
     _, _, vt = np.linalg.svd(data, full_matrices=False)
@@ -411,7 +410,9 @@ def _factorised(tensors: Mapping[str, np.ndarray], where: str) -> FactorisedBasi
     if not integer or colours.shape != factor_of.shape or colour_entries.shape[0] != factors.shape[1]:
         raise BasisError(f"{where}: 'colours' and 'factor_of' must be 1-D integers, one per vector, and "
                          "'colour_entries' 1-D integers, one per factor column")
-    if colours.size and (colours.min() < 0 or colours.max() > 2):
+    if not 1 <= colours.shape[0] <= MAX_BASIS_COUNT:  # checked before expanding: K × 3P floats
+        raise BasisError(f"{where}: 'colours' lists {colours.shape[0]} vectors; a basis holds 1 to {MAX_BASIS_COUNT}")
+    if colours.min() < 0 or colours.max() > 2:
         raise BasisError(f"{where}: 'colours' must be 0 (grey), 1 or 2 (chroma)")
     if factor_of.size and (factor_of.min() < 0 or factor_of.max() >= factors.shape[0]):
         raise BasisError(f"{where}: 'factor_of' must name rows of 'factors' (0 to {factors.shape[0] - 1})")
