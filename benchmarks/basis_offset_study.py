@@ -65,7 +65,7 @@ def main() -> None:
             estimate[i, entries] = mean + quantise_coefficients(basis.sha256, c).coefficients() @ pca[:k]
         row["pca-int8"] = kept_slice_relae(estimate.reshape(x.shape), x, m)
         for first in OFFSETS:
-            components = basis.components[first : first + k]
+            components = basis.vectors(first, k)
             decoded = []
             for i in range(len(x)):
                 z, c = fit_basis_coefficients(decoder.network, mu[i : i + 1], x[i : i + 1], m[i : i + 1], components,

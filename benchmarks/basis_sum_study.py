@@ -63,7 +63,7 @@ def main() -> None:
     basis = decoder.shared_basis
     assert record.basis is not None and record.detail is not None and basis is not None
     c = record.basis.coefficients()
-    vectors = basis.components[record.basis.first : record.basis.first + len(c)].astype(np.float32)
+    vectors = basis.vectors(record.basis.first, len(c))
     rows: dict[str, Any] = {
         "coefficients": len(c), "basis_entries": int(vectors.shape[1]),
         "basis_megabytes_float32": vectors.nbytes / 1e6,

@@ -102,12 +102,12 @@ def main() -> None:
     for k in [c for c in COUNTS if c <= min(basis.count, pca.n_components)]:
         first = basis_offset(linear_rank, basis.count, k)
         if k:
-            codes, _ = fit_basis_coefficients(decoder.network, refined, x, m, basis.components[first : first + k],
+            codes, _ = fit_basis_coefficients(decoder.network, refined, x, m, basis.vectors(first, k),
                                               basis.entries, 1)
         else:
             codes = refined
         compact = np.stack([dequantise_int8(*int8_with_step(z)) for z in codes])
-        coefficients = (fit_basis_coefficients(decoder.network, compact, x, m, basis.components[first : first + k],
+        coefficients = (fit_basis_coefficients(decoder.network, compact, x, m, basis.vectors(first, k),
                                                basis.entries, 1, fit_latent=False)[1] if k else np.zeros((n, 0)))
         fits[k] = (compact, coefficients, decoder.decode_mapped(compact), first)
         for i in range(n):

@@ -10,6 +10,7 @@ from brdfcodec.errors import BasisMismatchError, BvaeFormatError
 from brdfcodec.layers.basis import (
     BasisError,
     BasisLayer,
+    SharedBasis,
     fit_shared_basis,
     load_shared_basis,
     quantise_coefficients,
@@ -403,7 +404,7 @@ def test_the_basis_layer_follows_the_decoder_output_it_was_fitted_on(analytic_ta
     inputs, masks = network_input_from_table(brdf.values, brdf.mask)
     basis = encoder.decoder.shared_basis
     _, refitted = fit_basis_coefficients(encoder.decoder.network, record.mu[None], inputs[None], masks[None],
-                                         basis.components[8:61], basis.entries, 1, fit_latent=False)
+                                         basis.vectors(8, 53), basis.entries, 1, fit_latent=False)
     assert quantise_coefficients(basis.sha256, refitted[0], 8).q.tolist() == record.basis.q.tolist()
     tiny = BrdfEncoder(effort=1, bytes=12).encode(brdf, name="t")  # the smallest record: compact base, 1 coefficient
     assert tiny.basis.count == 1 and tiny.meta["rate"]["payload_bytes"] == 12
@@ -516,7 +517,7 @@ def test_coefficients_fitted_to_a_fixed_code_leave_it_and_lower_the_error(analyt
     brdf = analytic_tables["red-plastic"]
     inputs, masks = network_input_from_table(brdf.values, brdf.mask)
     code = BrdfEncoder(effort=0).encode(brdf).mu + np.float32(0.05)  # off the encoder's own answer
-    components = basis.components[8:28]
+    components = basis.vectors(8, 20)
     codes, fitted = fit_basis_coefficients(decoder.network, code[None], inputs[None], masks[None], components,
                                            basis.entries, 1, fit_latent=False)
     np.testing.assert_array_equal(codes[0], code)
@@ -545,7 +546,7 @@ def test_a_fit_minimises_the_error_it_is_given(analytic_tables) -> None:
     brdf = analytic_tables["red-plastic"]
     inputs, masks = network_input_from_table(brdf.values, brdf.mask)
     code = BrdfEncoder(effort=0).encode(brdf).mu
-    components = basis.components[8:20]
+    components = basis.vectors(8, 12)
 
     def squared(decoded: torch.Tensor, target: torch.Tensor, weight: torch.Tensor) -> torch.Tensor:
         return ((decoded - target) * weight).square().sum(1)
@@ -576,16 +577,21 @@ def test_a_factorised_basis_file_expands_to_the_dense_basis_it_stands_for(tmp_pa
     dense, dense_entries = fit_shared_basis(x, m, 12, colour_permutations=True)
     np.testing.assert_array_equal(components, dense)
     np.testing.assert_array_equal(entries, dense_entries)
-    # The spec's rule, written out: w_c · u_e in binary32, rounded to binary16, colour-major.
+    # The spec's rule (spec/model.md 1.4), written out: vector k is w_c · u_e in binary32, colour-major; the
+    # dense layout rounds it to binary16.
     k = 5
     w = COLOUR_VECTORS.astype(np.float32)[factorised.colours[k]]
     u = factorised.factors[factorised.factor_of[k]].astype(np.float32)
-    np.testing.assert_array_equal(components[k], np.concatenate([w[c] * u for c in range(3)]).astype(np.float16))
+    exact = np.concatenate([w[c] * u for c in range(3)])
+    np.testing.assert_array_equal(components[k], exact.astype(np.float16))
     assert len(factorised.factors) < 12  # chroma pairs share a factor
     path = tmp_path / "basis.safetensors"
     sha = write_factorised_basis(path, factorised)
     loaded = load_shared_basis(path, sha)
-    np.testing.assert_array_equal(loaded.components, dense)
+    assert loaded.components is None and loaded.factorised is not None  # never expanded when read
+    np.testing.assert_array_equal(loaded.vectors(k, 1)[0], exact)
+    np.testing.assert_array_equal(loaded.entries, dense_entries)
+    np.testing.assert_allclose(loaded.vectors(0, 12), dense, atol=2e-3)
     assert path.stat().st_size < 0.5 * dense.nbytes
     from safetensors.numpy import save_file
 
@@ -630,3 +636,44 @@ def test_a_manifest_lists_previous_bases_as_hashes_and_plain_file_names(tmp_path
         (folder / "model.json").write_text(json.dumps({**stored, "previous_bases": bad}))
         with pytest.raises(BrdfcodecError, match="previous_bases"):
             load_manifest(folder)
+
+
+def test_sums_on_the_factors_equal_sums_over_the_expanded_vectors() -> None:
+    """The decoder's kernels on a factorised basis (fold + combine, dots, values at entries, partial channels) give
+    what the dense binary32 vectors give, with unused leading and trailing factors skipped correctly."""
+    from brdfcodec.layers.basis import fit_factorised_basis
+
+    x, m = coloured_inputs(4)
+    factorised = fit_factorised_basis(x, m, 14)
+    entries = factorised.entries()
+    factored = SharedBasis(None, entries, "ab" * 32, factorised)
+    dense = factored.vectors(0, 14).astype(np.float64)
+    other = SharedBasis(factored.vectors(0, 14).astype(np.float16), entries, "cd" * 32)
+    rng = np.random.default_rng(3)
+    for first, k in ((0, 14), (3, 7), (13, 1), (5, 2)):
+        c = rng.normal(size=k).astype(np.float32)
+        want = c.astype(np.float64) @ dense[first : first + k]
+        for threads in (1, 2, 3):
+            np.testing.assert_allclose(factored.weighted_sum(c, first, threads=threads), want, atol=1e-5)
+        np.testing.assert_allclose(factored.residual(c, first).reshape(-1)[entries], want, atol=1e-5)
+        assert np.count_nonzero(factored.residual(c, first)) == np.count_nonzero(want)
+        channels = [0, 20, 21, 40, 62]
+        full = factored.residual(c, first)
+        np.testing.assert_allclose(factored.residual_channels(c, channels, first), full[channels], atol=1e-6)
+        np.testing.assert_allclose(other.residual_channels(c, channels, first), other.residual(c, first)[channels],
+                                   atol=1e-6)
+    y = rng.normal(size=(2, len(entries))).astype(np.float32)
+    for count in (1, 6, 14):
+        np.testing.assert_allclose(factored.dots(y, count), y.astype(np.float64) @ dense[:count].T, atol=1e-4)
+        np.testing.assert_allclose(factored.dots(y[0], count), y[0].astype(np.float64) @ dense[:count].T, atol=1e-4)
+    where = np.array([0, 7, len(entries) // 3 + 5, len(entries) - 1])
+    np.testing.assert_array_equal(factored.vector_values(9, where), factored.vectors(0, 9)[:, where])
+    np.testing.assert_allclose(other.vector_values(9, where), factored.vectors(0, 9)[:, where], atol=2e-3)
+    centre = rng.normal(size=len(entries)).astype(np.float32)
+    a = (y[0] - centre).astype(np.float64) @ dense[:6].T
+    np.testing.assert_allclose(factored.project(y[0], centre, 6), centre + a @ dense[:6], atol=1e-4)
+    np.testing.assert_allclose(factored.project(y, centre, 6)[0], centre + a @ dense[:6], atol=1e-4)
+    with pytest.raises(BasisError, match="holds 14"):
+        factored.weighted_sum(np.ones(3, np.float32), 12)
+    with pytest.raises(ValueError, match="dense .* or factorised"):
+        SharedBasis(None, entries, "ab" * 32)

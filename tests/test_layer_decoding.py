@@ -93,7 +93,7 @@ def one_after_the_other(basis: SharedBasis | None, layer: BasisLayer | None, det
     out = np.zeros(NETWORK_INPUT_SHAPE, dtype=np.float64)
     if layer is not None and basis is not None:
         flat = np.zeros(out.size)
-        flat[basis.entries] = layer.coefficients().astype(np.float64) @ basis.components[2:11].astype(np.float64)
+        flat[basis.entries] = layer.coefficients().astype(np.float64) @ basis.vectors(2, 9).astype(np.float64)
         out += flat.reshape(out.shape)
     if detail is not None:
         out += decode_detail(detail).reshape(out.shape)

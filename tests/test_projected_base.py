@@ -24,7 +24,7 @@ def test_projection_is_the_orthogonal_projection_around_the_centre() -> None:
     basis = small_basis()
     rng = np.random.default_rng(12)
     y, m = rng.normal(size=40), rng.normal(size=40)
-    v = basis.components[:4].astype(np.float64)
+    v = basis.vectors(0, 4).astype(np.float64)
     expected = m + (y - m) @ v.T @ v
     np.testing.assert_allclose(basis.project(y, m, 4), expected, rtol=1e-5, atol=1e-5)
     once = basis.project(y, m, 4)
@@ -75,7 +75,7 @@ def test_the_shipped_decoder_projects_the_base_as_the_spec_says() -> None:
     index = network.valid_index.numpy()
     centre = network.basis_mean.float().numpy()[np.searchsorted(index, basis.entries)]
     base = decoder.decode_mapped(mu).reshape(-1)
-    v = basis.components[:50].astype(np.float64)
+    v = basis.vectors(0, 50).astype(np.float64)
     y = base[basis.entries].astype(np.float64)
     base[basis.entries] = centre + (y - centre) @ v.T @ v
     expected = base.reshape(63, 90, 90) + basis.residual(0.25 * q.astype(np.float32), 8)
@@ -118,15 +118,31 @@ def test_a_decoder_without_a_linear_path_refuses_a_projected_base() -> None:
 
 
 @pytest.mark.parametrize("budget", [32, 64])
-def test_the_encoder_projects_only_when_asked(analytic_tables, budget: int) -> None:
+def test_the_encoder_projects_where_that_lowers_the_error(analytic_tables, budget: int) -> None:
+    """``never`` and ``always`` do as they say; ``auto`` (the default) writes whichever of the two has the lower
+    kept-slice error on the material."""
     from brdfcodec.codec import BrdfEncoder
-    from brdfcodec.layers.encoding import PROJECTED_BASE_VECTORS
+    from brdfcodec.layers.encoding import PROJECTED_BASE_VECTORS, EncodeOptions
+    from brdfcodec.representation import network_input_from_table
 
     table = analytic_tables["red-plastic"]
-    plain = BrdfEncoder(bytes=budget, latent_dtype="float16").encode(table, name="m")
-    projected = BrdfEncoder(bytes=budget, latent_dtype="float16", project_base=True).encode(table, name="m")
-    assert plain.basis.project == 0 and projected.basis.project == PROJECTED_BASE_VECTORS == 50
-    assert projected.meta["rate"]["payload_bytes"] <= budget
+    inputs, masks = network_input_from_table(table.values, table.mask)
+    records, errors = {}, {}
+    for way in ("never", "always", "auto"):
+        encoder = BrdfEncoder(bytes=budget, latent_dtype="float16", project_base=way)
+        records[way] = encoder.encode(table, name="m")
+        errors[way] = float((np.abs(encoder.decoder.mapped_record(records[way]) - inputs) * masks).sum())
+        assert records[way].meta["rate"]["payload_bytes"] <= budget
+    assert records["never"].basis.project == 0 and records["always"].basis.project == PROJECTED_BASE_VECTORS == 50
+    assert errors["never"] != errors["always"]
+    best = min(("never", "always"), key=errors.__getitem__)
+    assert records["auto"].basis.project == records[best].basis.project
+    assert errors["auto"] == pytest.approx(errors[best], rel=1e-5)
+    assert EncodeOptions().project_base == "auto"
+    assert EncodeOptions(project_base=True).project_base == "always"
+    assert EncodeOptions(project_base=False).project_base == "never"
+    with pytest.raises(ValueError, match="project_base must be one of"):
+        EncodeOptions(project_base="sometimes")  # type: ignore[arg-type]
 
 
 @pytest.mark.parametrize("compact", [None, "int8-fixed"])
@@ -163,6 +179,9 @@ def test_cli_project_base(red_plastic_file, tmp_path, capsys) -> None:
     capsys.readouterr()
     assert main(["info", str(out)]) == 0
     assert "base projected on 50" in capsys.readouterr().out
+    never = tmp_path / "n.bvae"
+    assert main(["compress", str(red_plastic_file), "-o", str(never), "--bytes", "64", "--project-base", "never"]) == 0
+    assert parse_bvae(never.read_bytes()).header.entries[0].layers["basis"].get("project") is None
     lonely = tmp_path / "l.bvae"
     assert main(["compress", str(red_plastic_file), "-o", str(lonely), "--project-base"]) != 0
     assert "--project-base applies to records with a basis layer" in capsys.readouterr().err
@@ -182,7 +201,7 @@ def test_the_joint_fit_codes_the_residual_of_the_projected_base(analytic_tables)
     inputs, masks = network_input_from_table(table.values, table.mask)
     code = encoder.encode(table, name="m").mu
     # Vectors past the 50 of the projection: there the projected base is the centre's, not the decoder's output.
-    vectors = basis.components[50:71].astype(np.float32)
+    vectors = basis.vectors(50, 21).astype(np.float32)
     projection = (basis.vectors(0, 50), decoder.projection_centre)
     def l2(decoded, target, weight):  # least squares: the projection is the best start, never the fallback
         return (((decoded - target) * weight) ** 2).sum(1)

@@ -149,8 +149,12 @@ def test_the_report_has_projected_base_points_up_to_256_bytes() -> None:
     from brdfcodec.layers.points import LayeredBvae, rate_distortion_points
 
     train = np.random.default_rng(6).uniform(0.0, 1.0, size=(3, 63, 90, 90)).astype(np.float32)
-    projected = [p for p in rate_distortion_points(train) if p.name.startswith("bvae-projected")]
-    assert [p.name for p in projected] == [f"bvae-projected@{n}B" for n in (16, 32, 64, 128, 256)]
-    assert all(p.family == "bvae-projected" and p.encoder.options.project_base for p in projected)
+    points = rate_distortion_points(train)
+    for family, way in (("bvae-projected", "always"), ("bvae-unprojected", "never")):
+        fixed = [p for p in points if p.name.startswith(f"{family}@")]
+        assert [p.name for p in fixed] == [f"{family}@{n}B" for n in (16, 32, 64, 128, 256)]
+        assert all(p.family == family and p.encoder.options.project_base == way for p in fixed)
+    layered = [p for p in points if p.family == "bvae-layered"]
+    assert layered and all(p.encoder.options.project_base == "auto" for p in layered)  # the default
     with pytest.raises(ValueError, match="size budget"):
-        LayeredBvae(max_relae=0.02, project_base=True)
+        LayeredBvae(max_relae=0.02, project_base="always")

@@ -38,6 +38,20 @@ def test_version_line_is_the_latest_change_log_entry(name: str) -> None:
     assert latest == max(log, key=lambda v: tuple(int(p) for p in v.split("."))), name
 
 
+@pytest.mark.parametrize("name", ["conventions.md", "model.md", "dataset-format.md", "bvae-format.md"])
+def test_the_spec_index_lists_each_document_at_its_version(name: str) -> None:
+    """``spec/README.md``'s table names the version each document's first lines state."""
+    text = (SPEC / name).read_text(encoding="utf-8")
+    top = re.search(r"^(?:Version|Format version) ([0-9.]+)(?: \(document revision ([0-9.]+)\))?", text, re.M)
+    assert top is not None, name
+    row = re.search(rf"^\| \[{re.escape(name)}\]\({re.escape(name)}\) \| ([^|]+) \|",
+                    (SPEC / "README.md").read_text(encoding="utf-8"), re.M)
+    assert row is not None, f"spec/README.md does not list {name}"
+    listed = row.group(1).strip()
+    wanted = top.group(1) if top.group(2) is None else f"{top.group(1)} (revision {top.group(2)})"
+    assert listed == wanted, f"spec/README.md lists {name} at {listed!r}, the document says {wanted!r}"
+
+
 def test_kept_slices_match() -> None:
     match = re.search(r"KEPT_PHI_D_SLICES = ([0-9, ]+)", conventions_text())
     assert match is not None

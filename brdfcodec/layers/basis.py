@@ -34,7 +34,8 @@ from __future__ import annotations
 import functools
 import itertools
 import os
-from collections.abc import Mapping, Sequence
+import threading
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Final
@@ -92,25 +93,42 @@ class SharedBasis:
 
     Attributes
     ----------
-    components : ndarray of float16, shape (K, E)
-        Orthonormal rows (up to float16 rounding) over ``entries``.
+    components : ndarray of float16, shape (K, E), or None
+        Orthonormal rows (up to float16 rounding) over ``entries``, as a dense basis file stores them; None
+        for a factorised file (``factorised``), whose vectors are never stored dense.
     entries : ndarray of int64, shape (E,)
         Strictly increasing flat positions in the ``(63, 90, 90)`` network layout.
     sha256 : str
         SHA-256 of the file it was read from (its identity in records).
+    factorised : FactorisedBasis or None
+        The factors of a factorised basis file (``spec/model.md`` §5); its vectors are the binary32 products
+        of colour vector and factor. Sums over the vectors are taken on the factors: a third of the memory
+        traffic of the dense vectors, which bounds a layered decode's time.
     """
 
-    components: npt.NDArray[np.float16]
+    components: npt.NDArray[np.float16] | None
     entries: npt.NDArray[np.int64]
     sha256: str
+    factorised: FactorisedBasis | None = None
+
+    def __post_init__(self) -> None:
+        if (self.components is None) == (self.factorised is None):
+            raise ValueError("a shared basis is either dense (components) or factorised, not both or neither")
 
     @property
     def count(self) -> int:
         """Number of vectors K."""
+        if self.factorised is not None:
+            return len(self.factorised.colours)
+        assert self.components is not None
         return int(self.components.shape[0])
 
     @functools.cached_property
     def _float32(self) -> npt.NDArray[np.float32]:
+        """Every vector in float32, dense (cached: encoders fit on them again and again)."""
+        if self.factorised is not None:
+            return self.factorised.products(0, self.count)
+        assert self.components is not None
         return self.components.astype(np.float32)
 
     @functools.cached_property
@@ -133,10 +151,78 @@ class SharedBasis:
         return mask
 
     def vectors(self, first: int, k: int) -> npt.NDArray[np.float32]:
-        """The vectors ``first … first + k − 1`` as a read-only float32 ``(k, E)`` view."""
+        """The vectors ``first … first + k − 1`` as a read-only float32 ``(k, E)`` array.
+
+        Dense in memory (a factorised basis is expanded once and kept): for encoders. Decoders sum over the
+        vectors with :meth:`weighted_sum` and :meth:`dots` instead.
+        """
         view = self._float32[self._rows(first, k)]
         view.setflags(write=False)
         return view
+
+    def vectors_uncached(self, first: int, k: int) -> npt.NDArray[np.float32]:
+        """:meth:`vectors` without keeping a dense copy of a factorised basis (for one-off passes)."""
+        if self.factorised is None or "_float32" in self.__dict__:
+            return self.vectors(first, k)
+        rows = self._rows(first, k)
+        return self.factorised.products(rows.start, rows.stop - rows.start)
+
+    def vector_values(self, count: int, positions: npt.ArrayLike) -> npt.NDArray[np.float32]:
+        """Values of the first ``count`` vectors at a few ``positions`` (indices into ``entries``), ``(count, n)``."""
+        rows = self._rows(0, count)
+        where = np.asarray(positions, dtype=np.int64)
+        if self.factorised is None:
+            return self._float32[rows][:, where] if "_float32" in self.__dict__ else (
+                self.components[rows][:, where].astype(np.float32))  # type: ignore[index]
+        return self.factorised.values_at(count, where)
+
+    def weighted_sum(self, weights: npt.ArrayLike, first: int = 0, *, threads: int = 1) -> npt.NDArray[np.float32]:
+        """``Σᵢ wᵢ · b_(first+i)`` over ``entries``, shape (E,), float32.
+
+        Parameters
+        ----------
+        weights : array_like, shape (k,)
+            One weight per vector ``first … first + k − 1``.
+        first : int, default 0
+        threads : int, default 1
+            Threads to split the entries over (the sum is bound by memory bandwidth, which one core does
+            not use up).
+        """
+        w = np.asarray(weights, dtype=np.float32).reshape(-1)
+        rows = self._rows(first, len(w))
+        out = np.empty(len(self.entries), dtype=np.float32)
+        if self.factorised is not None:
+            folded = self.factorised.fold(w, rows.start)
+            width = self.factorised.factors.shape[1]
+            columns = _split(width, threads)
+            _in_threads([functools.partial(self.factorised.combine, folded, part, out.reshape(N_CHANNELS, width))
+                         for part in columns])
+            return out
+        vectors = self.vectors(rows.start, len(w))
+
+        def part_sum(part: slice) -> None:
+            np.matmul(w, vectors[:, part], out=out[part])
+
+        _in_threads([functools.partial(part_sum, part) for part in _split(len(out), threads)])
+        return out
+
+    def dots(self, values: npt.ArrayLike, count: int) -> npt.NDArray[np.float32]:
+        """Dot products of ``values`` over ``entries`` with the first ``count`` vectors.
+
+        Parameters
+        ----------
+        values : array_like, shape (E,) or (B, E)
+        count : int
+
+        Returns
+        -------
+        ndarray of float32, shape (count,) or (B, count)
+        """
+        y = np.asarray(values, dtype=np.float32)
+        rows = self._rows(0, count)
+        if self.factorised is None:
+            return y @ self.vectors(0, count).T
+        return self.factorised.dots(y, rows.stop)
 
     def on_grid(self, values: npt.ArrayLike) -> npt.NDArray[np.float32]:
         """Values over ``entries``, shape (E,), placed in the ``(63, 90, 90)`` layout (0 elsewhere)."""
@@ -154,23 +240,30 @@ class SharedBasis:
         first : int, default 0
             Index of the first of those vectors (``first + k`` ≤ K).
         """
-        c = np.asarray(coefficients, dtype=np.float32).reshape(-1)
-        return self.on_grid(c @ self.vectors(first, len(c)))
+        return self.on_grid(self.weighted_sum(coefficients, first))
 
     def residual_channels(
         self, coefficients: npt.ArrayLike, channels: Sequence[int], first: int = 0
     ) -> npt.NDArray[np.float32]:
         """Only some channels of :meth:`residual`, shape ``(len(channels), 90, 90)`` (partial decoding)."""
         c = np.asarray(coefficients, dtype=np.float32).reshape(-1)
-        vectors = self.vectors(first, len(c))
+        rows = self._rows(first, len(c))
         wanted = np.asarray(channels, dtype=np.int64)
         out = np.zeros((len(wanted), _ENTRIES_PER_CHANNEL), dtype=np.float32)
+        factorised = self.factorised
+        folded = None if factorised is None else factorised.fold(c, rows.start)
         for row, channel in enumerate(wanted):
             start, stop = np.searchsorted(self._channel_of_entry, [channel, channel + 1])
-            if stop > start:
-                out[row, self.entries[start:stop] - channel * _ENTRIES_PER_CHANNEL] = (
-                    c @ vectors[:, start:stop]
-                )
+            if stop <= start:
+                continue
+            target = self.entries[start:stop] - channel * _ENTRIES_PER_CHANNEL
+            if factorised is None or folded is None:
+                out[row, target] = c @ self.vectors(rows.start, len(c))[:, start:stop]
+            else:  # entries of colour k are k·P … k·P + P − 1 in order
+                colour = int(channel) // N_KEPT_SLICES
+                width = factorised.factors.shape[1]
+                part = slice(start - colour * width, stop - colour * width)
+                out[row, target] = folded[:, colour] @ factorised.factors32[:, part]
         return out.reshape(len(wanted), *NETWORK_INPUT_SHAPE[1:])
 
     def project(self, values: npt.ArrayLike, centre: npt.ArrayLike, count: int) -> npt.NDArray[np.float32]:
@@ -190,10 +283,16 @@ class SharedBasis:
         -------
         ndarray of float32, the shape of ``values``
         """
-        vectors = self.vectors(0, count)
         m = np.asarray(centre, dtype=np.float32)
         y = np.asarray(values, dtype=np.float32)
-        return m + ((y - m) @ vectors.T) @ vectors
+        a = self.dots(y - m, count)
+        if a.ndim == 1:
+            return m + self.weighted_sum(a)
+        return m + np.stack([self.weighted_sum(row) for row in a])
+
+    def check_vectors(self, first: int, k: int) -> None:
+        """Refuse (:class:`BasisError`, with the sizes) unless vectors ``first … first + k − 1`` exist."""
+        self._rows(first, k)
 
     def _rows(self, first: int, k: int) -> slice:
         """The vectors ``first … first + k − 1``, refused unless they exist."""
@@ -203,6 +302,38 @@ class SharedBasis:
                 f"but this basis holds {self.count}"
             )
         return slice(first, first + k)
+
+
+def _split(length: int, parts: int) -> list[slice]:
+    """``range(length)`` in ``parts`` contiguous slices (fewer when short)."""
+    parts = max(1, min(int(parts), length))
+    bounds = np.linspace(0, length, parts + 1).astype(int)
+    return [slice(int(a), int(b)) for a, b in itertools.pairwise(bounds)]
+
+
+def _in_threads(calls: Sequence[Callable[[], object]]) -> None:
+    """Run the calls, all but the first on threads of their own (numpy releases the GIL in its kernels)."""
+    if len(calls) == 1:
+        calls[0]()
+        return
+    errors: list[BaseException] = []
+
+    def guarded(call: Callable[[], object]) -> None:
+        try:
+            call()
+        except BaseException as error:  # noqa: BLE001 - raised on the calling thread below
+            errors.append(error)
+
+    others = [threading.Thread(target=guarded, args=(call,), daemon=True) for call in calls[1:]]
+    for thread in others:
+        thread.start()
+    try:
+        calls[0]()
+    finally:
+        for thread in others:
+            thread.join()
+    if errors:
+        raise errors[0]
 
 
 def fit_shared_basis(
@@ -247,13 +378,18 @@ def fit_shared_basis(
     return vt[:count].astype(np.float16), entries
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class FactorisedBasis:
     """A shared basis fitted on colour-permuted materials, stored as its factors (``spec/model.md`` §5).
 
     Every vector of such a basis is a colour vector times a vector over one colour's entries
     (:mod:`brdfcodec.colour_orders_pca`), and the two vectors of a chroma pair share the latter, so the
     factors take about a third of the dense vectors' bytes.
+
+    Vector k's value at entry ``c · P + e`` (colour c, column e) is the binary32 product
+    ``COLOUR_VECTORS[colours[k], c] · factors[factor_of[k], e]`` (:meth:`products`). Sums over the vectors are
+    taken on the factors (:meth:`fold`, then :meth:`combine`; :meth:`dots`), which read a third of the memory
+    the dense vectors would.
 
     Attributes
     ----------
@@ -275,18 +411,90 @@ class FactorisedBasis:
     factor_of: npt.NDArray[np.int64]
     colour_entries: npt.NDArray[np.int64]
 
-    def expand(self) -> tuple[npt.NDArray[np.float16], npt.NDArray[np.int64]]:
-        """The dense basis: vector k is ``COLOUR_VECTORS[colours[k]] ⊗ factors[factor_of[k]]``, each product
-        taken in float32 and rounded to float16, over the entries ``c · 21 · 90 · 90 + colour_entries``
-        (colour c = 0, 1, 2, in that order)."""
+    @functools.cached_property
+    def factors32(self) -> npt.NDArray[np.float32]:
+        """``factors`` widened to float32, ``(F, P)`` (read-only, cached)."""
+        widened = self.factors.astype(np.float32)
+        widened.setflags(write=False)
+        return widened
+
+    @functools.cached_property
+    def _colour_vectors(self) -> npt.NDArray[np.float32]:
+        """Each vector's colour vector in binary32, ``(K, 3)``."""
         from brdfcodec.colour_orders_pca import COLOUR_VECTORS
 
-        colour_vectors = COLOUR_VECTORS.astype(np.float32)[self.colours]  # (K, 3)
-        factors = self.factors.astype(np.float32)[self.factor_of]  # (K, P)
-        components = (colour_vectors[:, :, None] * factors[:, None, :]).reshape(len(self.colours), -1)
+        return COLOUR_VECTORS.astype(np.float32)[self.colours]
+
+    def products(self, first: int, k: int) -> npt.NDArray[np.float32]:
+        """Vectors ``first … first + k − 1`` as the spec defines them (``spec/model.md`` §5): colour vector times
+        factor, each product in binary32, over the entries ``c · 21 · 90 · 90 + colour_entries`` (colour c = 0, 1,
+        2, in that order); shape ``(k, 3 · P)``."""
+        rows = slice(first, first + k)
+        colours = self._colour_vectors[rows]
+        factors = self.factors32[self.factor_of[rows]]
+        return (colours[:, :, None] * factors[:, None, :]).reshape(len(colours), -1)
+
+    def values_at(self, count: int, positions: npt.NDArray[np.int64]) -> npt.NDArray[np.float32]:
+        """Values of vectors ``0 … count − 1`` at ``positions`` (indices into the ``3 · P`` entries), ``(count, n)``."""
+        width = self.factors.shape[1]
+        colour, column = np.divmod(positions, width)
+        return self._colour_vectors[:count][:, colour] * self.factors32[self.factor_of[:count]][:, column]
+
+    def fold(self, weights: npt.NDArray[np.float32], first: int) -> npt.NDArray[np.float32]:
+        """Weights of vectors ``first …`` gathered per factor and colour: ``W[f, c] = Σ wᵢ · colourᵢ[c]`` over the
+        vectors i of factor f, shape ``(F, 3)``; ``Σᵢ wᵢ vᵢ`` is then ``Wᵀ @ factors`` (:meth:`combine`)."""
+        rows = slice(first, first + len(weights))
+        folded = np.zeros((self.factors.shape[0], N_CHANNELS), dtype=np.float32)
+        np.add.at(folded, self.factor_of[rows], weights[:, None] * self._colour_vectors[rows])
+        return folded
+
+    def combine(self, folded: npt.NDArray[np.float32], columns: slice, out: npt.NDArray[np.float32]) -> None:
+        """``out[:, columns] = foldedᵀ @ factors[:, columns]`` (``out`` of shape ``(3, P)``), column block by column
+        block so that each block of the factors is read from memory once for all three colours; only the factors
+        with nonzero weights are read."""
+        used = np.flatnonzero(np.any(folded != 0, axis=1))
+        if used.size == 0:
+            out[:, columns] = 0.0
+            return
+        rows = slice(int(used[0]), int(used[-1]) + 1)
+        weights = np.ascontiguousarray(folded[rows].T)  # (3, F')
+        factors = self.factors32[rows]
+        for start in range(columns.start, columns.stop, _COLUMN_BLOCK):
+            block = slice(start, min(start + _COLUMN_BLOCK, columns.stop))
+            part = factors[:, block]
+            for colour in range(N_CHANNELS):
+                np.matmul(weights[colour], part, out=out[colour, block])
+
+    def dots(self, values: npt.NDArray[np.float32], count: int) -> npt.NDArray[np.float32]:
+        """Dot products of ``values`` (``(3 · P,)`` or ``(B, 3 · P)``) with vectors ``0 … count − 1``:
+        per factor and colour first (``factors @ valuesᵀ``), then combined with each vector's colour vector."""
+        width = self.factors.shape[1]
+        y = values.reshape(-1, N_CHANNELS, width)
+        used = int(self.factor_of[:count].max()) + 1
+        factors = self.factors32[:used]
+        per_factor = np.zeros((len(y), used, N_CHANNELS), dtype=np.float32)
+        for start in range(0, width, _COLUMN_BLOCK):
+            block = slice(start, min(start + _COLUMN_BLOCK, width))
+            part = factors[:, block]
+            for b in range(len(y)):
+                per_factor[b] += part @ y[b, :, block].T
+        out = np.einsum("bkc,kc->bk", per_factor[:, self.factor_of[:count]], self._colour_vectors[:count])
+        return out.reshape(values.shape[:-1] + (count,)).astype(np.float32, copy=False)
+
+    def expand(self) -> tuple[npt.NDArray[np.float16], npt.NDArray[np.int64]]:
+        """The basis in the dense layout: :meth:`products` rounded to float16 (what a dense file of the same
+        vectors would hold), and its entries ``c · 21 · 90 · 90 + colour_entries``."""
+        return self.products(0, len(self.colours)).astype(np.float16), self.entries()
+
+    def entries(self) -> npt.NDArray[np.int64]:
+        """The flat positions of the vectors' entries in the ``(63, 90, 90)`` layout, colour by colour."""
         block = _N_ENTRIES // N_CHANNELS
-        entries = np.concatenate([c * block + self.colour_entries for c in range(N_CHANNELS)]).astype(np.int64)
-        return components.astype(np.float16), entries
+        return np.concatenate([c * block + self.colour_entries for c in range(N_CHANNELS)]).astype(np.int64)
+
+
+#: Columns of the factors summed at a time (a block of 64 float32 factors is 512 kB: it stays in cache while
+#: the three colours read it).
+_COLUMN_BLOCK: Final = 2048
 
 
 def fit_factorised_basis(inputs: npt.ArrayLike, masks: npt.ArrayLike, count: int) -> FactorisedBasis:
@@ -385,12 +593,12 @@ def load_shared_basis(path: str | os.PathLike[str], expected_sha256: str) -> Sha
     except SafetensorError as error:
         raise BasisError(f"{path}: not a readable safetensors file ({error})") from None
     if "factors" in tensors:
-        components, entries = _factorised(tensors, str(path)).expand()
-    else:
-        components, entries = tensors.get("components"), tensors.get("entries")
-        if components is None or entries is None:
-            raise BasisError(f"{path}: a basis file needs the tensors 'components' and 'entries', or 'factors', "
-                             "'colours', 'factor_of' and 'colour_entries'")
+        factorised = _factorised(tensors, str(path))
+        return SharedBasis(None, factorised.entries(), actual, factorised)
+    components, entries = tensors.get("components"), tensors.get("entries")
+    if components is None or entries is None:
+        raise BasisError(f"{path}: a basis file needs the tensors 'components' and 'entries', or 'factors', "
+                         "'colours', 'factor_of' and 'colour_entries'")
     _validate(components, entries, str(path))
     return SharedBasis(components, entries.astype(np.int64), actual)
 
@@ -438,7 +646,7 @@ def write_factorised_basis(path: str | os.PathLike[str], basis: FactorisedBasis)
         "factor_of": np.ascontiguousarray(basis.factor_of, dtype=np.int64),
         "colour_entries": np.ascontiguousarray(basis.colour_entries, dtype=np.int64),
     }
-    _validate(*_factorised(tensors, str(path)).expand(), str(path))
+    _factorised(tensors, str(path))
     with atomic_output(Path(path), overwrite=True) as tmp:
         save_file(tensors, str(tmp))
     return sha256_of_file(path)

@@ -5,11 +5,12 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 
 from brdfcodec.bvae_format import LatentRecord
+from brdfcodec.conventions import MAPPED_MAX
 from brdfcodec.layers.basis import (
     BasisError,
     BasisLayer,
@@ -25,16 +26,21 @@ if TYPE_CHECKING:
     from brdfcodec.codec import BrdfDecoder
     from brdfcodec.merl import MerlBRDF
 
-__all__ = ["PROJECTED_BASE_VECTORS", "EncodeOptions", "layer_records", "projected_base_vectors"]
+__all__ = ["PROJECTED_BASE_VECTORS", "EncodeOptions", "ProjectBase", "layer_records", "projected_base_vectors"]
 
 #: Basis vectors a writer projects a layered record's base decode on (``layers.basis.project``, format 1.6) when
 #: asked to (``EncodeOptions.project_base``). The decoder's output carries what its 8 numbers say about a material
 #: in the leading principal components; past them it adds its own errors, larger on new materials than the mean's.
 #: Measured on the held-out NBRDF proxy of MERL (``benchmarks/projected_base_study.py``,
-#: ``reports/rd-study/projected-base.json``): 50 and 75 vectors gain alike at 16 to 128 B. Not the default: the
-#: projection runs after the network and needs a pass over the vectors (memory-bound, about 2.4 ms for a 64 B
-#: record on the 2-core development machine), which takes a 64 B record's decode to about 1.8× a base-only one.
+#: ``reports/rd-study/projected-base.json``): 50 and 75 vectors gain alike at 16 to 128 B. The projection runs
+#: after the network and needs a pass over the vectors, taken on the factors of a factorised basis (about 1.5 ms
+#: for the shipped basis on the 2-core development machine; a 64 B record decodes in about 1.4× a base-only one).
 PROJECTED_BASE_VECTORS = 50
+
+#: When a writer projects a layered record's base (:class:`EncodeOptions`): ``"auto"`` fits the basis layer both
+#: ways and keeps, per material and size, the one with the lower kept-slice error; ``"always"``; ``"never"``.
+ProjectBase = Literal["auto", "always", "never"]
+_PROJECT_BASE_CHOICES: tuple[str, ...] = ("auto", "always", "never")
 
 
 def projected_base_vectors(decoder: BrdfDecoder, basis: SharedBasis) -> int:
@@ -67,9 +73,12 @@ class EncodeOptions:
         Bytes per stored latent value (4 for float32 files, 2 for float16).
     basis : bool
         Whether layered records may use the model's shared basis (when it has one).
-    project_base : bool
+    project_base : {"auto", "always", "never"}
         Whether a record with a basis layer projects its base decode on the basis (format 1.6,
-        :data:`PROJECTED_BASE_VECTORS`): 3 to 6 % lower error at 16 to 128 B, about 3–4 ms more to decode.
+        :data:`PROJECTED_BASE_VECTORS`; :data:`ProjectBase`). On held-out materials of the NBRDF proxy
+        projecting lowers the error by 3 to 6 % at 16 to 128 B; on a family the basis was not fitted on it
+        can cost (RGL proxy at 128 B), so ``"auto"`` (the default) measures both on each material: it
+        doubles the basis layer's fitting time. ``True`` and ``False`` mean ``"always"`` and ``"never"``.
     """
 
     effort: int = 1
@@ -79,9 +88,13 @@ class EncodeOptions:
     detail_step: float | None = None
     latent_itemsize: int = 4
     basis: bool = True
-    project_base: bool = False
+    project_base: ProjectBase = "auto"
 
     def __post_init__(self) -> None:
+        if isinstance(self.project_base, bool):
+            object.__setattr__(self, "project_base", "always" if self.project_base else "never")
+        if self.project_base not in _PROJECT_BASE_CHOICES:
+            raise ValueError(f"project_base must be one of {list(_PROJECT_BASE_CHOICES)}, got {self.project_base!r}")
         if self.effort not in EFFORT_STEPS:
             raise ValueError(f"effort must be one of {sorted(EFFORT_STEPS)}, got {self.effort!r}")
         targets = [x for x in (self.bytes_budget, self.max_relae, self.detail_step) if x is not None]
@@ -163,19 +176,21 @@ def _basis_fit(
     config = decoder.network.config
     linear_rank = config.latent_dim if config.linear_basis else 0
 
-    joint: dict[int, tuple[np.ndarray, np.ndarray]] = {}
-    project = projected_base_vectors(decoder, basis) if options.project_base else 0
-    projection = None if not project else (basis.vectors(0, project), decoder.projection_centre)
+    joint: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]] = {}
+    project = projected_base_vectors(decoder, basis) if options.project_base != "never" else 0
+    ways = [project] if options.project_base == "always" or not project else [0, project]
+    target, weights = np.asarray(inputs, dtype=np.float32), np.asarray(masks, dtype=np.float32)
 
-    def fit(k: int, mu_storage: MuStorage) -> tuple[LatentRecord, BasisLayer, np.ndarray]:
+    def fit_one(k: int, mu_storage: MuStorage, p: int) -> tuple[LatentRecord, BasisLayer, np.ndarray]:
         first = basis_offset(linear_rank, basis.count, k)
-        components = basis.components[first : first + k]
-        if k not in joint:
-            joint[k] = fit_basis_coefficients(
+        components = basis.vectors(first, k)
+        projection = None if not p else (basis.vectors(0, p), decoder.projection_centre)
+        if (k, p) not in joint:
+            joint[k, p] = fit_basis_coefficients(
                 decoder.network, base.mu[None], inputs[None], masks[None], components, basis.entries, options.effort,
                 projection=projection,
             )
-        codes, coefficients = joint[k]
+        codes, coefficients = joint[k, p]
         if mu_storage is not None:
             # μ as a compact record stores it (int8 on the fixed grid or with a step), then the coefficients
             # refitted to that code.
@@ -186,11 +201,19 @@ def _basis_fit(
             )
         else:
             code = _as_stored(codes, options.latent_itemsize)[0]
-        layer = quantise_coefficients(basis.sha256, coefficients[0], first, project)
+        layer = quantise_coefficients(basis.sha256, coefficients[0], first, p)
         record = LatentRecord(base.name, code, base.sigma, base.meta)
         mapped = decoder.decode_mapped(code)
         decoder.project_base(LayeredRecord(base.name, code, base.sigma, base.meta, basis=layer), mapped)
         mapped += basis.residual(layer.coefficients(), first)
         return record, layer, mapped
+
+    def kept_slice_error(mapped: np.ndarray) -> float:
+        """What rate control ranks candidates by: the clamped decode's L1 error over valid kept-slice entries."""
+        return float((np.abs(np.clip(mapped, 0.0, MAPPED_MAX) - target) * weights).sum())
+
+    def fit(k: int, mu_storage: MuStorage) -> tuple[LatentRecord, BasisLayer, np.ndarray]:
+        fits = [fit_one(k, mu_storage, p) for p in ways]
+        return min(fits, key=lambda candidate: kept_slice_error(candidate[2]))
 
     return fit

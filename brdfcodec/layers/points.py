@@ -9,12 +9,15 @@ which codec is better on materials it has not seen". Points of one family
   enhancement layers rate control chooses within N bytes of record payload:
   coefficients on the model's shared basis (compact σ; below the size that
   holds all of them, a compact base: μ as int8, one σ byte), then a detail
-  layer;
+  layer; the base decode projected on the shared basis (format 1.6) where,
+  measured on the material, that lowers its error (``--project-base auto``,
+  the default);
 - ``bvae-max-relae-X``: the same with ``--max-relae X`` (the smallest tried
   record meeting X on each material);
-- ``bvae-projected@N``: the same as ``bvae-layered@N`` with the base decode
-  projected on the shared basis (``bvae compress --project-base``, format
-  1.6), up to 256 B, where the basis layer is what the bytes buy;
+- ``bvae-projected@N`` and ``bvae-unprojected@N``: the same as
+  ``bvae-layered@N`` with the base decode always projected
+  (``--project-base always``) or never (``never``), up to 256 B, where the
+  basis layer is what the bytes buy: what the per-material choice gains;
 - ``pca-k-float16`` / ``pca-k-int8``: PCA of the mapped kept slices (basis of
   the training split), coefficients (orthogonal projection) as float16, or
   as int8 with one float16 scale per material (k + 2 bytes; also k = 14, 30
@@ -33,7 +36,7 @@ which codec is better on materials it has not seen". Points of one family
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -42,11 +45,14 @@ from brdfcodec.merl import MerlBRDF
 from brdfcodec.report.points import Material, OperatingPoint
 from brdfcodec.transforms import table_from_network_output
 
+if TYPE_CHECKING:
+    from brdfcodec.layers.encoding import ProjectBase
+
 __all__ = ["rate_distortion_points"]
 
 #: Payload budgets of the layered points, bytes per material.
 LAYERED_BUDGETS = (16, 32, 64, 128, 256, 1024, 4096, 16384, 65536, 262144)
-#: Payload budgets of the points with a projected base (an encoder option, slower to decode).
+#: Payload budgets of the points whose base is always, or never, projected (the encoder's choice made fixed).
 PROJECTED_BUDGETS = (16, 32, 64, 128, 256)
 
 
@@ -61,23 +67,26 @@ class LayeredBvae(OperatingPoint):
     family = "bvae-layered"
 
     def __init__(self, *, bytes_budget: int | None = None, max_relae: float | None = None, model: Any = None,
-                 project_base: bool = False) -> None:
+                 project_base: ProjectBase = "auto") -> None:
         from brdfcodec.codec import BrdfEncoder
 
         self.encoder = BrdfEncoder(model, effort=1, bytes=bytes_budget, max_relae=max_relae, latent_dtype="float16",
                                    project_base=project_base)
         self.decoder = self.encoder.decoder
-        if project_base:
+        if project_base != "auto":
             if bytes_budget is None:
-                raise ValueError("a projected-base point needs a size budget")
-            self.family = "bvae-projected"
-            self.name = f"bvae-projected@{_size_label(bytes_budget)}"
-            self.description = (f"β-VAE (effort 1, float16) + basis layer over the base projected on the shared "
-                                f"basis (--project-base), at most {bytes_budget} B of payload")
+                raise ValueError(f"a point with project_base={project_base!r} needs a size budget")
+            self.family = "bvae-projected" if project_base == "always" else "bvae-unprojected"
+            self.name = f"{self.family}@{_size_label(bytes_budget)}"
+            how = ("projected on the shared basis (--project-base always)" if project_base == "always" else
+                   "never projected (--project-base never)")
+            self.description = (f"β-VAE (effort 1, float16) + basis layer over the base {how}, at most "
+                                f"{bytes_budget} B of payload")
         elif bytes_budget is not None:
             self.name = f"bvae-layered@{_size_label(bytes_budget)}"
             self.description = (
-                f"β-VAE (effort 1, float16) + basis and detail layers, at most {bytes_budget} B of payload"
+                f"β-VAE (effort 1, float16) + basis and detail layers (the base projected where that lowers the "
+                f"error, the default), at most {bytes_budget} B of payload"
             )
         else:
             self.family = f"bvae-max-relae-{max_relae:g}"
@@ -224,7 +233,8 @@ def rate_distortion_points(train_inputs: np.ndarray, model: Any = None) -> list[
 
     points: list[OperatingPoint] = [LayeredBvae(bytes_budget=n, model=model) for n in LAYERED_BUDGETS]
     points.append(LayeredBvae(max_relae=0.02, model=model))
-    points += [LayeredBvae(bytes_budget=n, model=model, project_base=True) for n in PROJECTED_BUDGETS]
+    points += [LayeredBvae(bytes_budget=n, model=model, project_base=way) for n in PROJECTED_BUDGETS
+               for way in ("always", "never")]
     basis = fit_pca(train_inputs, min(75, len(train_inputs)))
     sizes = [k for k in (8, 16, 32, 64, 75) if k <= basis.n_components]
     points += [PcaPacked(basis, k, "float16") for k in sizes]

@@ -198,7 +198,7 @@ def fit_basis_coefficients(
     start = torch.as_tensor(np.array(codes, dtype=np.float32, ndmin=2), device=device, dtype=dtype)
     target = torch.as_tensor(np.asarray(inputs, dtype=np.float32), device=device, dtype=dtype).flatten(1)
     weight = torch.as_tensor(np.asarray(masks, dtype=np.float32), device=device, dtype=dtype).flatten(1)
-    basis = torch.as_tensor(np.asarray(components, dtype=np.float32), device=device, dtype=dtype)
+    basis = torch.as_tensor(np.array(components, dtype=np.float32), device=device, dtype=dtype)  # a writable copy
     where = torch.as_tensor(np.asarray(entries, dtype=np.int64), device=device)
     grads = [p.requires_grad for p in decoder.parameters()]
     for p in decoder.parameters():
