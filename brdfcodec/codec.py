@@ -572,9 +572,11 @@ class BrdfDecoder:
         from brdfcodec.layers.detail import decode_detail
 
         detail = _BackgroundCall(decode_detail, record.detail) if record.detail is not None else None
+        # The detail layer's inverse DCT (numpy, one core) runs beside the network, which then gets one core fewer.
+        beside = one_core_left() if detail is not None and self.device.type == "cpu" else contextlib.nullcontext()
         try:
             batch, _ = self._codes(record.mu)
-            with torch.inference_mode(), _EvalMode(self.network):
+            with beside, torch.inference_mode(), _EvalMode(self.network):
                 z = torch.from_numpy(batch).to(self.device, self.dtype)
                 hidden, unbounded = self.network.hidden_and_unbounded(z)
                 h = hidden.float().cpu().numpy().reshape(-1)

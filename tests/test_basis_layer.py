@@ -384,7 +384,8 @@ def test_the_basis_layer_follows_the_decoder_output_it_was_fitted_on(analytic_ta
     brdf = analytic_tables["red-plastic"]
     base = BrdfEncoder(effort=1, latent_dtype="float16")
     base_error = measure(base.encode(brdf, name="m"), base.decoder, brdf).meta["relae"]["mapped"]
-    encoder = BrdfEncoder(effort=1, bytes=64, latent_dtype="float16")
+    # Unprojected, so that the refit below needs no projection (test_projected_base.py covers projected fits).
+    encoder = BrdfEncoder(effort=1, bytes=64, latent_dtype="float16", project_base="never")
     record = encoder.encode(brdf, name="m")
     # 64 B cannot hold all 75 coefficients beside a float16 μ, so the base is compact: 8 bytes of μ on the fixed
     # grid (its μ fits ±3.97), 1 of σ.
@@ -451,12 +452,14 @@ def test_cli_bytes_writes_the_basis_layer(red_plastic_file, tmp_path, capsys) ->
     capsys.readouterr()
     assert main(["info", str(out)]) == 0
     shown = capsys.readouterr().out
-    assert "64 B" in shown and "[μ int8 fixed grid + σ shared + basis 53 (vectors 9–61)]" in shown
+    assert "64 B" in shown and "[μ int8 fixed grid + σ shared + basis 53 (vectors 9–61)" in shown
+    assert ("base projected on 50" in shown) == (entry.layers["basis"].get("project") == 50)  # auto: chosen per material
     smallest = tmp_path / "s.bvae"
     assert main(["compress", str(red_plastic_file), "-o", str(smallest), "--bytes", "12"]) == 0
     capsys.readouterr()
     assert main(["info", str(smallest)]) == 0
-    assert "[μ int8 fixed grid + σ shared + basis 1 (vector 9)] 12 B" in capsys.readouterr().out
+    shown = capsys.readouterr().out
+    assert "[μ int8 fixed grid + σ shared + basis 1 (vector 9)" in shown and "] 12 B" in shown
     assert main(["compress", str(red_plastic_file), "-o", str(tmp_path / "t.bvae"), "--bytes", "11"]) != 0
     assert "11 bytes is below the base record's 12 bytes" in capsys.readouterr().err
     assert not (tmp_path / "t.bvae").exists()

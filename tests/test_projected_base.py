@@ -161,7 +161,7 @@ def test_the_encoders_fit_is_the_decode_of_the_record_it_writes(analytic_tables,
     mu = encoder.encode(table, name="m").mu
     base = LatentRecord("m", mu, np.full(8, 0.01, np.float32), {})
     fit = _basis_fit(decoder, decoder.shared_basis, base, inputs, masks, EncodeOptions(effort=0, project_base=True))
-    record, layer, mapped = fit(21, compact)
+    record, layer, mapped = fit(21, compact, False)
     assert layer.project == 50
     written = LayeredRecord("m", record.mu, record.sigma, basis=layer, compact_mu=compact is not None,
                             shared_sigma=compact is not None, fixed_mu_grid=compact is not None,

@@ -91,10 +91,12 @@ class RateResult:
 #: How a record stores μ: None in the file's latent dtype, else compact (``layers.mu``): ``"int8"`` (a float16
 #: step and D int8 values) or ``"int8-fixed"`` (D int8 values on the fixed grid μ = q / 32).
 MuStorage = str | None
-#: What a basis fit returns for k coefficients and how μ is stored (when compact, the code it returns is the
-#: quantised one, and the coefficients are fitted to it): the base with its jointly refined μ, the layer, and
-#: the decoder's mapped output before the detail layer (clamped base decode plus the basis residual).
-BasisFit = Callable[[int, MuStorage], tuple[LatentRecord, BasisLayer, np.ndarray]]
+#: What a basis fit returns for k coefficients, how μ is stored (when compact, the code it returns is the
+#: quantised one, and the coefficients are fitted to it) and whether a detail layer will follow (the writer may
+#: then choose differently, for decode time: :func:`~brdfcodec.layers.encoding.layer_records`): the base with its
+#: jointly refined μ, the layer, and the decoder's mapped output before the detail layer (clamped base decode
+#: plus the basis residual).
+BasisFit = Callable[[int, MuStorage, bool], tuple[LatentRecord, BasisLayer, np.ndarray]]
 #: Basis sizes tried by an error target below the basis' full size.
 _BASIS_COUNTS: Final = (4, 8, 16, 32)
 #: A candidate of an error target: compact base or not, basis coefficients, detail step (None: no detail layer).
@@ -125,23 +127,25 @@ class _Candidates:
         self.mu_storage = compact_mu_storage(base.mu) if compact else None
         self.layered_bytes = _layered_base_bytes(d, latent_itemsize, self.mu_storage)
         self.basis_fit = basis_fit
-        self.stages: dict[int, tuple[LatentRecord, BasisLayer | None, np.ndarray]] = {0: (base, None, base_mapped)}
+        self.stages: dict[tuple[int, bool], tuple[LatentRecord, BasisLayer | None, np.ndarray]] = {
+            (0, False): (base, None, base_mapped), (0, True): (base, None, base_mapped)}
         self.details: dict[tuple[int, float], DetailLayer] = {}
 
-    def stage(self, k: int) -> tuple[LatentRecord, BasisLayer | None, np.ndarray]:
-        if k not in self.stages:
+    def stage(self, k: int, under_detail: bool = False) -> tuple[LatentRecord, BasisLayer | None, np.ndarray]:
+        """Base and k basis coefficients, for a record without a detail layer or (``under_detail``) with one."""
+        if (k, under_detail) not in self.stages:
             assert self.basis_fit is not None and k > 0
-            self.stages[k] = self.basis_fit(k, self.mu_storage)
-        return self.stages[k]
+            self.stages[k, under_detail] = self.basis_fit(k, self.mu_storage, under_detail)
+        return self.stages[k, under_detail]
 
     def detail(self, k: int, s: float) -> DetailLayer:
         if (k, s) not in self.details:
-            _, _, mapped = self.stage(k)
+            _, _, mapped = self.stage(k, True)
             self.details[k, s] = encode_detail((self.inputs - mapped) * self.masks, s)
         return self.details[k, s]
 
     def record(self, k: int, s: float | None) -> LatentRecord:
-        base, basis, _ = self.stage(k)
+        base, basis, _ = self.stage(k, s is not None)
         if basis is None and s is None:
             return base
         detail = None if s is None else self.detail(k, s)
@@ -151,14 +155,14 @@ class _Candidates:
         return LayeredRecord(base.name, base.mu, base.sigma, base.meta, detail=detail, basis=basis, **storage)
 
     def size(self, k: int, s: float | None) -> int:
-        _, basis, _ = self.stage(k)
+        _, basis, _ = self.stage(k, s is not None)
         if basis is None and s is None:
             return self.plain_bytes
         return (self.layered_bytes + (0 if basis is None else basis.nbytes)
                 + (0 if s is None else self.detail(k, s).nbytes))
 
     def mapped(self, k: int, s: float | None) -> np.ndarray:
-        _, _, mapped = self.stage(k)
+        _, _, mapped = self.stage(k, s is not None)
         return mapped if s is None else mapped + decode_detail(self.detail(k, s)).reshape(mapped.shape)
 
 
