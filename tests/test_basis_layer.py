@@ -453,7 +453,8 @@ def test_cli_bytes_writes_the_basis_layer(red_plastic_file, tmp_path, capsys) ->
     assert main(["info", str(out)]) == 0
     shown = capsys.readouterr().out
     assert "64 B" in shown and "[μ int8 fixed grid + σ shared + basis 53 (vectors 9–61)" in shown
-    assert ("base projected on 50" in shown) == (entry.layers["basis"].get("project") == 50)  # auto: chosen per material
+    projected = entry.layers["basis"].get("project") == 50  # auto: chosen per material
+    assert ("base projected on 50" in shown) == projected
     smallest = tmp_path / "s.bvae"
     assert main(["compress", str(red_plastic_file), "-o", str(smallest), "--bytes", "12"]) == 0
     capsys.readouterr()
