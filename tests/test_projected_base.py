@@ -145,6 +145,18 @@ def test_the_encoder_projects_where_that_lowers_the_error(analytic_tables, budge
         EncodeOptions(project_base="sometimes")  # type: ignore[arg-type]
 
 
+def test_auto_leaves_records_with_a_detail_layer_unprojected(analytic_tables) -> None:
+    """A projected base under a detail layer decodes past the 1.5x a layered decode may take, so ``auto`` keeps
+    the projection to records without one; ``always`` still projects them."""
+    from brdfcodec.codec import BrdfEncoder
+
+    table = analytic_tables["red-plastic"]
+    auto = BrdfEncoder(effort=0, bytes=2048).encode(table, name="m")
+    always = BrdfEncoder(effort=0, bytes=2048, project_base="always").encode(table, name="m")
+    assert auto.detail is not None and always.detail is not None
+    assert auto.basis.project == 0 and always.basis.project == 50
+
+
 @pytest.mark.parametrize("compact", [None, "int8-fixed"])
 def test_the_encoders_fit_is_the_decode_of_the_record_it_writes(analytic_tables, compact: str | None) -> None:
     """Rate control measures, and the detail layer codes, what the encoder's basis fit returns: it must be what

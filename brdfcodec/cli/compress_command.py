@@ -69,9 +69,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     parser.add_argument("--project-base", nargs="?", const="always", choices=("auto", "always", "never"),
                         default=None, metavar="WHEN",
                         help="with --bytes/--max-relae: project the base decode on the shared basis in records with "
-                        "a basis layer (format 1.6): auto (default: per material, where it lowers the error), "
-                        "always (the flag alone) or never; projecting lowers the error by about 5 %% at 32-128 B on "
-                        "held-out materials and takes about 2 ms more to decode per material")
+                        "a basis layer (format 1.6): auto (default: per material, where it lowers the error, in "
+                        "records without a detail layer), always (the flag alone) or never; projecting lowers the "
+                        "error by 4-11 %% at 16-128 B on held-out materials and takes about 2-3 ms more to decode "
+                        "per material")
     parser.set_defaults(handler=run)
 
 
