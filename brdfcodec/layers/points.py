@@ -9,9 +9,9 @@ which codec is better on materials it has not seen". Points of one family
   enhancement layers rate control chooses within N bytes of record payload:
   coefficients on the model's shared basis (compact σ; below the size that
   holds all of them, a compact base: μ as int8, one σ byte), then a detail
-  layer; the base decode projected on the shared basis (format 1.6) where,
-  measured on the material, that lowers its error (``--project-base auto``,
-  the default);
+  layer; in records without a detail layer, the base decode projected on the
+  shared basis (format 1.6) where, measured on the material, that lowers its
+  error (``--project-base auto``, the default);
 - ``bvae-max-relae-X``: the same with ``--max-relae X`` (the smallest tried
   record meeting X on each material);
 - ``bvae-projected@N`` and ``bvae-unprojected@N``: the same as
