@@ -15,10 +15,10 @@ detail layer alone, inverted plane by plane over its nonzero blocks (the
 decoder's choice here) and batched over all planes; and the basis sum
 ``c @ B`` of the shipped basis in float32 with numpy's BLAS on one thread and
 on all, and with torch in float32, float16 and bfloat16, against the
-decoder's sum over the factors of the shipped (factorised) basis, on one
-thread and on two. The dense basis sum reads 116 MB per decode and is bound
-by memory bandwidth; the factors are 33 MB; the detail layer and the
-network are bound by compute. Run it on an idle machine.
+decoder's sum over the factors of the shipped (factorised) basis. The
+dense basis sum reads 116 MB per decode and is bound by memory bandwidth;
+the factors are 33 MB; the detail layer and the network are bound by
+compute. Run it on an idle machine.
 """
 
 from __future__ import annotations
@@ -88,8 +88,6 @@ def main() -> None:
         if basis.factorised is not None:  # what the decoder does with a factorised basis (spec/model.md 1.4)
             rows["basis sum on the factors (decoder), 1 thread"] = timed(
                 lambda: basis.weighted_sum(c, record.basis.first))
-            rows["basis sum on the factors, 2 threads"] = timed(
-                lambda: basis.weighted_sum(c, record.basis.first, threads=2))
     rows["basis sum numpy, all BLAS threads"] = timed(lambda: c @ vectors)
     for dtype in (torch.float32, torch.float16, torch.bfloat16):
         tv, tc = torch.from_numpy(vectors).to(dtype), torch.from_numpy(c).to(dtype)

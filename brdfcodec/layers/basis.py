@@ -34,8 +34,7 @@ from __future__ import annotations
 import functools
 import itertools
 import os
-import threading
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Final
@@ -176,35 +175,24 @@ class SharedBasis:
                 self.components[rows][:, where].astype(np.float32))  # type: ignore[index]
         return self.factorised.values_at(count, where)
 
-    def weighted_sum(self, weights: npt.ArrayLike, first: int = 0, *, threads: int = 1) -> npt.NDArray[np.float32]:
-        """``Σᵢ wᵢ · b_(first+i)`` over ``entries``, shape (E,), float32.
+    def weighted_sum(self, weights: npt.ArrayLike, first: int = 0) -> npt.NDArray[np.float32]:
+        """``Σᵢ wᵢ · b_(first+i)`` over ``entries``, shape (E,), float32, on the calling thread (the sum is bound
+        by memory bandwidth; a factorised basis is summed on its factors).
 
         Parameters
         ----------
         weights : array_like, shape (k,)
             One weight per vector ``first … first + k − 1``.
         first : int, default 0
-        threads : int, default 1
-            Threads to split the entries over (the sum is bound by memory bandwidth, which one core does
-            not use up).
         """
         w = np.asarray(weights, dtype=np.float32).reshape(-1)
         rows = self._rows(first, len(w))
-        out = np.empty(len(self.entries), dtype=np.float32)
-        if self.factorised is not None:
-            folded = self.factorised.fold(w, rows.start)
-            width = self.factorised.factors.shape[1]
-            columns = _split(width, threads)
-            _in_threads([functools.partial(self.factorised.combine, folded, part, out.reshape(N_CHANNELS, width))
-                         for part in columns])
-            return out
-        vectors = self.vectors(rows.start, len(w))
-
-        def part_sum(part: slice) -> None:
-            np.matmul(w, vectors[:, part], out=out[part])
-
-        _in_threads([functools.partial(part_sum, part) for part in _split(len(out), threads)])
-        return out
+        if self.factorised is None:
+            return w @ self.vectors(rows.start, len(w))
+        width = self.factorised.factors.shape[1]
+        out = np.empty((N_CHANNELS, width), dtype=np.float32)
+        self.factorised.combine(self.factorised.fold(w, rows.start), slice(0, width), out)
+        return out.reshape(-1)
 
     def dots(self, values: npt.ArrayLike, count: int) -> npt.NDArray[np.float32]:
         """Dot products of ``values`` over ``entries`` with the first ``count`` vectors.
@@ -302,38 +290,6 @@ class SharedBasis:
                 f"but this basis holds {self.count}"
             )
         return slice(first, first + k)
-
-
-def _split(length: int, parts: int) -> list[slice]:
-    """``range(length)`` in ``parts`` contiguous slices (fewer when short)."""
-    parts = max(1, min(int(parts), length))
-    bounds = np.linspace(0, length, parts + 1).astype(int)
-    return [slice(int(a), int(b)) for a, b in itertools.pairwise(bounds)]
-
-
-def _in_threads(calls: Sequence[Callable[[], object]]) -> None:
-    """Run the calls, all but the first on threads of their own (numpy releases the GIL in its kernels)."""
-    if len(calls) == 1:
-        calls[0]()
-        return
-    errors: list[BaseException] = []
-
-    def guarded(call: Callable[[], object]) -> None:
-        try:
-            call()
-        except BaseException as error:  # noqa: BLE001 - raised on the calling thread below
-            errors.append(error)
-
-    others = [threading.Thread(target=guarded, args=(call,), daemon=True) for call in calls[1:]]
-    for thread in others:
-        thread.start()
-    try:
-        calls[0]()
-    finally:
-        for thread in others:
-            thread.join()
-    if errors:
-        raise errors[0]
 
 
 def fit_shared_basis(

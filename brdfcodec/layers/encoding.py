@@ -5,7 +5,7 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, Literal
+from typing import TYPE_CHECKING, Any, Literal, get_args
 
 import numpy as np
 
@@ -33,15 +33,16 @@ __all__ = ["PROJECTED_BASE_VECTORS", "EncodeOptions", "ProjectBase", "layer_reco
 #: in the leading principal components; past them it adds its own errors, larger on new materials than the mean's.
 #: Measured on the held-out NBRDF proxy of MERL (``benchmarks/projected_base_study.py``,
 #: ``reports/rd-study/projected-base.json``): 50 and 75 vectors gain alike at 16 to 128 B. The projection runs
-#: after the network and needs a pass over the vectors, taken on the factors of a factorised basis (about 1.5 ms
-#: for the shipped basis on the 2-core development machine; a 64 B record decodes in about 1.4× a base-only one).
+#: after the network and needs a pass over the vectors, taken on the factors of a factorised basis (about 1.8 ms
+#: for the shipped basis on the 2-core development machine, ``benchmarks/basis_sum_study.py``; a 64 B record decodes
+#: in about 1.4× a base-only one, benchmark ``decode-layered-64B-projected``).
 PROJECTED_BASE_VECTORS = 50
 
 #: When a writer projects a layered record's base (:class:`EncodeOptions`): ``"auto"`` fits the basis layer both
 #: ways and keeps, per material and size, the one with the lower kept-slice error (records without a detail layer
 #: only); ``"always"``; ``"never"``.
 ProjectBase = Literal["auto", "always", "never"]
-_PROJECT_BASE_CHOICES: tuple[str, ...] = ("auto", "always", "never")
+_PROJECT_BASE_CHOICES: tuple[str, ...] = get_args(ProjectBase)
 
 
 def projected_base_vectors(decoder: BrdfDecoder, basis: SharedBasis) -> int:
