@@ -2,13 +2,12 @@
 
 Decoding runs torch (the network, on its OpenMP threads) and numpy's BLAS
 (basis sum, inverse DCT of the detail layer, slice interpolation) one after
-the other, and a layered record's layers beside the network on one core
-(:mod:`brdfcodec.torch_threads`). OpenBLAS' worker threads keep spinning for a while after each
+the other. OpenBLAS' worker threads keep spinning for a while after each
 call, so on a machine with few cores they take the cores torch's threads
 need next: on 2 cores a layered decode took 27.3 ms with BLAS threaded and
 21.6 ms with BLAS on one thread, a base-only decode 11.9 ms either way
-(``python -m pytest benchmarks/test_bench_codec.py -k layered``; measured
-before the layers ran beside the network). The limit
+(``python -m pytest benchmarks/test_bench_codec.py -k layered``, measured
+with an earlier, slower basis sum). The limit
 is set for the duration of a decode only, through threadpoolctl, and the
 caller's own BLAS setting is restored afterwards; decodes that overlap on
 several threads share one limit (:class:`~brdfcodec.shared_limit.SharedLimit`).

@@ -25,16 +25,14 @@ float32, and entries whose bin lies below the horizon set to ``-1``
 
 from __future__ import annotations
 
-import contextlib
 import functools
 import itertools
 import os
-import threading
 import warnings
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import TYPE_CHECKING, Generic, Literal, TypeVar
+from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 import numpy.typing as npt
@@ -80,7 +78,6 @@ from brdfcodec.representation import (
     unmap_values,
     validate_phi_d_bins,
 )
-from brdfcodec.torch_threads import one_core_left
 
 if TYPE_CHECKING:
     from brdfcodec.layers.basis import SharedBasis
@@ -181,41 +178,6 @@ def _invalid_bins() -> np.ndarray:
     invalid = ~horizon_mask()
     invalid.setflags(write=False)
     return invalid
-
-
-_T = TypeVar("_T")
-
-
-class _BackgroundCall(Generic[_T]):
-    """``function(*args)`` run on a new thread; :meth:`result` joins it and returns its value or raises its error.
-
-    A thread per call (about 0.1 ms) rather than a pool, so that a process forked after a decode
-    (multiprocessing) has nothing stale to wait on.
-    """
-
-    def __init__(self, function: Callable[..., _T], *args: object) -> None:
-        self._value: _T | None = None
-        self._error: BaseException | None = None
-        self._thread = threading.Thread(target=self._run, args=(function, args), daemon=True)
-        self._thread.start()
-
-    def _run(self, function: Callable[..., _T], args: tuple[object, ...]) -> None:
-        try:
-            self._value = function(*args)
-        except BaseException as error:  # noqa: BLE001 - handed to the caller by result()
-            self._error = error
-
-    def join(self) -> None:
-        """Wait for the call to end, without raising its error (:meth:`result` raises it)."""
-        self._thread.join()
-
-    def result(self) -> _T:
-        self._thread.join()
-        if self._error is not None:
-            raise self._error
-        if self._value is None:
-            raise RuntimeError("background call ended without a result")
-        return self._value
 
 
 @dataclass(frozen=True)
@@ -552,8 +514,7 @@ class BrdfDecoder:
         the fast way: the projection's dot products ``(y − m) · v_j`` go through the network's last layer,
         ``G h`` with ``G`` its adjoint applied to the vectors (:class:`_ProjectionPlan`), plus the linear
         path's ``z · (C vⱼ)``, the last layer's bias, and the entries the clamp moved; then one pass over the
-        vectors adds the projection and the basis layer together. The network runs on every core: nothing
-        but a detail layer runs beside it.
+        vectors adds the projection and the basis layer together; then the detail layer, if any.
         """
         layer = record.basis
         assert layer is not None
@@ -570,19 +531,12 @@ class BrdfDecoder:
         plan = self._projection_plan(basis)
         from brdfcodec.layers.detail import decode_detail
 
-        detail = _BackgroundCall(decode_detail, record.detail) if record.detail is not None else None
-        # The detail layer's inverse DCT (numpy, one core) runs beside the network, which then gets one core fewer.
-        beside = one_core_left() if detail is not None and self.device.type == "cpu" else contextlib.nullcontext()
-        try:
-            batch, _ = self._codes(record.mu)
-            with beside, torch.inference_mode(), _EvalMode(self.network):
-                z = torch.from_numpy(batch).to(self.device, self.dtype)
-                hidden, unbounded = self.network.hidden_and_unbounded(z)
-                h = hidden.float().cpu().numpy().reshape(-1)
-                u = unbounded.float().cpu().numpy()[0]
-        finally:
-            if detail is not None:
-                detail.join()
+        batch, _ = self._codes(record.mu)
+        with torch.inference_mode(), _EvalMode(self.network):
+            z = torch.from_numpy(batch).to(self.device, self.dtype)
+            hidden, unbounded = self.network.hidden_and_unbounded(z)
+            h = hidden.float().cpu().numpy().reshape(-1)
+            u = unbounded.float().cpu().numpy()[0]
         mapped = clamp_mapped(u)  # a new array: u is still needed
         on_basis = basis.entry_mask  # boolean: gathers and scatters faster than the index array
         unclamped = u.reshape(-1)[on_basis]
@@ -595,8 +549,8 @@ class BrdfDecoder:
             weights[:count] = plan.dot_products(count, h, batch[0], moved)
             weights[first : first + len(c)] += c
             mapped.reshape(-1)[on_basis] = plan.reconstruct(weights)
-        if detail is not None:
-            mapped += detail.result().reshape(mapped.shape)
+        if record.detail is not None:
+            mapped += decode_detail(record.detail).reshape(mapped.shape)
         return clamp_mapped(mapped, out=mapped)
 
     def project_base(self, record: Record, mapped: np.ndarray) -> None:
@@ -618,11 +572,9 @@ class BrdfDecoder:
     def _layer_residuals(self, record: Record, slots: Sequence[int] | None = None) -> list[np.ndarray]:
         """A record's layers decoded to mapped residuals, in the order they are added (basis, then detail).
 
-        Empty for a base-only record. A full decode gets one ``(63, 90, 90)`` residual, both layers summed on
-        the calling thread (:func:`~brdfcodec.layers.layer_sum.layered_residual`). A partial decode gets each
-        layer's channels of the kept ``slots`` only, in
-        :func:`~brdfcodec.representation.network_channels_for_slots` order; the detail layer's inverse DCT
-        (compute-bound) runs on a second thread beside the basis sum (memory-bound).
+        Empty for a base-only record. A full decode gets one ``(63, 90, 90)`` residual, both layers summed
+        (:func:`~brdfcodec.layers.layer_sum.layered_residual`). A partial decode gets each layer's channels of
+        the kept ``slots`` only, in :func:`~brdfcodec.representation.network_channels_for_slots` order.
         """
         basis_layer, detail = getattr(record, "basis", None), getattr(record, "detail", None)
         if basis_layer is None and detail is None:
@@ -642,37 +594,25 @@ class BrdfDecoder:
 
             residual = layered_residual(basis, basis_layer, detail)
             return [] if residual is None else [residual]
-        channels = network_channels_for_slots(slots)
         residuals = []
-        detail_residual = None
+        if basis_layer is not None and basis is not None:
+            channels = network_channels_for_slots(slots)
+            residuals.append(basis.residual_channels(basis_layer.coefficients(), channels, basis_layer.first))
         if detail is not None:
             from brdfcodec.layers.detail import decode_detail
 
-            detail_residual = _BackgroundCall(decode_detail, detail, slots)
-        try:
-            if basis_layer is not None and basis is not None:
-                residuals.append(basis.residual_channels(basis_layer.coefficients(), channels, basis_layer.first))
-        finally:
-            if detail_residual is not None:
-                detail_residual.join()  # the caller's thread limits must outlast it, also on error
-        if detail_residual is not None:
-            residuals.append(detail_residual.result().reshape(-1, *NETWORK_INPUT_SHAPE[1:]))
+            residuals.append(decode_detail(detail, slots).reshape(-1, *NETWORK_INPUT_SHAPE[1:]))
         return residuals
 
-    def _with_layers(
-        self,
-        record: Record,
-        mapped: np.ndarray,
-        slots: Sequence[int] | None = None,
-        residuals: list[np.ndarray] | None = None,
-    ) -> np.ndarray:
+    def _with_layers(self, record: Record, mapped: np.ndarray, slots: Sequence[int] | None = None) -> np.ndarray:
         """A layered record's decode: base + basis layer + detail layer, then the one clamp (spec §4.4, §6).
 
         ``mapped`` is the clamped base decode of all 63 channels, or (partial decoding) of the channels of
-        the kept ``slots`` only; ``residuals`` are :meth:`_layer_residuals`', computed here when not given.
+        the kept ``slots`` only. The layers are decoded after the network, on the calling thread: beside the
+        network, on a thread of their own, they made a decode slower on 2 cores, not faster
+        (``benchmarks/README.md``).
         """
-        if residuals is None:
-            residuals = self._layer_residuals(record, slots)
+        residuals = self._layer_residuals(record, slots)
         if not residuals:
             return mapped
         for residual in residuals:
@@ -689,28 +629,7 @@ class BrdfDecoder:
                 return out
             if _projected_vectors(record):
                 return self._projected_mapped(record)  # type: ignore[arg-type]
-            mapped, (residuals,) = self._network_beside_layers([record])
-            return self._with_layers(record, mapped[0], residuals=residuals)
-
-    def _network_beside_layers(
-        self, records: Sequence[LatentRecord], batch_size: int = 16
-    ) -> tuple[np.ndarray, list[list[np.ndarray]]]:
-        """The network's clamped mapped slices for the records' codes, ``(B, 63, 90, 90)``, and each record's
-        layer residuals (:meth:`_layer_residuals`).
-
-        When a record has layers, they (numpy) are computed on a thread of their own while the network runs on
-        all cores but one (:mod:`brdfcodec.torch_threads`). Call it with numpy's BLAS on one thread.
-        """
-        codes = np.stack([record.mu for record in records])
-        if not any(_has_layers(record) for record in records):
-            return self.decode_mapped(codes, batch_size=batch_size), [[] for _ in records]
-        with one_core_left() if self.device.type == "cpu" else contextlib.nullcontext():
-            layers = _BackgroundCall(lambda: [self._layer_residuals(record) for record in records])
-            try:
-                mapped = self.decode_mapped(codes, batch_size=batch_size)
-            finally:
-                layers.join()  # also when the network failed: the thread limits must outlast the layers' thread
-            return mapped, layers.result()
+            return self._with_layers(record, self.decode_mapped(record.mu))
 
     def decode(
         self,
@@ -755,16 +674,13 @@ class BrdfDecoder:
             chunk = records[start : start + batch_size]
             # Projected records decode on their own (their network pass also yields the projection's terms).
             latent = [r for r in chunk if isinstance(r, LatentRecord) and not _projected_vectors(r)]
-            batch: Iterator[tuple[np.ndarray, list[np.ndarray]]] = iter(())
+            batch: Iterator[np.ndarray] = iter(())
             if latent:
-                with single_blas_thread():
-                    mapped_rows, residuals = self._network_beside_layers(latent, batch_size)
-                batch = zip(mapped_rows, residuals, strict=True)
+                batch = iter(self.decode_mapped(np.stack([record.mu for record in latent]), batch_size=batch_size))
             for record in chunk:  # grafts need two codes each: decoded on their own
                 with single_blas_thread():
                     if isinstance(record, LatentRecord) and not _projected_vectors(record):
-                        rows, layers = next(batch)
-                        mapped = self._with_layers(record, rows, residuals=layers)
+                        mapped = self._with_layers(record, next(batch))
                     else:
                         mapped = self.mapped_record(record)
                     table = _apply_mask(table_from_mapped(mapped), None, masked)

@@ -432,12 +432,13 @@ def test_an_error_target_takes_the_smallest_candidate_that_meets_it(analytic_tab
 
 
 def test_an_error_target_tries_candidates_from_small_to_large() -> None:
-    from brdfcodec.layers.rate import STEP_LADDER, error_target_sequence
+    from brdfcodec.layers.rate import DETAIL_BASIS_COUNT, STEP_LADDER, error_target_sequence
 
     sequence = error_target_sequence(75)
     assert sequence[:5] == [(True, 4, None), (True, 8, None), (True, 16, None), (True, 32, None), (True, 75, None)]
-    assert sequence[5:] == [(False, 75, s) for s in STEP_LADDER]
+    assert sequence[5:] == [(False, DETAIL_BASIS_COUNT, s) for s in STEP_LADDER]  # a detail layer: at most 32
     assert error_target_sequence(20)[:4] == [(True, 4, None), (True, 8, None), (True, 16, None), (True, 20, None)]
+    assert error_target_sequence(20)[4:] == [(False, 20, s) for s in STEP_LADDER]
     assert error_target_sequence(0) == [(False, 0, None), *((False, 0, s) for s in STEP_LADDER)]
 
 

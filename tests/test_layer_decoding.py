@@ -1,11 +1,9 @@
 """Issue 14: the layered decode's fast paths give what the plain definitions give.
 
 The detail layer is inverted plane by plane over the blocks that hold its
-nonzero coefficients (or batched when it is dense), and a full decode computes
-the layers on a thread of their own while the network runs on one torch thread
-fewer (``brdfcodec.torch_threads``). Both are checked against the spec's
-definitions written out directly, and torch's thread count is checked to come
-back.
+nonzero coefficients (or batched when it is dense), and a full decode sums both
+layers into one residual. Both are checked against the spec's definitions
+written out directly.
 """
 
 from __future__ import annotations
@@ -14,7 +12,6 @@ import dataclasses
 
 import numpy as np
 import pytest
-import torch
 import zstandard
 
 from brdfcodec.conventions import MAPPED_MAX, NETWORK_INPUT_SHAPE
@@ -22,7 +19,6 @@ from brdfcodec.layers import detail as detail_module
 from brdfcodec.layers import layer_sum
 from brdfcodec.layers.basis import BasisLayer, SharedBasis
 from brdfcodec.layers.detail import COLOUR_MATRIX, DetailLayer, decode_detail
-from brdfcodec.torch_threads import one_core_left
 
 SHAPE = (3, 21, 90, 90)
 
@@ -101,7 +97,7 @@ def one_after_the_other(basis: SharedBasis | None, layer: BasisLayer | None, det
 
 
 @pytest.mark.parametrize("which", ["both", "basis", "detail"])
-def test_the_two_thread_layer_sum_equals_the_layers_one_after_the_other(which: str) -> None:
+def test_the_layer_sum_equals_the_layers_one_after_the_other(which: str) -> None:
     basis, layer, detail = basis_and_layers()
     use_layer = layer if which != "detail" else None
     use_detail = detail if which != "basis" else None
@@ -121,101 +117,22 @@ def test_a_bad_detail_layer_is_named_in_the_error() -> None:
         layer_sum.layered_residual(basis, layer, broken_detail())
 
 
-def test_one_core_left_lowers_torch_threads_and_restores_them(monkeypatch) -> None:
-    counts = [4]
-    monkeypatch.setattr(torch, "get_num_threads", lambda: counts[-1])
-    monkeypatch.setattr(torch, "set_num_threads", counts.append)
-    with one_core_left():
-        assert counts[-1] == 3
-        with one_core_left():  # nested on one thread: lowered once, restored once
-            assert counts[-1] == 3
-        assert counts[-1] == 3
-    assert counts == [4, 3, 4]
-    with pytest.raises(KeyError), one_core_left():
-        raise KeyError("x")
-    assert counts[-1] == 4
-    counts[:] = [1]
-    with one_core_left():
-        assert counts[-1] == 1  # never below one thread
-
-
-def test_overlapping_blocks_on_two_threads_restore_each_threads_own_count() -> None:
-    """torch keeps the count per thread: the thread that entered first must get its own back, whoever leaves last."""
-    import threading
-
-    if torch.get_num_threads() < 2:
-        pytest.skip("needs torch on at least 2 threads")
-    entered, main_left = threading.Event(), threading.Event()
-    seen: dict[str, int] = {}
-
-    def worker() -> None:
-        seen["start"] = torch.get_num_threads()
-        with one_core_left():
-            seen["inside"] = torch.get_num_threads()
-            entered.set()
-            main_left.wait(10)
-        seen["after"] = torch.get_num_threads()
-
-    before = torch.get_num_threads()
-    thread = threading.Thread(target=worker)
-    thread.start()
-    assert entered.wait(10)
-    with one_core_left():
-        assert torch.get_num_threads() == before - 1
-    assert torch.get_num_threads() == before
-    main_left.set()
-    thread.join(10)
-    assert seen["inside"] == seen["start"] - 1
-    assert seen["after"] == seen["start"]
-
-
-def test_a_failing_network_waits_for_the_layers_thread(monkeypatch) -> None:
-    """The thread limits are given back only after the layers' thread has ended, also when the network raises."""
-    import time
-
+def test_a_layered_decode_is_the_base_plus_its_layers_and_a_bad_layer_is_named() -> None:
     from brdfcodec.codec import BrdfDecoder
     from brdfcodec.layers.record import LayeredRecord
 
     decoder = BrdfDecoder()
-    done: list[bool] = []
-
-    def slow_layers(record, slots=None):  # noqa: ARG001
-        time.sleep(0.2)
-        done.append(True)
-        return []
-
-    def failing_network(*args, **kwargs):  # noqa: ARG001
-        raise RuntimeError("network failed")
-
-    monkeypatch.setattr(decoder, "_layer_residuals", slow_layers)
-    monkeypatch.setattr(decoder, "decode_mapped", failing_network)
-    before = torch.get_num_threads()
-    record = LayeredRecord("d", np.zeros(8), np.ones(8), detail=layer_of(sparse_coefficients(2, 0.01), 0.05))
-    with pytest.raises(RuntimeError, match="network failed"):
-        decoder.mapped_record(record)
-    assert done == [True]
-    assert torch.get_num_threads() == before
-
-
-def test_a_layered_decode_gives_torch_its_threads_back_also_when_a_layer_fails() -> None:
-    from brdfcodec.codec import BrdfDecoder
-    from brdfcodec.layers.record import LayeredRecord
-
-    decoder = BrdfDecoder()
-    before = torch.get_num_threads()
     rng = np.random.default_rng(2)
     record = LayeredRecord("d", rng.normal(size=8), np.ones(8), detail=layer_of(sparse_coefficients(2, 0.01), 0.05))
     mapped = decoder.mapped_record(record)
-    assert torch.get_num_threads() == before
     expected = decoder.decode_mapped(record.mu) + decode_detail(record.detail).reshape(NETWORK_INPUT_SHAPE)
     np.testing.assert_allclose(mapped, np.clip(expected, 0.0, MAPPED_MAX), atol=1e-5)
     with pytest.raises(ValueError, match="detail layer declares 10 bytes"):
         decoder.mapped_record(dataclasses.replace(record, detail=broken_detail()))
-    assert torch.get_num_threads() == before
 
 
 def test_decode_many_gives_each_record_its_own_layers() -> None:
-    """A batch mixing base-only, layered and graft records: the batched network, with the layers beside it."""
+    """A batch mixing base-only, layered and graft records: the batched network, then each record's layers."""
     from brdfcodec.bvae_format import GraftRecord, LatentRecord
     from brdfcodec.codec import BrdfDecoder
     from brdfcodec.layers.record import LayeredRecord
@@ -232,9 +149,7 @@ def test_decode_many_gives_each_record_its_own_layers() -> None:
         GraftRecord("graft", rng.normal(size=8), np.ones(8), (0, 1), [2.0, -1.0]),
         LayeredRecord("detail", rng.normal(size=8), np.ones(8), detail=layer_of(sparse_coefficients(5, 0.01), 0.05)),
     ]
-    before = torch.get_num_threads()
     batched = list(decoder.decode_many(records, masked="zero", batch_size=3))
-    assert torch.get_num_threads() == before
     for record, table in zip(records, batched, strict=True):
         np.testing.assert_allclose(table, decoder.decode(record, masked="zero"), rtol=1e-5, atol=1e-6,
                                    err_msg=record.name)

@@ -332,8 +332,9 @@ def test_measure_sets_the_provenance_of_the_source_it_measured_against(analytic_
 
 
 @pytest.mark.parametrize("better", [32, 75])
-def test_size_budget_tries_a_smaller_basis_under_the_detail_layer(better: int) -> None:
-    """Under a budget with room for detail, the search fits 75 and 32 coefficients and keeps the lower error."""
+def test_a_record_with_a_detail_layer_carries_at_most_the_detail_basis_count(better: int) -> None:
+    """Under a budget with room for detail, all 75 coefficients are tried without detail and at most 32 with it
+    (a bound on every layered record's decode time), and the lower error is kept."""
     from brdfcodec.layers.basis import quantise_coefficients
     from brdfcodec.layers.rate import DETAIL_BASIS_COUNT, encode_layers
 
@@ -341,20 +342,23 @@ def test_size_budget_tries_a_smaller_basis_under_the_detail_layer(better: int) -
     target = rng.uniform(0.0, 1.0, NETWORK_INPUT_SHAPE).astype(np.float32)
     masks = np.ones(NETWORK_INPUT_SHAPE, dtype=np.float32)
     base = LatentRecord("m", np.zeros(8), np.ones(8))
-    fitted: list[int] = []
+    fitted: list[tuple[int, bool]] = []
 
-    def fit(k: int, mu_storage: str | None, under_detail: bool):  # noqa: ANN202, ARG001 - the BasisFit callable
+    def fit(k: int, mu_storage: str | None, under_detail: bool):  # noqa: ANN202 - the BasisFit callable
         assert mu_storage is None  # 4096 B hold all 75 coefficients beside μ in float32
-        fitted.append(k)
-        share = 0.9 if k == better else 0.5  # how much of the material k coefficients explain
+        fitted.append((k, under_detail))
+        # how much of the material k coefficients explain: 75 without detail can beat 32 with it
+        share = 0.999 if k == better else 0.5
         return base, quantise_coefficients("cd" * 32, np.ones(k)), (target * share).astype(np.float32)
 
     budget = 4096
     result = encode_layers(base, np.zeros_like(target), target, masks, bytes_budget=budget, basis_fit=fit,
                            basis_count=75)
-    assert sorted(set(fitted)) == [DETAIL_BASIS_COUNT, 75]
-    assert isinstance(result.record, LayeredRecord) and result.record.detail is not None
-    assert result.record.basis.count == better and result.payload_bytes <= budget
+    assert sorted(set(fitted)) == [(DETAIL_BASIS_COUNT, True), (75, False)]
+    record = result.record
+    assert isinstance(record, LayeredRecord) and result.payload_bytes <= budget
+    assert record.basis.count == better
+    assert (record.detail is not None) == (better == DETAIL_BASIS_COUNT)
 
 
 @pytest.mark.parametrize(("budget", "itemsize", "mu_max", "storage", "count"), [

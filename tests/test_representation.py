@@ -41,6 +41,13 @@ def test_units_are_the_colour_scale_and_its_inverse() -> None:
 def test_clamp_is_the_mapped_domain_with_nan_as_zero() -> None:
     raw = np.array([-3.0, np.nan, 0.5, MAPPED_MAX + 1, np.inf, -np.inf], dtype=np.float32)
     np.testing.assert_array_equal(clamp_mapped(raw), [0.0, 0.0, 0.5, MAPPED_MAX, MAPPED_MAX, 0.0])
+    in_place = raw.copy()
+    assert clamp_mapped(in_place, out=in_place) is in_place
+    np.testing.assert_array_equal(in_place, [0.0, 0.0, 0.5, MAPPED_MAX, MAPPED_MAX, 0.0])
+    assert clamp_mapped(np.array(np.nan)) == 0.0 and clamp_mapped(np.float64(9.0)) == MAPPED_MAX  # 0-d
+    lone_nan = np.full((63, 90, 90), 0.25, dtype=np.float32)
+    lone_nan[40, 89, 89] = np.nan  # one NaN among many values is still found
+    assert clamp_mapped(lone_nan)[40, 89, 89] == 0.0 and clamp_mapped(lone_nan).dtype == np.float32
 
 
 def test_network_input_is_the_mapped_kept_slices_with_invalid_entries_zero(

@@ -1,11 +1,12 @@
 """A layered record's residual: basis layer plus detail layer, as one array (full-table decodes).
 
-The decoder computes it on a thread of its own while the network runs
-(:mod:`brdfcodec.torch_threads`), so it is written for one core: the basis
-sum ``c @ B`` (116 MB of float32 vectors read for 75 coefficients, bound by
-memory bandwidth), placed on the grid, then the detail layer's residual
-added (its inverse DCT, bound by compute, only over the blocks that hold
-nonzero coefficients: :func:`~brdfcodec.layers.detail.decode_detail`).
+The decoder computes it after the network, on the calling thread: the basis
+sum on the shared basis' factors (bound by memory bandwidth: each factor its
+coefficients use is read once), placed on the grid, then the detail layer's
+residual added (its inverse DCT, bound by compute, only over the blocks that
+hold nonzero coefficients: :func:`~brdfcodec.layers.detail.decode_detail`).
+Beside the network, on a thread of its own, it made a 2-core decode slower,
+not faster (``benchmarks/README.md``).
 
 This module does not import torch.
 """

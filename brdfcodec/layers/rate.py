@@ -101,11 +101,13 @@ BasisFit = Callable[[int, MuStorage, bool], tuple[LatentRecord, BasisLayer, np.n
 _BASIS_COUNTS: Final = (4, 8, 16, 32)
 #: A candidate of an error target: compact base or not, basis coefficients, detail step (None: no detail layer).
 _Candidate = tuple[bool, int, float | None]
-#: The smaller basis size a size budget also tries under a detail layer (measured on held-out materials of the
-#: NBRDF proxy: at 1 KB and 16 KB, 32 coefficients plus detail beat 75 plus detail; at 256 B, 75 win).
+#: The most basis coefficients a record with a detail layer carries, so that decoding any layered record stays
+#: within 1.5 times its base-only decode (the basis sum reads every factor its coefficients use; 32 coefficients
+#: use 28 of the 64 factors, 75 all of them). Measured on the held-out materials of the NBRDF proxy
+#: (``benchmarks/basis_cap_study.py``): at most 32 under a detail layer costs 0.5 % of mapped RelAE at 1 KB and
+#: nothing measurable at 4 KB and 16 KB against also trying all 75.
 DETAIL_BASIS_COUNT: Final = 32
-#: Relative kept-slice error a size budget gives up for fewer basis coefficients: a record with 32 instead of 75
-#: decodes about 3 ms faster (the basis sum streams each coefficient's 387,378-entry vector).
+#: Relative kept-slice error a size budget gives up for fewer basis coefficients (each costs decode time).
 DECODE_TOLERANCE: Final = 0.02
 
 
@@ -201,7 +203,8 @@ def encode_layers(
     metric : {"mapped", "linear"}
         RelAE used by ``max_relae``.
     step : float, optional
-        A fixed quantisation step instead of a target (on top of the full basis layer, when there is one).
+        A fixed quantisation step instead of a target (on top of a basis layer of min(K,
+        :data:`DETAIL_BASIS_COUNT`) coefficients, when there is a basis).
     latent_itemsize : int
         Bytes per stored latent value (4: float32, 2: float16).
     basis_fit : callable, optional
@@ -226,20 +229,19 @@ def encode_layers(
     cands = _Candidates(base, base_mapped, target, weights, latent_itemsize, basis_fit, compact)
     base_bytes = min(cands.plain_bytes, cands.layered_bytes + STEP_BYTES + 1) if full else cands.plain_bytes
     if step is not None:
-        return RateResult(cands.record(full, float(step)), cands.size(full, float(step)),
-                          [(float(step), cands.size(full, float(step)), None)])
+        count = min(full, DETAIL_BASIS_COUNT)
+        return RateResult(cands.record(count, float(step)), cands.size(count, float(step)),
+                          [(float(step), cands.size(count, float(step)), None)])
     tried: list[tuple[float | None, int, float | None]] = []
     if bytes_budget is not None:
         if bytes_budget < base_bytes:
             raise RateTargetError(f"{base.name}: {bytes_budget} bytes is below the base record's {base_bytes} bytes")
         k = max(0, min(full, bytes_budget - cands.layered_bytes - STEP_BYTES))
-        small = min(k, DETAIL_BASIS_COUNT)
-        # The smaller basis only pays where a detail layer fits beside it (no room at 64 B: 51 coefficients, no detail).
-        room = bytes_budget - (cands.layered_bytes + STEP_BYTES + small) >= _empty_detail_bytes()
-        counts = sorted({k, small}) if room else [k]
+        under_detail = min(k, DETAIL_BASIS_COUNT)
         fitting: set[tuple[int, float | None]] = {c for c in ((0, None), (k, None)) if cands.size(*c) <= bytes_budget}
-        for count in counts:
-            fitting |= {(count, s) for s in _finest_fitting_steps(cands, count, bytes_budget, tried)}
+        # A detail layer only where it fits beside its coefficients (no room at 64 B: 51 coefficients, no detail).
+        if bytes_budget - (cands.layered_bytes + STEP_BYTES + under_detail) >= _empty_detail_bytes():
+            fitting |= {(under_detail, s) for s in _finest_fitting_steps(cands, under_detail, bytes_budget, tried)}
 
         # Among the fitting candidates, the lowest kept-slice L1 error (a very coarse layer can be worse than none);
         # within DECODE_TOLERANCE of it, the one with the fewest coefficients (each costs decode time).
@@ -268,7 +270,11 @@ def encode_layers(
         return errors[candidate]
 
     sequence = error_target_sequence(full)
-    bracket = _bisect(lambda c: error(c) <= max_relae, len(sequence), sequence)
+    # Records without a detail layer first, then the detail ladder: the error falls along each part, but the
+    # coarsest rung (at most DETAIL_BASIS_COUNT coefficients) can be worse than all K without detail.
+    plain = sum(1 for candidate in sequence if candidate[2] is None)
+    search = sequence[:plain] if error(sequence[plain - 1]) <= max_relae else sequence[plain:]
+    bracket = _bisect(lambda c: error(c) <= max_relae, len(search), search)
     if bracket is None:
         best = min(errors.values())
         raise RateTargetError(
@@ -280,7 +286,7 @@ def encode_layers(
         low, high = failing[2], meeting[2]
         for _ in range(_REFINE_ROUNDS - 1):
             mid_step = float(np.sqrt(low * high))
-            if error((False, full, mid_step)) <= max_relae:
+            if error((False, min(full, DETAIL_BASIS_COUNT), mid_step)) <= max_relae:
                 high = mid_step
             else:
                 low = mid_step
@@ -294,8 +300,9 @@ def error_target_sequence(basis_count: int) -> list[_Candidate]:
 
     With a shared basis of K vectors: 4, 8, 16 and 32 coefficients (those below K), then all K, on a compact
     base (the same rule as a size budget: a record too small for all K coefficients beside μ in the latent
-    dtype stores its base compact), then K coefficients on the latent-dtype base under each rung of
-    :data:`STEP_LADDER`, coarse to fine. Without a basis: the base alone, then the base under each rung.
+    dtype stores its base compact), then min(K, :data:`DETAIL_BASIS_COUNT`) coefficients on the latent-dtype
+    base under each rung of :data:`STEP_LADDER`, coarse to fine. Without a basis: the base alone, then the base
+    under each rung.
     The base alone is not tried where there is a basis: four coefficients on a compact base are smaller
     (17 bytes for D = 8 against 24 or 40) and, fitted from no coefficients up, no worse on the material
     beyond the int8 rounding of μ.
@@ -303,7 +310,8 @@ def error_target_sequence(basis_count: int) -> list[_Candidate]:
     if basis_count <= 0:
         return [(False, 0, None), *((False, 0, s) for s in STEP_LADDER)]
     counts = [n for n in _BASIS_COUNTS if n < basis_count] + [basis_count]
-    return [*((True, n, None) for n in counts), *((False, basis_count, s) for s in STEP_LADDER)]
+    under_detail = min(basis_count, DETAIL_BASIS_COUNT)
+    return [*((True, n, None) for n in counts), *((False, under_detail, s) for s in STEP_LADDER)]
 
 
 def compact_base_pays(bytes_budget: int, latent_dim: int, latent_itemsize: int, basis_count: int) -> bool:
