@@ -4,13 +4,13 @@ Usage::
 
     python benchmarks/basis_sum_study.py [-o reports/rd-study/basis-sum.json]
 
-On the analytic ``gold`` material encoded at 16 KB (75 basis coefficients
+On the analytic ``gold`` material encoded at 16 KB (32 basis coefficients
 and a detail layer, the ``decode-layered`` benchmark's record), times (median
 and minimum of 30 calls, milliseconds) of: the whole table decoded base-only;
-layered as the decoder does it (the layers on a thread of their own beside
-the network on all cores but one, ``brdfcodec.torch_threads``); layered with
-the layers first and the network after (one after the other, each on every
-core); the layers alone (basis sum, then detail layer, one thread); the
+the mapped clamp of the network output, the decoder's and the one before it;
+layered as the decoder does it (the network on every core, then the layers
+on the calling thread); layered with the layers first and the network
+after; the layers alone (basis sum, then detail layer, one thread); the
 detail layer alone, inverted plane by plane over its nonzero blocks (the
 decoder's choice here) and batched over all planes; and the basis sum
 ``c @ B`` of the shipped basis in float32 with numpy's BLAS on one thread and
@@ -37,9 +37,10 @@ from basis_study import replaced
 from brdfcodec.analytic import ANALYTIC_PRESETS
 from brdfcodec.blas_threads import single_blas_thread
 from brdfcodec.codec import BrdfEncoder
+from brdfcodec.conventions import MAPPED_MAX
 from brdfcodec.layers import detail as detail_module
 from brdfcodec.layers.detail import decode_detail
-from brdfcodec.representation import table_from_mapped
+from brdfcodec.representation import clamp_mapped, table_from_mapped
 
 CALLS = 30
 
@@ -70,17 +71,24 @@ def main() -> None:
         "coefficients": len(c), "basis_entries": int(vectors.shape[1]),
         "basis_megabytes_float32": vectors.nbytes / 1e6,
         "table base-only": timed(lambda: decoder.table(record.base())),
-        "table layered (decoder: layers beside the network)": timed(lambda: decoder.table(record)),
+        "table layered (decoder: network, then layers)": timed(lambda: decoder.table(record)),
     }
 
     def one_after_the_other() -> None:
         residuals = decoder._layer_residuals(record)
-        mapped = decoder._with_layers(record, decoder.decode_mapped(record.mu), residuals=residuals)
-        table_from_mapped(mapped)
+        mapped = decoder.decode_mapped(record.mu)
+        for residual in residuals:
+            mapped += residual
+        table_from_mapped(clamp_mapped(mapped, out=mapped))
 
     with single_blas_thread():
         rows["table layered, layers then network"] = timed(one_after_the_other)
         rows["layers (one thread: basis sum, then detail layer)"] = timed(lambda: decoder._layer_residuals(record))
+        network_output = decoder.decode_mapped(record.mu) * np.float32(1.2) - np.float32(0.1)  # some entries out
+        rows["clamp of the network output (decoder)"] = timed(lambda: clamp_mapped(network_output.copy()))
+        rows["clamp, clip with Python float bounds then nan_to_num (before)"] = timed(
+            lambda: np.nan_to_num(np.clip(network_output.copy(), 0.0, MAPPED_MAX), copy=False, nan=0.0))
+        rows["copy of the network output (in both clamp rows)"] = timed(lambda: network_output.copy())
         rows["detail layer alone (decoder: nonzero blocks)"] = timed(lambda: decode_detail(record.detail))
         with replaced(detail_module, "_DENSE_SHARE", 0.0):
             rows["detail layer alone, batched over all planes"] = timed(lambda: decode_detail(record.detail))
@@ -93,7 +101,7 @@ def main() -> None:
         tv, tc = torch.from_numpy(vectors).to(dtype), torch.from_numpy(c).to(dtype)
         rows[f"basis sum torch {str(dtype).removeprefix('torch.')}"] = timed(lambda tv=tv, tc=tc: tc @ tv)
     base = rows["table base-only"]["median_ms"]
-    layered = rows["table layered (decoder: layers beside the network)"]["median_ms"]
+    layered = rows["table layered (decoder: network, then layers)"]["median_ms"]
     rows["layered / base-only (medians)"] = layered / base
     rows["layers then network / base-only (medians)"] = rows["table layered, layers then network"]["median_ms"] / base
     for key, value in rows.items():

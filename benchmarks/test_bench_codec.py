@@ -122,9 +122,10 @@ def test_query_decoded_material(benchmark, decoder: BrdfDecoder, record: LatentR
 
 
 #: Benchmark group → (encoder options, has a detail layer): the high-rate record with all three parts
-#: (75 basis coefficients + a 16 KB detail layer; the default ``--project-base auto`` leaves a record with a detail
-#: layer unprojected), and the low-rate one (a 64 B record: compact base + 53 basis coefficients), with its base
-#: never and always projected on the shared basis (format 1.6; the default picks per material).
+#: (32 basis coefficients, the most a record with a detail layer carries, + a 16 KB detail layer; the default
+#: ``--project-base auto`` leaves a record with a detail layer unprojected), and the low-rate one (a 64 B record:
+#: compact base + 53 basis coefficients), with its base never and always projected on the shared basis (format
+#: 1.6; the default picks per material).
 _LAYERED_CASES = {
     "decode-layered": ({"bytes": 16384}, True),
     "decode-layered-64B": ({"bytes": 64, "latent_dtype": "float16", "project_base": "never"}, False),
