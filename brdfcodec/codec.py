@@ -239,10 +239,6 @@ class _ProjectionPlan:
         return a
 
 
-def _has_layers(record: Record) -> bool:
-    return getattr(record, "basis", None) is not None or getattr(record, "detail", None) is not None
-
-
 def _projected_vectors(record: Record) -> int:
     """P of a record whose base decode is projected on the shared basis (format 1.6), else 0."""
     layer = getattr(record, "basis", None)

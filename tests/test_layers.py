@@ -361,6 +361,35 @@ def test_a_record_with_a_detail_layer_carries_at_most_the_detail_basis_count(bet
     assert (record.detail is not None) == (better == DETAIL_BASIS_COUNT)
 
 
+@pytest.mark.parametrize("all_coefficients_meet_it", [True, False])
+def test_an_error_target_searches_records_without_detail_first(all_coefficients_meet_it: bool) -> None:
+    """The detail ladder carries at most 32 coefficients, so its coarse rungs can be worse than all 75 without
+    detail: the search keeps to the records without detail when the largest of them meets the target."""
+    from brdfcodec.layers.basis import quantise_coefficients
+    from brdfcodec.layers.rate import DETAIL_BASIS_COUNT, encode_layers
+    from brdfcodec.representation import network_input_from_table
+
+    values = np.full((3, 90, 90, 180), 0.05)
+    mask = np.ones(values.shape, dtype=bool)
+    inputs, input_mask = network_input_from_table(values, mask)
+    base = LatentRecord("m", np.zeros(8), np.ones(8))
+
+    def fit(k: int, mu_storage: str | None, under_detail: bool):  # noqa: ANN202, ARG001 - the BasisFit callable
+        exact = k == 75 and not under_detail and all_coefficients_meet_it
+        mapped = inputs if exact else inputs * np.float32(0.7)  # only all 75 coefficients explain the material
+        return base, quantise_coefficients("cd" * 32, np.ones(k)), mapped.astype(np.float32)
+
+    result = encode_layers(base, inputs * np.float32(0.7), inputs, input_mask.astype(np.float32), values=values,
+                           mask=mask, max_relae=0.01, basis_fit=fit, basis_count=75)
+    record = result.record
+    assert isinstance(record, LayeredRecord)
+    if all_coefficients_meet_it:
+        assert record.basis.count == 75 and record.detail is None
+        assert all(step is None for step, _, _ in result.tried)  # no detail candidate was needed
+    else:
+        assert record.basis.count == DETAIL_BASIS_COUNT and record.detail is not None
+
+
 @pytest.mark.parametrize(("budget", "itemsize", "mu_max", "storage", "count"), [
     (12, 4, 1.0, "int8-fixed", 1),  # the smallest layered record: 9 B of compact base, the step, one coefficient
     (14, 4, 5.0, "int8", 1),  # μ past the fixed grid's ±3.97: its own step, 2 bytes more
