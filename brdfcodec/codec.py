@@ -30,6 +30,7 @@ import itertools
 import os
 import warnings
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Literal
@@ -170,6 +171,12 @@ def prepare_source(brdf: MerlBRDF, *, warn: bool = True) -> MerlBRDF:
         )
     clamped = np.where(over, np.broadcast_to(limit, brdf.values.shape), brdf.values)
     return replace(brdf, values=clamped, _file_sha256=brdf.sha256)  # provenance kept: name, path, source
+
+
+def source_digest(brdf: MerlBRDF) -> str:
+    """The SHA-256 a record names its source by (``meta.source_sha256``): the measurement's own where the table
+    was converted from one (RGL), else the MERL file's (:attr:`MerlBRDF.sha256`)."""
+    return brdf.source_sha256 or brdf.sha256
 
 
 @functools.cache
@@ -808,14 +815,23 @@ class BrdfEncoder:
         return BrdfDecoder(self.manifest, device=self.device)
 
     def encode_arrays(
-        self, names: Sequence[str], inputs: np.ndarray, masks: np.ndarray, sources: Sequence[MerlBRDF | None]
+        self,
+        names: Sequence[str],
+        inputs: np.ndarray,
+        masks: np.ndarray,
+        sources: Sequence[MerlBRDF | None],
+        *,
+        source_digests: Future[list[str]] | None = None,
     ) -> list[LatentRecord]:
         """Records of materials given as network inputs ``(B, 63, 90, 90)`` and masks, with effort and rate control.
 
-        ``sources`` (tables) are needed for ``max_relae``; otherwise they only add their SHA-256 to ``meta``.
+        ``sources`` (tables) are needed for ``max_relae``; otherwise they only add their SHA-256 to ``meta``
+        (taken from ``source_digests`` when given: the sources' :func:`source_digest`, being computed elsewhere).
         """
+        # Waited for before the network: torch's threads beside the hashing thread ran the network 3× slower.
+        digests = None if source_digests is None else source_digests.result()
         mu, sigma = self.posterior_from_inputs(inputs, batch_size=max(len(inputs), 1))
-        records = self.make_records(names, mu, sigma, sources)
+        records = self.make_records(names, mu, sigma, sources, digests)
         if self.options.effort == 0 and not self.options.layered:
             return records
         from brdfcodec.layers.encoding import layer_records
@@ -882,25 +898,36 @@ class BrdfEncoder:
         """Records of many materials, encoded in batches (with the encoder's effort and rate options)."""
         labels = list(names) if names is not None else [b.name or f"material-{i}" for i, b in enumerate(brdfs)]
         records: list[LatentRecord] = []
-        for start in range(0, len(brdfs), batch_size):
-            chunk = [prepare_source(b) for b in brdfs[start : start + batch_size]]
-            arrays = [network_input_from_table(b.values, b.mask) for b in chunk]
-            records += self.encode_arrays(
-                labels[start : start + batch_size], np.stack([a[0] for a in arrays]), np.stack([a[1] for a in arrays]),
-                list(chunk),
-            )
+        # A table's SHA-256 (about 16 ms for MERL's 35 MB, half of an effort-0 encode) is taken on a thread of its
+        # own while the table is prepared and encoded: hashlib lets go of the GIL.
+        with ThreadPoolExecutor(max_workers=1, thread_name_prefix="bvae-sha256") as hashing:
+            for start in range(0, len(brdfs), batch_size):
+                group = brdfs[start : start + batch_size]
+                digests = hashing.submit(lambda group=group: [source_digest(b) for b in group])
+                chunk = [prepare_source(b) for b in group]
+                arrays = [network_input_from_table(b.values, b.mask) for b in chunk]
+                records += self.encode_arrays(
+                    labels[start : start + batch_size], np.stack([a[0] for a in arrays]),
+                    np.stack([a[1] for a in arrays]), list(chunk), source_digests=digests,
+                )
         return records
 
     def make_records(
-        self, names: Sequence[str], mu: np.ndarray, sigma: np.ndarray, sources: Sequence[MerlBRDF | None]
+        self,
+        names: Sequence[str],
+        mu: np.ndarray,
+        sigma: np.ndarray,
+        sources: Sequence[MerlBRDF | None],
+        digests: Sequence[str] | None = None,
     ) -> list[LatentRecord]:
-        """Records from posteriors, with metadata: the encoder's SHA-256, and the source's where it is known."""
+        """Records from posteriors, with metadata: the encoder's SHA-256, and the source's where it is known
+        (``digests[i]`` when given, else :func:`source_digest` of ``sources[i]``)."""
         records = []
         for i, name in enumerate(names):
             meta = {} if self.manifest is None else {"encoder_sha256": self.manifest.encoder_sha256}
             source = sources[i]
             if source is not None:
-                meta["source_sha256"] = source.source_sha256 or source.sha256
+                meta["source_sha256"] = digests[i] if digests is not None else source_digest(source)
                 if source.source_kind is not None:
                     meta["source_kind"] = source.source_kind
             records.append(LatentRecord(name, mu[i], sigma[i], meta))
@@ -921,7 +948,7 @@ def measure(record: Record, decoder: BrdfDecoder, source: MerlBRDF) -> LatentRec
     estimate = decoder.decode(record, masked="keep").astype(np.float64)
     linear, mapped = relae_both(source.values, estimate, source.mask)
     meta = {key: value for key, value in record.meta.items() if key not in ("relae", "source_kind")}
-    meta["source_sha256"] = source.source_sha256 or source.sha256  # the provenance of what was measured against
+    meta["source_sha256"] = source_digest(source)  # the provenance of what was measured against
     if source.source_kind is not None:
         meta["source_kind"] = source.source_kind
     relae = {"mapped": mapped.overall, "linear": linear.overall}

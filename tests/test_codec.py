@@ -230,3 +230,30 @@ def test_extreme_latents_decode_to_finite_non_negative_tables(scale: float) -> N
         for row in code:
             table = decoder.decode(LatentRecord("x", row, np.ones(8)), masked="zero")
             assert np.isfinite(table).all() and (table >= 0).all()
+
+
+def test_encode_many_names_each_source_by_its_file_hash_across_batches(
+    tiny_model_folder: Path, analytic_tables: dict[str, MerlBRDF], tmp_path: Path
+) -> None:
+    """The sources' SHA-256 is taken on a thread of its own, batch by batch: each record still gets its own source's
+    (the file's bytes; a clamped table keeps its source's; a converted measurement names the measurement)."""
+    import dataclasses
+    import hashlib
+    import warnings
+
+    from brdfcodec.codec import ClampWarning
+
+    gold, chrome, plastic = (analytic_tables[n] for n in ("gold", "chrome", "red-plastic"))
+    bright = MerlBRDF(np.where(gold.mask, gold.values * 1e12, gold.values), name="bright")  # clamped when encoded
+    measured = dataclasses.replace(chrome, source_sha256="ab" * 32)
+    tables = [gold, bright, measured, plastic, chrome]
+    expected = []
+    for i, table in enumerate(tables):
+        path = tmp_path / f"m{i}.binary"
+        write_merl(path, table)
+        expected.append(table.source_sha256 or hashlib.sha256(path.read_bytes()).hexdigest())
+    fresh = [dataclasses.replace(t) for t in tables]  # no hash cached yet
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ClampWarning)
+        records = BrdfEncoder(tiny_model_folder, effort=0).encode_many(fresh, batch_size=2)
+    assert [r.meta["source_sha256"] for r in records] == expected
