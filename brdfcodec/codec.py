@@ -828,7 +828,7 @@ class BrdfEncoder:
         ``sources`` (tables) are needed for ``max_relae``; otherwise they only add their SHA-256 to ``meta``
         (taken from ``source_digests`` when given: the sources' :func:`source_digest`, being computed elsewhere).
         """
-        # Waited for before the network: torch's threads beside the hashing thread ran the network 3× slower.
+        # Waited for before the network: torch's threads beside the hashing thread ran the network markedly slower.
         digests = None if source_digests is None else source_digests.result()
         mu, sigma = self.posterior_from_inputs(inputs, batch_size=max(len(inputs), 1))
         records = self.make_records(names, mu, sigma, sources, digests)
@@ -898,7 +898,7 @@ class BrdfEncoder:
         """Records of many materials, encoded in batches (with the encoder's effort and rate options)."""
         labels = list(names) if names is not None else [b.name or f"material-{i}" for i, b in enumerate(brdfs)]
         records: list[LatentRecord] = []
-        # A table's SHA-256 (about 16 ms for MERL's 35 MB, half of an effort-0 encode) is taken on a thread of its
+        # A table's SHA-256 (MERL's 35 MB: the largest single cost of an effort-0 encode) is taken on a thread of its
         # own while the table is prepared and encoded: hashlib lets go of the GIL.
         with ThreadPoolExecutor(max_workers=1, thread_name_prefix="bvae-sha256") as hashing:
             for start in range(0, len(brdfs), batch_size):
