@@ -30,7 +30,7 @@ import itertools
 import os
 import warnings
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
-from concurrent.futures import Future, ThreadPoolExecutor
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Literal
@@ -62,7 +62,7 @@ from brdfcodec.errors import (
 )
 from brdfcodec.inputs import read_measured
 from brdfcodec.mask import horizon_mask, kept_slice_horizon_mask
-from brdfcodec.merl import MerlBRDF
+from brdfcodec.merl import MerlBRDF, source_digest
 from brdfcodec.metrics import relae_both
 from brdfcodec.models.registry import default_model_folder, find_model
 from brdfcodec.models.store import ModelManifest, load_manifest, load_model
@@ -171,12 +171,6 @@ def prepare_source(brdf: MerlBRDF, *, warn: bool = True) -> MerlBRDF:
         )
     clamped = np.where(over, np.broadcast_to(limit, brdf.values.shape), brdf.values)
     return replace(brdf, values=clamped, _file_sha256=brdf.sha256)  # provenance kept: name, path, source
-
-
-def source_digest(brdf: MerlBRDF) -> str:
-    """The SHA-256 a record names its source by (``meta.source_sha256``): the measurement's own where the table
-    was converted from one (RGL), else the MERL file's (:attr:`MerlBRDF.sha256`)."""
-    return brdf.source_sha256 or brdf.sha256
 
 
 @functools.cache
@@ -821,17 +815,15 @@ class BrdfEncoder:
         masks: np.ndarray,
         sources: Sequence[MerlBRDF | None],
         *,
-        source_digests: Future[list[str]] | None = None,
+        source_digests: Sequence[str] | None = None,
     ) -> list[LatentRecord]:
         """Records of materials given as network inputs ``(B, 63, 90, 90)`` and masks, with effort and rate control.
 
         ``sources`` (tables) are needed for ``max_relae``; otherwise they only add their SHA-256 to ``meta``
-        (taken from ``source_digests`` when given: the sources' :func:`source_digest`, being computed elsewhere).
+        (``source_digests``, when given, are their :func:`~brdfcodec.merl.source_digest`, already taken).
         """
-        # Waited for before the network: torch's threads beside the hashing thread ran the network markedly slower.
-        digests = None if source_digests is None else source_digests.result()
         mu, sigma = self.posterior_from_inputs(inputs, batch_size=max(len(inputs), 1))
-        records = self.make_records(names, mu, sigma, sources, digests)
+        records = self.make_records(names, mu, sigma, sources, source_digests)
         if self.options.effort == 0 and not self.options.layered:
             return records
         from brdfcodec.layers.encoding import layer_records
@@ -899,7 +891,8 @@ class BrdfEncoder:
         labels = list(names) if names is not None else [b.name or f"material-{i}" for i, b in enumerate(brdfs)]
         records: list[LatentRecord] = []
         # A table's SHA-256 (MERL's 35 MB: the largest single cost of an effort-0 encode) is taken on a thread of its
-        # own while the table is prepared and encoded: hashlib lets go of the GIL.
+        # own while the table is prepared (hashlib lets go of the GIL), and waited for before the network: torch's
+        # threads beside the hashing thread ran the network markedly slower.
         with ThreadPoolExecutor(max_workers=1, thread_name_prefix="bvae-sha256") as hashing:
             for start in range(0, len(brdfs), batch_size):
                 group = brdfs[start : start + batch_size]
@@ -908,7 +901,7 @@ class BrdfEncoder:
                 arrays = [network_input_from_table(b.values, b.mask) for b in chunk]
                 records += self.encode_arrays(
                     labels[start : start + batch_size], np.stack([a[0] for a in arrays]),
-                    np.stack([a[1] for a in arrays]), list(chunk), source_digests=digests,
+                    np.stack([a[1] for a in arrays]), list(chunk), source_digests=digests.result(),
                 )
         return records
 

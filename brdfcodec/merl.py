@@ -31,6 +31,7 @@ __all__ = [
     "MERL_HEADER",
     "MerlBRDF",
     "read_merl",
+    "source_digest",
     "write_merl",
 ]
 
@@ -140,6 +141,12 @@ def _check_header(path: Path, header: bytes, size: int) -> None:
     if size != MERL_FILE_SIZE:
         kind = "truncated" if size < MERL_FILE_SIZE else "has trailing bytes"
         raise MerlFormatError(path, f"file {kind}: {size} bytes, a MERL file has exactly {MERL_FILE_SIZE}")
+
+
+def source_digest(brdf: MerlBRDF) -> str:
+    """The SHA-256 a record names its source by (``meta.source_sha256``): the measurement's own where the table
+    was converted from one (``source_sha256``, RGL), else the MERL file's (:attr:`MerlBRDF.sha256`)."""
+    return brdf.source_sha256 or brdf.sha256
 
 
 def read_merl(

@@ -22,7 +22,7 @@ from pathlib import Path
 from brdfcodec.analytic import ANALYTIC_PRESETS, AnalyticBRDF, random_analytic_materials
 from brdfcodec.errors import SourceFormatError
 from brdfcodec.genuine import genuine_merl_name
-from brdfcodec.merl import MerlBRDF, read_merl
+from brdfcodec.merl import MerlBRDF, read_merl, source_digest
 from brdfcodec.nbrdf import NBRDF_SOURCE_KIND, iter_nbrdf_zip, list_nbrdf_zip, nbrdf_zip_family
 from brdfcodec.rgl import RGL_SOURCE_KIND, read_rgl_bsdf
 
@@ -139,7 +139,7 @@ def rgl_folder_sources(folder: str | os.PathLike[str]) -> list[MaterialSource]:
     def loader(path: Path) -> Callable[[], LoadedMaterial]:
         def load() -> LoadedMaterial:
             brdf = read_rgl_bsdf(path)
-            return LoadedMaterial(brdf, brdf.source_sha256 or brdf.sha256)
+            return LoadedMaterial(brdf, source_digest(brdf))
 
         return load
 

@@ -6,21 +6,21 @@ chooses the enhancement layers: k coefficients on the model's shared basis
 whose quantisation step comes from a fixed ladder (:data:`STEP_LADDER`,
 halving every two rungs):
 
-- ``bytes_budget=N``: two basis sizes, as many coefficients as fit (up to
-  the basis' size K) and at most :data:`DETAIL_BASIS_COUNT`; for each, the
-  finest rung whose record payload (μ, σ and the layers) fits in N bytes;
-  then, of those records, the same without a detail layer, and the base
-  alone, the one with the fewest coefficients among those within
-  :data:`DECODE_TOLERANCE` (2 %) of the lowest kept-slice mapped L1 error —
-  the largest quality within N bytes, up to 2 % traded for decode time.
-  Where a detail layer has room, the bytes of coefficients past the first
-  few dozen buy more as detail, and each costs decode time
-  (``reports/rd-study/basis-cap.json``); below that, all K coefficients win;
+- ``bytes_budget=N``: as many coefficients as fit (up to the basis' size
+  K) without a detail layer, and at most :data:`DETAIL_BASIS_COUNT` under
+  one, with the finest rung whose record payload (μ, σ and the layers) fits
+  in N bytes; of those records and the base alone, the one with the fewest
+  coefficients among those within :data:`DECODE_TOLERANCE` (2 %) of the
+  lowest kept-slice mapped L1 error — the largest quality within N bytes, up
+  to 2 % traded for decode time. The cap bounds every layered record's
+  decode time; where a detail layer has room, the bytes of coefficients past
+  the first few dozen buy more as detail anyway
+  (``reports/rd-study/basis-cap.json``);
 - ``max_relae=X``: the first of 4, 8, 16, 32 and K basis coefficients on a
-  compact base, then K coefficients plus each rung from coarse to fine,
-  whose decoded table has a measured RelAE (mapped or linear, full table,
-  valid entries) of at most X — the smallest file that meets X
-  (:func:`error_target_sequence`).
+  compact base, then (if K misses X) min(K, :data:`DETAIL_BASIS_COUNT`)
+  coefficients plus each rung from coarse to fine, whose decoded table has
+  a measured RelAE (mapped or linear, full table, valid entries) of at most
+  X — the smallest file that meets X (:func:`error_target_sequence`).
 
 Both searches bisect (size falls and error rises along the sequence), then
 bisect the step in log space between the two rungs that bracket the target
@@ -286,7 +286,7 @@ def encode_layers(
         low, high = failing[2], meeting[2]
         for _ in range(_REFINE_ROUNDS - 1):
             mid_step = float(np.sqrt(low * high))
-            if error((False, min(full, DETAIL_BASIS_COUNT), mid_step)) <= max_relae:
+            if error((False, meeting[1], mid_step)) <= max_relae:
                 high = mid_step
             else:
                 low = mid_step
