@@ -268,3 +268,37 @@ def test_decoder_dropout_run_is_reproducible_and_differs(tiny_dataset: Path, tmp
     assert [r["loss"] for r in a] == [r["loss"] for r in b]
     assert a[-1]["loss"] != c[-1]["loss"]
     assert json.loads((tmp_path / "a" / "run.json").read_text())["train_config"]["decoder_dropout"] == 0.3
+
+
+def test_epoch_record_is_the_sample_weighted_mean_of_its_steps(tiny_dataset: Path) -> None:
+    """The epoch's logged loss, reconstruction, KL and per-dimension KL are means over its samples: each step's
+    terms weighted by its batch size (the sums stay on the training device between steps)."""
+    from brdfcodec.models.loss import beta_vae_loss, kl_per_dimension
+    from brdfcodec.training.augment import mix_physical, permute_colours
+    from brdfcodec.training.trainer import _global_batches, _load_training_data, _Progress, _train_epoch, _World
+
+    world = _World(0, 1, torch.device("cpu"))
+    data = _load_training_data(tiny_dataset, world)
+    config = dataclasses.replace(TINY_TRAIN, batch_size=2)
+    torch.manual_seed(0)
+    model = BetaVAE(TINY_CONFIG)
+    frozen = torch.optim.SGD([torch.nn.Parameter(torch.zeros(1))], lr=0.0)  # the model's weights never move
+    record = _train_epoch(model, model, frozen, data, TINY_CONFIG, config, 0, world, _Progress())
+
+    model.train()
+    totals, kl_dims, count = np.zeros(3), np.zeros(TINY_CONFIG.latent_dim), 0
+    with torch.no_grad():
+        for draw in _global_batches(len(data.inputs), config, 0, TINY_CONFIG.latent_dim):
+            rows, partner = draw["rows"], draw["partner"]
+            x = permute_colours(mix_physical(data.inputs[rows], data.inputs[partner], draw["weight"]),
+                                draw["permutation"])
+            m = permute_colours(data.masks[rows] & data.masks[partner], draw["permutation"])
+            recon, mu, logvar = model(x, draw["noise"])
+            terms = beta_vae_loss(recon, x, m, mu, logvar, beta=config.beta, recon=config.recon)
+            totals += np.array([terms.loss.item(), terms.recon.item(), terms.kl.item()]) * len(rows)
+            kl_dims += kl_per_dimension(mu, logvar).sum(0).double().numpy()
+            count += len(rows)
+    assert count == 2 * (len(data.inputs) // 2) and count < len(data.inputs) + 2
+    np.testing.assert_allclose([record["loss"], record["recon"], record["kl"]], totals / count, rtol=1e-5)
+    np.testing.assert_allclose(record["kl_per_dim"], kl_dims / count, rtol=1e-5)
+    assert record["traversal"] == 0.0

@@ -170,3 +170,14 @@ def test_energy_keeps_a_gradient_on_saturated_peaks(flat, penalty) -> None:
     assert float(terms.energy[0].detach()) > 0
     terms.energy.sum().backward()
     assert edited.grad is not None and float(edited.grad[0, :, 0:3, :].abs().sum()) > 0
+
+
+def test_penalty_moved_to_a_device_keeps_its_tensors_there(flat: torch.Tensor) -> None:
+    """`to` moves the fixed masks and weights once (the trainer's device), and returns the penalty itself."""
+    moved = TraversalPenalty(flat)
+    assert moved.to("meta") is moved
+    assert {t.device.type for t in (moved._cells, moved._near, moved._weights)} == {"meta"}
+    terms = moved(torch.zeros(2, 63, 90, 90, device="meta"), torch.zeros(2, 63, 90, 90, device="meta"))
+    assert terms.total().device.type == "meta" and terms.total().shape == (2,)
+    on_cpu = TraversalPenalty(flat).to("cpu")
+    assert float(on_cpu(flat[:1].clone(), flat[:1]).total()) == 0.0

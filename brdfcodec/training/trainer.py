@@ -171,6 +171,17 @@ class _TrainingData:
     traversal_penalty: TraversalPenalty | None = None
 
 
+def _resident(data: _TrainingData, device: torch.device) -> None:
+    """Keep the training inputs and masks on the training device, so that each step's augmentation (reflectance
+    blend, colour permutation) runs there instead of on the host and crossing to the device.
+
+    On a GPU the host-side augmentation was most of a step's time (``reports/model-v2-trials``, GPU sweep);
+    100 materials take about 260 MB of device memory.
+    """
+    data.inputs = data.inputs.to(device)
+    data.masks = data.masks.to(device)
+
+
 @dataclass
 class _Progress:
     """Where a run stands: the next epoch, the best validation RelAE so far and its epoch, the optimiser step."""
@@ -302,8 +313,9 @@ def _train_epoch(model: BetaVAE, forward: torch.nn.Module, optimizer: torch.opti
     n_train = len(data.inputs)
     local = train_config.batch_size // world.size
     steps_per_epoch = max(1, n_train // train_config.batch_size)
-    sums = torch.zeros(4, dtype=torch.float64)  # loss, recon, kl, traversal penalty (sums over samples)
-    kl_dims = torch.zeros(model_config.latent_dim, dtype=torch.float64)
+    # loss, recon, kl, traversal penalty (sums over samples), and the KL of each dimension
+    sums = torch.zeros(4, dtype=torch.float64, device=world.device)
+    kl_dims = torch.zeros(model_config.latent_dim, dtype=torch.float64, device=world.device)
     count = 0
     dropout = (DecoderHiddenDropout(model.decoder, train_config.decoder_dropout)
                if train_config.decoder_dropout > 0 else None)
@@ -313,11 +325,15 @@ def _train_epoch(model: BetaVAE, forward: torch.nn.Module, optimizer: torch.opti
         part = slice(world.rank * local, (world.rank + 1) * local)
         if dropout is not None:
             dropout.set_keep(draw["keep"][part])
-        rows, partner = draw["rows"][part], draw["partner"][part]
-        x = mix_physical(data.inputs[rows], data.inputs[partner], draw["weight"][part])
+        # The draws are made on the CPU (the same stream on every device); the augmentation runs where the
+        # training set lives (the training device, see `_resident`).
+        here = data.inputs.device
+        rows, partner = draw["rows"][part].to(here), draw["partner"][part].to(here)
+        permutation = draw["permutation"][part].to(here)
+        x = mix_physical(data.inputs[rows], data.inputs[partner], draw["weight"][part].to(here))
         m = data.masks[rows] & data.masks[partner]
-        x = permute_colours(x, draw["permutation"][part]).to(world.device)
-        m = permute_colours(m, draw["permutation"][part]).to(world.device)
+        x = permute_colours(x, permutation).to(world.device)
+        m = permute_colours(m, permutation).to(world.device)
         rate = _learning_rate(progress.step, steps_per_epoch, train_config)
         for group in optimizer.param_groups:
             group["lr"] = rate * group.get("lr_scale", 1.0)
@@ -338,13 +354,15 @@ def _train_epoch(model: BetaVAE, forward: torch.nn.Module, optimizer: torch.opti
             average.update_parameters(model)
         progress.step += 1
         n = len(rows)
-        sums += torch.tensor([loss.item(), terms.recon.item(), terms.kl.item(), traversal.item()],
-                             dtype=torch.float64) * n
-        kl_dims += kl_per_dimension(mu.detach(), logvar.detach()).sum(0).double().cpu()
+        # Summed on the training device: no synchronisation per step.
+        step_terms = torch.stack([loss.detach(), terms.recon.detach(), terms.kl.detach(),
+                                  traversal.detach().to(loss.device)])
+        sums += step_terms.double() * n
+        kl_dims += kl_per_dimension(mu.detach(), logvar.detach()).sum(0).double()
         count += n
     if dropout is not None:
         dropout.remove()
-    totals = torch.cat([sums, kl_dims, torch.tensor([count], dtype=torch.float64)])
+    totals = torch.cat([sums, kl_dims, torch.tensor([count], dtype=torch.float64, device=world.device)])
     if world.size > 1:
         dist.all_reduce(totals)
     count_all = totals[-1].item()
@@ -434,9 +452,10 @@ def train(
     _check_run_folder(out, run_info, resume)
     data = _load_training_data(dataset_path, world)
     if train_config.traversal_weight > 0:
-        data.traversal_penalty = TraversalPenalty(data.inputs)
+        data.traversal_penalty = TraversalPenalty(data.inputs).to(world.device)
     run_info["data"] = data.info
     model, optimizer, state, average = _build_model(model_config, train_config, data, world, out, resume)
+    _resident(data, world.device)
     if world.is_main and not resume:
         out.mkdir(parents=True, exist_ok=True)
         (out / "run.json").write_text(json.dumps(run_info, indent=2))

@@ -139,6 +139,12 @@ class TraversalPenalty:
         if not self.albedo_limit > 0:
             raise ValueError("the training materials reflect no energy: cannot set an albedo limit")
 
+    def to(self, device: torch.device | str) -> TraversalPenalty:
+        """Keep the penalty's fixed masks and weights on ``device`` (the training device), so that a step does not
+        copy them there; returns ``self``."""
+        self._cells, self._near, self._weights = (t.to(device) for t in (self._cells, self._near, self._weights))
+        return self
+
     def __call__(self, edited: torch.Tensor, material: torch.Tensor) -> TraversalTerms:
         """Penalties of unbounded traversed decodes ``edited`` against the batch's materials.
 
