@@ -1,5 +1,5 @@
 #!/bin/bash
-# GPU sweep 2 (issue 12): training set resident on the GPU. Writes $OUT/res.tgz.
+# GPU sweep 3 (issue 12): the recipe and its 12-D variant, then per-family RelAE of each best.pt. Writes $OUT/res.tgz.
 # Run from the repository root on the GPU machine; .devdata/ (git-ignored) held merl-nbrdf-90.zip, rgl-nbrdf-30.zip
 # and whl/ (zstandard, OpenEXR and colour-science wheels for Python 3.12, which that machine lacked).
 set -u
