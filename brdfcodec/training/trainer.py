@@ -481,7 +481,7 @@ def train(
             record.update(_evaluate(evaluated, data, world))
             _keep_if_best(evaluated, model_config, record, state, out)
         stop = _stop_reason(train_config, state, done, time.perf_counter() - start_time)
-        stop_flag = torch.tensor([1.0 if stop else 0.0])
+        stop_flag = torch.tensor([1.0 if stop else 0.0], device=world.device)  # NCCL reduces device tensors only
         if world.size > 1:
             dist.broadcast(stop_flag, 0)
         if world.is_main:
