@@ -325,21 +325,19 @@ def _train_epoch(model: BetaVAE, forward: torch.nn.Module, optimizer: torch.opti
         part = slice(world.rank * local, (world.rank + 1) * local)
         if dropout is not None:
             dropout.set_keep(draw["keep"][part])
-        # The draws are made on the CPU (the same stream on every device); the augmentation runs where the
-        # training set lives (the training device, see `_resident`).
-        here = data.inputs.device
-        rows, partner = draw["rows"][part].to(here), draw["partner"][part].to(here)
-        permutation = draw["permutation"][part].to(here)
-        x = mix_physical(data.inputs[rows], data.inputs[partner], draw["weight"][part].to(here))
-        m = data.masks[rows] & data.masks[partner]
-        x = permute_colours(x, permutation).to(world.device)
-        m = permute_colours(m, permutation).to(world.device)
+        # The draws are made on the CPU (the same stream on every device); the augmentation runs on the training
+        # device, where the training set lives (`_resident`).
+        rows, partner = draw["rows"][part].to(world.device), draw["partner"][part].to(world.device)
+        permutation = draw["permutation"][part].to(world.device)
+        x = mix_physical(data.inputs[rows], data.inputs[partner], draw["weight"][part].to(world.device))
+        x = permute_colours(x, permutation)
+        m = permute_colours(data.masks[rows] & data.masks[partner], permutation)
         rate = _learning_rate(progress.step, steps_per_epoch, train_config)
         for group in optimizer.param_groups:
             group["lr"] = rate * group.get("lr_scale", 1.0)
         recon, mu, logvar = forward(x, draw["noise"][part].to(world.device))
         terms = beta_vae_loss(recon, x, m, mu, logvar, beta=train_config.beta, recon=train_config.recon)
-        loss, traversal = terms.loss, torch.zeros(())
+        loss, traversal = terms.loss, terms.loss.new_zeros(())
         if penalty is not None:
             # Through the module, not the DDP wrapper: autograd adds this use of a weight to the wrapper's before
             # DDP reduces the gradient (reasoned, not yet tested under torchrun with the penalty).
@@ -355,9 +353,7 @@ def _train_epoch(model: BetaVAE, forward: torch.nn.Module, optimizer: torch.opti
         progress.step += 1
         n = len(rows)
         # Summed on the training device: no synchronisation per step.
-        step_terms = torch.stack([loss.detach(), terms.recon.detach(), terms.kl.detach(),
-                                  traversal.detach().to(loss.device)])
-        sums += step_terms.double() * n
+        sums += torch.stack([loss, terms.recon, terms.kl, traversal]).detach().double() * n
         kl_dims += kl_per_dimension(mu.detach(), logvar.detach()).sum(0).double()
         count += n
     if dropout is not None:
