@@ -14,7 +14,7 @@ from __future__ import annotations
 import hashlib
 from collections.abc import Sequence
 
-__all__ = ["TRAIN", "VALIDATION", "split_by_family", "split_materials"]
+__all__ = ["TRAIN", "VALIDATION", "fold_by_family", "split_by_family", "split_materials"]
 
 TRAIN = "train"
 VALIDATION = "validation"
@@ -85,4 +85,45 @@ def split_by_family(
         for i, side in zip(members, split_materials([names[i] for i in members],
                                                     validation_fraction=validation_fraction, seed=seed), strict=True):
             result[i] = side
+    return result
+
+
+def fold_by_family(names: Sequence[str], families: Sequence[str], *, folds: int, seed: int = 0) -> list[int]:
+    """Stratified k-fold assignment: each family's materials dealt in rank order over ``folds`` folds.
+
+    Within a family, materials are ranked as in :func:`split_materials` (SHA-256 of ``"{seed}:{name}"``) and
+    the material of rank r goes to fold ``r mod folds``, so every fold holds ``⌊n/folds⌋`` or ``⌈n/folds⌉`` of
+    each family's n materials, and the assignment depends only on names, families, seed and ``folds``.
+
+    Parameters
+    ----------
+    names : sequence of str
+        Distinct material names.
+    families : sequence of str
+        Each material's family, same length as ``names``.
+    folds : int
+        Number of folds, ≥ 2.
+    seed : int, default 0
+
+    Returns
+    -------
+    list of int
+        The fold (0 to ``folds`` − 1) of each name, in the input order.
+
+    Examples
+    --------
+    >>> fold_by_family(["a", "b", "c", "d"], ["x", "x", "y", "y"], folds=2).count(0)
+    2
+    """
+    if folds < 2:
+        raise ValueError(f"folds must be at least 2, got {folds}")
+    if len(families) != len(names):
+        raise ValueError(f"got {len(names)} names but {len(families)} families")
+    if len(set(names)) != len(names):
+        raise ValueError("material names must be distinct")
+    result = [0] * len(names)
+    for family in sorted(set(families)):
+        members = sorted((i for i, f in enumerate(families) if f == family), key=lambda i: _rank(seed, names[i]))
+        for rank, i in enumerate(members):
+            result[i] = rank % folds
     return result

@@ -144,3 +144,21 @@ def test_records_encoded_from_a_dataset_keep_the_sources_provenance(tmp_path: Pa
     assert meta["paper"]["source_kind"] == RGL_SOURCE_KIND and meta["paper"]["source_sha256"] == bsdf_sha
     assert "source_kind" not in meta["gold"] and meta["gold"]["source_sha256"] == rows[0].source_sha256
     assert "relae" in meta["paper"]
+
+
+def test_fold_by_family_is_stratified_complete_and_order_free() -> None:
+    from brdfcodec.split import fold_by_family
+
+    names = [f"m{i}" for i in range(90)] + [f"r{i}" for i in range(30)]
+    families = ["merl"] * 90 + ["rgl"] * 30
+    folds = fold_by_family(names, families, folds=4, seed=0)
+    for fold in range(4):
+        merl = sum(1 for f, fam in zip(folds, families, strict=True) if f == fold and fam == "merl")
+        rgl = sum(1 for f, fam in zip(folds, families, strict=True) if f == fold and fam == "rgl")
+        assert merl in (22, 23) and rgl in (7, 8)
+    order = list(reversed(range(120)))
+    again = fold_by_family([names[i] for i in order], [families[i] for i in order], folds=4, seed=0)
+    assert [again[order.index(i)] for i in range(120)] == folds
+    assert fold_by_family(names, families, folds=4, seed=1) != folds
+    with pytest.raises(ValueError, match="at least 2"):
+        fold_by_family(names, families, folds=1)

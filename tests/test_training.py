@@ -278,7 +278,7 @@ def test_epoch_record_is_the_sample_weighted_mean_of_its_steps(tiny_dataset: Pat
     from brdfcodec.training.trainer import _global_batches, _load_training_data, _Progress, _train_epoch, _World
 
     world = _World(0, 1, torch.device("cpu"))
-    data = _load_training_data(tiny_dataset, world)
+    data = _load_training_data(tiny_dataset, world, TINY_TRAIN)
     config = dataclasses.replace(TINY_TRAIN, batch_size=2)
     torch.manual_seed(0)
     model = BetaVAE(TINY_CONFIG)
@@ -302,3 +302,37 @@ def test_epoch_record_is_the_sample_weighted_mean_of_its_steps(tiny_dataset: Pat
     np.testing.assert_allclose([record["loss"], record["recon"], record["kl"]], totals / count, rtol=1e-5)
     np.testing.assert_allclose(record["kl_per_dim"], kl_dims / count, rtol=1e-5)
     assert record["traversal"] == 0.0
+
+
+def test_folds_and_train_families_choose_the_held_out_materials(tiny_dataset: Path, tmp_path: Path) -> None:
+    from brdfcodec.dataset import BrdfDataset
+    from brdfcodec.split import fold_by_family
+
+    with BrdfDataset(tiny_dataset) as dataset:
+        names, families = dataset.names, dataset.families
+    one_epoch = {**TINY_TRAIN.to_dict(), "epochs": 1}
+    held = set()
+    for fold in range(2):
+        config = TrainConfig(**{**one_epoch, "folds": 2, "fold": fold, "keep": "last"})
+        train(tiny_dataset, tmp_path / f"fold{fold}", model_config=TINY_CONFIG, train_config=config, progress=False)
+        data = json.loads((tmp_path / f"fold{fold}" / "run.json").read_text())["data"]
+        expected = {n for n, f in zip(names, fold_by_family(names, families, folds=2), strict=True) if f == fold}
+        assert set(data["validation"]) == expected and not expected & set(data["train"])
+        held |= expected
+    assert held == set(names)  # every material is held out once
+    config = TrainConfig(**{**one_epoch, "train_families": "rgl"})
+    with pytest.raises(ValueError, match="families the dataset does not hold"):
+        train(tiny_dataset, tmp_path / "nofamily", model_config=TINY_CONFIG, train_config=config, progress=False)
+
+
+def test_keep_last_saves_the_last_evaluation(
+    tiny_dataset: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from brdfcodec.training import evaluation
+
+    errors = iter([0.1, 0.5, 0.9])  # gets worse: "best" keeps epoch 1, "last" epoch 3
+    monkeypatch.setattr(evaluation.MappedReference, "relae", lambda self, outputs: np.full(len(self.indices),
+                                                                                              next(errors)))
+    config = TrainConfig(**{**TINY_TRAIN.to_dict(), "keep": "last"})
+    train(tiny_dataset, tmp_path / "run", model_config=TINY_CONFIG, train_config=config, progress=False)
+    assert torch.load(tmp_path / "run" / "best.pt", weights_only=False)["epoch"] == 3

@@ -52,6 +52,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     parser.add_argument("--eval-every", type=int)
     parser.add_argument("--patience", type=int, help="evaluations without gain before stopping (0: never)")
     parser.add_argument("--time-limit", type=float, dest="time_limit_s", help="seconds; checkpoint and stop")
+    parser.add_argument("--folds", type=int, help="cross-validation: deal the materials into this many folds, "
+                        "stratified by family (the stored split is ignored)")
+    parser.add_argument("--fold", type=int, help="the fold held out (0 to folds - 1)")
+    parser.add_argument("--train-families", help="comma-separated families to train on; every other family "
+                        "is held out (a family never seen)")
+    parser.add_argument("--keep", choices=("best", "last"),
+                        help="weights to keep: best on the held-out materials (default), or the last ones "
+                        "(use it when the held-out materials are the test set)")
     parser.add_argument("--resume", action="store_true", help="continue the run in --run-dir")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     parser.set_defaults(handler=run)

@@ -81,6 +81,22 @@ class TrainConfig:
     time_limit_s : float or None
         Wall-clock budget; the run checkpoints and stops when it is spent
         (``--resume`` continues it).
+    folds, fold : int
+        Cross-validation: with ``folds`` ≥ 2 the dataset's stored split is
+        ignored; the materials are dealt into ``folds`` folds stratified by
+        family (:func:`brdfcodec.split.fold_by_family`, seeded by the
+        dataset's split seed), the run trains on every fold but ``fold`` and
+        holds that one out. 0 (the default) uses the stored split.
+    train_families : str
+        Comma-separated families to train on (for example ``"merl"``); the
+        materials of every other family are held out, whatever the stored
+        split or fold says. Empty (the default): every family.
+    keep : {"best", "last"}
+        Which weights ``best.pt`` (and so an export) holds: those of the
+        evaluation with the lowest held-out RelAE (the default), or the last
+        evaluated ones. Use ``"last"`` whenever the held-out materials are
+        the test set (cross-validation, a family never seen), so that no
+        choice is made on them.
     """
 
     epochs: int = 300
@@ -103,6 +119,10 @@ class TrainConfig:
     patience: int = 0
     checkpoint_every: int = 10
     time_limit_s: float | None = None
+    folds: int = 0
+    fold: int = 0
+    train_families: str = ""
+    keep: Literal["best", "last"] = "best"
 
     def __post_init__(self) -> None:
         if self.epochs < 1 or self.batch_size < 1:
@@ -122,6 +142,10 @@ class TrainConfig:
             raise ValueError(f"linear_path_rate must be finite and ≥ 0, got {self.linear_path_rate}")
         if not 0 <= self.average_from_epoch <= self.epochs:
             raise ValueError(f"average_from_epoch must be in [0, epochs={self.epochs}], got {self.average_from_epoch}")
+        if self.folds == 1 or self.folds < 0 or not 0 <= self.fold < max(self.folds, 1):
+            raise ValueError(f"folds must be 0 or at least 2 and fold in [0, folds), got {self.folds}, {self.fold}")
+        if self.keep not in ("best", "last"):
+            raise ValueError(f"keep must be 'best' or 'last', got {self.keep!r}")
         if not 0 <= self.decoder_dropout < 1:
             raise ValueError(f"decoder_dropout must be in [0, 1), got {self.decoder_dropout}")
 

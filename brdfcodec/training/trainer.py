@@ -34,6 +34,7 @@ from tqdm.auto import tqdm
 
 from brdfcodec.atomic import atomic_output
 from brdfcodec.dataset import BrdfDataset
+from brdfcodec.split import VALIDATION, fold_by_family
 from brdfcodec.models.config import ModelConfig
 from brdfcodec.models.loss import beta_vae_loss, kl_per_dimension
 from brdfcodec.models.network import BetaVAE, initialise_linear_basis, linear_path_trainable
@@ -220,11 +221,31 @@ def _check_run_folder(out: Path, run_info: dict[str, Any], resume: bool) -> None
         raise FileExistsError(f"{out}: run folder is not empty (use --resume to continue it)")
 
 
-def _load_training_data(dataset_path: str | os.PathLike[str], world: _World) -> _TrainingData:
-    """Inputs of the training split, and (on rank 0) the mapped references that RelAE is measured against."""
+def _held_out(dataset: BrdfDataset, config: TrainConfig) -> list[bool]:
+    """Which materials the run holds out: the stored split, or a fold (``config.folds``), and every family
+    outside ``config.train_families``."""
+    if config.folds:
+        seed = int(dataset.attribute("split_seed"))
+        held = [fold == config.fold for fold in fold_by_family(dataset.names, dataset.families, folds=config.folds,
+                                                                  seed=seed)]
+    else:
+        held = [side == VALIDATION for side in dataset.split]
+    families = {name.strip() for name in config.train_families.split(",") if name.strip()}
+    if families:
+        unknown = sorted(families - set(dataset.families))
+        if unknown:
+            raise ValueError(f"train_families names families the dataset does not hold: {unknown}")
+        held = [h or family not in families for h, family in zip(held, dataset.families, strict=True)]
+    return held
+
+
+def _load_training_data(dataset_path: str | os.PathLike[str], world: _World,
+                        config: TrainConfig) -> _TrainingData:
+    """Inputs of the training materials, and (on rank 0) the mapped references that RelAE is measured against."""
     with BrdfDataset(dataset_path) as dataset:
-        train_rows = dataset.indices("train")
-        val_rows = dataset.indices("validation")
+        held = _held_out(dataset, config)
+        train_rows = [i for i, h in enumerate(held) if not h]
+        val_rows = [i for i, h in enumerate(held) if h]
         if not train_rows:
             raise ValueError(f"{dataset_path}: no training materials")
         inputs = torch.from_numpy(dataset.inputs(train_rows))
@@ -387,9 +408,10 @@ def _evaluate(model: BetaVAE, data: _TrainingData, world: _World) -> dict[str, f
 
 
 def _keep_if_best(model: BetaVAE, model_config: ModelConfig, record: dict[str, Any], progress: _Progress,
-                  out: Path) -> None:
-    """Save ``best.pt`` when the validation RelAE improved; count evaluations without gain otherwise."""
-    if record["val_relae_mapped"] < progress.best:
+                  out: Path, keep: str = "best") -> None:
+    """Save ``best.pt`` when the validation RelAE improved (every time with ``keep="last"``); count evaluations
+    without gain otherwise."""
+    if record["val_relae_mapped"] < progress.best or keep == "last":
         progress.best, progress.best_epoch = record["val_relae_mapped"], record["epoch"]
         _atomic_save({"model": model.state_dict(), "epoch": record["epoch"], "model_config": model_config.to_json()},
                      out / BEST)
@@ -446,7 +468,7 @@ def train(
         raise ValueError("linear_path_rate > 0 needs a model with a linear path (ModelConfig.linear_basis)")
     run_info = _run_info(dataset_path, model_config, train_config, world)
     _check_run_folder(out, run_info, resume)
-    data = _load_training_data(dataset_path, world)
+    data = _load_training_data(dataset_path, world, train_config)
     if train_config.traversal_weight > 0:
         data.traversal_penalty = TraversalPenalty(data.inputs).to(world.device)
     run_info["data"] = data.info
@@ -475,7 +497,7 @@ def train(
         if data.reference is not None and (done % train_config.eval_every == 0 or done == train_config.epochs):
             evaluated = _evaluated_model(model, average)
             record.update(_evaluate(evaluated, data, world))
-            _keep_if_best(evaluated, model_config, record, state, out)
+            _keep_if_best(evaluated, model_config, record, state, out, train_config.keep)
         stop = _stop_reason(train_config, state, done, time.perf_counter() - start_time)
         stop_flag = torch.tensor([1.0 if stop else 0.0], device=world.device)  # NCCL reduces device tensors only
         if world.size > 1:
