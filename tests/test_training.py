@@ -328,11 +328,21 @@ def test_folds_and_train_families_choose_the_held_out_materials(tiny_dataset: Pa
 def test_keep_last_saves_the_last_evaluation(
     tiny_dataset: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    from brdfcodec.training import evaluation
+    from brdfcodec.training import trainer
 
-    errors = iter([0.1, 0.5, 0.9])  # gets worse: "best" keeps epoch 1, "last" epoch 3
-    monkeypatch.setattr(evaluation.MappedReference, "relae", lambda self, outputs: np.full(len(self.indices),
-                                                                                              next(errors)))
-    config = TrainConfig(**{**TINY_TRAIN.to_dict(), "keep": "last"})
-    train(tiny_dataset, tmp_path / "run", model_config=TINY_CONFIG, train_config=config, progress=False)
-    assert torch.load(tmp_path / "run" / "best.pt", weights_only=False)["epoch"] == 3
+    for keep, kept_epoch in (("last", 3), ("best", 1)):
+        errors = iter([0.1, 0.5, 0.9])  # gets worse: "best" keeps epoch 1, "last" epoch 3
+        monkeypatch.setattr(trainer, "_evaluate", lambda *args, errors=errors: {"val_relae_mapped": next(errors)})
+        config = TrainConfig(**{**TINY_TRAIN.to_dict(), "keep": keep})
+        train(tiny_dataset, tmp_path / keep, model_config=TINY_CONFIG, train_config=config, progress=False)
+        assert torch.load(tmp_path / keep / "best.pt", weights_only=False)["epoch"] == kept_epoch
+
+
+def test_a_run_with_nothing_held_out_keeps_its_last_weights(tmp_path: Path) -> None:
+    path = tmp_path / "all.h5"
+    build_dataset(path, analytic_sources(random_count=3), source_kind="analytic", description="all trained",
+                  validation_fraction=0.0, progress=False)
+    config = TrainConfig(**{**TINY_TRAIN.to_dict(), "epochs": 2})
+    result = train(path, tmp_path / "run", model_config=TINY_CONFIG, train_config=config, progress=False)
+    assert result.best_epoch == 2
+    assert torch.load(tmp_path / "run" / "best.pt", weights_only=False)["epoch"] == 2

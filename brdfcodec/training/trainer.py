@@ -494,10 +494,16 @@ def train(
         done = epoch + 1
         if averaging is not None:
             record["averaged_steps"] = int(averaging.n_averaged)
-        if data.reference is not None and (done % train_config.eval_every == 0 or done == train_config.epochs):
+        evaluation_due = done % train_config.eval_every == 0 or done == train_config.epochs
+        if data.reference is not None and evaluation_due:
             evaluated = _evaluated_model(model, average)
             record.update(_evaluate(evaluated, data, world))
             _keep_if_best(evaluated, model_config, record, state, out, train_config.keep)
+        elif evaluation_due and world.is_main and not data.info["validation"]:
+            # Nothing held out (a release trained on every material): best.pt holds the last weights.
+            state.best_epoch = done
+            _atomic_save({"model": _evaluated_model(model, average).state_dict(), "epoch": done,
+                          "model_config": model_config.to_json()}, out / BEST)
         stop = _stop_reason(train_config, state, done, time.perf_counter() - start_time)
         stop_flag = torch.tensor([1.0 if stop else 0.0], device=world.device)  # NCCL reduces device tensors only
         if world.size > 1:
