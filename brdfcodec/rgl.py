@@ -28,6 +28,7 @@ Mitsuba is loaded.
 from __future__ import annotations
 
 import contextlib
+import math
 import os
 import struct
 import warnings
@@ -64,6 +65,7 @@ TENSOR_FILE_MAGIC = b"tensor_file\x00"
 # Mitsuba's tensor-file dtype codes (mitsuba/core/tensor.h, Struct::Type) → NumPy.
 _DTYPES = {1: "u1", 2: "i1", 3: "<u2", 4: "<i2", 5: "<u4", 6: "<i4", 7: "<u8", 8: "<i8", 9: "<f2", 10: "<f4", 11: "<f8"}
 _REQUIRED_FIELDS = ("theta_i", "phi_i", "ndf", "sigma", "vndf", "luminance", "valid")
+_TENSOR_FILE_VERSION = (1, 0)
 _MAX_FIELDS = 256
 _MAX_DIMENSIONS = 8
 
@@ -77,9 +79,14 @@ class RglField:
     shape: tuple[int, ...]
 
     @property
+    def count(self) -> int:
+        """Number of values the field holds (a Python integer: a declared shape cannot overflow it)."""
+        return math.prod(self.shape)
+
+    @property
     def nbytes(self) -> int:
-        """Bytes the field's data occupies."""
-        return int(np.dtype(self.dtype).itemsize * np.prod(self.shape, dtype=np.int64))
+        """Bytes the field's data occupies (a Python integer)."""
+        return np.dtype(self.dtype).itemsize * self.count
 
 
 @dataclass(frozen=True)
@@ -120,7 +127,7 @@ class RglHeader:
     @property
     def theta_i_count(self) -> int:
         """Number of measured incident elevations."""
-        return int(np.prod(self.fields["theta_i"].shape))
+        return self.fields["theta_i"].count
 
 
 def is_rgl_file(path: str | os.PathLike[str]) -> bool:
@@ -165,9 +172,15 @@ def read_rgl_header(path: str | os.PathLike[str]) -> RglHeader:
     n_fields = reader.unpack("<I")
     if n_fields > _MAX_FIELDS:
         raise SourceFormatError(file_path, f"header declares {n_fields} fields, more than {_MAX_FIELDS}")
+    if version != _TENSOR_FILE_VERSION:
+        raise SourceFormatError(
+            file_path, f"tensor-file version {version[0]}.{version[1]} is not the 1.0 that Mitsuba reads"
+        )
     fields: dict[str, RglField] = {}
     for _ in range(n_fields):
         name = reader.take(reader.unpack("<H")).decode("ascii", errors="replace")
+        if name in fields:
+            raise SourceFormatError(file_path, f"field {name!r} appears twice in the header")
         ndim = reader.unpack("<H")
         code = reader.unpack("<B")
         offset = reader.unpack("<Q")
@@ -177,8 +190,10 @@ def read_rgl_header(path: str | os.PathLike[str]) -> RglHeader:
         if code not in _DTYPES:
             raise SourceFormatError(file_path, f"field {name!r} has unknown type code {code}")
         entry = RglField(_DTYPES[code], offset, shape)
-        if offset + entry.nbytes > size:
-            raise SourceFormatError(file_path, f"field {name!r} extends past the end of the file (truncated?)")
+        if offset + entry.nbytes > size:  # Python integers: a huge declared shape cannot wrap around
+            raise SourceFormatError(
+                file_path, f"field {name!r} (shape {list(shape)}) extends past the end of the file (truncated?)"
+            )
         fields[name] = entry
     missing = [name for name in _REQUIRED_FIELDS if name not in fields]
     if missing:
@@ -212,13 +227,19 @@ class _HeaderReader:
 
 
 def check_supported(header: RglHeader) -> None:
-    """Refuse what brdfcodec cannot tabulate on the MERL grid: anisotropic or non-RGB files.
+    """Refuse what brdfcodec cannot tabulate on the MERL grid, and every file Mitsuba's ``measured`` plugin would
+    refuse or misread: anisotropic or non-RGB files, and fields of the wrong type, shape or value.
+
+    Every field the plugin reads is checked here, before Mitsuba sees the file (:func:`check_measured_fields`),
+    so that ``bvae info`` says "reads yes" only for files that ``bvae compress`` reads.
 
     Raises
     ------
     SourceFormatError
-        With a message saying what the file is and what is accepted.
+        With a message naming the file and saying what the file is and what is accepted (or which field is
+        wrong).
     """
+    _check_field(header, "phi_i", ndim=1)
     if not header.isotropic:
         raise SourceFormatError(
             header.path,
@@ -231,6 +252,94 @@ def check_supported(header: RglHeader) -> None:
         )
     if header.colour != "rgb":
         raise SourceFormatError(header.path, "RGL file holds no RGB data (no 'rgb' field)")
+    check_measured_fields(header)
+
+
+#: The fields Mitsuba's ``measured`` plugin reads from an RGB file, with their number of dimensions and type.
+_MEASURED_FIELDS = {
+    "description": (1, "u1"),
+    "jacobian": (1, "u1"),
+    "theta_i": (1, "<f4"),
+    "phi_i": (1, "<f4"),
+    "ndf": (2, "<f4"),
+    "sigma": (2, "<f4"),
+    "vndf": (4, "<f4"),
+    "luminance": (4, "<f4"),
+    "rgb": (5, "<f4"),
+}
+#: Fields whose values the plugin turns into sampling distributions: finite and ≥ 0.
+_DENSITY_FIELDS = ("ndf", "sigma", "vndf", "luminance")
+
+
+def _check_field(header: RglHeader, name: str, *, ndim: int, dtype: str = "<f4") -> RglField:
+    """A field the ``measured`` plugin reads, refused unless it exists with ``ndim`` dimensions of ``dtype``
+    and no empty dimension."""
+    field = header.fields.get(name)
+    if field is None:
+        raise SourceFormatError(header.path, f"not an RGL BRDF measurement: missing field {name!r}")
+    if field.dtype != dtype or len(field.shape) != ndim or 0 in field.shape:
+        raise SourceFormatError(
+            header.path,
+            f"field {name!r} is {np.dtype(field.dtype).name} of shape {list(field.shape)}; Mitsuba's measured "
+            f"plugin needs {np.dtype(dtype).name} with {ndim} non-empty dimension(s)",
+        )
+    return field
+
+
+def check_measured_fields(header: RglHeader) -> None:
+    """Refuse a file whose fields Mitsuba's ``measured`` plugin would refuse, misread or crash on.
+
+    Checks the type, dimensions and agreeing sizes of every field the plugin reads (``description``,
+    ``jacobian``, ``theta_i``, ``phi_i``, ``ndf``, ``sigma``, ``vndf``, ``luminance``, ``rgb``), the
+    byte range of each (done by :func:`read_rgl_header`, in Python integers), and their values: the angle
+    grids finite and strictly increasing, the distributions finite and ≥ 0, the colours finite.
+
+    Raises
+    ------
+    SourceFormatError
+        Naming the file and the field.
+    """
+    for name, (ndim, dtype) in _MEASURED_FIELDS.items():
+        _check_field(header, name, ndim=ndim, dtype=dtype)
+    fields, path = header.fields, header.path
+    n_phi, n_theta = fields["phi_i"].shape[0], fields["theta_i"].shape[0]
+    if fields["jacobian"].shape != (1,):
+        raise SourceFormatError(path, f"field 'jacobian' has shape {list(fields['jacobian'].shape)}, expected [1]")
+    for name in ("ndf", "sigma"):
+        if min(fields[name].shape) < 2:
+            raise SourceFormatError(path, f"field {name!r} has shape {list(fields[name].shape)}: "
+                                    "each dimension needs at least 2 entries")
+    grid = fields["luminance"].shape[2:]
+    for name, expected in (
+        ("vndf", (n_phi, n_theta)),
+        ("luminance", (n_phi, n_theta, grid[0], grid[0])),
+        ("rgb", (n_phi, n_theta, 3, *grid)),
+    ):
+        shape = fields[name].shape
+        if shape[: len(expected)] != expected or min(shape[-2:]) < 2:
+            want = ", ".join(map(str, expected))
+            raise SourceFormatError(
+                path, f"field {name!r} has shape {list(shape)}; the measured plugin needs [{want}, …] "
+                "(incident azimuths, elevations, then a square grid of at least 2 × 2 for luminance and rgb)"
+            )
+    with open(path, "rb") as stream:
+        for name in ("theta_i", "phi_i", *_DENSITY_FIELDS, "rgb"):
+            values = _field_values(stream, path, name, fields[name])
+            if not np.isfinite(values).all():
+                raise SourceFormatError(path, f"field {name!r} holds non-finite values")
+            if name in ("theta_i", "phi_i") and np.any(np.diff(values) <= 0):
+                raise SourceFormatError(path, f"field {name!r} is not strictly increasing")
+            if name in _DENSITY_FIELDS and (values < 0).any():
+                raise SourceFormatError(path, f"field {name!r} holds negative values")
+
+
+def _field_values(stream: Any, path: Path, name: str, field: RglField) -> np.ndarray:
+    """A field's values, read from its byte range (already checked to lie in the file)."""
+    stream.seek(field.offset)
+    data = stream.read(field.nbytes)
+    if len(data) != field.nbytes:
+        raise SourceFormatError(path, f"field {name!r} extends past the end of the file (truncated?)")
+    return np.frombuffer(data, dtype=field.dtype)
 
 
 def read_rgl_bsdf(path: str | os.PathLike[str], *, name: str | None = None) -> MerlBRDF:
@@ -287,13 +396,22 @@ def _evaluate_on_grid(path: Path) -> np.ndarray:
     with _mitsuba_variant() as mi:
         try:
             bsdf = mi.load_dict({"type": "measured", "filename": str(path)})
-        except Exception as error:  # Mitsuba raises RuntimeError with its own message
-            raise SourceFormatError(path, f"Mitsuba's measured plugin refused the file: {error}") from None
+        except Exception as error:  # Mitsuba raises RuntimeError with its own (many-line) message
+            raise SourceFormatError(path, f"Mitsuba's measured plugin refused the file: {_first_line(error)}") from None
         value = _eval_bsdf(mi, bsdf, wi, wo)
     cos_out = wo[:, 2]
     with np.errstate(divide="ignore", invalid="ignore"):
         brdf = np.where(cos_out[:, None] > 0.0, value / cos_out[:, None], 0.0)
     return np.ascontiguousarray(brdf.T.reshape(3, *theta_h.shape), dtype=np.float64)
+
+
+def _first_line(error: BaseException) -> str:
+    """The gist of a Mitsuba error in one line: its first line, without the dump of the file's fields that
+    Mitsuba appends (``Invalid file structure: TensorFile[...]``), at most 200 characters."""
+    lines = [line.strip() for line in str(error).splitlines() if line.strip()]
+    text = lines[0] if lines else type(error).__name__
+    text = text.split("TensorFile[")[0].rstrip(" :[") or text
+    return text if len(text) <= 200 else text[:199] + "…"
 
 
 def _eval_bsdf(mi: object, bsdf: object, wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
