@@ -346,3 +346,19 @@ def test_a_run_with_nothing_held_out_keeps_its_last_weights(tmp_path: Path) -> N
     result = train(path, tmp_path / "run", model_config=TINY_CONFIG, train_config=config, progress=False)
     assert result.best_epoch == 2
     assert torch.load(tmp_path / "run" / "best.pt", weights_only=False)["epoch"] == 2
+
+
+def test_export_of_a_fold_run_measures_and_fits_on_the_fold_s_training_materials(
+    tiny_dataset: Path, tmp_path: Path
+) -> None:
+    from brdfcodec.training.export import export_run
+
+    config = TrainConfig(**{**TINY_TRAIN.to_dict(), "epochs": 1, "folds": 3, "fold": 1, "keep": "last"})
+    train(tiny_dataset, tmp_path / "run", model_config=dataclasses.replace(TINY_CONFIG, linear_basis=True),
+          train_config=config, progress=False)
+    run_data = json.loads((tmp_path / "run" / "run.json").read_text())["data"]
+    export_run(tmp_path / "run", tmp_path / "model", name="fold-test", basis_count=5)
+    info = json.loads((tmp_path / "model" / "model.json").read_text())["info"]
+    assert info["data"]["train"] == run_data["train"] and info["data"]["validation"] == run_data["validation"]
+    assert info["summary"]["validation"]["count"] == len(run_data["validation"])
+    assert info["basis"]["materials"] == len(run_data["train"])

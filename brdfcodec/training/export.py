@@ -90,18 +90,20 @@ def export_run(
     summary_file = run / "summary.json"
     seconds = sum(record["seconds"] for record in log)
     with BrdfDataset(dataset_path or run_info["dataset"]) as dataset:
-        measured = measure_model(model.encoder, model.decoder, dataset, config.latent_dim)
+        train_rows = _trained_rows(dataset, run_info)
+        measured = measure_model(model.encoder, model.decoder, dataset, config.latent_dim, train_rows)
         errors, baseline = measured.errors, measured.pca_errors
-        train_rows = dataset.indices("train")
         mu, logvar = measured.mu[train_rows], measured.logvar[train_rows]
         kl = kl_per_dim(mu, logvar)
         traversal = traversal_changes(model.decoder, mu.mean(0), np.maximum(mu.std(0), 1e-6))
+        trained = set(train_rows)
         data = {"source_kind": dataset.source_kind, "description": dataset.description,
-                "train": [dataset.names[i] for i in dataset.indices("train")],
-                "validation": [dataset.names[i] for i in dataset.indices("validation")]}
+                "train": [dataset.names[i] for i in train_rows],
+                "validation": [name for i, name in enumerate(dataset.names) if i not in trained]}
         out = Path(folder)
         out.mkdir(parents=True, exist_ok=True)
-        basis = _fit_basis(out, dataset, basis_count, basis_colour_permutations) if basis_count else None
+        basis = (_fit_basis(out, dataset, train_rows, basis_count, basis_colour_permutations) if basis_count
+                 else None)
     info: dict[str, Any] = {
         "brdfcodec_version": __version__,
         "torch_version": torch.__version__,
@@ -144,9 +146,17 @@ def export_run(
     return write_manifest(out, manifest)  # last: a folder with a model.json is a complete model
 
 
-def _fit_basis(folder: Path, dataset: BrdfDataset, count: int, colour_permutations: bool,
+def _trained_rows(dataset: BrdfDataset, run_info: dict[str, Any]) -> list[int]:
+    """Rows of the materials the run trained on (``run.json``: its folds or families, not only the stored
+    split), or the dataset's training split when the run's materials are not all in this dataset."""
+    trained = set(run_info.get("data", {}).get("train", []))
+    rows = [i for i, name in enumerate(dataset.names) if name in trained]
+    return rows if trained and len(rows) == len(trained) else dataset.indices("train")
+
+
+def _fit_basis(folder: Path, dataset: BrdfDataset, rows: list[int], count: int, colour_permutations: bool,
                name: str | None = None) -> dict[str, Any]:
-    """Fit the shared basis on the dataset's training split, then write it into ``folder`` as ``name``
+    """Fit the shared basis on the given (training) materials, then write it into ``folder`` as ``name``
     (``basis.safetensors`` by default; atomically: a failed fit leaves any basis there as it was).
 
     With ``colour_permutations`` the file holds the basis' factors (``spec/model.md`` §5), a third of the
@@ -160,7 +170,6 @@ def _fit_basis(folder: Path, dataset: BrdfDataset, count: int, colour_permutatio
         write_shared_basis,
     )
 
-    rows = dataset.indices("train")
     if len(rows) < 2:
         raise ValueError(f"{dataset.path}: a shared basis needs at least 2 training materials")
     count = min(count, shared_basis_rank(len(rows), colour_permutations))  # no more vectors than the data's rank
@@ -210,7 +219,7 @@ def add_shared_basis(folder: str | os.PathLike[str], dataset_path: str | os.Path
         )
     fitting = ".basis-fitting.safetensors"
     with BrdfDataset(dataset_path) as dataset:
-        basis = _fit_basis(out, dataset, count, colour_permutations, name=fitting)
+        basis = _fit_basis(out, dataset, dataset.indices("train"), count, colour_permutations, name=fitting)
     kept: dict[str, str] = {}
     if existing and basis["sha256"] != existing and (out / BASIS_FILE).is_file():
         kept[existing] = f"basis-{existing[:16]}.safetensors"

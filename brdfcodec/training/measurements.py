@@ -76,17 +76,21 @@ def _errors(name: str, split: str, reference: MerlBRDF, estimate: np.ndarray) ->
                           relae_linear(reference.values, values, reference.mask).overall)
 
 
-def measure_model(encoder: Encoder, decoder: Decoder, dataset: BrdfDataset, pca_components: int) -> ModelMeasurements:
-    """Errors of the model and of a PCA basis (fitted on the training split) on every material's full table.
+def measure_model(encoder: Encoder, decoder: Decoder, dataset: BrdfDataset, pca_components: int,
+                  train_rows: Sequence[int] | None = None) -> ModelMeasurements:
+    """Errors of the model and of a PCA basis (fitted on the training materials) on every material's full table.
 
-    Each material's reference table is read once and its input encoded once.
+    ``train_rows`` are the materials the model trained on (by default the dataset's training split); every
+    other material is reported as ``"validation"``. Each material's reference table is read once and its input
+    encoded once.
     """
-    basis = fit_pca(dataset.inputs(dataset.indices("train")), pca_components)
+    trained = set(dataset.indices("train") if train_rows is None else train_rows)
+    basis = fit_pca(dataset.inputs(sorted(trained)), pca_components)
     mu, logvar = encode_dataset(encoder, dataset.inputs(list(range(len(dataset)))))
     runner = BrdfDecoder.from_network(decoder)
     errors, baseline = [], []
     for index in range(len(dataset)):
-        name, split = dataset.names[index], dataset.split[index]
+        name, split = dataset.names[index], "train" if index in trained else "validation"
         reference = dataset.table(index)
         errors.append(_errors(name, split, reference, table_from_mapped(runner.decode_mapped(mu[index]))))
         pca_output = basis.decode(basis.encode(dataset.inputs([index])))[0]
