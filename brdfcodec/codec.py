@@ -51,6 +51,7 @@ from brdfcodec.bvae_format import (
     Record,
     encode_bvae,
     parse_bvae,
+    without_provenance,
 )
 from brdfcodec.conventions import MAPPED_MAX, N_KEPT_SLICES, NETWORK_INPUT_SHAPE, UNMEASURED_VALUE
 from brdfcodec.errors import (
@@ -359,6 +360,9 @@ class BrdfDecoder:
             Names both hashes and says how to get the right model.
         LatentDimensionError
             The file's ``latent_dim`` is not the decoder's.
+        BasisMismatchError, BasisError
+            A record's basis layer names a shared basis this model does not have, or vectors beyond it
+            (``spec/bvae-format.md`` §4.5): refused on opening, before any record is decoded.
         """
         mine = self.reference
         if mine is None or header.decoder.sha256 != mine.sha256:
@@ -374,6 +378,10 @@ class BrdfDecoder:
                 f"declares latent_dim {header.latent_dim}, but its decoder {header.decoder.name} "
                 f"({header.decoder.sha256[:12]}…) has {self.latent_dim}: the file is inconsistent",
             )
+        from brdfcodec.layers.basis import check_basis_layers
+
+        own = self.manifest.basis_sha256 if self.manifest is not None else None
+        check_basis_layers(header.entries, self.basis_named, os.fspath(path) or "<bvae>", own)
 
     def _codes(self, codes: npt.ArrayLike) -> tuple[np.ndarray, bool]:
         array = np.asarray(codes, dtype=np.float32)
@@ -448,19 +456,11 @@ class BrdfDecoder:
         return load_shared_basis(self.manifest.folder / BASIS_FILE, self.manifest.basis_sha256)
 
     def basis_named(self, sha256: str) -> SharedBasis | None:
-        """The model's shared basis with this SHA-256: its current one (:attr:`shared_basis`) or one it had before
-        (``previous_bases`` in ``model.json``, checked against its hash when first read); None if it has none."""
+        """The model's shared basis (:attr:`shared_basis`) if it has this SHA-256, else None: a model ships one
+        basis, and a file's basis layers decode with the model whose basis they name (``spec/bvae-format.md``
+        §4.5)."""
         basis = self.shared_basis
-        if basis is not None and basis.sha256 == sha256:
-            return basis
-        if self.manifest is None or sha256 not in self.manifest.previous_bases:
-            return None
-        cache = self.__dict__.setdefault("_previous_bases", {})
-        if sha256 not in cache:
-            from brdfcodec.layers.basis import load_shared_basis
-
-            cache[sha256] = load_shared_basis(self.manifest.folder / self.manifest.previous_bases[sha256], sha256)
-        return cache[sha256]
+        return basis if basis is not None and basis.sha256 == sha256 else None
 
     @property
     def projection_centre(self) -> npt.NDArray[np.float32]:
@@ -515,13 +515,12 @@ class BrdfDecoder:
         """
         layer = record.basis
         assert layer is not None
-        basis = self.basis_named(layer.sha256)
-        if basis is None or layer.project > basis.count:
+        basis = self._basis_of(record, layer.sha256)
+        if layer.project > basis.count:
             from brdfcodec.layers.basis import BasisError
 
-            held = 0 if basis is None else basis.count
             raise BasisError(f"{record.name}: the record projects its base on {layer.project} basis vectors, but "
-                             f"this model's shared basis holds {held}")
+                             f"this model's shared basis holds {basis.count}")
         count, c, first = layer.project, layer.coefficients(), layer.first
         if first + len(c) > basis.count:
             basis.check_vectors(first, len(c))  # refused with the sizes (BasisError)
@@ -556,15 +555,26 @@ class BrdfDecoder:
         count = _projected_vectors(record)
         if not count:
             return
-        basis = self.basis_named(record.basis.sha256)  # type: ignore[union-attr]
-        if basis is None or count > basis.count:
+        basis = self._basis_of(record, record.basis.sha256)  # type: ignore[union-attr]
+        if count > basis.count:
             from brdfcodec.layers.basis import BasisError
 
-            held = 0 if basis is None else basis.count
             raise BasisError(f"{record.name}: the record projects its base on {count} basis vectors, but this "
-                             f"model's shared basis holds {held}")
+                             f"model's shared basis holds {basis.count}")
         flat = mapped.reshape(-1)
         flat[basis.entries] = basis.project(flat[basis.entries], self._centre_on(basis), count)
+
+    def _basis_of(self, record: Record, sha256: str) -> SharedBasis:
+        """The shared basis a record's basis layer names; :class:`BasisMismatchError` naming both hashes when
+        this decoder's model has no basis by that hash (projected records included)."""
+        basis = self.basis_named(sha256)
+        if basis is None:
+            own = self.manifest.basis_sha256 if self.manifest is not None else None
+            raise BasisMismatchError(
+                f"{record.name}: the record's basis layer needs shared basis {sha256}, but this "
+                f"decoder's model has {own or 'none'}; decode it with the model that wrote it"
+            )
+        return basis
 
     def _layer_residuals(self, record: Record, slots: Sequence[int] | None = None) -> list[np.ndarray]:
         """A record's layers decoded to mapped residuals, in the order they are added (basis, then detail).
@@ -576,16 +586,7 @@ class BrdfDecoder:
         basis_layer, detail = getattr(record, "basis", None), getattr(record, "detail", None)
         if basis_layer is None and detail is None:
             return []
-        basis = None
-        if basis_layer is not None:
-            basis = self.basis_named(basis_layer.sha256)
-            if basis is None:
-                current = self.shared_basis
-                own = "none" if current is None else current.sha256
-                raise BasisMismatchError(
-                    f"{record.name}: the record's basis layer needs shared basis {basis_layer.sha256}, but this "
-                    f"decoder's model has {own}; decode it with the model that wrote it"
-                )
+        basis = None if basis_layer is None else self._basis_of(record, basis_layer.sha256)
         if slots is None:
             from brdfcodec.layers.layer_sum import layered_residual
 
@@ -1216,6 +1217,7 @@ def encode(
     bytes: int | None = None,  # noqa: A002 - the CLI's --bytes
     max_relae: float | None = None,
     metric: Literal["mapped", "linear"] = "mapped",
+    provenance: bool = False,
 ) -> bytes:
     """Encode MERL tables into the bytes of one ``.bvae`` file (one material, or a library of many).
 
@@ -1230,10 +1232,13 @@ def encode(
     model : model folder, decoder SHA-256, or None for the default
     latent_dtype : {"float32", "float16"}
     measure_error : bool, default True
-        Store each record's RelAE against its source in ``meta["relae"]``.
+        Measure each record's RelAE against its source (``meta["relae"]``; stored with ``provenance``).
     batch_size : int, default 8
     effort, bytes, max_relae, metric
         Encode-time refinement and rate control, as for :class:`BrdfEncoder`.
+    provenance : bool, default False
+        Store each record's provenance in the file (``spec/bvae-format.md`` §5: source SHA-256 and kind,
+        RelAE, encoder, effort, rate control). By default the file holds names and records only.
 
     Returns
     -------
@@ -1246,7 +1251,7 @@ def encode(
     >>> from brdfcodec.analytic import ANALYTIC_PRESETS
     >>> data = bc.encode([ANALYTIC_PRESETS["gold"].to_merl()], measure_error=False)
     >>> data[1:5], len(data)   # one material: a header naming the decoder, then 64 bytes of latents
-    (b'BVAE', 428)
+    (b'BVAE', 136)
     >>> bc.decode(data)["gold"].table(phi_d_bins=[0]).shape
     (3, 90, 90, 1)
     """
@@ -1257,6 +1262,8 @@ def encode(
     records = encode_records(items, names=names, encoder=encoder, measure_error=measure_error, batch_size=batch_size)
     if encoder.reference is None:  # loaded from a model folder, so it has one
         raise RuntimeError("the encoder has no decoder reference")
+    if not provenance:
+        records = without_provenance(records)
     return encode_bvae(records, encoder.reference, latent_dtype=latent_dtype)
 
 
@@ -1295,6 +1302,7 @@ def compress(
     bytes: int | None = None,  # noqa: A002 - the CLI's --bytes
     max_relae: float | None = None,
     metric: Literal["mapped", "linear"] = "mapped",
+    provenance: bool = False,
 ) -> int:
     """Write :func:`encode` of the sources to a ``.bvae`` file, atomically (options as for :func:`encode`).
 
@@ -1306,7 +1314,7 @@ def compress(
     check_output_path(output, overwrite=overwrite)  # before the work, not after
     data = encode(
         sources, names=names, model=model, latent_dtype=latent_dtype, measure_error=measure_error,
-        effort=effort, bytes=bytes, max_relae=max_relae, metric=metric,
+        effort=effort, bytes=bytes, max_relae=max_relae, metric=metric, provenance=provenance,
     )
     with atomic_output(output, overwrite=overwrite) as tmp:
         Path(tmp).write_bytes(data)

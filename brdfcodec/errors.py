@@ -12,6 +12,7 @@ from __future__ import annotations
 import os
 
 __all__ = [
+    "BasisError",
     "BasisMismatchError",
     "BrdfcodecError",
     "BvaeChecksumError",
@@ -104,6 +105,11 @@ class DecoderMismatchError(BrdfcodecError):
 
 class BasisMismatchError(DecoderMismatchError):
     """A record's basis layer names a shared basis that its decoder's model does not have."""
+
+
+class BasisError(BrdfcodecError, ValueError):
+    """A shared basis file that is malformed or not the one named, or a record that needs basis vectors its
+    model's shared basis does not hold (``spec/bvae-format.md`` §4.5)."""
 
 
 class ModelNotFoundError(DecoderNotFoundError):

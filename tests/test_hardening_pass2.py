@@ -168,3 +168,156 @@ def test_rgl_shape_wrap_on_the_real_file(shared_dir: Path, tmp_path: Path) -> No
     with pytest.raises(SourceFormatError, match="'vndf'"):
         read_rgl_header(path)
     assert issubclass(SourceFormatError, BrdfcodecError)
+
+
+# --------------------------------------------------------------------------- 2, 3. layered records
+
+
+@pytest.fixture(scope="module")
+def shipped_decoder():  # type: ignore[no-untyped-def]
+    from brdfcodec.codec import BrdfDecoder
+
+    decoder = BrdfDecoder()
+    assert decoder.shared_basis is not None and decoder.shared_basis.count < 200
+    return decoder
+
+
+def _layered_file(tmp_path: Path, decoder, *, detail=None, basis=None, name: str = "gold") -> Path:  # type: ignore[no-untyped-def]
+    """A one-record ``.bvae`` file written by the library's own writer, so every CRC and length is right."""
+    from brdfcodec.bvae_format import write_bvae
+    from brdfcodec.layers.record import LayeredRecord
+
+    rng = np.random.default_rng(0)
+    record = LayeredRecord(name, rng.normal(size=decoder.latent_dim), np.ones(decoder.latent_dim),
+                           detail=detail, basis=basis)
+    path = tmp_path / f"{name}.bvae"
+    write_bvae(path, [record], decoder.reference)
+    return path
+
+
+def _detail_frame() -> tuple[bytes, str]:
+    from brdfcodec.layers.detail import encode_detail
+
+    layer = encode_detail(np.random.default_rng(1).normal(0.0, 0.05, (63, 90, 90)), 0.2)
+    return layer.data, layer.dtype
+
+
+def _skippable(payload: bytes) -> bytes:
+    return struct.pack("<II", 0x184D2A50, len(payload)) + payload
+
+
+@pytest.mark.parametrize("how", ["corrupt", "truncated", "two-frames", "trailing-garbage", "skippable-frame"])
+def test_broken_detail_layer_is_refused_at_read(tmp_path: Path, shipped_decoder, how: str,  # type: ignore[no-untyped-def]
+                                                capsys: pytest.CaptureFixture[str]) -> None:
+    """A detail frame that is corrupt or truncated under a correct record CRC, or followed by anything:
+    refused when the record is read (``info`` included), as a format error naming the file and the record."""
+    from brdfcodec.bvae_format import read_bvae
+    from brdfcodec.errors import BvaeFormatError
+    from brdfcodec.layers.detail import DetailLayer
+
+    frame, dtype = _detail_frame()
+    corrupt = bytearray(frame)
+    corrupt[9] ^= 0xFF
+    data = {"corrupt": bytes(corrupt), "truncated": frame[: len(frame) // 2], "two-frames": frame + frame,
+            "trailing-garbage": frame + b"\x00garbage", "skippable-frame": frame + _skippable(b"hidden")}[how]
+    path = _layered_file(tmp_path, shipped_decoder, detail=DetailLayer(0.2, dtype, data))
+    with pytest.raises(BvaeFormatError) as caught:
+        read_bvae(path)
+    assert str(path) in str(caught.value) and "'gold'" in str(caught.value) and "detail" in str(caught.value)
+    assert main(["info", str(path)]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and str(path) in err[0] and "detail" in err[0]
+    out = tmp_path / "out"
+    assert main(["decompress", str(path), "-o", str(out)]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and str(path) in err[0]
+    assert not out.exists() or not any(out.iterdir())
+
+
+def test_a_good_detail_layer_still_reads_and_decodes(tmp_path: Path, shipped_decoder) -> None:  # type: ignore[no-untyped-def]
+    from brdfcodec.codec import MaterialLibrary
+    from brdfcodec.layers.detail import DetailLayer
+
+    frame, dtype = _detail_frame()
+    path = _layered_file(tmp_path, shipped_decoder, detail=DetailLayer(0.2, dtype, frame))
+    with MaterialLibrary(path) as library:
+        assert library["gold"].table(phi_d_bins=[90]).shape == (3, 90, 90, 1)
+
+
+def _basis_layer(decoder, *, count: int = 5, first: int = 0, project: int = 0, sha: str | None = None):  # type: ignore[no-untyped-def]
+    from brdfcodec.layers.basis import BasisLayer
+
+    return BasisLayer(sha or decoder.shared_basis.sha256, 0.25, np.ones(count, dtype=np.int8), first, project)
+
+
+@pytest.mark.parametrize(("fields", "what"), [
+    ({"count": 200}, "vectors 1 to 200"),
+    ({"count": 10, "first": 70}, "vectors 71 to 80"),
+    ({"count": 5, "first": 8, "project": 76}, "projected on 76"),
+])
+def test_basis_fields_beyond_the_shared_basis_are_refused_on_open(tmp_path: Path, shipped_decoder, fields: dict,  # type: ignore[no-untyped-def]
+                                                                  what: str, capsys: pytest.CaptureFixture[str]) -> None:
+    from brdfcodec.bvae_format import read_bvae
+    from brdfcodec.codec import MaterialLibrary
+    from brdfcodec.errors import BasisError
+
+    path = _layered_file(tmp_path, shipped_decoder, basis=_basis_layer(shipped_decoder, **fields))
+    with pytest.raises(BasisError, match=what) as caught:
+        MaterialLibrary(path)
+    assert isinstance(caught.value, BrdfcodecError) and str(path) in str(caught.value) and "'gold'" in str(caught.value)
+    assert main(["info", str(path)]) == 1  # the model is installed: info refuses what decoding would
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and str(path) in err[0] and "holds" in err[0]
+    with pytest.raises(BrdfcodecError):  # decoding the record directly: typed too
+        shipped_decoder.decode(read_bvae(path).records[0], phi_d_bins=[90])
+
+
+@pytest.mark.parametrize("project", [0, 50])
+def test_unknown_basis_hash_is_a_basis_mismatch_for_projected_records_too(tmp_path: Path, shipped_decoder,  # type: ignore[no-untyped-def]
+                                                                          project: int) -> None:
+    from brdfcodec.bvae_format import read_bvae
+    from brdfcodec.codec import MaterialLibrary
+    from brdfcodec.errors import BasisMismatchError
+
+    layer = _basis_layer(shipped_decoder, count=5, first=8, project=project, sha="00" * 32)
+    path = _layered_file(tmp_path, shipped_decoder, basis=layer)
+    with pytest.raises(BasisMismatchError, match="0" * 64) as caught:
+        MaterialLibrary(path)
+    assert str(path) in str(caught.value) and shipped_decoder.shared_basis.sha256 in str(caught.value)
+    with pytest.raises(BasisMismatchError, match=shipped_decoder.shared_basis.sha256):
+        shipped_decoder.decode(read_bvae(path).records[0])
+
+
+def test_every_error_raised_on_bad_basis_input_is_a_brdfcodec_error() -> None:
+    from brdfcodec.errors import BasisError, BasisMismatchError
+    from brdfcodec.layers import basis
+
+    assert basis.BasisError is BasisError and issubclass(BasisError, BrdfcodecError)
+    assert issubclass(BasisError, ValueError)  # callers that caught ValueError still do
+    assert issubclass(BasisMismatchError, BrdfcodecError)
+
+
+SHA = "ab" * 32
+DETAIL = {"transform": "dct3-ycc", "step": 0.5, "dtype": "int16", "length": 100}
+
+
+@pytest.mark.parametrize(("layers", "error"), [
+    ({"detail": {**DETAIL, "quality": 3}}, "unsupported"),  # unknown key inside detail, as in layers and basis
+    ({"detail": {k: v for k, v in DETAIL.items() if k != "transform"}}, "malformed"),  # a required key missing
+    ({"detail": {**DETAIL, "transform": 5}}, "malformed"),  # the wrong JSON type
+    ({"detail": {**DETAIL, "transform": "wavelet"}}, "unsupported"),  # a string this reader does not know
+    ({"detail": {**DETAIL, "dtype": "int8"}}, "unsupported"),
+    ({"detail": {**DETAIL, "dtype": 16}}, "malformed"),
+    ({"detail": DETAIL, "mu": None}, "malformed"),
+    ({"detail": DETAIL, "mu": "int4"}, "unsupported"),
+    ({"detail": DETAIL, "sigma": 8}, "malformed"),
+    ({"detail": DETAIL, "sigma": "log2-u4"}, "unsupported"),
+])
+def test_layer_keys_and_values_have_the_spec_error_classes(layers: dict, error: str) -> None:
+    """Spec §4.4/§7: a missing key or a value of the wrong JSON type is malformed; an unknown key, or a string
+    value this reader does not know, is unsupported."""
+    from brdfcodec.layers.record import UnsupportedLayerError, layers_length
+
+    with pytest.raises(ValueError) as caught:
+        layers_length(layers, "record 0 (a)", 8)
+    assert isinstance(caught.value, UnsupportedLayerError) == (error == "unsupported"), caught.value

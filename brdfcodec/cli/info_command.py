@@ -10,7 +10,7 @@ from typing import Any
 
 import numpy as np
 
-from brdfcodec.bvae_format import FLAG_HEADER_ZSTD, read_bvae
+from brdfcodec.bvae_format import FLAG_METADATA_ZSTD, RecordEntry, read_bvae
 from brdfcodec.bvae_format import MAGIC as BVAE_MAGIC
 from brdfcodec.conventions import MERL_SHAPE
 from brdfcodec.dataset import HDF5_SIGNATURE
@@ -98,29 +98,71 @@ def _bvae_summary(path: Path) -> dict[str, Any]:
         installed: str | None = str(model.folder)
     except DecoderNotFoundError:
         installed = None
-    materials = []
-    for entry in header.entries:
-        item: dict[str, Any] = {"name": entry.name, "kind": entry.kind, "payload_bytes": entry.length}
-        if entry.graft_dims:
-            item["graft_dims"] = list(entry.graft_dims)
-        if entry.layers is not None:
-            item["layers"] = dict(entry.layers)
-        item.update({k: v for k, v in entry.meta.items() if k in ("relae", "source_sha256", "edit", "effort", "rate")})
-        materials.append(item)
+    else:  # basis layers checked against the model's shared bases, as opening the file for decoding does (§4.5)
+        from brdfcodec.layers.basis import check_basis_layers, model_basis_lookup
+
+        bases = model_basis_lookup(model.folder, model.basis_sha256, {})  # one basis per model (issue 40)
+        check_basis_layers(header.entries, bases, str(path), model.basis_sha256)
+    name = header.decoder.name or (model.name if installed is not None else "")
+    materials = [_record_summary(entry, header.latent_dtype) for entry in header.entries]
+    names = sum(len(entry.name.encode("utf-8")) for entry in header.entries)
+    index = sum(entry.descriptor_bytes for entry in header.entries)
     return {
         "file": str(path),
         "kind": "bvae",
         "format_version": f"{header.major}.{header.minor}",
         "created_by": header.created_by,
-        "decoder": {"sha256": header.decoder.sha256, "name": header.decoder.name, "installed_at": installed},
+        "decoder": {"sha256": header.decoder.sha256, "name": name, "installed_at": installed},
         "latent_dim": header.latent_dim,
         "latent_dtype": header.latent_dtype,
-        "header_compressed": bool(header.flags & FLAG_HEADER_ZSTD),
+        "basis_sha256": header.basis_sha256,
+        "record_forms": header.form_count,
+        "metadata": any(entry.meta for entry in header.entries) or bool(header.created_by),
+        "header_compressed": bool(header.flags & FLAG_METADATA_ZSTD),
         "header_bytes": header.header_bytes,
         "bytes": header.file_size,
         "bytes_per_material": header.file_size / len(header.entries),
+        "names_bytes": names,
+        "index_bytes": index,
+        "payload_bytes": header.file_size - header.records_offset,
         "materials": materials,
     }
+
+
+def _record_summary(entry: RecordEntry, latent_dtype: str) -> dict[str, Any]:
+    """What one record stores (μ and σ forms, layers, sizes) and, when it carries them, its provenance."""
+    layers = entry.layers or {}
+    item: dict[str, Any] = {
+        "name": entry.name, "kind": entry.kind,
+        "mu": layers.get("mu", latent_dtype), "sigma": layers.get("sigma", latent_dtype),
+        "payload_bytes": entry.length, "record_bytes": entry.length + entry.descriptor_bytes,
+    }
+    if entry.graft_dims:
+        item["graft_dims"] = list(entry.graft_dims)
+    if "basis" in layers:
+        basis = layers["basis"]
+        item["basis"] = {"count": basis["count"], "first": basis.get("first", 0), "project": basis.get("project", 0)}
+    if "detail" in layers:
+        item["detail_bytes"] = layers["detail"]["length"]
+    item.update({k: v for k, v in entry.meta.items()
+                 if k in ("relae", "source_sha256", "source_kind", "edit", "effort", "rate")})
+    return item
+
+
+def _stored_forms(item: dict[str, Any], latent_dtype: str) -> str:
+    """One line of what a record stores: μ, σ, the layers."""
+    mu = {"int8-fixed": "μ int8 grid", "int8": "μ int8+step"}.get(item["mu"], f"μ {item['mu']}")
+    sigma = {"log2-u8": "σ u8", "log2-u8-shared": "σ shared u8"}.get(item["sigma"], f"σ {item['sigma']}")
+    parts = [mu, sigma]
+    if item["kind"] == "graft":  # parameters numbered from 1, like every number the CLI shows
+        parts.append("graft z" + ",".join(str(d + 1) for d in item["graft_dims"]))
+    if "basis" in item:
+        count, first, project = item["basis"]["count"], item["basis"]["first"], item["basis"]["project"]
+        vectors = f"vector {first + 1}" if count == 1 else f"vectors {first + 1}–{first + count}"
+        parts.append(f"basis {count} ({vectors})" + (f", base projected on {project}" if project else ""))
+    if "detail_bytes" in item:
+        parts.append(f"detail {item['detail_bytes']:,} B")
+    return ", ".join(parts)
 
 
 def _rgl_summary(path: Path) -> dict[str, Any]:
@@ -179,38 +221,31 @@ def _format_text(summary: dict[str, Any]) -> str:
     if summary["kind"] == "bvae":
         decoder = summary["decoder"]
         where = decoder["installed_at"] or "NOT INSTALLED: register the model folder that made this file"
+        created = f" ({summary['created_by']})" if summary["created_by"] else ""
+        metadata = "per-record metadata" if summary["metadata"] else "no metadata (names and records only)"
         lines += [
-            f"  kind            .bvae latent file, format {summary['format_version']} ({summary['created_by']})",
-            f"  decoder         {decoder['name']}  sha256 {decoder['sha256']}",
+            f"  kind            .bvae latent file, format {summary['format_version']}{created}",
+            f"  decoder         {decoder['name'] or '(name not stored)'}  sha256 {decoder['sha256']}",
             f"                  {where}",
-            f"  latents         {summary['latent_dim']} dimensions, {summary['latent_dtype']}",
-            f"  size            {summary['bytes']:,} bytes ({summary['bytes_per_material']:.1f} per material; "
-            f"header {summary['header_bytes']:,}{' zstd' if summary['header_compressed'] else ''})",
-            f"  materials       {len(summary['materials'])}",
+            f"  latents         {summary['latent_dim']} dimensions; values stored as floats are "
+            f"{summary['latent_dtype']} (each record says how it stores μ and σ)",
+            f"  shared basis    {summary['basis_sha256'] or '- (no basis layer)'}",
+            f"  size            {summary['bytes']:,} bytes ({summary['bytes_per_material']:.1f} per material): "
+            f"payloads {summary['payload_bytes']:,}, names {summary['names_bytes']:,}, index "
+            f"{summary['index_bytes']:,}, rest of the header {summary['header_bytes'] - summary['names_bytes'] - summary['index_bytes']:,}",
+            f"  records         {len(summary['materials'])} in {summary['record_forms']} "
+            f"form{'s' if summary['record_forms'] != 1 else ''}; {metadata}"
+            f"{' (zstd)' if summary['header_compressed'] else ''}",
         ]
         for item in summary["materials"][:50]:
             relae = item.get("relae", {})
-            error = f"RelAE {relae['mapped']:.4f}" if isinstance(relae, dict) and "mapped" in relae else ""
+            notes = [f"RelAE {relae['mapped']:.4f}"] if isinstance(relae, dict) and "mapped" in relae else []
+            if "source_kind" in item:
+                notes.append(f"source {item['source_kind']}")
             kind = "" if item["kind"] == "latent" else f"[{item['kind']}] "
-            layers = item.get("layers") or {}
-            if layers:
-                parts = []
-                if "mu" in layers:  # a compact base: μ as int8 with a step (1.4) or on the fixed grid (1.5)
-                    parts.append("μ int8 fixed grid" if layers["mu"] == "int8-fixed" else "μ int8")
-                if layers.get("sigma") == "log2-u8-shared":
-                    parts.append("σ shared")
-                if "basis" in layers:
-                    count, first = layers["basis"]["count"], layers["basis"].get("first", 0)
-                    # vectors numbered from 1, like every number the CLI shows
-                    vectors = f"vector {first + 1}" if count == 1 else f"vectors {first + 1}–{first + count}"
-                    span = f" ({vectors})" if first else ""
-                    parts.append(f"basis {count}{span}")
-                    if "project" in layers["basis"]:  # a projected base (1.6)
-                        parts.append(f"base projected on {layers['basis']['project']}")
-                if "detail" in layers:
-                    parts.append(f"detail {layers['detail']['length']} B")
-                kind = f"[{' + '.join(parts)}] "
-            lines.append(f"    {item['name']:<32} {kind}{item['payload_bytes']} B  {error}".rstrip())
+            lines.append(f"    {item['name']:<32} {kind}{_stored_forms(item, summary['latent_dtype'])}; "
+                         f"{item['payload_bytes']:,} B payload, {item['record_bytes']:,} B with its index entry  "
+                         f"{'  '.join(notes)}".rstrip())
         if len(summary["materials"]) > 50:
             lines.append(f"    … and {len(summary['materials']) - 50} more (--json lists all)")
         return "\n".join(lines)

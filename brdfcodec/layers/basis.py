@@ -34,7 +34,7 @@ from __future__ import annotations
 import functools
 import itertools
 import os
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Final
@@ -44,11 +44,13 @@ import numpy.typing as npt
 
 from brdfcodec.colour_orders_pca import colour_orders_pca
 from brdfcodec.conventions import N_CHANNELS, N_KEPT_SLICES, NETWORK_INPUT_SHAPE
+from brdfcodec.errors import BasisError, BasisMismatchError
 from brdfcodec.hashing import is_sha256_hex
 
 __all__ = [
     "BASIS_FILE",
     "FIXED_MU_LIMIT",
+    "BasisError",
     "FIXED_MU_STEP",
     "MAX_BASIS_COUNT",
     "BasisLayer",
@@ -56,6 +58,7 @@ __all__ = [
     "SharedBasis",
     "basis_layer_from_bytes",
     "basis_offset",
+    "check_basis_layers",
     "dequantise_int8",
     "fit_factorised_basis",
     "fit_shared_basis",
@@ -65,6 +68,7 @@ __all__ = [
     "int8_step_bytes",
     "int8_with_step",
     "load_shared_basis",
+    "model_basis_lookup",
     "quantise_coefficients",
     "shared_basis_rank",
     "with_colour_permutations",
@@ -80,10 +84,6 @@ _ENTRIES_PER_CHANNEL: Final = NETWORK_INPUT_SHAPE[1] * NETWORK_INPUT_SHAPE[2]
 _N_ENTRIES: Final = int(np.prod(NETWORK_INPUT_SHAPE))
 #: Bytes of the step that precedes the coefficients.
 STEP_BYTES: Final = 2
-
-
-class BasisError(ValueError):
-    """A basis file that is malformed or does not match its expected SHA-256."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -796,6 +796,73 @@ def quantise_coefficients(sha256: str, coefficients: npt.ArrayLike, first: int =
     vectors (0: not projected)."""
     step, q = int8_with_step(coefficients, "basis coefficients")
     return BasisLayer(sha256, step, q, int(first), int(project))
+
+
+def check_basis_layers(
+    entries: Sequence[Any], basis_named: Callable[[str], SharedBasis | None], where: str, own: str | None
+) -> None:
+    """Refuse, when a file is opened for decoding, a record whose basis layer its model cannot decode.
+
+    Parameters
+    ----------
+    entries : sequence of RecordEntry
+        A file's index (:attr:`brdfcodec.bvae_format.BvaeHeader.entries`).
+    basis_named : callable
+        The model's shared basis with a SHA-256, or None when the model has none by that hash.
+    where : str
+        The file, for the messages.
+    own : str or None
+        SHA-256 of the model's current shared basis (None: it has none), for the messages.
+
+    Raises
+    ------
+    BasisMismatchError
+        A record names a shared basis the model does not have (naming both hashes).
+    BasisError
+        A record's ``first + count`` or ``project`` exceeds the vectors its shared basis holds.
+    """
+    for entry in entries:
+        layer = (entry.layers or {}).get("basis")
+        if layer is None:
+            continue
+        sha = str(layer["sha256"])
+        basis = basis_named(sha)
+        if basis is None:
+            raise BasisMismatchError(
+                f"{where}: record {entry.name!r}: its basis layer needs shared basis {sha}, but the decoder's model "
+                f"has {own or 'none'}; decode it with the model that wrote it"
+            )
+        count, first, project = int(layer["count"]), int(layer.get("first", 0)), int(layer.get("project", 0))
+        if first + count > basis.count:
+            raise BasisError(
+                f"{where}: record {entry.name!r}: its basis layer uses vectors {first + 1} to {first + count}, but "
+                f"shared basis {sha[:12]}… holds {basis.count}"
+            )
+        if project > basis.count:
+            raise BasisError(
+                f"{where}: record {entry.name!r}: its base is projected on {project} basis vectors, but shared "
+                f"basis {sha[:12]}… holds {basis.count}"
+            )
+
+
+def model_basis_lookup(folder: str | os.PathLike[str], current: str | None,
+                       previous: Mapping[str, str]) -> Callable[[str], SharedBasis | None]:
+    """``basis_named`` for :func:`check_basis_layers` from a model folder (no torch): its current basis
+    (``basis.safetensors``, hash ``current``) or a previous one (``previous``: hash → file name), each read and
+    checked against its hash once."""
+    loaded: dict[str, SharedBasis] = {}
+
+    def basis_named(sha256: str) -> SharedBasis | None:
+        if sha256 not in loaded:
+            if sha256 == current:
+                loaded[sha256] = load_shared_basis(Path(folder) / BASIS_FILE, sha256)
+            elif sha256 in previous:
+                loaded[sha256] = load_shared_basis(Path(folder) / previous[sha256], sha256)
+            else:
+                return None
+        return loaded[sha256]
+
+    return basis_named
 
 
 def basis_layer_from_bytes(entry: Mapping[str, Any], data: bytes) -> BasisLayer:

@@ -36,6 +36,7 @@ __all__ = [
     "COLOUR_MATRIX",
     "DETAIL_TRANSFORM",
     "DetailLayer",
+    "check_detail_frame",
     "decode_detail",
     "encode_detail",
 ]
@@ -52,6 +53,8 @@ _SHAPE = (N_CHANNELS, N_KEPT_SLICES, *NETWORK_INPUT_SHAPE[1:])  # (3, 21, 90, 90
 N_DETAIL_VALUES = int(np.prod(_SHAPE))
 _DTYPES = {"int16": np.dtype("<i2"), "int32": np.dtype("<i4")}
 _ZSTD_LEVEL = 19
+#: Largest zstandard window a detail frame may ask a reader for (its content is at most 2 MB).
+_MAX_WINDOW: Final = 1 << 22
 #: Smallest and largest quantisation step a file may declare (mapped units).
 MIN_STEP, MAX_STEP = 1e-5, 100.0
 #: A plane-by-plane inverse is taken when its multiply-adds are at most this share of the batched inverse's
@@ -146,6 +149,40 @@ def _forward(block: np.ndarray) -> np.ndarray:
     y = np.einsum("fs,ashd->afhd", _dct_matrix(_SHAPE[1]), y)
     y = np.einsum("gh,afhd->afgd", _dct_matrix(_SHAPE[2]), y)
     return np.einsum("ed,afgd->afge", _dct_matrix(_SHAPE[3]), y)
+
+
+def check_detail_frame(data: bytes, dtype: str) -> None:
+    """Check a detail layer's bytes as a reader must when the record is read (``spec/bvae-format.md`` §4.4, §7):
+    exactly one zstandard frame, nothing after it, that declares and holds ``63·90·90`` integers of ``dtype``.
+
+    The frame is decompressed whole (bounded by the declared size), so that a file a tool describes without
+    error also decodes.
+
+    Raises
+    ------
+    ValueError
+        What is wrong with the frame (the reader wraps it in a format error naming the file and the record).
+    """
+    import zstandard
+
+    expected = N_DETAIL_VALUES * _DTYPES[dtype].itemsize
+    try:
+        declared = zstandard.get_frame_parameters(data).content_size
+    except zstandard.ZstdError as error:
+        raise ValueError(f"detail layer is not a zstandard frame ({error})") from None
+    if declared != expected:
+        shown = "no content size" if declared == zstandard.CONTENTSIZE_UNKNOWN else f"{declared} bytes of content"
+        raise ValueError(f"detail layer declares {shown}, expected {expected} ({dtype})")
+    stream = zstandard.ZstdDecompressor(max_window_size=_MAX_WINDOW).decompressobj()
+    try:
+        raw = stream.decompress(data)  # bounded: the frame declares its size, checked above
+    except zstandard.ZstdError as error:
+        raise ValueError(f"detail layer's frame cannot be decompressed ({error})") from None
+    if len(raw) != expected or not stream.eof:
+        raise ValueError(f"detail layer's frame is truncated: it holds {len(raw)} of the {expected} bytes it declares")
+    if stream.unused_data:
+        raise ValueError(f"{len(stream.unused_data)} bytes after the detail layer's zstandard frame "
+                         "(the layer is exactly one frame)")
 
 
 def _stored_integers(layer: DetailLayer, path: str = "<detail>") -> np.ndarray:

@@ -31,7 +31,7 @@ from brdfcodec.layers.basis import (
     int8_step_bytes,
     int8_with_step,
 )
-from brdfcodec.layers.detail import _DTYPES, DETAIL_TRANSFORM, MAX_STEP, MIN_STEP, N_DETAIL_VALUES, DetailLayer
+from brdfcodec.layers.detail import _DTYPES, DETAIL_TRANSFORM, MAX_STEP, MIN_STEP, DetailLayer, check_detail_frame
 
 __all__ = [
     "LAYERED_KIND",
@@ -229,6 +229,9 @@ def layers_length(layers: object, where: str, latent_dim: int = 0) -> int:
     if "basis" not in layers and "detail" not in layers:
         raise ValueError(f"{where} layers hold neither 'basis' nor 'detail'")
     length = 0
+    for key in ("mu", "sigma"):
+        if key in layers and not isinstance(layers[key], str):
+            raise ValueError(f"{where} layers.{key} is not a string")
     if "mu" in layers:
         if layers["mu"] not in _MU_MODES:
             raise UnsupportedLayerError(
@@ -276,7 +279,14 @@ def _basis_length(basis: object, where: str) -> int:
 def _detail_length(detail: object, where: str) -> int:
     if not isinstance(detail, Mapping):
         raise ValueError(f"{where} layers.detail is not a JSON object")
+    unknown = sorted(set(detail) - {"transform", "step", "dtype", "length"})
+    if unknown:
+        raise UnsupportedLayerError(
+            f"{where} detail layer has fields {unknown}, unknown to this reader; upgrade brdfcodec"
+        )
     transform = detail.get("transform")
+    if not isinstance(transform, str):
+        raise ValueError(f"{where} detail transform {transform!r} is not a string")
     if transform != DETAIL_TRANSFORM:
         raise UnsupportedLayerError(
             f"{where} detail transform {transform!r} is unknown to this reader ({DETAIL_TRANSFORM}); upgrade brdfcodec"
@@ -284,8 +294,12 @@ def _detail_length(detail: object, where: str) -> int:
     step, dtype, length = detail.get("step"), detail.get("dtype"), detail.get("length")
     if not isinstance(step, float | int) or isinstance(step, bool) or not MIN_STEP <= float(step) <= MAX_STEP:
         raise ValueError(f"{where} detail step {step!r} is not a number in [{MIN_STEP}, {MAX_STEP}]")
+    if not isinstance(dtype, str):
+        raise ValueError(f"{where} detail dtype {dtype!r} is not a string")
     if dtype not in _DTYPES:
-        raise ValueError(f"{where} detail dtype {dtype!r} is not one of {sorted(_DTYPES)}")
+        raise UnsupportedLayerError(
+            f"{where} detail dtype {dtype!r} is unknown to this reader ({', '.join(sorted(_DTYPES))}); upgrade brdfcodec"
+        )
     if not isinstance(length, int) or isinstance(length, bool) or not 1 <= length <= MAX_DETAIL_BYTES:
         raise ValueError(f"{where} detail length {length!r} is not an integer in [1, {MAX_DETAIL_BYTES}]")
     return length
@@ -300,8 +314,6 @@ def layered_from_payload(
 ) -> LayeredRecord:
     """A layered record from its validated entry, the values stored in the latent dtype (μ unless compact,
     then σ unless stored as bytes: :func:`latent_values_stored` of them) and the payload bytes after them."""
-    import zstandard
-
     d = latent_dim
     compact_mu = layers.get("mu") in _MU_MODES
     fixed_mu_grid = layers.get("mu") == MU_INT8_FIXED
@@ -334,11 +346,5 @@ def layered_from_payload(
         return LayeredRecord(name, mu, sigma, meta, basis=basis, **flags)
     detail = layers["detail"]
     layer = DetailLayer(float(detail["step"]), str(detail["dtype"]), bytes(tail))
-    expected = N_DETAIL_VALUES * _DTYPES[layer.dtype].itemsize
-    try:
-        declared = zstandard.get_frame_parameters(layer.data).content_size
-    except zstandard.ZstdError as error:
-        raise ValueError(f"detail layer is not a zstandard frame ({error})") from None
-    if declared != expected:
-        raise ValueError(f"detail layer declares {declared} bytes of content, expected {expected}")
+    check_detail_frame(layer.data, layer.dtype)  # decompressed whole at read: one frame, nothing after it (§4.4)
     return LayeredRecord(name, mu, sigma, meta, detail=layer, basis=basis, **flags)
