@@ -5,17 +5,21 @@ materials, and the SHA-256 of the decoder that turns them back into BRDF
 tables. This module does not import torch: inspecting a file (``bvae info``)
 is instant, and a file can be checked on a machine without a model.
 
-Layout (little-endian)::
+Layout (format 2.0, little-endian)::
 
     preamble  24 bytes   magic, version, flags, header length, header CRC-32
-    header    N bytes    UTF-8 JSON (zstandard-compressed when flag bit 0 is set):
-                         decoder reference, latent dtype, the record index
+    header    N bytes    binary: decoder SHA-256, latent size and dtype, the shared
+                         basis' SHA-256 (once), the form table (how records store
+                         μ, σ and their layers, once per form), the record index
+                         (name, form, per-record numbers), the payloads' CRC-32;
+                         then an optional JSON metadata block (provenance, edits)
     records   ...        raw payloads, contiguous, in index order; the file
                          ends exactly where the last record ends
 
 Every byte is covered by a CRC-32: the preamble and header by the header CRC,
-each record by the CRC in its index entry. A reader can therefore decode one
-material of a library by reading the preamble, the header and that record.
+the payloads by the payload CRC in the header. A record's descriptor holds
+only its name and what varies between records (:func:`record_overhead`), so a
+file costs little more than its payloads and names.
 """
 
 from __future__ import annotations
@@ -29,7 +33,7 @@ import re
 import struct
 import zlib
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, BinaryIO, Literal
 
@@ -47,6 +51,7 @@ __all__ = [
     "FORMAT_MINOR",
     "MAGIC",
     "MAX_HEADER_BYTES",
+    "PROVENANCE_KEYS",
     "BvaeHeader",
     "BvaeReader",
     "DecoderReference",
@@ -57,24 +62,25 @@ __all__ = [
     "RecordEntry",
     "encode_bvae",
     "parse_bvae",
+    "descriptor_size",
+    "record_overhead",
+    "record_size",
     "read_bvae",
     "read_header",
+    "without_provenance",
     "write_bvae",
 ]
 
 #: First 8 bytes of every ``.bvae`` file (a non-ASCII byte, the name, CR LF, EOF: catches text-mode transfers).
 MAGIC = b"\x89BVAE\r\n\x1a"
-#: Major version written and read; a file of another major version is refused.
-FORMAT_MAJOR = 1
+#: Major version written and read; a file of another major version (the development format 1.x too) is refused.
+#: 2.0 (issue 40): a binary header and index, file-level facts stated once, metadata opt-in in a JSON block.
+FORMAT_MAJOR = 2
 #: Minor version written; readers accept any minor version of their major version.
-#: 1.1 added the "layered" record kind (issue 14); a 1.0 reader refuses it by its kind.
-#: 1.2 added the basis layer and compact sigma of layered records; a 1.1 reader refuses them as unknown layers.
-#: 1.3 added the basis layer's ``first`` vector; a 1.2 reader refuses it as an unknown basis field.
-#: 1.4 added compact μ and shared σ of layered records; a 1.3 reader refuses them as an unknown layer / sigma mode.
-FORMAT_MINOR = 6
-#: Largest stored header, in bytes (compressed size when compressed).
-MAX_HEADER_BYTES = 1 << 20
-#: Largest decompressed header, in bytes.
+FORMAT_MINOR = 0
+#: Largest stored header (binary index and stored metadata block), in bytes.
+MAX_HEADER_BYTES = 1 << 24
+#: Largest metadata block, decompressed, in bytes.
 MAX_HEADER_JSON_BYTES = 16 << 20
 #: Largest number of records in one file.
 MAX_RECORDS = 65536
@@ -87,8 +93,13 @@ MAX_HEADER_DEPTH = 64
 #: Largest magnitude of a JSON integer in a header (I-JSON, RFC 7493: exact in binary64).
 MAX_JSON_INTEGER = (1 << 53) - 1
 
-FLAG_HEADER_ZSTD = 1 << 0
-KNOWN_FLAGS = FLAG_HEADER_ZSTD
+#: Flag bit 0: the header's metadata block is a zstandard frame.
+FLAG_METADATA_ZSTD = 1 << 0
+#: Flag bit 1: the header names the shared basis of the file's basis layers.
+FLAG_BASIS = 1 << 1
+KNOWN_FLAGS = FLAG_METADATA_ZSTD | FLAG_BASIS
+#: Longest varint (LEB128) in a header, in bytes: values below 2^28.
+_VARINT_MAX_BYTES = 4
 
 _PREAMBLE = struct.Struct("<8sHHIII")
 PREAMBLE_SIZE = _PREAMBLE.size  # 24
@@ -100,6 +111,7 @@ _ZSTD_FAST_LEVEL = 3
 
 LatentDtype = Literal["float32", "float16"]
 _DTYPES: dict[str, np.dtype] = {"float32": np.dtype("<f4"), "float16": np.dtype("<f2")}
+_DTYPE_CODES = {"float32": 0, "float16": 1}
 _SHA256 = re.compile(r"^[0-9a-f]{64}$")
 _RECORD_KINDS = ("latent", "graft", "layered")  # "layered": brdfcodec.layers.record
 
@@ -279,16 +291,32 @@ Record = LatentRecord | GraftRecord
 
 @dataclass(frozen=True)
 class RecordEntry:
-    """One record as the header's index describes it (no payload read)."""
+    """One record as the header's index describes it (no payload read).
+
+    ``offset`` and ``length`` are derived from the form and the per-record
+    numbers (§3.3); ``layers`` is the layered record's description with the
+    file-level parts filled in (the basis' SHA-256, the form's ``first``,
+    ``project``, ``mu``, ``sigma``, the detail dtype); ``descriptor_bytes``
+    is what the index spends on the record beyond its name's bytes.
+    """
 
     name: str
     kind: str
     offset: int
     length: int
-    crc32: int
     meta: Mapping[str, Any]
     graft_dims: tuple[int, ...] = ()
     layers: Mapping[str, Any] | None = None  # kind "layered" only (brdfcodec.layers.record)
+    descriptor_bytes: int = 0
+
+
+@dataclass(frozen=True)
+class _Form:
+    """An entry of the form table as read: a kind, graft dimensions, or a layered record's fixed layer fields."""
+
+    kind: str
+    graft_dims: tuple[int, ...]
+    layers: Mapping[str, Any] | None
 
 
 @dataclass(frozen=True)
@@ -309,11 +337,17 @@ class BvaeHeader:
     created_by : str
         Writer (informative).
     header_bytes : int
-        Stored size of the header (after compression, if any).
+        Stored size of the header (index and metadata block).
     records_offset : int
         File offset of the first record.
     file_size : int
         Total size of the file, in bytes.
+    basis_sha256 : str or None
+        The shared basis every basis layer of the file is on (None: no basis layer).
+    payload_crc32 : int
+        CRC-32 of all the payloads.
+    form_count : int
+        Entries of the form table.
     """
 
     major: int
@@ -327,6 +361,9 @@ class BvaeHeader:
     header_bytes: int
     records_offset: int
     file_size: int
+    basis_sha256: str | None = None
+    payload_crc32: int = 0
+    form_count: int = 1
 
     @property
     def names(self) -> list[str]:
@@ -369,6 +406,23 @@ BvaeLibrary = ParsedBvae
 
 
 # --------------------------------------------------------------------------- writing
+
+
+#: Metadata keys (§5) that describe how a record was made and measured: opt-in (``bvae compress --provenance``).
+PROVENANCE_KEYS = ("source_sha256", "source_kind", "relae", "encoder_sha256", "effort", "rate")
+
+
+def without_provenance(records: Sequence[Record]) -> list[Record]:
+    """The records without the metadata of :data:`PROVENANCE_KEYS` (other keys, such as ``edit``, are kept).
+
+    A writer that was not asked for provenance stores none (format 2.0, §5): the file then costs the names,
+    the descriptors and the payloads.
+    """
+    out: list[Record] = []
+    for record in records:
+        kept = {key: value for key, value in record.meta.items() if key not in PROVENANCE_KEYS}
+        out.append(record if len(kept) == len(record.meta) else replace(record, meta=kept))
+    return out
 
 
 def canonical_json(value: Any) -> bytes:
@@ -458,9 +512,108 @@ def _unique_keys(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
     return result
 
 
-def _payload_length(kind: str, latent_dim: int, n_graft: int, itemsize: int) -> int:
-    n_values = 2 * latent_dim + (n_graft if kind == "graft" else 0)
-    return n_values * itemsize
+def _varint(value: int) -> bytes:
+    """Unsigned LEB128 (§2.1): 7 bits a byte, lowest group first, the high bit set on every byte but the last."""
+    out = bytearray()
+    while True:
+        byte, value = value & 0x7F, value >> 7
+        out.append(byte | (0x80 if value else 0))
+        if not value:
+            return bytes(out)
+
+
+def _varint_size(value: int) -> int:
+    return max(1, (int(value).bit_length() + 6) // 7)
+
+
+def record_overhead(name: str, *, basis_count: int | None = None, detail_bytes: int | None = None) -> int:
+    """Bytes a record's descriptor takes in the index beyond its name's UTF-8 bytes (§3.3).
+
+    This is what ``--bytes N`` counts besides the payload: the name's length
+    (a varint), the form byte and, by the record's form, the basis
+    coefficient count (a varint) and the detail layer's step (8 bytes) and
+    length (a varint). File-level parts (preamble, header fields, form
+    table, CRC-32s) belong to no record.
+
+    Parameters
+    ----------
+    name : str
+        The record's name.
+    basis_count : int, optional
+        Basis coefficients, when the record has a basis layer.
+    detail_bytes : int, optional
+        Bytes of the detail layer, when the record has one.
+
+    Returns
+    -------
+    int
+    """
+    size = _varint_size(len(name.encode("utf-8"))) + 1
+    if basis_count is not None:
+        size += _varint_size(basis_count)
+    if detail_bytes is not None:
+        size += 8 + _varint_size(detail_bytes)
+    return size
+
+
+def descriptor_size(record: Record) -> int:
+    """:func:`record_overhead` of a record: its descriptor's bytes beyond its name's."""
+    basis, detail = getattr(record, "basis", None), getattr(record, "detail", None)
+    return record_overhead(record.name, basis_count=None if basis is None else basis.count,
+                           detail_bytes=None if detail is None else detail.nbytes)
+
+
+def record_size(record: Record, latent_dtype: LatentDtype = "float32") -> int:
+    """What a record adds to a file beyond its name's UTF-8 bytes: its payload plus :func:`descriptor_size`."""
+    return len(_payload(record, _DTYPES[latent_dtype])) + descriptor_size(record)
+
+
+def _payload(record: Record, dtype: np.dtype) -> bytes:
+    payload = record.payload_values().astype(dtype).tobytes()
+    if record.kind == "layered":  # layered records (brdfcodec.layers.record): layer bytes follow the values
+        payload += record.layer_bytes()  # type: ignore[union-attr]
+    return payload
+
+
+#: Codes of the form table (§3.2): record kinds, how μ and σ are stored, the detail layer's coefficient type.
+_KIND_CODES = {"latent": 0, "graft": 1, "layered": 2}
+_MU_CODES: dict[str | None, int] = {None: 0, "int8": 1, "int8-fixed": 2}
+_SIGMA_CODES: dict[str | None, int] = {None: 0, "log2-u8": 1, "log2-u8-shared": 2}
+_DETAIL_CODES = {"int16": 0, "int32": 1}  # transform "dct3-ycc", the only one
+_LAYER_BASIS, _LAYER_DETAIL = 1, 2
+#: Most entries of a file's form table (its count is one byte).
+MAX_FORMS = 255
+
+
+def _form_of(record: Record) -> tuple[Any, ...]:
+    """A record's form (§3.2): what the form table states once for every record that shares it."""
+    if isinstance(record, GraftRecord):
+        return ("graft", tuple(record.graft_dims))
+    if record.kind != "layered":
+        return ("latent",)
+    from brdfcodec.layers.record import layers_entry
+
+    layers = layers_entry(record)  # type: ignore[arg-type]
+    basis, detail = layers.get("basis"), layers.get("detail")
+    return ("layered", layers.get("mu"), layers.get("sigma"),
+            None if basis is None else (int(basis.get("first", 0)), int(basis.get("project", 0))),
+            None if detail is None else str(detail["dtype"]))
+
+
+def _form_bytes(form: tuple[Any, ...]) -> bytes:
+    kind = form[0]
+    out = bytes([_KIND_CODES[kind]])
+    if kind == "graft":
+        return out + _varint(len(form[1])) + b"".join(_varint(d) for d in form[1])
+    if kind == "layered":
+        _, mu, sigma, basis, detail = form
+        layers = (_LAYER_BASIS if basis is not None else 0) | (_LAYER_DETAIL if detail is not None else 0)
+        out += bytes([_MU_CODES[mu], _SIGMA_CODES[sigma], layers])
+        if basis is not None:
+            out += _varint(basis[0]) + _varint(basis[1])
+        if detail is not None:
+            out += bytes([_DETAIL_CODES[detail]])
+    return out
 
 
 def encode_bvae(
@@ -470,20 +623,24 @@ def encode_bvae(
     latent_dtype: LatentDtype = "float32",
     compress_header: bool | None = None,
 ) -> bytes:
-    """Serialise records to the bytes of a ``.bvae`` file.
+    """Serialise records to the bytes of a ``.bvae`` file (format 2.0).
 
     Parameters
     ----------
-    records : sequence of LatentRecord or GraftRecord
-        At least one; names unique; all of the same latent dimension.
+    records : sequence of LatentRecord, GraftRecord or LayeredRecord
+        At least one; names unique; all of the same latent dimension; every
+        basis layer on the same shared basis. Each record's ``meta`` is
+        written as given (the metadata block, §5): a record without ``meta``
+        costs its name, its descriptor and its payload only.
     decoder : DecoderReference
-        The decoder the latents belong to.
+        The decoder the latents belong to. Its name is written only when the
+        file has a metadata block (informative; the hash decides).
     latent_dtype : {"float32", "float16"}, default "float32"
         Storage of the latent values. float16 halves the payload; values are
         rounded to nearest (|values| above 65504 are refused).
     compress_header : bool, optional
-        Compress the JSON header with zstandard. By default it is compressed
-        when that makes it smaller.
+        Compress the metadata block with zstandard. By default it is
+        compressed when that makes it smaller.
 
     Returns
     -------
@@ -508,61 +665,60 @@ def encode_bvae(
     latent_dim = records[0].latent_dim
     if any(r.latent_dim != latent_dim for r in records):
         raise ValueError("all records of a file must have the same latent dimension")
+    bases = sorted({r.basis.sha256 for r in records if getattr(r, "basis", None) is not None})  # type: ignore[attr-defined]
+    if len(bases) > 1:
+        raise ValueError(f"a file holds the basis layers of one shared basis; these records use {len(bases)}")
     dtype = _DTYPES[latent_dtype]
+    forms: dict[tuple[Any, ...], int] = {}
+    descriptors: list[bytes] = []
     payloads: list[bytes] = []
-    index: list[dict[str, Any]] = []
-    offset = 0
+    metadata: dict[str, Any] = {}
     for record in records:
         values = record.payload_values()
         if latent_dtype == "float16" and np.abs(values).max(initial=0.0) > np.finfo(np.float16).max:
             raise ValueError(f"{record.name}: latent values exceed the float16 range; store them as float32")
-        payload = values.astype(dtype).tobytes()
-        # --- layered records (issue 14, brdfcodec.layers): layer bytes follow mu and sigma
-        if record.kind == "layered":
-            from brdfcodec.layers.record import layers_entry
-
-            payload += record.layer_bytes()  # type: ignore[union-attr]
-        # ---
-        entry: dict[str, Any] = {
-            "name": record.name,
-            "kind": record.kind,
-            "offset": offset,
-            "length": len(payload),
-            "crc32": zlib.crc32(payload),
-        }
-        if isinstance(record, GraftRecord):
-            entry["graft_dims"] = list(record.graft_dims)
-        if record.kind == "layered":
-            entry["layers"] = layers_entry(record)  # type: ignore[arg-type]
-        if record.meta:
-            entry["meta"] = dict(record.meta)
+        payload = _payload(record, dtype)
+        form = _form_of(record)
+        if form not in forms:
+            if len(forms) == MAX_FORMS:
+                raise ValueError(f"the records need more than {MAX_FORMS} record forms; split the library")
+            forms[form] = len(forms)
+        name = record.name.encode("utf-8")
+        descriptor = _varint(len(name)) + name + bytes([forms[form]])
+        basis, detail = getattr(record, "basis", None), getattr(record, "detail", None)
+        if basis is not None:
+            descriptor += _varint(basis.count)
+        if detail is not None:
+            descriptor += struct.pack("<d", detail.step) + _varint(detail.nbytes)
+        descriptors.append(descriptor)
         payloads.append(payload)
-        index.append(entry)
-        offset += len(payload)
-    header = {
-        "format": "bvae",
-        "created_by": f"brdfcodec {__version__}",
-        "decoder": {"sha256": decoder.sha256, "name": decoder.name},
-        "latent_dim": latent_dim,
-        "latent_dtype": latent_dtype,
-        "records": index,
-    }
-    stored = canonical_json(header)
-    if len(stored) > MAX_HEADER_JSON_BYTES:
-        raise ValueError(f"header of {len(stored)} bytes exceeds {MAX_HEADER_JSON_BYTES}; split the library")
-    flags = 0
-    if compress_header is not False:
-        import zstandard
+        if record.meta:
+            metadata[record.name] = dict(record.meta)
+    data = b"".join(payloads)
+    flags = FLAG_BASIS if bases else 0
+    header = bytearray(bytes.fromhex(decoder.sha256) + struct.pack("<HB", latent_dim, _DTYPE_CODES[latent_dtype]))
+    if bases:
+        header += bytes.fromhex(bases[0])
+    header += bytes([len(forms)]) + b"".join(_form_bytes(f) for f in forms)
+    header += _varint(len(records)) + b"".join(descriptors) + struct.pack("<I", zlib.crc32(data))
+    if metadata:
+        block = {"created_by": f"brdfcodec {__version__}", "decoder_name": decoder.name, "records": metadata}
+        stored = canonical_json(block)
+        if len(stored) > MAX_HEADER_JSON_BYTES:
+            raise ValueError(f"metadata of {len(stored)} bytes exceeds {MAX_HEADER_JSON_BYTES}; split the library")
+        if compress_header is not False:
+            import zstandard
 
-        level = _ZSTD_LEVEL if len(stored) <= _ZSTD_FAST_ABOVE else _ZSTD_FAST_LEVEL
-        packed = zstandard.ZstdCompressor(level=level, write_content_size=True).compress(stored)
-        if compress_header or len(packed) < len(stored):
-            stored, flags = packed, FLAG_HEADER_ZSTD
-    if len(stored) > MAX_HEADER_BYTES:
-        raise ValueError(f"stored header of {len(stored)} bytes exceeds {MAX_HEADER_BYTES}; split the library")
-    head = _PREAMBLE.pack(MAGIC, FORMAT_MAJOR, FORMAT_MINOR, flags, len(stored), 0)[:_CRC_COVERED_PREAMBLE]
-    crc = zlib.crc32(stored, zlib.crc32(head))
-    return head + struct.pack("<I", crc) + stored + b"".join(payloads)
+            level = _ZSTD_LEVEL if len(stored) <= _ZSTD_FAST_ABOVE else _ZSTD_FAST_LEVEL
+            packed = zstandard.ZstdCompressor(level=level, write_content_size=True).compress(stored)
+            if compress_header or len(packed) < len(stored):
+                stored, flags = packed, flags | FLAG_METADATA_ZSTD
+        header += stored
+    if len(header) > MAX_HEADER_BYTES:
+        raise ValueError(f"stored header of {len(header)} bytes exceeds {MAX_HEADER_BYTES}; split the library")
+    head = _PREAMBLE.pack(MAGIC, FORMAT_MAJOR, FORMAT_MINOR, flags, len(header), 0)[:_CRC_COVERED_PREAMBLE]
+    crc = zlib.crc32(header, zlib.crc32(head))
+    return head + struct.pack("<I", crc) + bytes(header) + data
 
 
 def write_bvae(
@@ -607,7 +763,8 @@ def _parse_preamble(path: str, preamble: bytes, file_size: int) -> tuple[int, in
     if major != FORMAT_MAJOR:
         raise UnsupportedVersionError(
             path, f"format version {major}.{minor} is not supported by this reader (version {FORMAT_MAJOR}.x); "
-            "upgrade brdfcodec, or re-create the file with this version"
+            + ("files of the development format 1.x are not read: re-create the file with this version"
+               if major < FORMAT_MAJOR else "upgrade brdfcodec, or re-create the file with this version")
         )
     if header_length > MAX_HEADER_BYTES:
         raise _fail(path, f"header length {header_length} exceeds the maximum of {MAX_HEADER_BYTES} bytes")
@@ -618,139 +775,190 @@ def _parse_preamble(path: str, preamble: bytes, file_size: int) -> tuple[int, in
 
 
 def _decompress_header(path: str, stored: bytes) -> bytes:
-    """The one zstandard frame of a compressed header (§3): declared size within the limit, nothing after it."""
+    """The one zstandard frame of a compressed metadata block (§5): declared size within the limit, nothing after."""
     import zstandard
 
     try:
         params = zstandard.get_frame_parameters(stored)
         if params.content_size <= 0 or params.content_size > MAX_HEADER_JSON_BYTES:
-            raise _fail(path, "compressed header does not declare a content size within the limit")
+            raise _fail(path, "compressed metadata does not declare a content size within the limit")
         raw = zstandard.ZstdDecompressor().decompress(stored, max_output_size=MAX_HEADER_JSON_BYTES)
         stream = zstandard.ZstdDecompressor().decompressobj()
         stream.decompress(stored)  # bounded: the frame just decompressed within the limit
     except zstandard.ZstdError as error:
-        raise _fail(path, f"compressed header cannot be decompressed ({error})") from None
+        raise _fail(path, f"compressed metadata cannot be decompressed ({error})") from None
     if stream.unused_data:
-        raise _fail(path, f"{len(stream.unused_data)} bytes after the compressed header's zstandard frame")
+        raise _fail(path, f"{len(stream.unused_data)} bytes after the compressed metadata's zstandard frame")
     return raw
 
 
-def _header_json(path: str, preamble: bytes, stored: bytes, flags: int, crc: int) -> dict[str, Any]:
+def _check_header_crc(path: str, preamble: bytes, stored: bytes, flags: int, crc: int) -> None:
     if zlib.crc32(stored, zlib.crc32(preamble[:_CRC_COVERED_PREAMBLE])) != crc:
         raise BvaeChecksumError(path, "header CRC-32 mismatch: the file is corrupt (re-create or re-download it)")
     if flags & ~KNOWN_FLAGS:  # after the CRC: a flipped bit is corruption, a set bit under a good CRC a new feature
         raise UnsupportedVersionError(
             path, f"flag bits 0x{flags & ~KNOWN_FLAGS:08x} name features this reader does not know; upgrade brdfcodec"
         )
-    raw = _decompress_header(path, stored) if flags & FLAG_HEADER_ZSTD else stored
-    header = _check_json_text(raw, lambda problem: _fail(path, problem))
-    if not isinstance(header, dict):
-        raise _fail(path, "header is not a JSON object")
-    return header
 
 
 def _reject_constant(name: str) -> None:
     raise ValueError(f"{name} is not allowed in a .bvae header")
 
 
-def _require(path: str, mapping: Mapping[str, Any], key: str, kind: type | tuple[type, ...], where: str) -> Any:
-    if key not in mapping:
-        raise _fail(path, f"{where} lacks the field {key!r}")
-    value = mapping[key]
-    if not isinstance(value, kind) or (kind is int and isinstance(value, bool)):
-        raise _fail(path, f"{where} field {key!r} has the wrong type ({type(value).__name__})")
-    return value
+class _Cursor:
+    """Reads the binary header field by field; running past its end is a malformed (truncated) header."""
+
+    def __init__(self, path: str, data: bytes) -> None:
+        self.path, self.data, self.at = path, data, 0
+
+    def take(self, count: int, what: str) -> bytes:
+        if self.at + count > len(self.data):
+            raise _fail(self.path, f"header ends inside {what}")
+        self.at += count
+        return self.data[self.at - count : self.at]
+
+    def u8(self, what: str) -> int:
+        return self.take(1, what)[0]
+
+    def varint(self, what: str) -> int:
+        value = 0
+        for i in range(_VARINT_MAX_BYTES):
+            byte = self.u8(what)
+            value |= (byte & 0x7F) << (7 * i)
+            if not byte & 0x80:
+                if i and not byte:
+                    raise _fail(self.path, f"{what} is a varint with a superfluous zero byte (not minimal)")
+                return value
+        raise _fail(self.path, f"{what} is a varint longer than {_VARINT_MAX_BYTES} bytes")
 
 
-def _parse_header(path: str, header: dict[str, Any], preamble_fields: tuple[int, ...], file_size: int) -> BvaeHeader:
+def _parse_form(path: str, cursor: _Cursor, i: int, latent_dim: int, basis_sha: str | None) -> _Form:
+    where = f"record form {i}"
+    code = cursor.u8(f"{where}'s kind")
+    kinds = {v: k for k, v in _KIND_CODES.items()}
+    if code not in kinds:
+        raise UnsupportedVersionError(path, f"{where} has record kind {code}, unknown to this reader; upgrade brdfcodec")
+    kind = kinds[code]
+    if kind == "graft":
+        count = cursor.varint(f"{where}'s graft dimension count")
+        dims = [cursor.varint(f"{where}'s graft dimensions") for _ in range(min(count, latent_dim + 1))]
+        if not 1 <= count <= latent_dim or len(set(dims)) != len(dims) or not all(d < latent_dim for d in dims):
+            raise _fail(path, f"{where} has invalid graft dimensions ({count}: {dims[:8]})")
+        return _Form("graft", tuple(dims), None)
+    if kind == "latent":
+        return _Form("latent", (), None)
+    mu_code, sigma_code, layer_bits = cursor.u8(f"{where}'s mu"), cursor.u8(f"{where}'s sigma"), cursor.u8(where)
+    mus = {v: k for k, v in _MU_CODES.items()}
+    sigmas = {v: k for k, v in _SIGMA_CODES.items()}
+    if mu_code not in mus or sigma_code not in sigmas or layer_bits & ~(_LAYER_BASIS | _LAYER_DETAIL):
+        raise UnsupportedVersionError(
+            path, f"{where} stores mu, sigma or layers in a way unknown to this reader (codes {mu_code}, {sigma_code}, "
+            f"{layer_bits}); upgrade brdfcodec")
+    if not layer_bits:
+        raise _fail(path, f"{where}: a layered form holds neither a basis nor a detail layer")
+    layers: dict[str, Any] = {}
+    if mus[mu_code] is not None:
+        layers["mu"] = mus[mu_code]
+    if sigmas[sigma_code] is not None:
+        layers["sigma"] = sigmas[sigma_code]
+    if layer_bits & _LAYER_BASIS:
+        first, project = cursor.varint(f"{where}'s basis first"), cursor.varint(f"{where}'s basis projection")
+        if basis_sha is None:
+            raise _fail(path, f"{where} has a basis layer, but the header names no shared basis")
+        layers["basis"] = {"sha256": basis_sha, "count": 1, "first": first, **({"project": project} if project else {})}
+    if layer_bits & _LAYER_DETAIL:
+        dtypes = {v: k for k, v in _DETAIL_CODES.items()}
+        code = cursor.u8(f"{where}'s detail form")
+        if code not in dtypes:
+            raise UnsupportedVersionError(path, f"{where} has detail form {code}, unknown to this reader; upgrade "
+                                          "brdfcodec")
+        layers["detail"] = {"transform": "dct3-ycc", "step": 1.0, "dtype": dtypes[code], "length": 1}
+    return _Form("layered", (), layers)
+
+
+def _parse_header(path: str, stored: bytes, preamble_fields: tuple[int, ...], file_size: int) -> BvaeHeader:
+    """The binary header (§3): file-level fields, the form table, the record index, the payload CRC, metadata."""
     major, minor, flags, header_length, _ = preamble_fields
-    if header.get("format") != "bvae":
-        raise _fail(path, "header field 'format' is not 'bvae'")
-    decoder = _require(path, header, "decoder", dict, "header")
-    sha = _require(path, decoder, "sha256", str, "decoder reference")
-    name = _require(path, decoder, "name", str, "decoder reference")
-    if not _SHA256.match(sha):
-        raise _fail(path, f"decoder SHA-256 {sha!r} is not 64 lower-case hex digits")
-    latent_dim = _require(path, header, "latent_dim", int, "header")
+    cursor = _Cursor(path, stored)
+    sha = cursor.take(32, "the decoder's SHA-256").hex()
+    latent_dim = int.from_bytes(cursor.take(2, "latent_dim"), "little")
     if not 1 <= latent_dim <= MAX_LATENT_DIM:
         raise _fail(path, f"latent_dim {latent_dim} is outside [1, {MAX_LATENT_DIM}]")
-    latent_dtype = _require(path, header, "latent_dtype", str, "header")
-    if latent_dtype not in _DTYPES:
-        raise UnsupportedVersionError(path, f"latent dtype {latent_dtype!r} is not supported (float32, float16)")
-    raw_entries = _require(path, header, "records", list, "header")
-    if not 1 <= len(raw_entries) <= MAX_RECORDS:
-        raise _fail(path, f"record count {len(raw_entries)} is outside [1, {MAX_RECORDS}]")
+    dtype_code = cursor.u8("latent_dtype")
+    dtypes = {v: k for k, v in _DTYPE_CODES.items()}
+    if dtype_code not in dtypes:
+        raise UnsupportedVersionError(path, f"latent dtype code {dtype_code} is not supported (0: float32, 1: float16)")
+    latent_dtype = dtypes[dtype_code]
+    basis_sha = cursor.take(32, "the shared basis' SHA-256").hex() if flags & FLAG_BASIS else None
+    form_count = cursor.u8("the form count")
+    if not form_count:
+        raise _fail(path, "the form table is empty")
+    forms = [_parse_form(path, cursor, i, latent_dim, basis_sha) for i in range(form_count)]
+    if len({repr(f) for f in forms}) != len(forms):
+        raise _fail(path, "the form table states a form twice")
+    if basis_sha is not None and not any(f.layers and "basis" in f.layers for f in forms):
+        raise _fail(path, "the header names a shared basis, but no record form has a basis layer")
+    count = cursor.varint("the record count")
+    if not 1 <= count <= MAX_RECORDS:
+        raise _fail(path, f"record count {count} is outside [1, {MAX_RECORDS}]")
     itemsize = _DTYPES[latent_dtype].itemsize
-    created_by = header.get("created_by", "")
-    if not isinstance(created_by, str):
-        raise _fail(path, f"header field 'created_by' must be a string, got {type(created_by).__name__}")
     entries: list[RecordEntry] = []
     seen: dict[str, str] = {}
+    used: set[int] = set()
     offset = 0
-    for i, raw in enumerate(raw_entries):
+    for i in range(count):
         where = f"record {i}"
-        if not isinstance(raw, dict):
-            raise _fail(path, f"{where} is not a JSON object")
-        entry_name = _require(path, raw, "name", str, where)
+        start = cursor.at
+        raw_name = cursor.take(cursor.varint(f"{where}'s name length"), f"{where}'s name")
         try:
-            _check_name(entry_name)
-        except ValueError as error:
+            entry_name = _check_name(raw_name.decode("utf-8"))
+        except (UnicodeDecodeError, ValueError) as error:
             raise _fail(path, f"{where}: {error}") from None
         key = name_collision_key(entry_name)
         if key in seen:
             twin = "" if seen[key] == entry_name else f" (as {seen[key]!r}: names differ only in case)"
             raise _fail(path, f"material name {entry_name!r} appears twice{twin}")
         seen[key] = entry_name
-        kind = _require(path, raw, "kind", str, where)
-        if kind not in _RECORD_KINDS:
-            raise UnsupportedVersionError(
-                path, f"{where} ({entry_name}) has record kind {kind!r}, unknown to this reader; upgrade brdfcodec"
-            )
-        graft_dims: tuple[int, ...] = ()
-        if kind == "graft":
-            dims = _require(path, raw, "graft_dims", list, where)
-            if (
-                not dims
-                or len(dims) > latent_dim
-                or not all(isinstance(d, int) and not isinstance(d, bool) and 0 <= d < latent_dim for d in dims)
-                or len(set(dims)) != len(dims)
-            ):
-                raise _fail(path, f"{where} ({entry_name}) has invalid graft_dims {dims!r}")
-            graft_dims = tuple(dims)
-        elif "graft_dims" in raw:
-            raise _fail(path, f"{where} ({entry_name}) of kind {kind!r} has graft_dims (only graft records do)")
-        if kind != "layered" and "layers" in raw:
-            raise _fail(path, f"{where} ({entry_name}) of kind {kind!r} has layers (only layered records do)")
-        start = _require(path, raw, "offset", int, where)
-        length = _require(path, raw, "length", int, where)
-        crc = _require(path, raw, "crc32", int, where)
-        meta = raw.get("meta", {})
-        if not isinstance(meta, dict):
-            raise _fail(path, f"{where} ({entry_name}) field 'meta' is not a JSON object")
-        problem = _meta_problem(meta)
-        if problem is not None:
-            raise _fail(path, f"{where} ({entry_name}): {problem}")
-        if start != offset:
-            raise _fail(path, f"{where} ({entry_name}) starts at {start}, expected {offset} (records are contiguous)")
-        expected = _payload_length(kind, latent_dim, len(graft_dims), itemsize)
+        label = f"{where} ({entry_name})"
+        index = cursor.u8(f"{label}'s form")
+        if index >= form_count:
+            raise _fail(path, f"{label} uses form {index}, but the table has {form_count}")
+        used.add(index)
+        form = forms[index]
         layers = None
-        if kind == "layered":  # --- layered records (issue 14): validated by brdfcodec.layers.record
+        if form.kind == "layered":  # --- layered records (issue 14): validated by brdfcodec.layers.record
             from brdfcodec.layers.record import UnsupportedLayerError, latent_values_stored, layers_length
 
-            layers = raw.get("layers")
+            assert form.layers is not None
+            layers = {key: dict(value) if isinstance(value, dict) else value for key, value in form.layers.items()}
+            if "basis" in layers:
+                layers["basis"]["count"] = cursor.varint(f"{label}'s basis count")
+            if "detail" in layers:
+                layers["detail"]["step"] = struct.unpack("<d", cursor.take(8, f"{label}'s detail step"))[0]
+                layers["detail"]["length"] = cursor.varint(f"{label}'s detail length")
             try:
-                tail = layers_length(layers, f"{where} ({entry_name})", latent_dim)
-                expected = latent_values_stored(layers, latent_dim) * itemsize + tail  # type: ignore[arg-type]
+                length = latent_values_stored(layers, latent_dim) * itemsize + layers_length(layers, label, latent_dim)
             except UnsupportedLayerError as error:
                 raise UnsupportedVersionError(path, str(error)) from None
             except ValueError as error:
                 raise _fail(path, str(error)) from None
-        if length != expected:
-            raise _fail(path, f"{where} ({entry_name}) has length {length}, expected {expected} for kind {kind!r}")
-        if not 0 <= crc <= 0xFFFFFFFF:
-            raise _fail(path, f"{where} ({entry_name}) has an invalid crc32")
-        entries.append(RecordEntry(entry_name, kind, start, length, crc, meta, graft_dims, layers))
+        else:
+            length = (2 * latent_dim + len(form.graft_dims)) * itemsize
+        overhead = cursor.at - start - len(raw_name)
+        entries.append(RecordEntry(entry_name, form.kind, offset, length, {}, form.graft_dims, layers, overhead))
         offset += length
+    if len(used) != form_count:
+        unused = sorted(set(range(form_count)) - used)
+        raise _fail(path, f"record form {unused[0]} is used by no record (a file lists only the forms it uses)")
+    payload_crc = int.from_bytes(cursor.take(4, "the payload CRC-32"), "little")
+    created_by, decoder_name = "", ""
+    rest = stored[cursor.at :]
+    if not rest and flags & FLAG_METADATA_ZSTD:
+        raise _fail(path, "flag bit 0 (compressed metadata) is set, but the header holds no metadata block")
+    if rest:
+        raw = _decompress_header(path, rest) if flags & FLAG_METADATA_ZSTD else rest
+        created_by, decoder_name, metas = _parse_metadata(path, raw, seen)
+        entries = [replace(e, meta=metas.get(e.name, {})) for e in entries]
     records_offset = PREAMBLE_SIZE + header_length
     expected_size = records_offset + offset
     if file_size < expected_size:
@@ -761,7 +969,7 @@ def _parse_header(path: str, header: dict[str, Any], preamble_fields: tuple[int,
         major=major,
         minor=minor,
         flags=flags,
-        decoder=DecoderReference(sha, name),
+        decoder=DecoderReference(sha, decoder_name),
         latent_dim=latent_dim,
         latent_dtype=latent_dtype,  # type: ignore[arg-type]
         entries=tuple(entries),
@@ -769,7 +977,36 @@ def _parse_header(path: str, header: dict[str, Any], preamble_fields: tuple[int,
         header_bytes=header_length,
         records_offset=records_offset,
         file_size=file_size,
+        basis_sha256=basis_sha,
+        payload_crc32=payload_crc,
+        form_count=form_count,
     )
+
+
+def _parse_metadata(
+    path: str, raw: bytes, names: Mapping[str, str]
+) -> tuple[str, str, dict[str, Mapping[str, Any]]]:
+    """The metadata block (§5): ``created_by``, ``decoder_name`` and each named record's ``meta``."""
+    block = _check_json_text(raw, lambda problem: _fail(path, f"metadata: {problem}"))
+    if not isinstance(block, dict):
+        raise _fail(path, "the metadata block is not a JSON object")
+    for key in ("created_by", "decoder_name"):
+        if not isinstance(block.get(key, ""), str):
+            raise _fail(path, f"metadata field {key!r} must be a string, got {type(block[key]).__name__}")
+    records = block.get("records", {})
+    if not isinstance(records, dict):
+        raise _fail(path, "metadata field 'records' is not a JSON object")
+    metas: dict[str, Mapping[str, Any]] = {}
+    for name, meta in records.items():
+        if names.get(name_collision_key(name)) != name:
+            raise _fail(path, f"metadata names the material {name!r}, which the file does not hold")
+        if not isinstance(meta, dict):
+            raise _fail(path, f"metadata of {name!r} is not a JSON object")
+        problem = _meta_problem(meta)
+        if problem is not None:
+            raise _fail(path, f"metadata of {name!r}: {problem}")
+        metas[name] = meta
+    return block.get("created_by", ""), block.get("decoder_name", ""), metas
 
 
 def _read_exact(handle: BinaryIO, count: int) -> bytes:
@@ -783,24 +1020,29 @@ def _header_from_handle(path: str, handle: BinaryIO, file_size: int) -> BvaeHead
     stored = _read_exact(handle, fields[3])
     if len(stored) != fields[3]:
         raise _fail(path, "truncated header")
-    header = _header_json(path, preamble, stored, fields[2], fields[4])
-    return _parse_header(path, header, fields, file_size)
+    _check_header_crc(path, preamble, stored, fields[2], fields[4])
+    return _parse_header(path, stored, fields, file_size)
+
+
+def _check_payload_crc(path: str, header: BvaeHeader, crc: int) -> None:
+    if crc != header.payload_crc32:
+        raise BvaeChecksumError(
+            path, "payload CRC-32 mismatch: a record is corrupt (re-create or re-download the file)"
+        )
 
 
 def _decode_record(path: str, header: BvaeHeader, entry: RecordEntry, payload: bytes) -> Record:
+    """A record from its payload (the payload CRC-32 already checked)."""
     if len(payload) != entry.length:
         raise _fail(path, f"truncated record {entry.name!r}")
-    if zlib.crc32(payload) != entry.crc32:
-        raise BvaeChecksumError(
-            path, f"record {entry.name!r}: CRC-32 mismatch, the file is corrupt (re-create or re-download it)"
-        )
     d = header.latent_dim
-    n_latent = _payload_length(entry.kind, d, len(entry.graft_dims), _DTYPES[header.latent_dtype].itemsize)
+    itemsize = _DTYPES[header.latent_dtype].itemsize
+    n_latent = (2 * d + len(entry.graft_dims)) * itemsize
     if entry.kind == "layered":
         from brdfcodec.layers.record import latent_values_stored
 
         assert entry.layers is not None
-        n_latent = latent_values_stored(entry.layers, d) * _DTYPES[header.latent_dtype].itemsize
+        n_latent = latent_values_stored(entry.layers, d) * itemsize
     values = np.frombuffer(payload[:n_latent], dtype=_DTYPES[header.latent_dtype]).astype(np.float32)
     try:
         if entry.kind == "layered":  # --- layered records (issue 14)
@@ -832,6 +1074,7 @@ def parse_bvae(data: bytes, path: str | os.PathLike[str] = "<bytes>") -> ParsedB
     handle = io.BytesIO(data)
     header = _header_from_handle(name, handle, len(data))
     start = header.records_offset
+    _check_payload_crc(name, header, zlib.crc32(memoryview(data)[start:]))
     records = tuple(
         _decode_record(name, header, e, data[start + e.offset : start + e.offset + e.length]) for e in header.entries
     )
@@ -847,14 +1090,14 @@ def _open_checked(path: str | os.PathLike[str]) -> tuple[BinaryIO, int]:
 
 
 def read_header(path: str | os.PathLike[str]) -> BvaeHeader:
-    """Read and verify a file's preamble and header only (no record is read)."""
+    """Read and verify a file's preamble and header only (no record is read, so the payload CRC is not checked)."""
     handle, size = _open_checked(path)
     with handle:
         return _header_from_handle(os.fspath(path), handle, size)
 
 
 def read_bvae(path: str | os.PathLike[str]) -> ParsedBvae:
-    """Read and verify a whole ``.bvae`` file (every record's CRC is checked)."""
+    """Read and verify a whole ``.bvae`` file (the header's and the payloads' CRC-32 are checked)."""
     handle, _ = _open_checked(path)
     with handle:
         data = handle.read()
@@ -864,8 +1107,9 @@ def read_bvae(path: str | os.PathLike[str]) -> ParsedBvae:
 class BvaeReader:
     """Random access to the records of a ``.bvae`` file.
 
-    Opening reads the preamble and header only; :meth:`read` then reads one
-    record's bytes. Use as a context manager, or call :meth:`close`.
+    Opening reads the preamble and header, and reads the payloads once to
+    check their CRC-32 (one for all records, §3); :meth:`read` then reads
+    one record's bytes. Use as a context manager, or call :meth:`close`.
 
     Parameters
     ----------
@@ -878,6 +1122,10 @@ class BvaeReader:
         self._handle, size = _open_checked(path)
         try:
             self.header = _header_from_handle(os.fspath(path), self._handle, size)
+            crc = 0
+            while chunk := self._handle.read(1 << 20):
+                crc = zlib.crc32(chunk, crc)
+            _check_payload_crc(os.fspath(path), self.header, crc)
         except BaseException:
             self._handle.close()
             raise
@@ -898,7 +1146,7 @@ class BvaeReader:
         return self.header.names
 
     def read(self, name: str) -> Record:
-        """Read and verify one material's record (``KeyError`` if absent)."""
+        """Read one material's record (``KeyError`` if absent); the payloads were verified on opening."""
         entry = self.header.entry(name)
         self._handle.seek(self.header.records_offset + entry.offset)
         return _decode_record(os.fspath(self.path), self.header, entry, _read_exact(self._handle, entry.length))

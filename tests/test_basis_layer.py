@@ -283,7 +283,7 @@ def test_fit_basis_replace_fits_a_new_basis_and_names_it(analytic_training_set, 
     folder = tmp_path / "model"
     shutil.copytree(default_model_folder(), folder)
     original = json.loads((folder / "model.json").read_text())
-    old_sha, previous = original["basis_sha256"], original.get("previous_bases", {})
+    old_sha = original["basis_sha256"]
     assert main(["model", "fit-basis", str(folder), "--dataset", str(analytic_training_set), "--replace",
                  "--count", "500"]) == 0
     stored = json.loads((folder / "model.json").read_text())
@@ -291,21 +291,18 @@ def test_fit_basis_replace_fits_a_new_basis_and_names_it(analytic_training_set, 
     # 9 or 10 training materials in 6 colour orders: at most 5N − 1 vectors, and the message says how many.
     assert info["colour_permutations"] is True and info["count"] == 5 * info["materials"] - 1
     printed = capsys.readouterr().out
-    assert f"{info['count']} vectors" in printed and f"kept {folder}/basis-{old_sha[:16]}.safetensors" in printed
+    assert f"{info['count']} vectors" in printed and "kept" not in printed
     decoder = BrdfDecoder(folder)
     basis = decoder.shared_basis
     assert basis is not None and basis.sha256 == stored["basis_sha256"] != old_sha and basis.count == info["count"]
-    # The old basis stays, renamed and listed, so records made with it decode as before (projected or not).
-    kept = f"basis-{old_sha[:16]}.safetensors"
-    assert sorted(p.name for p in folder.iterdir() if "basis" in p.name) == sorted(
-        [kept, "basis.safetensors", *previous.values()])
-    assert stored["previous_bases"] == {**previous, old_sha: kept}  # bases kept before stay listed
-    shipped = BrdfDecoder()
-    for project in (0, 50):
-        old = LayeredRecord("old", np.linspace(-1, 1, 8), np.ones(8), basis=BasisLayer(
-            old_sha, 0.25, np.arange(-3, 4, dtype=np.int8), 8, project), compact_sigma=True)
-        np.testing.assert_array_equal(decoder.decode(old), shipped.decode(old))
-    assert decoder.basis_named("ef" * 32) is None
+    # One model, one basis: the new basis replaces the old one, which the model no longer names or holds.
+    assert sorted(p.name for p in folder.iterdir() if "basis" in p.name) == ["basis.safetensors"]
+    assert "previous_bases" not in stored
+    assert decoder.basis_named(old_sha) is None and decoder.basis_named(basis.sha256) is basis
+    old = LayeredRecord("old", np.linspace(-1, 1, 8), np.ones(8), basis=BasisLayer(
+        old_sha, 0.25, np.arange(-3, 4, dtype=np.int8), 8), compact_sigma=True)
+    with pytest.raises(BasisMismatchError, match=old_sha[:12]):
+        decoder.decode(old)
 
 
 def test_the_shipped_model_has_a_basis_and_partial_decoding_matches() -> None:
@@ -625,22 +622,22 @@ def test_a_factorised_basis_file_expands_to_the_dense_basis_it_stands_for(tmp_pa
         load_shared_basis(broken, sha256_of_file(broken))
 
 
-def test_a_manifest_lists_previous_bases_as_hashes_and_plain_file_names(tmp_path) -> None:
+def test_the_shipped_model_holds_one_basis_and_manifests_ignore_previous_bases(tmp_path) -> None:
     import json
     import shutil
 
-    from brdfcodec.errors import BrdfcodecError
     from brdfcodec.models.manifest import load_manifest
     from brdfcodec.models.registry import default_model_folder
 
+    shipped = default_model_folder()
+    assert [p.name for p in shipped.iterdir() if p.suffix == ".safetensors" and "basis" in p.name] == [
+        "basis.safetensors"]
+    assert "previous_bases" not in json.loads((shipped / "model.json").read_text())
     folder = tmp_path / "model"
-    shutil.copytree(default_model_folder(), folder)
-    assert load_manifest(folder).previous_bases  # the shipped model keeps its first basis
+    shutil.copytree(shipped, folder)
     stored = json.loads((folder / "model.json").read_text())
-    for bad in ({"ab" * 32: "../basis.safetensors"}, {"AB" * 32: "b.safetensors"}, {"ab" * 32: 3}, ["x"]):
-        (folder / "model.json").write_text(json.dumps({**stored, "previous_bases": bad}))
-        with pytest.raises(BrdfcodecError, match="previous_bases"):
-            load_manifest(folder)
+    (folder / "model.json").write_text(json.dumps({**stored, "previous_bases": {"ab" * 32: "../x"}}))
+    assert not hasattr(load_manifest(folder), "previous_bases")  # a field of model spec 1.3-1.4, ignored
 
 
 def test_sums_on_the_factors_equal_sums_over_the_expanded_vectors() -> None:

@@ -13,7 +13,7 @@ import numpy as np
 from tqdm import tqdm
 
 from brdfcodec.atomic import check_output_path
-from brdfcodec.bvae_format import Record, write_bvae
+from brdfcodec.bvae_format import Record, without_provenance, write_bvae
 from brdfcodec.cli.usage import UsageError
 from brdfcodec.dataset import HDF5_SIGNATURE
 from brdfcodec.inputs import default_material_name, is_measured_file, read_measured
@@ -49,6 +49,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     parser.add_argument("--float16", action="store_true", help="store latents as float16 (half the payload)")
     parser.add_argument("--split", choices=("train", "validation"), help="with a dataset: only this split")
     parser.add_argument("--no-measure", action="store_true", help="skip decoding to measure RelAE")
+    parser.add_argument("--provenance", action="store_true",
+                        help="store each material's provenance in the file: source SHA-256 and kind, measured RelAE, "
+                        "encoder, effort and rate control (by default the file holds names and records only)")
     parser.add_argument("--batch-size", type=int, default=8, help="materials encoded at once (default 8)")
     parser.add_argument("--force", action="store_true", help="replace an existing output file")
     # --- issue 14: refinement and rate control (brdfcodec.layers)
@@ -56,7 +59,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
                         help="latent refinement at encode time: 0 (encoder only) to 3 (slowest); default 1")
     target = parser.add_mutually_exclusive_group()
     target.add_argument("--bytes", type=int, metavar="N",
-                        help="largest quality within N bytes of record payload per material (adds enhancement "
+                        help="largest quality within N bytes per material: what each adds to the file beyond its "
+                        "name, its record and its index entry (adds enhancement "
                         "layers: basis coefficients, then a detail layer; from 12 B, where the base is stored "
                         "compact: μ as int8 on a fixed grid, or with a step where it does not fit, one σ byte)")
     target.add_argument("--max-relae", type=float, metavar="X",
@@ -178,7 +182,8 @@ def run(args: argparse.Namespace) -> int:
             lines.append(f"  {record.name:<32} (RelAE undefined: the material reflects nothing)")
     if encoder.reference is None:  # loaded from a model folder, so it has one
         raise RuntimeError("the encoder has no decoder reference")
-    size = write_bvae(args.output, records, encoder.reference, latent_dtype=dtype, overwrite=args.force)
+    stored = records if args.provenance else without_provenance(records)
+    size = write_bvae(args.output, stored, encoder.reference, latent_dtype=dtype, overwrite=args.force)
     print("\n".join(lines))
     measured = [r.meta["relae"]["mapped"] for r in records if "relae" in r.meta]
     if measured:

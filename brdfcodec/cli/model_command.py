@@ -44,15 +44,15 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
         "mapped kept slices, by default in all 6 orders of their colour channels) for a model folder that "
         "lacks one, and name it in model.json. The weights are not touched: the decoder hash, and every file "
         "made with the model, stay valid. A model that has a basis keeps it unless --replace is given; then the "
-        "new basis is the one encoders use and the old one stays beside it (basis-<hash>.safetensors, listed "
-        "in model.json's previous_bases), so files with basis layers made with it keep decoding.",
+        "new basis replaces it (a model ships one basis), and files with basis layers made with the old one no "
+        "longer decode with this folder.",
     )
     fit.add_argument("folder", type=Path, help="model folder")
     fit.add_argument("--dataset", type=Path, required=True, help="dataset whose training split the model used")
     fit.add_argument("--count", type=int, default=None, metavar="K", help="vectors (default 75)")
     fit.add_argument("--replace", action="store_true",
-                     help="give a model that has a basis a new one for encoding; the old one is kept for "
-                     "decoding the files made with it")
+                     help="give a model that has a basis a new one; files with basis layers made with the old "
+                     "one no longer decode with this folder")
     fit.add_argument("--colour-permutations", action=argparse.BooleanOptionalAction, default=True,
                      help="fit on the training materials in all 6 orders of their colour channels (default)")
     fit.set_defaults(handler=run_fit_basis)
@@ -146,8 +146,6 @@ def run_fit_basis(args: argparse.Namespace) -> int:
                                 replace=args.replace)
     print(f"wrote {args.folder}/basis.safetensors: {manifest.info['basis']['count']} vectors, "
           f"sha256 {manifest.basis_sha256}")
-    for sha, name in manifest.previous_bases.items():
-        print(f"kept {args.folder}/{name} (sha256 {sha}) for the files made with it")
     return 0
 
 

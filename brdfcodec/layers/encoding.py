@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING, Any, Literal, get_args
 
 import numpy as np
 
-from brdfcodec.bvae_format import LatentRecord
+from brdfcodec.bvae_format import LatentRecord, descriptor_size
 from brdfcodec.conventions import MAPPED_MAX
 from brdfcodec.layers.basis import (
     BasisError,
@@ -154,7 +154,9 @@ def layer_records(
             basis_count=0 if basis is None else basis.count,
         )
         chosen = result.record
-        rate = {"payload_bytes": result.payload_bytes, "candidates_tried": len(result.tried)}
+        # record_bytes: what the budget caps (payload and index descriptor); payload_bytes: the payload alone
+        rate = {"payload_bytes": result.payload_bytes - descriptor_size(chosen), "record_bytes": result.payload_bytes,
+                "candidates_tried": len(result.tried)}
         if options.bytes_budget is not None:
             rate["bytes_budget"] = options.bytes_budget
         if options.max_relae is not None:

@@ -47,7 +47,7 @@ from typing import Final, Literal
 import numpy as np
 import numpy.typing as npt
 
-from brdfcodec.bvae_format import LatentRecord
+from brdfcodec.bvae_format import LatentRecord, record_overhead
 from brdfcodec.conventions import MAPPED_MAX, NETWORK_INPUT_SHAPE
 from brdfcodec.errors import RateTargetError
 from brdfcodec.layers.basis import STEP_BYTES, BasisLayer, fits_fixed_mu_grid
@@ -78,7 +78,8 @@ class RateResult:
     ----------
     record : LatentRecord or LayeredRecord
     payload_bytes : int
-        μ, σ and the layers, as stored.
+        What the record adds to a file beyond its name's bytes (what a size budget caps): μ, σ and the layers
+        as stored, plus its descriptor in the file's index (:func:`~brdfcodec.bvae_format.record_overhead`).
     tried : list of (step or None, payload bytes, RelAE or None)
         Every candidate evaluated (None step: no detail layer).
     """
@@ -125,7 +126,8 @@ class _Candidates:
                  latent_itemsize: int, basis_fit: BasisFit | None, compact: bool = False) -> None:
         self.base, self.inputs, self.masks = base, inputs, masks
         d = base.latent_dim
-        self.plain_bytes = 2 * d * latent_itemsize  # a latent record: μ and σ in the latent dtype
+        # a latent record: μ and σ in the latent dtype, and its descriptor
+        self.plain_bytes = 2 * d * latent_itemsize + record_overhead(base.name)
         self.mu_storage = compact_mu_storage(base.mu) if compact else None
         self.layered_bytes = _layered_base_bytes(d, latent_itemsize, self.mu_storage)
         self.basis_fit = basis_fit
@@ -160,8 +162,22 @@ class _Candidates:
         _, basis, _ = self.stage(k, s is not None)
         if basis is None and s is None:
             return self.plain_bytes
-        return (self.layered_bytes + (0 if basis is None else basis.nbytes)
-                + (0 if s is None else self.detail(k, s).nbytes))
+        detail = None if s is None else self.detail(k, s).nbytes
+        return (self.layered_bytes + (0 if basis is None else basis.nbytes) + (detail or 0)
+                + self.overhead(None if basis is None else basis.count, detail))
+
+    def overhead(self, basis_count: int | None, detail_bytes: int | None = None) -> int:
+        """The record's descriptor in the file's index (what a budget counts besides the payload)."""
+        return record_overhead(self.base.name, basis_count=basis_count, detail_bytes=detail_bytes)
+
+    def most_coefficients(self, bytes_budget: int, most: int) -> int:
+        """The most basis coefficients (at most ``most``) whose record without a detail layer fits the budget
+        with its descriptor; 0 when none does."""
+        fixed = self.layered_bytes + STEP_BYTES
+        k = min(most, bytes_budget - fixed - self.overhead(1))
+        while k > 0 and fixed + k + self.overhead(k) > bytes_budget:  # a count of 128 or more takes 2 bytes
+            k -= 1
+        return max(k, 0)
 
     def mapped(self, k: int, s: float | None) -> np.ndarray:
         _, _, mapped = self.stage(k, s is not None)
@@ -225,9 +241,12 @@ def encode_layers(
     target = np.asarray(inputs, dtype=np.float32)
     weights = np.asarray(masks, dtype=np.float32)
     d = base.latent_dim
-    compact = bytes_budget is not None and compact_base_pays(bytes_budget, d, latent_itemsize, full)
+    compact = bytes_budget is not None and compact_base_pays(
+        bytes_budget - record_overhead(base.name, basis_count=max(full, 1)), d, latent_itemsize, full)
     cands = _Candidates(base, base_mapped, target, weights, latent_itemsize, basis_fit, compact)
-    base_bytes = min(cands.plain_bytes, cands.layered_bytes + STEP_BYTES + 1) if full else cands.plain_bytes
+    base_bytes = cands.plain_bytes
+    if full:
+        base_bytes = min(base_bytes, cands.layered_bytes + STEP_BYTES + 1 + cands.overhead(1))
     if step is not None:
         count = min(full, DETAIL_BASIS_COUNT)
         return RateResult(cands.record(count, float(step)), cands.size(count, float(step)),
@@ -236,11 +255,14 @@ def encode_layers(
     if bytes_budget is not None:
         if bytes_budget < base_bytes:
             raise RateTargetError(f"{base.name}: {bytes_budget} bytes is below the base record's {base_bytes} bytes")
-        k = max(0, min(full, bytes_budget - cands.layered_bytes - STEP_BYTES))
+        k = cands.most_coefficients(bytes_budget, full)
         under_detail = min(k, DETAIL_BASIS_COUNT)
         fitting: set[tuple[int, float | None]] = {c for c in ((0, None), (k, None)) if cands.size(*c) <= bytes_budget}
-        # A detail layer only where it fits beside its coefficients (no room at 64 B: 51 coefficients, no detail).
-        if bytes_budget - (cands.layered_bytes + STEP_BYTES + under_detail) >= _empty_detail_bytes():
+        # A detail layer only where it fits beside its coefficients (no room at 64 B: 48 coefficients, no detail).
+        empty = _empty_detail_bytes()
+        smallest_detail = (cands.layered_bytes + (STEP_BYTES + under_detail if under_detail else 0) + empty
+                           + cands.overhead(under_detail or None, empty))
+        if smallest_detail <= bytes_budget:
             fitting |= {(under_detail, s) for s in _finest_fitting_steps(cands, under_detail, bytes_budget, tried)}
 
         # Among the fitting candidates, the lowest kept-slice L1 error (a very coarse layer can be worse than none);

@@ -39,9 +39,6 @@ class ModelManifest:
     basis_sha256 : str or None
         Hex SHA-256 of the shared basis file (``basis.safetensors``), when the model has one: the basis
         encoders use.
-    previous_bases : dict of str to str
-        Bases the model had before (SHA-256 → file name in the folder): records made with them still
-        decode (``spec/model.md`` §5).
     encoder_storage : {"full", "compact"}
         How ``encoder.safetensors`` stores the encoder (``spec/model.md`` §3): every tensor as trained, or
         large matrices as float16 and the linear path derived from the decoder's basis.
@@ -56,7 +53,6 @@ class ModelManifest:
     parameters: dict[str, Any] = field(default_factory=dict)
     basis_sha256: str | None = None
     encoder_storage: str = "full"
-    previous_bases: dict[str, str] = field(default_factory=dict)
 
 
 #: Values of ``encoder_storage`` this reader knows.
@@ -67,18 +63,6 @@ def _encoder_storage(value: object) -> str:
     if value not in ENCODER_STORAGES:
         raise ValueError(f"encoder_storage {value!r} is not one of {ENCODER_STORAGES}")
     return str(value)
-
-
-def _previous_bases(value: object) -> dict[str, str]:
-    from brdfcodec.hashing import is_sha256_hex
-
-    if not isinstance(value, dict):
-        raise ValueError("previous_bases must be an object of SHA-256 → file name")
-    for sha, name in value.items():
-        if not is_sha256_hex(sha) or not isinstance(name, str) or not name or Path(name).name != name \
-                or name in (".", ".."):
-            raise ValueError(f"previous_bases entry {sha!r}: {name!r} is not a SHA-256 and a plain file name")
-    return dict(value)
 
 
 def load_manifest(folder: str | os.PathLike[str]) -> ModelManifest:
@@ -96,7 +80,6 @@ def load_manifest(folder: str | os.PathLike[str]) -> ModelManifest:
             parameters=dict(data.get("parameters", {})),
             basis_sha256=None if data.get("basis_sha256") is None else str(data["basis_sha256"]),
             encoder_storage=_encoder_storage(data.get("encoder_storage", "full")),
-            previous_bases=_previous_bases(data.get("previous_bases", {})),
         )
     except (KeyError, TypeError, ValueError) as error:
         raise BrdfcodecError(f"{path}: not a valid model manifest ({error})") from None

@@ -196,10 +196,9 @@ def add_shared_basis(folder: str | os.PathLike[str], dataset_path: str | os.Path
     """Fit a shared basis for an exported model (on a dataset's training split) and name it in ``model.json``.
 
     For a model exported before shared bases existed (:func:`export_run` fits one itself), or, with
-    ``replace``, to give a model a new basis: the new one becomes the basis encoders use
-    (``basis.safetensors``) and the old one is kept beside it, renamed ``basis-<first 16 hex digits of its
-    hash>.safetensors`` and listed in ``previous_bases``, so files with basis layers made with it keep decoding.
-    The weights are not touched, so the model's identity (its decoder hash) is unchanged.
+    ``replace``, to give a model a new basis: the new one replaces the old one (a model ships one basis), so
+    files whose basis layers name the old one no longer decode with this folder (the decoder refuses them,
+    naming both hashes). The weights are not touched, so the model's identity (its decoder hash) is unchanged.
     ``colour_permutations`` as in :func:`export_run`. The basis file is written only once the fit has
     succeeded: a failed fit leaves the model as it was.
 
@@ -215,22 +214,17 @@ def add_shared_basis(folder: str | os.PathLike[str], dataset_path: str | os.Path
     if existing and not replace:
         raise FileExistsError(
             f"{folder}: the model already has a shared basis ({existing[:12]}…). --replace fits a new one for "
-            "encoders and keeps this one for the files made with it"
+            "that replaces this one (files with basis layers made with it then no longer decode with this folder)"
         )
     fitting = ".basis-fitting.safetensors"
     with BrdfDataset(dataset_path) as dataset:
         basis = _fit_basis(out, dataset, dataset.indices("train"), count, colour_permutations, name=fitting)
-    kept: dict[str, str] = {}
-    if existing and basis["sha256"] != existing and (out / BASIS_FILE).is_file():
-        kept[existing] = f"basis-{existing[:16]}.safetensors"
-        os.replace(out / BASIS_FILE, out / kept[existing])
     os.replace(out / fitting, out / BASIS_FILE)
 
     def add(stored: dict[str, Any]) -> None:
         stored["basis_sha256"] = basis.pop("sha256")
         stored.setdefault("info", {})["basis"] = basis
-        if kept:
-            stored["previous_bases"] = {**stored.get("previous_bases", {}), **kept}
+        stored.pop("previous_bases", None)  # a manifest of format 1.x of spec/model.md may list some
 
     return _rewrite_manifest(folder, add)
 
