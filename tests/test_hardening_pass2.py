@@ -321,3 +321,89 @@ def test_layer_keys_and_values_have_the_spec_error_classes(layers: dict, error: 
     with pytest.raises(ValueError) as caught:
         layers_length(layers, "record 0 (a)", 8)
     assert isinstance(caught.value, UnsupportedLayerError) == (error == "unsupported"), caught.value
+
+
+# --------------------------------------------------------------------------- 4. studio requests
+
+
+@pytest.fixture(scope="module")
+def studio(tmp_path_factory: pytest.TempPathFactory):  # type: ignore[no-untyped-def]
+    pytest.importorskip("starlette", reason="the studio needs the studio extra (starlette, uvicorn)")
+    pytest.importorskip("uvicorn", reason="the studio needs the studio extra (starlette, uvicorn)")
+    from brdfcodec.studio.browser import running_studio
+    from brdfcodec.studio.catalogue import Catalogue
+    from brdfcodec.studio.server import StudioServer, create_app
+
+    save_dir = tmp_path_factory.mktemp("studio-saves")
+    server = StudioServer(Catalogue(), save_dir=save_dir, manifold_cache=tmp_path_factory.mktemp("umap"))
+    with running_studio(create_app(server)) as url:
+        yield url, save_dir
+
+
+def _post(url: str, data: bytes) -> tuple[int, dict]:
+    import json
+    import urllib.error
+    import urllib.request
+
+    req = urllib.request.Request(url, data=data, headers={"Content-Type": "application/json"})
+    try:
+        with urllib.request.urlopen(req, timeout=120) as response:
+            return response.status, json.loads(response.read() or b"{}") if "json" in response.headers.get(
+                "content-type", "") else {}
+    except urllib.error.HTTPError as error:
+        return error.code, json.loads(error.read())
+
+
+def _save_body(**changes: object) -> bytes:
+    import json
+
+    body = {"file": "s.bvae", "name": "saved", "z": [0.1] * 8, "edit": {"changed": [1]}, **changes}
+    return json.dumps(body).encode()
+
+
+@pytest.mark.parametrize(("route", "data", "fragment"), [
+    ("decode", b'{"z": ' + b"[" * 30_000 + b"]" * 30_000 + b"}", "deeper"),  # was a RecursionError: 500
+    ("decode", b'{"z": [' + b"9" * 4000 + b', 0, 0, 0, 0, 0, 0, 0]}', "beyond"),  # was an OverflowError: 500
+    ("decode", b'{"z": [1e400, 0, 0, 0, 0, 0, 0, 0]}', "finite"),
+    ("save", _save_body(edit={"t": float("nan")}), "finite"),
+    ("save", _save_body(edit={"t": 1.0}).replace(b"1.0", b"1e400"), "finite"),
+    ("save", _save_body(edit={"t": 1.0}).replace(b"1.0", b"-Infinity"), "finite"),
+    ("save", _save_body(edit={"dims_from_a": [1e21]}), "finite numbers"),
+    ("save", _save_body(file="ok.bvae\n"), "plain name"),  # "$" matched before the newline
+    ("save", _save_body(name="saved\n"), "name"),
+    ("save", _save_body(file="CON.bvae"), "reserved device name"),
+    ("save", _save_body(file="nul.bvae"), "reserved device name"),
+    ("save", _save_body(file="lpt1.png"), "reserved device name"),
+])
+def test_studio_bad_bodies_are_400_not_500(studio, route: str, data: bytes, fragment: str) -> None:  # type: ignore[no-untyped-def]
+    url, save_dir = studio
+    status, body = _post(f"{url}/api/{route}", data)
+    assert status == 400, body
+    assert fragment in body["error"]
+    assert not any(save_dir.iterdir())
+
+
+def test_studio_slow_body_is_cut_off(studio, monkeypatch: pytest.MonkeyPatch) -> None:  # type: ignore[no-untyped-def]
+    import socket
+    import time
+    from urllib.parse import urlparse
+
+    from brdfcodec.studio import server
+
+    monkeypatch.setattr(server, "BODY_TIMEOUT_S", 0.5)
+    url, _ = studio
+    parts = urlparse(url)
+    with socket.create_connection((parts.hostname, parts.port), timeout=30) as sock:
+        sock.sendall(b"POST /api/decode HTTP/1.1\r\nHost: 127.0.0.1\r\nContent-Type: application/json\r\n"
+                     b"Content-Length: 100\r\n\r\n{\"z\": ")
+        start = time.monotonic()
+        answer = sock.recv(4096)
+        waited = time.monotonic() - start
+    assert answer.startswith(b"HTTP/1.1 408") and waited < 10, (answer[:200], waited)
+
+
+def test_studio_saves_a_good_body(studio) -> None:  # type: ignore[no-untyped-def]
+    url, save_dir = studio
+    status, body = _post(f"{url}/api/save", _save_body(file="fine.bvae", edit={"t": 0.5, "dims_from_a": [1, 2]}))
+    assert status == 200 and (save_dir / "fine.bvae").is_file(), body
+    (save_dir / "fine.bvae").unlink()

@@ -28,8 +28,10 @@ Design (measured; see the README's studio section):
 
 from __future__ import annotations
 
+import asyncio
 import io
 import json
+import math
 import re
 import threading
 import time
@@ -52,10 +54,16 @@ from brdfcodec.conventions import MAPPED_MAX
 from brdfcodec.studio import StudioError
 from brdfcodec.studio.catalogue import Catalogue
 
-__all__ = ["MAX_BODY_BYTES", "SLICE_STEP", "StudioServer", "create_app", "quantise_slices", "static_folder"]
+__all__ = ["BODY_TIMEOUT_S", "MAX_BODY_BYTES", "SLICE_STEP", "StudioServer", "create_app", "quantise_slices",
+           "static_folder"]
 
 #: Largest request body accepted, bytes.
 MAX_BODY_BYTES = 64 * 1024
+#: Longest a request body may take to arrive, seconds (a slow sender cannot hold a connection for long).
+BODY_TIMEOUT_S = 10.0
+#: Deepest nesting of JSON arrays and objects in a request body.
+MAX_JSON_DEPTH = 32
+_LARGEST_EXACT = (1 << 53) - 1
 #: Plain output names: letters, digits, '.', '_', '-', a known suffix; no folders, no leading dot.
 _FILE_NAME = re.compile(r"^[A-Za-z0-9_][A-Za-z0-9._-]{0,120}\.(bvae|binary|png|exr)$")
 _MATERIAL_NAME = re.compile(r"^[^\x00-\x1f\x7f/\\]{1,200}$")
@@ -185,18 +193,19 @@ class StudioServer:
         from brdfcodec.bvae_format import GraftRecord, LatentRecord
 
         file_name = body.get("file")
-        if not isinstance(file_name, str) or not _FILE_NAME.match(file_name):
+        if not isinstance(file_name, str) or not _FILE_NAME.fullmatch(file_name):  # fullmatch: "$" allows a "\n"
             raise StudioError("file must be a plain name (letters, digits, . _ -) ending in .bvae, .binary, .png or "
                               ".exr; folders are not allowed")
         name = body.get("name", "studio-edit")
-        if not isinstance(name, str) or not _MATERIAL_NAME.match(name):
+        if not isinstance(name, str) or not _MATERIAL_NAME.fullmatch(name):
             raise StudioError("name must be 1 to 200 characters without control characters or slashes")
         from brdfcodec.material_names import check_material_name
 
-        try:
-            check_material_name(name)  # the file format's rules (spec/bvae-format.md §4.3): "NUL", ".x", "a:b" ...
-        except ValueError as error:
-            raise StudioError(f"name: {error}") from None
+        for label, value in (("file", file_name), ("name", name)):
+            try:  # the file format's rules (spec/bvae-format.md §4.3): "NUL", "CON.bvae", ".x", "a:b" ...
+                check_material_name(value)
+            except ValueError as error:
+                raise StudioError(f"{label}: {error}") from None
         overwrite = body.get("overwrite") is True
         target = self.save_dir / file_name
         if target.exists() and not overwrite:
@@ -294,6 +303,9 @@ def _provenance(edit: object, catalogue: Catalogue) -> dict[str, Any]:
         if isinstance(value, list) and (len(value) > 64 or not all(
                 isinstance(v, int | float) and not isinstance(v, bool) for v in value)):
             raise StudioError(f"edit field {key!r} must be a short list of numbers")
+        if (isinstance(value, float) and not math.isfinite(value)) or (isinstance(value, list) and not all(
+                math.isfinite(v) and abs(v) <= _LARGEST_EXACT for v in value)):
+            raise StudioError(f"edit field {key!r} must hold finite numbers (integers within ±(2^53 − 1))")
         out[key] = value
     return out
 
@@ -301,23 +313,69 @@ def _provenance(edit: object, catalogue: Catalogue) -> dict[str, Any]:
 # ---------------------------------------------------------------------- HTTP layer
 
 
+def _refuse_constant(name: str) -> Any:
+    raise ValueError(f"{name} is not a JSON number (numbers must be finite)")
+
+
+def _finite_float(text: str) -> float:
+    value = float(text)
+    if not math.isfinite(value):
+        raise ValueError(f"number {text[:40]} is not finite (it overflows binary64)")
+    return value
+
+
+def _exact_int(text: str) -> int:
+    if len(text) > 17 or abs(int(text)) > _LARGEST_EXACT:  # parsed only when short: no quadratic conversion
+        raise ValueError(f"integer {text[:40]}{'…' if len(text) > 40 else ''} is beyond ±(2^53 − 1)")
+    return int(text)
+
+
+def _parse_json(data: bytes) -> Any:
+    """JSON as I-JSON (RFC 7493) has it: finite numbers, integers exact in binary64, at most
+    :data:`MAX_JSON_DEPTH` levels of nesting (checked before parsing, so a deep body cannot exhaust the stack)."""
+    depth = deepest = 0
+    in_string = escaped = False
+    for byte in data:  # counting brackets outside strings is exact for valid JSON
+        if in_string:
+            if escaped:
+                escaped = False
+            elif byte == 0x5C:
+                escaped = True
+            elif byte == 0x22:
+                in_string = False
+        elif byte == 0x22:
+            in_string = True
+        elif byte in (0x5B, 0x7B):
+            depth += 1
+            if depth > MAX_JSON_DEPTH:
+                raise ValueError(f"nested deeper than {MAX_JSON_DEPTH} levels")
+        elif byte in (0x5D, 0x7D):
+            depth -= 1
+    return json.loads(data, parse_constant=_refuse_constant, parse_float=_finite_float, parse_int=_exact_int)
+
+
 async def _json_body(request: Request) -> dict[str, Any]:
-    """The request's JSON object, refusing bodies over :data:`MAX_BODY_BYTES` and non-JSON content types."""
+    """The request's JSON object, refusing bodies over :data:`MAX_BODY_BYTES`, bodies that take longer than
+    :data:`BODY_TIMEOUT_S` to arrive, non-JSON content types, and JSON beyond I-JSON's rules (:func:`_parse_json`)."""
     if request.headers.get("content-type", "").split(";")[0].strip() != "application/json":
         raise StudioError("send the request as application/json", status=415)
     declared = request.headers.get("content-length")
     if declared is not None and (not declared.isdigit() or int(declared) > MAX_BODY_BYTES):
         raise StudioError(f"request body larger than {MAX_BODY_BYTES} bytes", status=413)
     chunks, size = [], 0
-    async for chunk in request.stream():
-        size += len(chunk)
-        if size > MAX_BODY_BYTES:
-            raise StudioError(f"request body larger than {MAX_BODY_BYTES} bytes", status=413)
-        chunks.append(chunk)
     try:
-        body = json.loads(b"".join(chunks) or b"null")
-    except (ValueError, UnicodeDecodeError) as error:
-        raise StudioError(f"the body is not valid JSON: {error}") from error
+        async with asyncio.timeout(BODY_TIMEOUT_S):
+            async for chunk in request.stream():
+                size += len(chunk)
+                if size > MAX_BODY_BYTES:
+                    raise StudioError(f"request body larger than {MAX_BODY_BYTES} bytes", status=413)
+                chunks.append(chunk)
+    except TimeoutError:
+        raise StudioError(f"the request body did not arrive within {BODY_TIMEOUT_S:g} s", status=408) from None
+    try:
+        body = _parse_json(b"".join(chunks) or b"null")
+    except (ValueError, UnicodeDecodeError, RecursionError) as error:
+        raise StudioError(f"the body is not valid JSON: {error}") from None
     if not isinstance(body, dict):
         raise StudioError("the body must be a JSON object")
     return body
