@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from brdfcodec import errors
-from brdfcodec.bvae_format import FLAG_HEADER_ZSTD, GraftRecord, parse_bvae
+from brdfcodec.bvae_format import FLAG_METADATA_ZSTD, FORMAT_MAJOR, FORMAT_MINOR, GraftRecord, parse_bvae
 
 VECTORS = Path(__file__).resolve().parents[1] / "spec" / "vectors"
 MANIFEST: dict[str, Any] = json.loads((VECTORS / "manifest.json").read_text(encoding="utf-8"))
@@ -30,39 +30,42 @@ def _load_generator() -> Any:
 
 def test_manifest_covers_what_the_spec_asks_for() -> None:
     valid = {Path(v["file"]).stem for v in MANIFEST["valid"]}
-    assert {"one-material", "library", "float16", "graft", "compressed-header", "layered"} <= valid
+    assert {"one-material", "library", "float16", "graft", "compressed-header", "layered", "metadata-empty"} <= valid
     assert {v["error"] for v in MANIFEST["invalid"]} == set(ERROR_CLASSES)
-    assert len(MANIFEST["invalid"]) >= 40
+    assert len(MANIFEST["invalid"]) >= 80
     invalid = {Path(v["file"]).stem for v in MANIFEST["invalid"]}
-    # Every rule 1.1 added for layered records and the metadata keys of §5 has a vector that breaks it.
-    assert {"layers-on-latent", "layered-unknown-transform", "layered-unknown-layer", "layered-content-size",
-            "meta-effort-string", "meta-effort-range", "meta-rate-number", "meta-source-kind-number"} <= invalid
-    # ... and every rule 1.2 added for the basis layer and compact sigma.
-    assert {"basis-unknown-sigma", "basis-unknown-field", "basis-count-zero", "basis-sha-upper", "basis-length",
-            "basis-step-nan", "basis-step-zero"} <= invalid
-    # ... and the basis layer's first vector (1.3).
-    assert {"basis-first-negative", "basis-first-string", "basis-first-range"} <= invalid
-    # ... and compact mu and the shared sigma byte (1.4).
-    assert {"compact-mu-unknown", "compact-mu-step-nan", "compact-sigma-length"} <= invalid
-    # ... and the projected base (1.6).
-    assert {"basis-project-zero", "basis-project-bool"} <= invalid
+    # The rules of the binary header and index (2.0), the either-way ones of §9 included ...
+    assert {"major-version-1", "major-version-3", "unknown-kind", "unknown-dtype", "header-ends-in-form-table",
+            "form-unused", "form-twice", "form-index", "varint-not-minimal", "varint-too-long", "basis-unused",
+            "basis-without-hash", "name-not-utf8", "record-crc"} <= invalid
+    # ... the metadata block's (§5) ...
+    assert {"metadata-unknown-name", "metadata-name-case", "zstd-flag-without-metadata", "meta-effort-string",
+            "meta-effort-range", "meta-rate-number", "meta-source-kind-number", "header-amplification"} <= invalid
+    # ... and those of layered records, the basis layer, compact mu and sigma, and the projected base.
+    assert {"layered-unknown-detail-form", "layered-unknown-layer", "layered-no-layer", "layered-content-size",
+            "basis-unknown-sigma", "basis-count-zero", "basis-count-payload", "basis-step-nan", "basis-step-zero",
+            "basis-first-range", "basis-project-range", "compact-mu-unknown", "compact-mu-step-nan",
+            "compact-sigma-length", "compact-mu-fixed-with-step"} <= invalid
     projected = [r for v in MANIFEST["valid"] for r in v["records"]
                  if "project" in r.get("layers", {}).get("basis", {})]
-    assert len(projected) == 3 and all(r["layers"]["basis"]["project"] == 50 for r in projected)
+    assert len(projected) == 2 and all(r["layers"]["basis"]["project"] == 50 for r in projected)
     compact = [r for v in MANIFEST["valid"] for r in v["records"] if r.get("layers", {}).get("mu") == "int8"]
     assert len(compact) == 2 and all(r["layers"]["sigma"] == "log2-u8-shared" for r in compact)
     assert MANIFEST["decode"]["values"] and MANIFEST["decode"]["rtol"] == 1e-3
     assert MANIFEST["decode_layers"]["values"]
+    layers_file = next(v for v in MANIFEST["valid"] if v["file"] == MANIFEST["decode_layers"]["file"])
+    assert layers_file["basis_sha256"] == MANIFEST["decode_layers"]["basis_sha256"]  # one basis per file
 
 
 @pytest.mark.parametrize("vector", MANIFEST["valid"], ids=lambda v: Path(v["file"]).stem)
 def test_valid_vector_reads_as_listed(vector: dict[str, Any]) -> None:
     parsed = parse_bvae((VECTORS / vector["file"]).read_bytes(), vector["file"])
     header = parsed.header
-    assert (header.major, header.minor) == (1, 6)
+    assert (header.major, header.minor) == (FORMAT_MAJOR, FORMAT_MINOR) == (2, 0)
     assert header.decoder.sha256 == vector["decoder_sha256"]
+    assert header.basis_sha256 == vector["basis_sha256"]
     assert header.latent_dtype == vector["latent_dtype"]
-    assert bool(header.flags & FLAG_HEADER_ZSTD) == vector["header_compressed"]
+    assert bool(header.flags & FLAG_METADATA_ZSTD) == vector["header_compressed"]
     assert len(parsed.records) == len(vector["records"])
     for record, expected in zip(parsed.records, vector["records"], strict=True):
         assert record.name == expected["name"] and record.kind == expected["kind"]

@@ -2,12 +2,15 @@
 
 Run from the repository root: ``python spec/vectors/make_vectors.py`` (writes
 into ``spec/vectors/``), or ``python spec/vectors/make_vectors.py OUT_DIR``.
+Re-run it whenever the shipped model changes: the reference-decode vectors
+name the shipped decoder and its shared basis, read from its ``model.json``.
 
-Valid files come from the reference writer; invalid files are built byte by
-byte here (JSON text, zstandard frame, CRC-32 and preamble written by hand),
-so that each breaks exactly one rule, or exactly the two rules whose
-precedence §7 settles. The expected decoder values are measured with the
-shipped model and stored with the tolerance §9 states.
+Valid files come from the reference writer (one, ``metadata-empty``, is
+written by hand); invalid files are built byte by byte here (binary header,
+JSON metadata, zstandard frame, CRC-32s and preamble written by hand), so
+that each breaks exactly one rule, or exactly the two rules whose precedence
+§7 settles. The expected decoder values are measured with the shipped model
+and stored with the tolerance §9 states.
 """
 
 from __future__ import annotations
@@ -22,18 +25,17 @@ from typing import Any
 import numpy as np
 
 from brdfcodec.bvae_format import DecoderReference, GraftRecord, LatentRecord, encode_bvae
+from brdfcodec.models.manifest import load_manifest
+from brdfcodec.models.registry import default_model_folder
 
 HERE = Path(__file__).resolve().parent
 MAGIC = b"\x89BVAE\r\n\x1a"
+_SHIPPED = load_manifest(default_model_folder())
 #: The shipped default model's decoder (``brdfcodec/data/models/default``).
-SHIPPED_DECODER = DecoderReference(
-    "e1e3ed1e24dc5a8746abbfb9194725e1a9d02808c2e81125c64f3d9e37b39491", "bvae-nbrdf-proxy-small-v1"
-)
+SHIPPED_DECODER = DecoderReference(_SHIPPED.decoder_sha256, _SHIPPED.name)
 TEST_DECODER = DecoderReference("ab" * 32, "conformance-test-decoder")
-#: SHA-256 of the shipped default model's first shared basis (a previous basis since 1.6, kept for decoding).
-SHIPPED_BASIS = "4fb0b97752edc3049cba46a0fb0cfcf5fa51a0575136efeab3d2bc1e391296b1"
-#: SHA-256 of its current shared basis (``basis.safetensors``: fitted on colour-permuted materials, factorised).
-CURRENT_BASIS = "b15a34554d6f7c923269dff4ccf19c66f6bac0f38d3993d7ba59e6738825fc47"
+#: SHA-256 of the shipped model's shared basis (``basis.safetensors``).
+SHIPPED_BASIS = str(_SHIPPED.basis_sha256)
 #: Relative and absolute tolerance of expected decoded values (stored MERL units).
 DECODE_RTOL = 1e-3
 DECODE_ATOL = 1e-6
@@ -49,13 +51,64 @@ REFERENCE_ENTRIES = [
 # --------------------------------------------------------------------------- a writer independent of the library
 
 
-def canonical(header: dict[str, Any]) -> bytes:
-    return json.dumps(header, sort_keys=True, separators=(",", ":"), ensure_ascii=False).encode("utf-8")
+def canonical(value: dict[str, Any]) -> bytes:
+    return json.dumps(value, sort_keys=True, separators=(",", ":"), ensure_ascii=False).encode("utf-8")
 
 
-def assemble(stored: bytes, payload: bytes, *, flags: int = 0, major: int = 1, minor: int = 1,
+def varint(value: int) -> bytes:
+    """LEB128 (§2.1)."""
+    out = bytearray()
+    while True:
+        out.append((value & 0x7F) | (0x80 if value >> 7 else 0))
+        value >>= 7
+        if not value:
+            return bytes(out)
+
+
+def latent_form() -> bytes:
+    return b"\x00"
+
+
+def graft_form(dims: list[int]) -> bytes:
+    return b"\x01" + varint(len(dims)) + b"".join(varint(d) for d in dims)
+
+
+def layered_form(mu: int = 0, sigma: int = 0, *, basis: tuple[int, int] | None = None, detail: int | None = None,
+                 layer_bits: int | None = None) -> bytes:
+    """A layered form (§3.2): mu and sigma codes, basis (first, project), detail code; ``layer_bits`` overrides."""
+    bits = (1 if basis is not None else 0) | (2 if detail is not None else 0)
+    out = bytes([2, mu, sigma, bits if layer_bits is None else layer_bits])
+    if basis is not None:
+        out += varint(basis[0]) + varint(basis[1])
+    if detail is not None:
+        out += bytes([detail])
+    return out
+
+
+def descriptor(name: str | bytes, form: int, *, count: int | None = None, step: float | None = None,
+               detail_length: int | None = None) -> bytes:
+    raw = name.encode("utf-8") if isinstance(name, str) else name
+    out = varint(len(raw)) + raw + bytes([form])
+    if count is not None:
+        out += varint(count)
+    if step is not None:
+        out += struct.pack("<d", step) + varint(detail_length or 0)
+    return out
+
+
+def header(forms: list[bytes], descriptors: list[bytes], payload: bytes, *, dim: int = 2, dtype: int = 0,
+           decoder: str = TEST_DECODER.sha256, basis: str | None = None, metadata: bytes = b"",
+           record_count: bytes | None = None) -> bytes:
+    """The binary header (§3): file fields, form table, index, payload CRC, metadata block."""
+    out = bytes.fromhex(decoder) + struct.pack("<HB", dim, dtype) + (bytes.fromhex(basis) if basis else b"")
+    out += bytes([len(forms)]) + b"".join(forms)
+    out += (varint(len(descriptors)) if record_count is None else record_count) + b"".join(descriptors)
+    return out + struct.pack("<I", zlib.crc32(payload)) + metadata
+
+
+def assemble(stored: bytes, payload: bytes, *, flags: int = 0, major: int = 2, minor: int = 0,
              crc_flags: int | None = None) -> bytes:
-    """Preamble + stored header + payload; ``crc_flags`` computes the CRC over other flags (a flipped bit)."""
+    """Preamble + header + payload; ``crc_flags`` computes the CRC over other flags (a flipped bit)."""
     def head(f: int) -> bytes:
         return MAGIC + struct.pack("<HHII", major, minor, f, len(stored))
 
@@ -69,178 +122,169 @@ def zstd(data: bytes) -> bytes:
     return zstandard.ZstdCompressor(level=19, write_content_size=True).compress(data)
 
 
-def base_header(records: list[dict[str, Any]], *, dim: int = 2, dtype: str = "float32") -> dict[str, Any]:
-    return {"created_by": "conformance vectors", "decoder": {"name": TEST_DECODER.name, "sha256": TEST_DECODER.sha256},
-            "format": "bvae", "latent_dim": dim, "latent_dtype": dtype, "records": records}
+def f32(*values: float) -> bytes:
+    return np.array(values, dtype="<f4").tobytes()
 
 
-def latent(name: str, mu: list[float], sigma: list[float], offset: int = 0, **extra: Any) -> tuple[dict, bytes]:
-    payload = np.array([*mu, *sigma], dtype="<f4").tobytes()
-    entry = {"crc32": zlib.crc32(payload), "kind": "latent", "length": len(payload), "name": name, "offset": offset}
-    entry.update(extra)
-    return entry, payload
-
-
-def plain(records: list[tuple[dict, bytes]], **header_changes: Any) -> tuple[bytes, bytes]:
-    """(stored header, payload) of records laid out contiguously."""
-    entries, payloads, offset = [], [], 0
-    for entry, payload in records:
-        entries.append({**entry, "offset": offset})
-        payloads.append(payload)
-        offset += len(payload)
-    header = base_header(entries)
-    header.update(header_changes)
-    return canonical(header), b"".join(payloads)
+def f16(value: float) -> bytes:
+    return np.float16(value).astype("<f2").tobytes()
 
 
 def invalid_vectors() -> dict[str, tuple[bytes, str, str]]:
     """name -> (file bytes, error class, what is wrong)."""
-    good = latent("a", [0.5, -1.0], [0.25, 0.5])
-    stored, payload = plain([good])
-    valid = assemble(stored, payload)
+    good = f32(0.5, -1.0, 0.25, 0.5)
     out: dict[str, tuple[bytes, str, str]] = {}
 
     def add(name: str, data: bytes, error: str, why: str) -> None:
         out[name] = (data, error, why)
 
-    def header_with(**changes: Any) -> bytes:
-        s, p = plain([good], **changes)
-        return assemble(s, p)
+    def one(name: str | bytes = "a", payload: bytes = good, form: bytes = latent_form(), *, flags: int = 0,
+            metadata: bytes = b"", **fields: Any) -> bytes:
+        """A file of one record (by default a latent record 'a', D = 2)."""
+        return assemble(header([form], [descriptor(name, 0, **fields)], payload, metadata=metadata), payload,
+                        flags=flags)
 
-    def with_entry(**changes: Any) -> bytes:
-        entry, p = good
-        s, p = plain([({**entry, **changes}, p)])
-        return assemble(s, p)
+    def with_meta(meta: Any, *, top: dict[str, Any] | None = None, flags: int = 0) -> bytes:
+        block = canonical({"records": {"a": meta}, **(top or {})})
+        return one(metadata=block, flags=flags)
 
+    valid = one()
     add("bad-magic", b"\x89BVAF" + valid[5:], "malformed", "wrong magic number")
     add("truncated-preamble", valid[:20], "malformed", "shorter than the 24-byte preamble")
     add("truncated-record", valid[:-1], "malformed", "the last record is one byte short")
     add("trailing-bytes", valid + b"\x00", "malformed", "one byte after the last record")
     flipped = bytearray(valid)
     flipped[24 + 5] ^= 0x01
-    add("header-crc", bytes(flipped), "checksum", "one header bit flipped")
+    add("header-crc", bytes(flipped), "checksum", "one bit of the decoder hash flipped")
     flipped = bytearray(valid)
     flipped[-1] ^= 0x80
-    add("record-crc", bytes(flipped), "checksum", "one payload bit flipped")
-    add("flag-bit-flipped", assemble(stored, payload, flags=2, crc_flags=0), "checksum",
-        "flag bit 1 set by corruption (CRC over the original flags): checksum wins over unsupported (§7)")
-    add("unknown-flag", assemble(stored, payload, flags=2), "unsupported", "flag bit 1 set, CRC valid")
-    add("major-version-2", assemble(stored, payload, major=2), "unsupported", "major version 2")
-    add("unknown-kind", with_entry(kind="spline"), "unsupported", "record kind 'spline'")
-    s, _ = plain([good], latent_dtype="bfloat16")
-    add("unknown-dtype", assemble(s, payload), "unsupported", "latent_dtype 'bfloat16'")
-    add("zstd-trailing-bytes", assemble(zstd(stored) + b"\x00\x00", payload, flags=1), "malformed",
-        "two bytes after the header's zstandard frame")
-    half = len(stored) // 2
-    add("zstd-two-frames", assemble(zstd(stored[:half]) + zstd(stored[half:]), payload, flags=1), "malformed",
-        "the header split over two zstandard frames (a joining decoder would read a valid header)")
-    text = stored.decode()
-    add("number-overflow", assemble(text.replace('"latent_dim":2', '"latent_dim":2,"x":1e999').encode(), payload),
+    add("record-crc", bytes(flipped), "checksum", "one payload bit flipped (payload CRC-32)")
+    stored = header([latent_form()], [descriptor("a", 0)], good)
+    add("flag-bit-flipped", assemble(stored, good, flags=4, crc_flags=0), "checksum",
+        "flag bit 2 set by corruption (CRC over the original flags): checksum wins over unsupported (§7)")
+    add("unknown-flag", assemble(stored, good, flags=4), "unsupported", "flag bit 2 set, CRC valid")
+    add("major-version-3", assemble(stored, good, major=3), "unsupported", "major version 3")
+    add("major-version-1", assemble(stored, good, major=1, minor=6), "unsupported",
+        "major version 1 (the development format): refused, whatever follows")
+    add("unknown-kind", one(form=b"\x03"), "unsupported", "record kind code 3")
+    add("unknown-dtype", assemble(header([latent_form()], [descriptor("a", 0)], good, dtype=2), good),
+        "unsupported", "latent_dtype code 2")
+    add("latent-dim-zero", assemble(header([latent_form()], [descriptor("a", 0)], b"", dim=0), b""), "malformed",
+        "latent_dim 0")
+    add("header-ends-in-form-table", assemble(header([latent_form()], [descriptor("a", 0)], good)[:36], good),
+        "malformed", "a header (CRC valid) that ends inside the form table")
+    add("record-count-zero", assemble(header([latent_form()], [], b""), b""), "malformed", "no record")
+    add("form-count-zero", assemble(header([], [descriptor("a", 0)], good), good), "malformed", "no form")
+    add("form-index", assemble(header([latent_form()], [descriptor("a", 1)], good), good), "malformed",
+        "a record names form 1 of a table of one")
+    add("form-unused", assemble(header([latent_form(), graft_form([1])], [descriptor("a", 0)], good), good),
+        "malformed", "a form (graft) that no record uses")
+    add("form-twice", assemble(header([latent_form(), latent_form()], [descriptor("a", 0), descriptor("b", 1)],
+                                      good + good), good + good), "malformed", "the latent form listed twice")
+    add("varint-not-minimal", assemble(header([latent_form()], [b"\x81\x00a\x00"], good), good), "malformed",
+        "the name length 1 written as 81 00 (not minimal)")
+    add("varint-too-long", assemble(header([latent_form()], [descriptor("a", 0)], good,
+                                           record_count=b"\x81\x80\x80\x80\x00"), good), "malformed",
+        "the record count as a 5-byte varint")
+    add("nan-mu", one(payload=f32(float("nan"), 0.0, 0.25, 0.5)), "malformed", "mu[0] is NaN (payload CRC valid)")
+    add("sigma-zero", one(payload=f32(0.0, 0.0, 0.0, 0.5)), "malformed", "sigma[0] is 0 (payload CRC valid)")
+    add("graft-value-infinite", one("g", f32(0.5, -1.0, 0.25, 0.5, np.inf), graft_form([1])), "malformed",
+        "a graft value is +infinity (payload CRC valid)")
+    add("graft-dims-repeated", one("g", f32(0.5, -1.0, 0.25, 0.5, 1.0, 2.0), graft_form([1, 1])), "malformed",
+        "graft dimensions 1 and 1")
+    add("graft-dim-range", one("g", f32(0.5, -1.0, 0.25, 0.5, 1.0), graft_form([2])), "malformed",
+        "graft dimension 2 with latent_dim 2")
+    # The metadata block (§5): JSON rules, types, names.
+    block = canonical({"records": {"a": {"effort": 1}}})
+    add("zstd-trailing-bytes", one(metadata=zstd(block) + b"\x00\x00", flags=1), "malformed",
+        "two bytes after the metadata block's zstandard frame")
+    half = len(block) // 2
+    add("zstd-two-frames", one(metadata=zstd(block[:half]) + zstd(block[half:]), flags=1), "malformed",
+        "the metadata split over two zstandard frames (a joining decoder would read valid metadata)")
+    add("zstd-flag-without-metadata", one(flags=1), "malformed", "flag bit 0 set, but no metadata block")
+    text = block.decode()
+    add("number-overflow", one(metadata=text.replace('"effort":1', '"effort":1,"x":1e999').encode()),
         "malformed", "the number 1e999 (overflows binary64 to infinity)")
-    add("integer-too-large", assemble(text.replace('"latent_dim":2', '"latent_dim":2,"x":9007199254740992').encode(),
-        payload), "malformed", "the integer 2^53, beyond I-JSON's exact range")
-    add("duplicate-key", assemble(text.replace('"latent_dim":2', '"latent_dim":2,"latent_dim":2').encode(), payload),
-        "malformed", "the key latent_dim twice in one object")
-    add("nan-mu", assemble(*plain([latent("a", [float("nan"), 0.0], [0.25, 0.5])])), "malformed",
-        "mu[0] is NaN (record CRC valid)")
-    add("sigma-zero", assemble(*plain([latent("a", [0.0, 0.0], [0.0, 0.5])])), "malformed",
-        "sigma[0] is 0 (record CRC valid)")
-    add("graft-dims-on-latent", with_entry(graft_dims=[0]), "malformed", "graft_dims on a latent record")
-    graft_payload = np.array([0.5, -1.0, 0.25, 0.5, np.inf], dtype="<f4").tobytes()
-    graft_entry = {"crc32": zlib.crc32(graft_payload), "graft_dims": [1], "kind": "graft",
-                   "length": len(graft_payload), "name": "g", "offset": 0}
-    add("graft-value-infinite", assemble(*plain([(graft_entry, graft_payload)])), "malformed",
-        "a graft value is +infinity (record CRC valid)")
-    add("decoder-name-missing", header_with(decoder={"sha256": TEST_DECODER.sha256}), "malformed",
-        "decoder.name absent")
-    add("created-by-number", header_with(created_by=3), "malformed", "created_by is the number 3")
-    add("meta-relae-null", with_entry(meta={"relae": {"mapped": None}}), "malformed", "meta.relae.mapped is null")
-    add("meta-relae-string", with_entry(meta={"relae": {"mapped": "x"}}), "malformed", "meta.relae.mapped is a string")
-    add("meta-sha-type", with_entry(meta={"source_sha256": 7}), "malformed", "meta.source_sha256 is a number")
-    add("layers-on-latent", with_entry(layers={"detail": {"transform": "dct3-ycc", "step": 0.1, "dtype": "int16",
-                                                          "length": 1}}),
-        "malformed", "a layers object on a latent record")
-    add("meta-effort-string", with_entry(meta={"effort": "1"}), "malformed", "meta.effort is the string '1'")
-    add("meta-effort-range", with_entry(meta={"effort": 4}), "malformed", "meta.effort is 4 (outside 0-3)")
-    add("meta-rate-number", with_entry(meta={"rate": 64}), "malformed", "meta.rate is a number, not an object")
-    add("meta-source-kind-number", with_entry(meta={"source_kind": 1}), "malformed", "meta.source_kind is a number")
+    add("integer-too-large", one(metadata=text.replace('"effort":1', '"effort":1,"x":9007199254740992').encode()),
+        "malformed", "the integer 2^53, beyond I-JSON's exact range")
+    add("duplicate-key", one(metadata=text.replace('"effort":1', '"effort":1,"effort":1').encode()),
+        "malformed", "the key effort twice in one object")
+    add("metadata-not-json", one(metadata=b"\xff{}"), "malformed", "a metadata block that is not UTF-8 JSON")
+    add("metadata-array", one(metadata=b"[]"), "malformed", "a metadata block that is an array")
+    add("created-by-number", with_meta({}, top={"created_by": 3}), "malformed", "created_by is the number 3")
+    add("decoder-name-number", with_meta({}, top={"decoder_name": 3}), "malformed", "decoder_name is the number 3")
+    add("metadata-unknown-name", one(metadata=canonical({"records": {"b": {}}})), "malformed",
+        "metadata for a material 'b' the file does not hold")
+    add("metadata-name-case", one("gold", metadata=canonical({"records": {"Gold": {}}})), "malformed",
+        "metadata keyed 'Gold' for the record 'gold' (names match exactly)")
+    add("metadata-record-array", with_meta([]), "malformed", "a record's metadata is an array")
+    add("meta-relae-null", with_meta({"relae": {"mapped": None}}), "malformed", "relae.mapped is null")
+    add("meta-relae-string", with_meta({"relae": {"mapped": "x"}}), "malformed", "relae.mapped is a string")
+    add("meta-sha-type", with_meta({"source_sha256": 7}), "malformed", "source_sha256 is a number")
+    add("meta-effort-string", with_meta({"effort": "1"}), "malformed", "effort is the string '1'")
+    add("meta-effort-range", with_meta({"effort": 4}), "malformed", "effort is 4 (outside 0-3)")
+    add("meta-rate-number", with_meta({"rate": 64}), "malformed", "rate is a number, not an object")
+    add("meta-source-kind-number", with_meta({"source_kind": 1}), "malformed", "source_kind is a number")
+    add("meta-edit-op", with_meta({"edit": {"op": 3}}), "malformed", "edit.op is a number")
+    bomb = zstd(b"[" + b"{}," * (16 * 2**20 // 3 - 1) + b"{}]")
+    add("header-amplification", one(metadata=bomb, flags=1), "malformed",
+        f"a {len(bomb) + 100}-byte file whose metadata expands to 16 MiB of [{{}},{{}},...]: more JSON containers "
+        "than the limit")
+    add("metadata-too-deep", with_meta({"deep": json.loads("[" * 65 + "]" * 65)}), "malformed",
+        "metadata JSON nested 68 levels deep")
+    # Layered records (§4.4): a detail layer.
     detail = detail_frame([1], 63 * 90 * 90)
-    lay_payload = np.array([0.5, -1.0, 0.25, 0.5], dtype="<f4").tobytes() + detail
-    lay_entry = {"crc32": zlib.crc32(lay_payload), "kind": "layered", "length": len(lay_payload), "name": "l",
-                 "offset": 0, "layers": {"detail": {"dtype": "int16", "length": len(detail), "step": 0.1,
-                                                    "transform": "dct3-ycc"}}}
-    add("layered-unknown-transform", assemble(*plain([({**lay_entry, "layers": {"detail": {
-        **lay_entry["layers"]["detail"], "transform": "wavelet"}}}, lay_payload)])), "unsupported",
-        "a detail layer with transform 'wavelet'")
-    add("layered-unknown-layer", assemble(*plain([({**lay_entry, "layers": {**lay_entry["layers"], "hologram": {}}},
-                                                   lay_payload)])), "unsupported",
-        "layers holding 'hologram' besides 'detail'")
-    # Basis layer (since 1.2): mu as float32, sigma as one byte each, the basis step (float16) and coefficients.
-    basis_payload = (np.array([0.5, -1.0], dtype="<f4").tobytes() + bytes([160, 176])
-                     + np.float16(0.25).astype("<f2").tobytes() + bytes([3, 253, 0]))
-    basis_entry = {"crc32": zlib.crc32(basis_payload), "kind": "layered", "length": len(basis_payload), "name": "b",
-                   "offset": 0, "layers": {"sigma": "log2-u8", "basis": {"sha256": "cd" * 32, "count": 3}}}
-
-    def basis_vector(layers: dict[str, Any], payload: bytes = basis_payload) -> bytes:
-        return assemble(*plain([({**basis_entry, "layers": layers, "length": len(payload),
-                                  "crc32": zlib.crc32(payload)}, payload)]))
-
-    add("basis-unknown-sigma", basis_vector({**basis_entry["layers"], "sigma": "log2-u4"}), "unsupported",
-        "sigma stored as 'log2-u4'")
-    add("basis-unknown-field", basis_vector({**basis_entry["layers"], "basis": {
-        **basis_entry["layers"]["basis"], "transform": "ica"}}), "unsupported",
-        "a basis layer with a field 'transform'")
-    add("basis-count-zero", basis_vector({**basis_entry["layers"], "basis": {"sha256": "cd" * 32, "count": 0}},
-                                         basis_payload[:12]), "malformed", "a basis layer of 0 coefficients")
-    add("basis-sha-upper", basis_vector({**basis_entry["layers"], "basis": {"sha256": "CD" * 32, "count": 3}}),
-        "malformed", "a basis sha256 in upper-case hex")
-    add("basis-length", basis_vector({**basis_entry["layers"], "basis": {"sha256": "cd" * 32, "count": 4}}),
-        "malformed", "count 4 but 3 coefficient bytes (record length as the payload)")
-    nan_step = basis_payload[:10] + np.float16(np.nan).astype("<f2").tobytes() + basis_payload[12:]
-    add("basis-step-nan", basis_vector(basis_entry["layers"], nan_step), "malformed",
-        "the basis step is NaN (record CRC valid)")
-    # The basis layer's first vector (since 1.3).
-    add("basis-first-negative", basis_vector({**basis_entry["layers"], "basis": {
-        **basis_entry["layers"]["basis"], "first": -1}}), "malformed", "a basis layer whose first vector is -1")
-    add("basis-first-string", basis_vector({**basis_entry["layers"], "basis": {
-        **basis_entry["layers"]["basis"], "first": "8"}}), "malformed", "a basis layer whose first vector is '8'")
-    add("basis-first-range", basis_vector({**basis_entry["layers"], "basis": {
-        **basis_entry["layers"]["basis"], "first": 4094}}), "malformed",
-        "first 4094 with count 3 runs past the 4096 vectors a basis may hold")
-    # A projected base (since 1.6): P in [1, 4096].
-    add("basis-project-zero", basis_vector({**basis_entry["layers"], "basis": {
-        **basis_entry["layers"]["basis"], "project": 0}}), "malformed",
-        "a basis layer projecting its base on 0 vectors (absent means no projection)")
-    add("basis-project-bool", basis_vector({**basis_entry["layers"], "basis": {
-        **basis_entry["layers"]["basis"], "project": True}}), "malformed",
-        "a basis layer whose projection is true, not a number of vectors")
-    zero_step = basis_payload[:10] + np.float16(0).astype("<f2").tobytes() + basis_payload[12:]
-    add("basis-step-zero", basis_vector(basis_entry["layers"], zero_step), "malformed",
-        "the basis step is 0 (record CRC valid)")
-    # Compact mu and the shared sigma byte (since 1.4): mu as a float16 step and int8 values, one sigma byte.
-    compact_payload = (np.float16(0.5).astype("<f2").tobytes() + bytes([2, 254]) + bytes([160])
-                       + basis_payload[10:])
-    compact_layers = {"mu": "int8", "sigma": "log2-u8-shared", "basis": basis_entry["layers"]["basis"]}
-    add("compact-mu-unknown", basis_vector({**compact_layers, "mu": "int4"}, compact_payload), "unsupported",
-        "mu stored as 'int4'")
-    add("compact-mu-step-nan", basis_vector(compact_layers, np.float16(np.nan).astype("<f2").tobytes()
-                                            + compact_payload[2:]), "malformed",
-        "the compact mu step is NaN (record CRC valid)")
-    add("compact-sigma-length", basis_vector(compact_layers, compact_payload[:5] + bytes([160])
-                                             + compact_payload[5:]), "malformed",
-        "a shared sigma (one byte) but two sigma bytes (record length as the payload)")
-    # Compact mu on the fixed grid (since 1.5): D int8 values and no step; a step in front is 2 bytes too many.
-    add("compact-mu-fixed-with-step", basis_vector({**compact_layers, "mu": "int8-fixed"}, compact_payload),
-        "malformed", "mu on the fixed grid (no step) followed by a step's 2 bytes (record length as the payload)")
+    lay_payload = good + detail
+    lay = {"step": 0.1, "detail_length": len(detail)}
+    add("layered-unknown-detail-form", one("l", lay_payload, layered_form(detail=2), **lay), "unsupported",
+        "detail form code 2 (a transform or coefficient type this reader does not know)")
+    add("layered-unknown-layer", one("l", lay_payload, layered_form(detail=0, layer_bits=2 | 4), **lay),
+        "unsupported", "layer bit 2 set besides the detail layer's")
+    add("layered-no-layer", one("l", good, layered_form(layer_bits=0)), "malformed",
+        "a layered form with neither a basis nor a detail layer")
+    add("detail-step-range", one("l", lay_payload, layered_form(detail=0), step=1000.0,
+                                 detail_length=len(detail)), "malformed", "a detail step of 1000 (above 100)")
+    add("detail-step-nan", one("l", lay_payload, layered_form(detail=0), step=float("nan"),
+                               detail_length=len(detail)), "malformed", "a detail step that is NaN")
     short = detail_frame([1], 63 * 90 * 90 - 1)
-    short_payload = lay_payload[:16] + short
-    add("layered-content-size", assemble(*plain([({**lay_entry, "crc32": zlib.crc32(short_payload),
-                                                   "length": len(short_payload), "layers": {"detail": {
-                                                       **lay_entry["layers"]["detail"], "length": len(short)}}},
-                                                  short_payload)])),
-        "malformed", "a detail frame declaring one int16 fewer than 63*90*90 (record CRC valid)")
-    add("record-offset-gap", assemble(canonical(base_header([{**good[0], "offset": 4}])), b"\0" * 4 + payload),
-        "malformed", "first record at offset 4, not 0 (the file is 4 bytes longer to match)")
+    add("layered-content-size", one("l", good + short, layered_form(detail=0), step=0.1, detail_length=len(short)),
+        "malformed", "a detail frame declaring one int16 fewer than 63*90*90 (payload CRC valid)")
+    # The basis layer (§4.5): mu as float32, sigma as one byte each, the step (float16) and 3 coefficients.
+    basis_payload = f32(0.5, -1.0) + bytes([160, 176]) + f16(0.25) + bytes([3, 253, 0])
+    basis_sha = "cd" * 32
+
+    def basis_file(form: bytes = layered_form(0, 1, basis=(0, 0)), payload: bytes = basis_payload, count: int = 3,
+                   *, basis: str | None = basis_sha, flags: int = 2) -> bytes:
+        return assemble(header([form], [descriptor("b", 0, count=count)], payload, basis=basis), payload,
+                        flags=flags)
+
+    add("basis-unknown-sigma", basis_file(layered_form(0, 3, basis=(0, 0))), "unsupported", "sigma code 3")
+    add("basis-count-zero", basis_file(payload=basis_payload[:12], count=0), "malformed",
+        "a basis layer of 0 coefficients")
+    add("basis-count-payload", basis_file(count=4), "malformed",
+        "count 4 but 3 coefficient bytes (the file one byte short of what the records need)")
+    add("basis-step-nan", basis_file(payload=basis_payload[:10] + f16(np.nan) + basis_payload[12:]), "malformed",
+        "the basis step is NaN (payload CRC valid)")
+    add("basis-step-zero", basis_file(payload=basis_payload[:10] + f16(0) + basis_payload[12:]), "malformed",
+        "the basis step is 0 (payload CRC valid)")
+    add("basis-first-range", basis_file(layered_form(0, 1, basis=(4094, 0))), "malformed",
+        "first 4094 with count 3 runs past the 4096 vectors a basis may hold")
+    add("basis-project-range", basis_file(layered_form(0, 1, basis=(0, 4097))), "malformed",
+        "a base projected on 4097 vectors (at most 4096)")
+    add("basis-without-hash", basis_file(basis=None, flags=0), "malformed",
+        "a basis layer in a file that names no shared basis (flag bit 1 clear)")
+    add("basis-unused", assemble(header([latent_form()], [descriptor("a", 0)], good, basis=basis_sha), good, flags=2),
+        "malformed", "a shared basis named (flag bit 1) in a file without basis layers")
+    # Compact mu and the shared sigma byte: mu as a float16 step and int8 values, one sigma byte.
+    compact_payload = f16(0.5) + bytes([2, 254]) + bytes([160]) + basis_payload[10:]
+    add("compact-mu-unknown", basis_file(layered_form(3, 2, basis=(0, 0)), compact_payload), "unsupported",
+        "mu code 3")
+    add("compact-mu-step-nan", basis_file(layered_form(1, 2, basis=(0, 0)), f16(np.nan) + compact_payload[2:]),
+        "malformed", "the compact mu step is NaN (payload CRC valid)")
+    add("compact-sigma-length", basis_file(layered_form(1, 1, basis=(0, 0)), compact_payload), "malformed",
+        "sigma as one byte per dimension, but the payload holds one shared byte (the file one byte short)")
+    add("compact-mu-fixed-with-step", basis_file(layered_form(2, 2, basis=(0, 0)), compact_payload), "malformed",
+        "mu on the fixed grid (no step) followed by a step's 2 bytes (two trailing bytes)")
     for label, name, why in [
         ("name-parent", "../UP", "a name holding '/' and '..'"),
         ("name-absolute", "/tmp/ESCAPED", "an absolute path as a name"),
@@ -255,20 +299,14 @@ def invalid_vectors() -> dict[str, tuple[bytes, str, str]]:
         ("name-device", "NUL", "a Windows device name"),
         ("name-too-long", "x" * 256, "a name of 256 characters"),
     ]:
-        add(label, with_entry(name=name), "malformed", why)
-    lone = text.replace('"name":"a"', '"name":"a\\ud800"').encode()
-    add("name-lone-surrogate", assemble(lone, payload), "malformed", "a name holding the lone surrogate \\ud800")
-    add("name-case-twins", assemble(*plain([latent("Gold", [0, 0], [1, 1]), latent("gold", [0, 0], [1, 1])])),
-        "malformed", "names 'Gold' and 'gold' (equal after case folding)")
-    add("name-duplicate", assemble(*plain([latent("a", [0, 0], [1, 1]), latent("a", [0, 0], [1, 1])])),
-        "malformed", "the name 'a' twice")
-    bomb = zstd(b"[" + b"{}," * (16 * 2**20 // 3 - 1) + b"{}]")
-    add("header-amplification", assemble(bomb, b"", flags=1), "malformed",
-        f"a {len(bomb) + 24}-byte file whose header expands to 16 MiB of [{{}},{{}},...]: more JSON containers "
-        "than the limit")
-    deep = canonical(base_header([good[0]])).replace(b'"created_by":"conformance vectors"',
-                                                     b'"created_by":"x","deep":' + b"[" * 65 + b"]" * 65)
-    add("header-too-deep", assemble(deep, payload), "malformed", "JSON nested 66 levels deep")
+        add(label, one(name), "malformed", why)
+    add("name-not-utf8", one(b"a\xffb"), "malformed", "a name whose bytes are not UTF-8")
+    add("name-surrogate", one(b"a\xed\xa0\x80"), "malformed", "a name holding an encoded surrogate (CESU, not UTF-8)")
+    add("name-case-twins", assemble(header([latent_form()], [descriptor("Gold", 0), descriptor("gold", 0)],
+                                           good + good), good + good), "malformed",
+        "names 'Gold' and 'gold' (equal after case folding)")
+    add("name-duplicate", assemble(header([latent_form()], [descriptor("a", 0), descriptor("a", 0)], good + good),
+                                   good + good), "malformed", "the name 'a' twice")
     return out
 
 
@@ -358,9 +396,6 @@ def valid_records() -> dict[str, tuple[list, DecoderReference, str, bool | None]
                                                   SHIPPED_BASIS, first=8, compact_base=True, fixed_grid=True),
                                      basis_record("reference.basis-projected", halves16(8), np.full(8, 0.125),
                                                   SHIPPED_BASIS, first=8, compact_base=True, fixed_grid=True,
-                                                  project=50),
-                                     basis_record("reference.basis-current", halves16(8), np.full(8, 0.125),
-                                                  CURRENT_BASIS, first=8, compact_base=True, fixed_grid=True,
                                                   project=50)],
                                     SHIPPED_DECODER, "float16", False),
         "layered": ([layered_record("gold.layered", halves(8), sigma(8)),
@@ -407,7 +442,7 @@ def generate(folder: Path, *, with_reference: bool = True) -> dict[str, Any]:
     (folder / "valid").mkdir(parents=True, exist_ok=True)
     (folder / "invalid").mkdir(parents=True, exist_ok=True)
     manifest: dict[str, Any] = {
-        "format_version": "1.6",
+        "format_version": "2.0",
         "error_classes": {
             "malformed": "BvaeFormatError",
             "checksum": "BvaeChecksumError",
@@ -421,9 +456,11 @@ def generate(folder: Path, *, with_reference: bool = True) -> dict[str, Any]:
     for name, (records, decoder, dtype, compress) in valid_records().items():
         path = folder / "valid" / f"{name}.bvae"
         path.write_bytes(encode_bvae(records, decoder, latent_dtype=dtype, compress_header=compress))
+        bases = sorted({r.basis.sha256 for r in records if getattr(r, "basis", None) is not None})
         manifest["valid"].append({
-            "file": f"valid/{name}.bvae", "decoder_sha256": decoder.sha256, "latent_dtype": dtype,
-            "header_compressed": bool(compress), "records": [describe(r) for r in records],
+            "file": f"valid/{name}.bvae", "decoder_sha256": decoder.sha256, "basis_sha256": (bases or [None])[0],
+            "latent_dtype": dtype, "header_compressed": bool(compress) and any(r.meta for r in records),
+            "records": [describe(r) for r in records],
         })
         if name == "reference-decode" and with_reference:
             manifest["decode"] = {
@@ -437,6 +474,15 @@ def generate(folder: Path, *, with_reference: bool = True) -> dict[str, Any]:
                 "masked": "unmeasured", "units": "stored MERL units (float32)", "basis_sha256": SHIPPED_BASIS,
                 "values": reference_values(records),
             }
+    # Written by hand: a record's metadata is {} (valid: it says nothing; a writer leaves it out, §5.3).
+    empty = f32(0.5, -1.0, 0.25, 0.5)
+    (folder / "valid" / "metadata-empty.bvae").write_bytes(assemble(header(
+        [latent_form()], [descriptor("a", 0)], empty, metadata=canonical({"records": {"a": {}}})), empty))
+    manifest["valid"].append({
+        "file": "valid/metadata-empty.bvae", "decoder_sha256": TEST_DECODER.sha256, "basis_sha256": None,
+        "latent_dtype": "float32", "header_compressed": False,
+        "records": [{"name": "a", "kind": "latent", "mu": [0.5, -1.0], "sigma": [0.25, 0.5], "meta": {}}],
+    })
     for name, (data, error, why) in invalid_vectors().items():
         (folder / "invalid" / f"{name}.bvae").write_bytes(data)
         manifest["invalid"].append({"file": f"invalid/{name}.bvae", "error": error, "why": why})
