@@ -407,3 +407,33 @@ def test_studio_saves_a_good_body(studio) -> None:  # type: ignore[no-untyped-de
     status, body = _post(f"{url}/api/save", _save_body(file="fine.bvae", edit={"t": 0.5, "dims_from_a": [1, 2]}))
     assert status == 200 and (save_dir / "fine.bvae").is_file(), body
     (save_dir / "fine.bvae").unlink()
+
+
+# --------------------------------------------------------------------------- 5. flags
+
+
+@pytest.mark.parametrize("budget", ["1", "11", "14", "99999999999999999999", str(2**30 + 1)])
+def test_bytes_out_of_range_is_a_usage_error_before_the_model_loads(tmp_path: Path, red_plastic_file: Path,
+                                                                     budget: str, monkeypatch: pytest.MonkeyPatch,
+                                                                     capsys: pytest.CaptureFixture[str]) -> None:
+    import brdfcodec.codec
+
+    def no_model(*args: object, **kwargs: object) -> None:
+        raise AssertionError("the model was loaded before the flags were checked")
+
+    monkeypatch.setattr(brdfcodec.codec.BrdfEncoder, "__init__", no_model)
+    output = tmp_path / "out.bvae"
+    assert main(["compress", str(red_plastic_file), "-o", str(output), "--bytes", budget]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--bytes" in err[0] and "Traceback" not in err[0]
+    assert not output.exists()
+
+
+def test_bytes_floor_is_the_smallest_record_the_encoder_writes() -> None:
+    """The floor checked up front is the one rate control enforces: a one-byte name, a compact base and one
+    coefficient, for the shipped model (D = 8, float32)."""
+    from brdfcodec.bvae_format import record_overhead
+    from brdfcodec.layers.rate import smallest_bytes_budget
+
+    assert smallest_bytes_budget(8, 4, basis=True) == 8 + 1 + 2 + 1 + record_overhead("a", basis_count=1)
+    assert smallest_bytes_budget(8, 4, basis=False) == 64 + record_overhead("a")

@@ -137,14 +137,40 @@ def collect_items(inputs: list[Path], split: str | None) -> list[_Item]:
     return items
 
 
+#: Largest ``--bytes`` accepted: beyond every record a file can hold (a detail layer is at most 64 MiB).
+MAX_BYTES_BUDGET = 1 << 30
+
+
+def _check_bytes_floor(budget: int, model: str | None, latent_itemsize: int, basis: bool) -> None:
+    """Refuse a ``--bytes`` below the smallest record the model can write (a usage error, exit 2)."""
+    from brdfcodec.layers.rate import smallest_bytes_budget
+    from brdfcodec.models.manifest import load_manifest
+    from brdfcodec.models.registry import default_model_folder, find_model
+
+    # brdfcodec.codec.resolve_model without importing torch: a folder, a decoder SHA-256, or the shipped model
+    text = None if model is None else str(model)
+    if text is None:
+        manifest = load_manifest(default_model_folder())
+    elif len(text) == 64 and all(c in "0123456789abcdef" for c in text.lower()) and not Path(text).exists():
+        manifest = find_model(text)
+    else:
+        manifest = load_manifest(text)
+    floor = smallest_bytes_budget(manifest.config.latent_dim, latent_itemsize,
+                                  basis and manifest.basis_sha256 is not None)
+    if budget < floor:
+        raise UsageError(f"--bytes {budget} is below the smallest record model {manifest.name} can write "
+                         f"({floor} bytes per material)")
+
+
 def run(args: argparse.Namespace) -> int:
     """Encode every input (:func:`brdfcodec.codec.encode_records`), write the file, print RelAE and sizes."""
     from brdfcodec.codec import BrdfEncoder, encode_records
 
     if args.batch_size < 1:
         raise UsageError("--batch-size must be at least 1")
-    if args.bytes is not None and args.bytes < 1:
-        raise UsageError(f"--bytes must be a positive number of bytes, got {args.bytes}")
+    if args.bytes is not None and not 1 <= args.bytes <= MAX_BYTES_BUDGET:
+        raise UsageError(f"--bytes must be a number of bytes from 1 to {MAX_BYTES_BUDGET:,} (a record holds at most "
+                         f"a 64 MiB detail layer), got {args.bytes}")
     if args.max_relae is not None and not (math.isfinite(args.max_relae) and args.max_relae > 0):
         raise UsageError(f"--max-relae must be a positive number, got {args.max_relae}")
     if args.metric is not None and args.max_relae is None:
@@ -152,11 +178,13 @@ def run(args: argparse.Namespace) -> int:
     if args.project_base is not None and (args.no_basis or (args.bytes is None and args.max_relae is None)):
         raise UsageError("--project-base applies to records with a basis layer: give --bytes or --max-relae, "
                          "without --no-basis")
+    dtype = "float16" if args.float16 else "float32"
+    if args.bytes is not None:  # the floor, from the model's manifest: before loading the model or any input
+        _check_bytes_floor(args.bytes, args.model, 2 if args.float16 else 4, not args.no_basis)
     check_output_path(args.output, overwrite=args.force)
     if args.output.suffix != ".bvae":
         raise ValueError(f"{args.output}: the output must end in .bvae")
     items = collect_items(args.inputs, args.split)
-    dtype = "float16" if args.float16 else "float32"
     encoder = BrdfEncoder(
         args.model, effort=args.effort, bytes=args.bytes, max_relae=args.max_relae, metric=args.metric or "mapped",
         basis=not args.no_basis, project_base=args.project_base or "auto",

@@ -435,3 +435,31 @@ def _bisect(
         else:
             lo = mid
     return sequence[lo], sequence[hi]
+
+
+def smallest_bytes_budget(latent_dim: int, latent_itemsize: int, basis: bool) -> int:
+    """The smallest ``bytes_budget`` that any material can be encoded within, for a model's latent size.
+
+    The smallest record is a compact base (μ on the fixed grid, one σ byte) with one basis coefficient, or, without
+    a basis layer, a latent record (μ and σ in the latent dtype); each with the descriptor of a one-byte name. A
+    material whose μ leaves the fixed grid, or whose name is longer, needs a little more: :func:`encode_layers`
+    refuses it then. Checked before any model is loaded (``bvae compress --bytes``).
+
+    Parameters
+    ----------
+    latent_dim : int
+        D.
+    latent_itemsize : int
+        Bytes of one value in the latent dtype (4 or 2).
+    basis : bool
+        Whether records may hold a basis layer (the model has a shared basis and it is not turned off).
+
+    Returns
+    -------
+    int
+    """
+    plain = 2 * latent_dim * latent_itemsize + record_overhead("a")
+    if not basis:
+        return plain
+    compact = _layered_base_bytes(latent_dim, latent_itemsize, MU_INT8_FIXED) + STEP_BYTES + 1
+    return min(plain, compact + record_overhead("a", basis_count=1))
