@@ -17,8 +17,6 @@ import os
 import re
 from pathlib import Path
 
-from mkdocs.structure.files import File, Files
-
 ROOT = Path(__file__).resolve().parents[1]
 #: Repository folders and files copied into the site under the same relative path.
 EXTRA_TREES = ("spec", "reports")
@@ -59,7 +57,9 @@ def cli_reference() -> str:
     return "\n".join(parts)
 
 
-def on_files(files: Files, config) -> Files:  # noqa: ANN001 - MkDocs' hook signature
+def on_files(files, config):  # noqa: ANN001, ANN201 - MkDocs' hook signature
+    from mkdocs.structure.files import File  # imported here so that tests can import this module without MkDocs
+
     files.append(File.generated(config, "cli.md", content=cli_reference()))
     for tree in EXTRA_TREES:
         for path in sorted((ROOT / tree).rglob("*")):
