@@ -1,0 +1,243 @@
+"""Rate–distortion on held-out materials, in file bytes: brdfcodec against PCA fitted on the same materials.
+
+The question a user asks of a codec: *at N bytes per material, on materials
+the model never saw, which codec is better?* One :class:`Experiment` is a
+model folder and the materials it held out (by default those its
+``model.json`` lists as not trained on: a cross-validation fold, or a whole
+family never seen). For each size budget N and each family of the held-out
+materials, :func:`run_experiment` measures
+
+- ``bvae``: the held-out materials of that family encoded into one library
+  with ``bvae compress --bytes N`` (effort 1, float16 latents, no
+  provenance) through the public API; its size is the **file's** bytes less
+  the materials' names (UTF-8), divided by the number of materials;
+- ``pca-*``: PCA of the mapped kept slices fitted on the *same training
+  materials* as the model (as measured, ``pca``, and in all six colour
+  orders, ``pca-perm``), with k coefficients as int8 plus one float16 scale
+  (k + 2 bytes) or as float16 (2k bytes), k chosen to fill N bytes (at most
+  the basis' rank). No container, index or name is counted for PCA: the
+  comparison favours it.
+
+Errors are the mean mapped and linear RelAE on the full table over valid
+entries (``spec/conventions.md``). Every row carries the commit, the model's
+decoder hash and the data it came from (:mod:`brdfcodec.report.rows`).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+__all__ = ["DEFAULT_BUDGETS", "Experiment", "RdConfig", "load_config", "run_config", "run_experiment"]
+
+#: Size budgets of the comparison, bytes per material.
+DEFAULT_BUDGETS = (16, 32, 64, 128)
+
+
+@dataclass(frozen=True)
+class Experiment:
+    """A model and the materials it is measured on.
+
+    Attributes
+    ----------
+    label : str
+        Names the experiment in the rows (``"cv3-fold0"``, ``"never-seen-rgl"``).
+    model : pathlib.Path
+        Model folder (``bvae model export``).
+    group : str
+        Rows of experiments in one group are pooled in the summary (the
+        folds of one cross-validation); by default the label.
+    held_out : tuple of str, optional
+        Material names to measure on; by default every dataset material the
+        model's ``model.json`` does not list as trained on.
+    """
+
+    label: str
+    model: Path
+    group: str = ""
+    held_out: tuple[str, ...] | None = None
+
+
+@dataclass(frozen=True)
+class RdConfig:
+    """What :func:`run_config` measures (the JSON file of ``bvae bench rd --config``)."""
+
+    dataset: Path
+    experiments: tuple[Experiment, ...]
+    budgets: tuple[int, ...] = DEFAULT_BUDGETS
+    effort: int = 1
+    limit: int | None = None
+    extra: dict[str, Any] = field(default_factory=dict)
+
+
+def load_config(path: str | os.PathLike[str]) -> RdConfig:
+    """Read a runner configuration; relative paths are taken from the file's folder.
+
+    The file is a JSON object: ``dataset`` (path), ``experiments`` (list of
+    objects with ``label``, ``model``, optional ``group`` and ``held_out``),
+    optional ``budgets`` (list of int), ``effort`` (int), ``limit`` (int:
+    only the first N held-out materials of each family, a quick look).
+
+    Raises
+    ------
+    ValueError
+        A missing or unknown key, or a value of the wrong type.
+    """
+    base = Path(path).parent
+    data = json.loads(Path(path).read_text(encoding="utf-8"))
+    known = {"dataset", "experiments", "budgets", "effort", "limit", "description"}
+    if not isinstance(data, dict) or "dataset" not in data or "experiments" not in data:
+        raise ValueError(f"{path}: a runner configuration is an object with 'dataset' and 'experiments'")
+    unknown = sorted(set(data) - known)
+    if unknown:
+        raise ValueError(f"{path}: unknown keys {unknown}")
+    experiments = []
+    for item in data["experiments"]:
+        if not isinstance(item, dict) or not {"label", "model"} <= set(item) or set(item) - {
+                "label", "model", "group", "held_out"}:
+            raise ValueError(f"{path}: each experiment is an object with 'label', 'model' (and optionally "
+                             f"'group', 'held_out'), got {item!r}")
+        held = item.get("held_out")
+        experiments.append(Experiment(str(item["label"]), base / item["model"], str(item.get("group", "")),
+                                      None if held is None else tuple(str(n) for n in held)))
+    budgets = tuple(int(n) for n in data.get("budgets", DEFAULT_BUDGETS))
+    if not budgets or min(budgets) < 1:
+        raise ValueError(f"{path}: budgets must be positive integers")
+    limit = data.get("limit")
+    return RdConfig(base / data["dataset"], tuple(experiments), budgets, int(data.get("effort", 1)),
+                    None if limit is None else int(limit), {"description": data.get("description", "")})
+
+
+def _pca_payload_counts(budget: int, rank: int) -> dict[str, int]:
+    """Coefficients that fill ``budget`` bytes: int8 with a float16 scale, or float16 (capped at the rank)."""
+    counts = {}
+    if budget - 2 >= 1:
+        counts["int8"] = min(budget - 2, rank)
+    if budget // 2 >= 1:
+        counts["float16"] = min(budget // 2, rank)
+    return counts
+
+
+def _pack_pca(coefficients: np.ndarray, storage: str) -> np.ndarray:
+    """Quantise PCA coefficients as stored (int8 with one float16 scale per material, or float16)."""
+    if storage == "float16":
+        return coefficients.astype(np.float16).astype(np.float32)
+    scale = np.maximum(np.abs(coefficients).max(axis=1, keepdims=True), 1e-6) / 127.0
+    scale = scale.astype(np.float16).astype(np.float32)
+    return np.clip(np.rint(coefficients / scale), -127, 127) * scale
+
+
+def _pca_rows(name: str, basis: Any, inputs: np.ndarray, references: Sequence[Any], budgets: Sequence[int],
+              error: Callable[[Any, np.ndarray], tuple[float, float]]) -> list[dict[str, Any]]:
+    from brdfcodec.conventions import MAPPED_MAX
+    from brdfcodec.representation import table_from_network_output
+
+    flat = inputs.reshape(len(inputs), -1) - basis.mean
+    rows = []
+    for budget in budgets:
+        for storage, k in _pca_payload_counts(budget, basis.n_components).items():
+            coefficients = _pack_pca(flat @ basis.components[:k].T, storage)
+            errors = []
+            for c, reference in zip(coefficients, references, strict=True):
+                mapped = np.clip(c @ basis.components[:k] + basis.mean, 0.0, MAPPED_MAX).reshape(63, 90, 90)
+                errors.append(error(reference, table_from_network_output(mapped)))
+            payload = k + 2 if storage == "int8" else 2 * k
+            rows.append({"point": f"{name}-{storage}", "budget_bytes": budget, "coefficients": k,
+                         "bytes_per_material": float(payload), **_error_summary(errors)})
+    return rows
+
+
+def _error_summary(errors: Sequence[tuple[float, float]]) -> dict[str, Any]:
+    mapped = np.array([e[0] for e in errors])
+    linear = np.array([e[1] for e in errors])
+    return {"mapped_relae_mean": float(mapped.mean()), "mapped_relae_median": float(np.median(mapped)),
+            "linear_relae_mean": float(linear.mean()), "per_material_mapped": [float(v) for v in mapped]}
+
+
+def _bvae_rows(model: Path, names: Sequence[str], inputs: np.ndarray, masks: np.ndarray,
+               references: Sequence[Any], budgets: Sequence[int], effort: int,
+               error: Callable[[Any, np.ndarray], tuple[float, float]]) -> list[dict[str, Any]]:
+    import brdfcodec as bc
+
+    decoder = bc.BrdfDecoder(model)
+    name_bytes = sum(len(n.encode("utf-8")) for n in names)
+    rows = []
+    for budget in budgets:
+        items = [bc.MaterialInput(n, x, r, m) for n, x, r, m in zip(names, inputs, references, masks, strict=True)]
+        data = bc.encode(items, model=model, latent_dtype="float16", measure_error=False, effort=effort,
+                         bytes=budget)
+        library = bc.decode(data, decoder=decoder)
+        errors = [error(r, library[n].table(masked="unmeasured")) for n, r in zip(names, references, strict=True)]
+        rows.append({"point": "bvae", "budget_bytes": budget, "file_bytes": len(data),
+                     "bytes_per_material": (len(data) - name_bytes) / len(names), **_error_summary(errors)})
+    return rows
+
+
+def run_experiment(config: RdConfig, experiment: Experiment,
+                   progress: Callable[[str], None] | None = None) -> list[dict[str, Any]]:
+    """Rows of one experiment: for each family of its held-out materials, brdfcodec and the PCA baselines
+    at every budget (see the module docstring).
+
+    Raises
+    ------
+    ValueError
+        The model lists no training materials, or none of its held-out materials is in the dataset.
+    """
+    from brdfcodec.baselines.pca import fit_pca, fit_pca_colour_orders
+    from brdfcodec.dataset import BrdfDataset
+    from brdfcodec.metrics import relae_linear, relae_mapped
+    from brdfcodec.models.store import load_manifest
+
+    manifest = load_manifest(experiment.model)
+    trained = set(manifest.info.get("data", {}).get("train", []))
+    if not trained:
+        raise ValueError(f"{experiment.model}: model.json lists no training materials")
+
+    def error(reference: Any, table: np.ndarray) -> tuple[float, float]:
+        values = np.asarray(table, dtype=np.float64)
+        return (relae_mapped(reference.values, values, reference.mask).overall,
+                relae_linear(reference.values, values, reference.mask).overall)
+
+    rows: list[dict[str, Any]] = []
+    with BrdfDataset(config.dataset) as dataset:
+        train_rows = [i for i, n in enumerate(dataset.names) if n in trained]
+        wanted = set(experiment.held_out) if experiment.held_out is not None else None
+        held = [i for i, n in enumerate(dataset.names)
+                if n not in trained and (wanted is None or n in wanted)]
+        if not held:
+            raise ValueError(f"{experiment.label}: no held-out material of the model is in {config.dataset}")
+        train_inputs = dataset.inputs(train_rows)
+        n_perm = min(max(config.budgets), 5 * len(train_rows) - 1)
+        bases = {"pca": fit_pca(train_inputs, min(max(config.budgets), len(train_rows) - 1)),
+                 "pca-perm": fit_pca_colour_orders(train_inputs, n_perm)}
+        del train_inputs
+        common = {"experiment": experiment.label, "group": experiment.group or experiment.label,
+                  "model": manifest.name, "decoder_sha256": manifest.decoder_sha256,
+                  "trained_materials": len(train_rows), "dataset_description": dataset.description}
+        for family in sorted({dataset.families[i] for i in held}):
+            rows_of = [i for i in held if dataset.families[i] == family][: config.limit]
+            if progress is not None:
+                progress(f"{experiment.label}: {len(rows_of)} held-out {family} materials")
+            names = [dataset.names[i] for i in rows_of]
+            inputs, masks = dataset.inputs(rows_of), dataset.input_masks(rows_of)
+            references = [dataset.table(i) for i in rows_of]
+            family_rows = _bvae_rows(experiment.model, names, inputs, masks, references, config.budgets,
+                                     config.effort, error)
+            for label, basis in bases.items():
+                family_rows += _pca_rows(label, basis, inputs, references, config.budgets, error)
+            rows += [{**common, "family": family, "materials": names, **row} for row in family_rows]
+    return rows
+
+
+def run_config(config: RdConfig, progress: Callable[[str], None] | None = None) -> list[dict[str, Any]]:
+    """Rows of every experiment of a configuration, in order."""
+    rows = []
+    for experiment in config.experiments:
+        rows += run_experiment(config, experiment, progress)
+    return rows

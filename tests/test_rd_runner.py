@@ -1,0 +1,72 @@
+"""``bvae bench rd``: held-out rate–distortion rows in file bytes against PCA of the same training materials."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from pathlib import Path
+
+import pytest
+
+from brdfcodec.dataset import build_dataset
+from brdfcodec.models.config import TINY_CONFIG
+from brdfcodec.sources import analytic_sources
+from brdfcodec.training.config import TrainConfig
+from brdfcodec.training.export import export_run
+from brdfcodec.training.trainer import train
+
+
+@pytest.fixture(scope="module")
+def fold_model(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
+    folder = tmp_path_factory.mktemp("rd-runner")
+    dataset = folder / "data.h5"
+    build_dataset(dataset, analytic_sources(random_count=7), source_kind="analytic", description="analytic",
+                  progress=False)
+    config = TrainConfig(epochs=1, batch_size=4, learning_rate=1e-3, warmup_epochs=1, eval_every=1, seed=3,
+                         folds=3, fold=0, keep="last")
+    train(dataset, folder / "run", model_config=dataclasses.replace(TINY_CONFIG, linear_basis=True),
+          train_config=config, progress=False)
+    export_run(folder / "run", folder / "model", name="rd-runner-test", basis_count=8)
+    return dataset, folder / "model"
+
+
+@pytest.mark.slow  # trains, exports and encodes: > 10 s on 2 cores
+def test_rows_compare_file_bytes_with_pca_of_the_same_training_materials(fold_model: tuple[Path, Path],
+                                                                         tmp_path: Path) -> None:
+    from brdfcodec.cli.main import main
+    from brdfcodec.report.rows import SCHEMA, read_rows
+
+    dataset, model = fold_model
+    config = tmp_path / "rd.json"
+    config.write_text(json.dumps({"dataset": str(dataset), "budgets": [32, 64],
+                                  "experiments": [{"label": "fold0", "model": str(model), "group": "cv"}]}))
+    assert main(["bench", "rd", "--config", str(config), "-o", str(tmp_path / "rows.jsonl"), "--quiet"]) == 0
+    rows = read_rows(tmp_path / "rows.jsonl")
+    held = set(json.loads((model / "model.json").read_text())["info"]["data"]["validation"])
+    assert rows and all(row["schema"] == SCHEMA and row["commit"] and row["group"] == "cv" for row in rows)
+    ours = [row for row in rows if row["point"] == "bvae"]
+    assert {row["budget_bytes"] for row in ours} == {32, 64}
+    for row in ours:
+        assert set(row["materials"]) <= held and len(row["per_material_mapped"]) == len(row["materials"])
+        names = sum(len(n.encode()) for n in row["materials"])
+        assert row["bytes_per_material"] == (row["file_bytes"] - names) / len(row["materials"])
+    pca = {row["point"] for row in rows} - {"bvae"}
+    assert pca == {"pca-int8", "pca-float16", "pca-perm-int8", "pca-perm-float16"}
+    # Plain PCA of 2/3 of 14 materials has at most 8 components: k is capped at the basis' rank.
+    plain = [row for row in rows if row["point"] == "pca-int8" and row["budget_bytes"] == 64]
+    assert plain[0]["coefficients"] <= 8
+    assert main(["bench", "table", str(tmp_path / "rows.jsonl"), "-o", str(tmp_path / "table.md")]) == 0
+    table = (tmp_path / "table.md").read_text()
+    assert "**cv, held-out analytic**" in table and "| 64 B |" in table
+
+
+def test_config_errors_name_the_file(tmp_path: Path) -> None:
+    from brdfcodec.report.generalisation import load_config
+
+    path = tmp_path / "bad.json"
+    path.write_text(json.dumps({"dataset": "x.h5", "experiments": [{"label": "a"}]}))
+    with pytest.raises(ValueError, match="bad.json: each experiment"):
+        load_config(path)
+    path.write_text(json.dumps({"dataset": "x.h5", "experiments": [], "bugdets": [1]}))
+    with pytest.raises(ValueError, match="unknown keys \\['bugdets'\\]"):
+        load_config(path)
