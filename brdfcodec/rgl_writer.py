@@ -55,8 +55,10 @@ from brdfcodec.rgl import TENSOR_FILE_MAGIC
 
 __all__ = [
     "LUMINANCE_WEIGHTS",
+    "export_rgl",
     "RglResolution",
     "RglWriteError",
+    "power_iteration_ndf",
     "rgl_fields",
     "tensor_file_bytes",
     "write_rgl_bsdf",
@@ -71,6 +73,7 @@ _ALIGNMENT = 8
 # Elevation at which a grazing node's BRDF is looked up: the MERL grid has no data at θ = π/2 exactly.
 _GRAZING_LIMIT = np.radians(89.5)
 _POWER_ITERATIONS = 200
+_OUTLIER_FACTOR = 4.0
 _EPSILON32 = float(np.finfo(np.float32).eps)
 
 
@@ -233,6 +236,23 @@ def _interpolate_profile(values: np.ndarray, u: np.ndarray) -> np.ndarray:
     return np.interp(u, np.linspace(0.0, 1.0, values.size), values)
 
 
+def _cap_outliers(value: np.ndarray, up: np.ndarray) -> np.ndarray:
+    """Scale down RGB values whose luminance exceeds a bound set by the bulk of one θi slice.
+
+    Where the warp lands on normals the NDF gives almost no weight (θm near π/2, or facing away from ωi),
+    f cos θo · 4σ / D(m) takes values thousands of times those of the neighbouring vertices; bilinear
+    interpolation would carry them into cells whose D is not small, so readers would return a spike. The
+    bound is :data:`_OUTLIER_FACTOR` times the 99th percentile of the slice's positive luminances.
+    """
+    lum = value @ np.asarray(LUMINANCE_WEIGHTS)
+    positive = lum[up & (lum > 0)]
+    if positive.size == 0:
+        return value
+    bound = _OUTLIER_FACTOR * float(np.percentile(positive, 99))
+    scale = np.divide(bound, lum, out=np.ones_like(lum), where=lum > bound)
+    return value * scale[:, None]
+
+
 def rgl_fields(
     reflectance: npt.ArrayLike,
     valid: npt.ArrayLike,
@@ -316,7 +336,8 @@ def rgl_fields(
         if up.any():
             factor = wo[up, 2] * 4.0 * sigma_i[k] / np.maximum(d_m[up], 1e-30)
             value[up] = brdf(np.broadcast_to(wi, wo[up].shape), wo[up]) * factor[:, None]
-        rgb[k] = np.maximum(value, 0.0).T.reshape(3, n, n)
+        value = _cap_outliers(np.maximum(value, 0.0), up)
+        rgb[k] = value.T.reshape(3, n, n)
         above[k] = up.reshape(n, n)
     luminance = np.tensordot(np.asarray(LUMINANCE_WEIGHTS), rgb, axes=([0], [1]))
 
@@ -437,3 +458,80 @@ def write_rgl_bsdf(
     with atomic_output(target, overwrite=overwrite) as tmp:
         tmp.write_bytes(data)
     return target
+
+
+def export_rgl(
+    source: str | os.PathLike[str],
+    output: str | os.PathLike[str],
+    *,
+    materials: list[str] | None = None,
+    resolution: RglResolution | None = None,
+    overwrite: bool = False,
+) -> list[Path]:
+    """Write materials of a ``.bvae`` library, or a measured file, as RGL ``.bsdf`` files.
+
+    The library call behind ``bvae decompress LIB.bvae -o OUT.bsdf`` and
+    ``bvae decompress LIB.bvae -o FOLDER --format bsdf``.
+
+    Parameters
+    ----------
+    source : str or os.PathLike
+        A ``.bvae`` file (decoded with the model it names), a MERL ``.binary``
+        file or an RGL ``.bsdf`` file (tabulated on the MERL grid first).
+    output : str or os.PathLike
+        The ``.bsdf`` file for a single material; for several, a folder (created
+        if absent) that receives ``NAME.bsdf`` for each.
+    materials : list of str, optional
+        Materials of a library to write (all by default).
+    resolution : RglResolution, optional
+        Table sizes (:class:`RglResolution`'s defaults when absent).
+    overwrite : bool, default False
+        Whether existing files may be replaced.
+
+    Returns
+    -------
+    list of pathlib.Path
+        The written files.
+
+    Raises
+    ------
+    RglWriteError
+        A material is non-finite, unmeasured or black (files written before it stay; none is partial).
+    SourceFormatError, MerlFormatError, BvaeFormatError
+        The source is unreadable or unsupported (an anisotropic or spectral RGL file, say); nothing is written.
+    FileExistsError
+        A target exists and ``overwrite`` is false; nothing is written.
+    """
+    from brdfcodec.material_names import material_file_path
+    from brdfcodec.rgl import is_rgl_file
+
+    src, out = Path(source), Path(output)
+    if is_rgl_file(src) or src.suffix.lower() == ".binary":
+        from brdfcodec.inputs import read_measured
+
+        if materials:
+            raise ValueError(f"{src}: a measured file holds one material; 'materials' applies to .bvae libraries")
+        brdf = read_measured(src)
+        label = brdf.name or src.stem
+        target = material_file_path(out, label, "bsdf") if out.is_dir() else out
+        return [write_rgl_bsdf(target, brdf.values, name=label, resolution=resolution, overwrite=overwrite)]
+    from brdfcodec.codec import MaterialLibrary
+
+    with MaterialLibrary(src) as library:
+        names = list(materials) if materials else library.names
+        for name in names:
+            library.record(name)  # unknown names and corrupt records fail before anything is written
+        if len(names) == 1 and not out.is_dir():
+            targets = {names[0]: check_output_path(out, overwrite=overwrite)}
+        else:
+            if out.exists() and not out.is_dir():
+                raise NotADirectoryError(f"{out}: several materials need an output folder, not a file")
+            paths = {name: material_file_path(out, name, "bsdf") for name in names}
+            out.mkdir(parents=True, exist_ok=True)
+            targets = {name: check_output_path(path, overwrite=overwrite) for name, path in paths.items()}
+        written = []
+        for name, target in targets.items():
+            table = library[name].table()
+            written.append(write_rgl_bsdf(target, table, name=name, resolution=resolution, overwrite=overwrite))
+            library.forget(name)
+        return written

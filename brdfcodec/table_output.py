@@ -1,11 +1,11 @@
-"""Writing decoded tables: MERL ``.binary``, NumPy ``.npy`` or EXR φd slices, chosen by file suffix."""
+"""Writing decoded tables: MERL ``.binary``, NumPy ``.npy``, EXR φd slices or RGL ``.bsdf``, chosen by file suffix."""
 
 from __future__ import annotations
 
 import os
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Literal
+from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 import numpy.typing as npt
@@ -15,10 +15,13 @@ from brdfcodec.conventions import N_PHI_D, TABLE_SHAPE
 from brdfcodec.merl import write_merl
 from brdfcodec.representation import reflectance_from_stored
 
+if TYPE_CHECKING:
+    from brdfcodec.rgl_writer import RglResolution
+
 __all__ = ["TABLE_FORMATS", "TableFormat", "table_format_of", "write_table"]
 
-TableFormat = Literal["binary", "npy", "exr"]
-TABLE_FORMATS: dict[str, TableFormat] = {".binary": "binary", ".npy": "npy", ".exr": "exr"}
+TableFormat = Literal["binary", "npy", "exr", "bsdf"]
+TABLE_FORMATS: dict[str, TableFormat] = {".binary": "binary", ".npy": "npy", ".exr": "exr", ".bsdf": "bsdf"}
 
 
 def table_format_of(path: str | os.PathLike[str]) -> TableFormat:
@@ -35,6 +38,8 @@ def write_table(
     *,
     phi_d_bins: Sequence[int] | None = None,
     overwrite: bool = False,
+    rgl_resolution: RglResolution | None = None,
+    name: str | None = None,
 ) -> TableFormat:
     """Write a decoded table (stored MERL units) atomically, in the format the suffix names.
 
@@ -44,11 +49,18 @@ def write_table(
         ``.binary``: a MERL file (needs all 180 bins). ``.npy``: the float32
         array as given, shape (3, 90, 90, K). ``.exr``: one 90×90 RGB part per
         φd bin holding reflectance in 1/sr (stored × channel scale; negative,
-        unmeasured entries written as 0).
+        unmeasured entries written as 0). ``.bsdf``: an RGL tensor file for
+        Mitsuba's ``measured`` BSDF (needs all 180 bins; see
+        :func:`brdfcodec.rgl_writer.write_rgl_bsdf`).
     table : array_like, shape (3, 90, 90, K)
     phi_d_bins : sequence of int, optional
         The bins the table's last axis holds (all 180 when absent).
     overwrite : bool, default False
+    rgl_resolution : RglResolution, optional
+        Table sizes of a ``.bsdf`` file (the defaults of
+        :class:`~brdfcodec.rgl_writer.RglResolution` when absent).
+    name : str, optional
+        Material name, for a ``.bsdf`` file's description (the file's stem when absent).
     """
     kind = table_format_of(path)
     array = np.asarray(table)
@@ -59,6 +71,12 @@ def write_table(
         if len(bins) != N_PHI_D or bins != list(range(N_PHI_D)):
             raise ValueError(f"{path}: a MERL .binary file needs all 180 φd bins; use .npy or .exr for a subset")
         write_merl(path, array.astype(np.float64), overwrite=overwrite)
+    elif kind == "bsdf":
+        if len(bins) != N_PHI_D or bins != list(range(N_PHI_D)):
+            raise ValueError(f"{path}: an RGL .bsdf file needs all 180 φd bins; use .npy or .exr for a subset")
+        from brdfcodec.rgl_writer import write_rgl_bsdf
+
+        write_rgl_bsdf(path, array, name=name or Path(path).stem, resolution=rgl_resolution, overwrite=overwrite)
     elif kind == "npy":
         with atomic_output(path, overwrite=overwrite) as tmp, open(tmp, "wb") as stream:
             np.save(stream, np.ascontiguousarray(array, dtype=np.float32))

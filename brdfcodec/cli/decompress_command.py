@@ -1,4 +1,4 @@
-"""``bvae decompress IN.bvae -o OUT``: decode materials to MERL ``.binary``, ``.npy`` or EXR slices."""
+"""``bvae decompress IN.bvae -o OUT``: decode materials to MERL ``.binary``, ``.npy``, EXR slices or RGL ``.bsdf``."""
 
 from __future__ import annotations
 
@@ -16,6 +16,7 @@ from brdfcodec.table_output import TABLE_FORMATS, table_format_of, write_table
 
 if TYPE_CHECKING:
     from brdfcodec.codec import DecodedMaterial
+    from brdfcodec.rgl_writer import RglResolution
 
 __all__ = ["parse_bins", "register"]
 
@@ -38,10 +39,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     """Add the ``decompress`` sub-command."""
     parser = subparsers.add_parser(
         "decompress",
-        help="decode a .bvae file to MERL .binary, .npy or EXR slices",
+        help="decode a .bvae file to MERL .binary, .npy, EXR slices or RGL .bsdf",
         description="Decode materials of a .bvae file with the decoder it names (found by SHA-256). The output "
         "type follows the suffix: .binary (MERL), .npy (float32 table in MERL units), .exr (one 90x90 RGB part "
-        "per phi_d bin, reflectance in 1/sr). With several materials and no --material, OUT is a folder that "
+        "per phi_d bin, reflectance in 1/sr), .bsdf (RGL tensor file for Mitsuba's built-in measured BSDF). "
+        "With several materials and no --material, OUT is a folder that "
         "receives NAME.binary for each (or the suffix of --format).",
     )
     parser.add_argument("input", type=Path, metavar="IN.bvae")
@@ -56,6 +58,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     parser.add_argument("--reference", type=Path, metavar="SOURCE.binary",
                         help="the original MERL file: print the RelAE of the decoded table against it")
     parser.add_argument("--force", action="store_true", help="replace existing output files")
+    parser.add_argument("--bsdf-theta-i", type=int, default=32, metavar="N",
+                        help=".bsdf: incident elevations, uniform over [0, 90] degrees (default 32)")
+    parser.add_argument("--bsdf-grid", type=int, default=32, metavar="N",
+                        help=".bsdf: RGB and luminance samples per axis (default 32, as the RGL database)")
+    parser.add_argument("--bsdf-vndf", type=int, default=128, metavar="N",
+                        help=".bsdf: NDF and VNDF samples per axis (default 128, as the RGL database)")
     parser.set_defaults(handler=run)
 
 
@@ -82,6 +90,10 @@ def run(args: argparse.Namespace) -> int:
                 n: check_output_path(material_file_path(args.output, n, args.format), overwrite=args.force)
                 for n in names
             }
+        kinds = {table_format_of(target) for target in targets.values()}
+        rgl_resolution = _rgl_resolution(args) if "bsdf" in kinds else None
+        if "bsdf" in kinds and args.phi_d is not None:
+            raise UsageError("--phi-d: an RGL .bsdf file needs all 180 phi_d bins (use .npy or .exr for a subset)")
         if args.reference is not None and not single:
             raise UsageError("--reference needs a single material (use --material)")
         # Measured before writing: a bad reference must not fail the command after its output exists.
@@ -90,11 +102,23 @@ def run(args: argparse.Namespace) -> int:
             material = library[name]
             table = material.table(phi_d_bins=args.phi_d, masked=args.masked)
             note = _stored_error_note(material.record.meta)  # before writing: nothing may fail after a write
-            kind = write_table(target, table, phi_d_bins=args.phi_d, overwrite=args.force)
+            kind = write_table(target, table, phi_d_bins=args.phi_d, overwrite=args.force,
+                               rgl_resolution=rgl_resolution, name=name)
             print(f"wrote {target} ({name}, {kind}){note}")
         if reference_line is not None:
             print(reference_line)
     return 0
+
+
+def _rgl_resolution(args: argparse.Namespace) -> RglResolution:
+    """The ``--bsdf-*`` sizes as an RglResolution (a UsageError naming the flag when out of range)."""
+    from brdfcodec.rgl_writer import RglResolution
+
+    for flag, value, upper in (("--bsdf-theta-i", args.bsdf_theta_i, 512), ("--bsdf-grid", args.bsdf_grid, 512),
+                               ("--bsdf-vndf", args.bsdf_vndf, 2048)):
+        if not 2 <= value <= upper:
+            raise UsageError(f"{flag} must lie in [2, {upper}], got {value}")
+    return RglResolution(theta_i=args.bsdf_theta_i, ndf=args.bsdf_vndf, vndf=args.bsdf_vndf, luminance=args.bsdf_grid)
 
 
 def _stored_error_note(meta: dict) -> str:
