@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import argparse
 import os
-import re
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -35,9 +34,21 @@ def _sub_commands(parser: argparse.ArgumentParser) -> list[tuple[str, argparse.A
     return found
 
 
+def _help(parser: argparse.ArgumentParser) -> str:
+    """``parser``'s help, wrapped at 100 columns whatever the terminal (argparse reads ``$COLUMNS``)."""
+    previous = os.environ.get("COLUMNS")
+    os.environ["COLUMNS"] = "100"
+    try:
+        return parser.format_help().rstrip()
+    finally:
+        if previous is None:
+            del os.environ["COLUMNS"]
+        else:
+            os.environ["COLUMNS"] = previous
+
+
 def cli_reference() -> str:
     """The command-line reference page, from ``brdfcodec.cli.main.build_parser``."""
-    os.environ["COLUMNS"] = "100"  # argparse wraps help text at the terminal width: fix it
     from brdfcodec.cli.main import build_parser
 
     parser = build_parser()
@@ -45,13 +56,12 @@ def cli_reference() -> str:
         "# Command line reference\n",
         "Generated from `bvae`'s argument parser when the site is built: each section is the "
         "output of `bvae COMMAND --help`. The [quick start](quickstart.md) shows the commands in use; "
-        "exit codes, outputs and threads are described under [Command line](#exit-codes-and-outputs) "
-        "below.\n",
-        "```text\n" + parser.format_help().rstrip() + "\n```\n",
+        "[exit codes, outputs and threads](#exit-codes-and-outputs) are described at the end.\n",
+        "```text\n" + _help(parser) + "\n```\n",
     ]
     for name, sub in _sub_commands(parser):
         parts.append(f"## bvae {name}\n")
-        parts.append("```text\n" + sub.format_help().rstrip() + "\n```\n")
+        parts.append("```text\n" + _help(sub) + "\n```\n")
     usage = (Path(__file__).parent / "cli-notes.md").read_text(encoding="utf-8")
     parts.append(usage)
     return "\n".join(parts)
