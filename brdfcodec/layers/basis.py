@@ -850,19 +850,26 @@ def model_basis_lookup(folder: str | os.PathLike[str], current: str | None,
     """``basis_named`` for :func:`check_basis_layers` from a model folder (no torch): its current basis
     (``basis.safetensors``, hash ``current``) or a previous one (``previous``: hash → file name), each read and
     checked against its hash once."""
-    loaded: dict[str, SharedBasis] = {}
-
     def basis_named(sha256: str) -> SharedBasis | None:
-        if sha256 not in loaded:
-            if sha256 == current:
-                loaded[sha256] = load_shared_basis(Path(folder) / BASIS_FILE, sha256)
-            elif sha256 in previous:
-                loaded[sha256] = load_shared_basis(Path(folder) / previous[sha256], sha256)
-            else:
-                return None
-        return loaded[sha256]
+        if sha256 == current:
+            return _load_checked(Path(folder) / BASIS_FILE, sha256)
+        if sha256 in previous:
+            return _load_checked(Path(folder) / previous[sha256], sha256)
+        return None
 
     return basis_named
+
+
+def _load_checked(path: Path, sha256: str) -> SharedBasis:
+    """:func:`load_shared_basis`, kept for the file's size and modification time (``bvae info`` of many files
+    reads and hashes a basis once)."""
+    stat = path.stat()
+    return _load_cached(path, sha256, stat.st_size, stat.st_mtime_ns)
+
+
+@functools.lru_cache(maxsize=2)
+def _load_cached(path: Path, sha256: str, size: int, mtime_ns: int) -> SharedBasis:
+    return load_shared_basis(path, sha256)
 
 
 def basis_layer_from_bytes(entry: Mapping[str, Any], data: bytes) -> BasisLayer:
