@@ -665,7 +665,8 @@ def encode_bvae(
     latent_dim = records[0].latent_dim
     if any(r.latent_dim != latent_dim for r in records):
         raise ValueError("all records of a file must have the same latent dimension")
-    bases = sorted({r.basis.sha256 for r in records if getattr(r, "basis", None) is not None})  # type: ignore[attr-defined]
+    layers = [getattr(r, "basis", None) for r in records]
+    bases = sorted({layer.sha256 for layer in layers if layer is not None})
     if len(bases) > 1:
         raise ValueError(f"a file holds the basis layers of one shared basis; these records use {len(bases)}")
     dtype = _DTYPES[latent_dtype]
@@ -837,7 +838,8 @@ def _parse_form(path: str, cursor: _Cursor, i: int, latent_dim: int, basis_sha: 
     code = cursor.u8(f"{where}'s kind")
     kinds = {v: k for k, v in _KIND_CODES.items()}
     if code not in kinds:
-        raise UnsupportedVersionError(path, f"{where} has record kind {code}, unknown to this reader; upgrade brdfcodec")
+        raise UnsupportedVersionError(path, f"{where} has record kind {code}, unknown to this reader; "
+                                      "upgrade brdfcodec")
     kind = kinds[code]
     if kind == "graft":
         count = cursor.varint(f"{where}'s graft dimension count")
@@ -912,7 +914,9 @@ def _parse_header(path: str, stored: bytes, preamble_fields: tuple[int, ...], fi
         raw_name = cursor.take(cursor.varint(f"{where}'s name length"), f"{where}'s name")
         try:
             entry_name = _check_name(raw_name.decode("utf-8"))
-        except (UnicodeDecodeError, ValueError) as error:
+        except UnicodeDecodeError as error:  # a lone surrogate's bytes (CESU-8) included
+            raise _fail(path, f"{where}: its name is not UTF-8 text ({error.reason} at byte {error.start})") from None
+        except ValueError as error:
             raise _fail(path, f"{where}: {error}") from None
         key = name_collision_key(entry_name)
         if key in seen:

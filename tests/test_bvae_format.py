@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import struct
 import zlib
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -16,7 +17,10 @@ from brdfcodec.bvae_format import (
     FORMAT_MAJOR,
     FORMAT_MINOR,
     MAGIC,
+    MAX_FORMS,
     MAX_HEADER_BYTES,
+    MAX_RECORDS,
+    PROVENANCE_KEYS,
     BvaeReader,
     DecoderReference,
     GraftRecord,
@@ -25,6 +29,9 @@ from brdfcodec.bvae_format import (
     parse_bvae,
     read_bvae,
     read_header,
+    record_overhead,
+    record_size,
+    without_provenance,
     write_bvae,
 )
 from brdfcodec.errors import BvaeChecksumError, BvaeFormatError, UnsupportedVersionError
@@ -44,25 +51,58 @@ def library(count: int = 3, dim: int = 8) -> list[LatentRecord | GraftRecord]:
 
 
 def spec_reader(data: bytes) -> tuple[dict, list[np.ndarray]]:
-    """A reader written from spec/bvae-format.md alone (no brdfcodec code)."""
+    """A reader of latent and graft records written from spec/bvae-format.md alone (no brdfcodec code)."""
     magic, major, minor, flags, length, crc = struct.unpack_from("<8sHHIII", data, 0)
-    assert magic == b"\x89BVAE\r\n\x1a" and major == 1 and flags & ~1 == 0
+    assert magic == b"\x89BVAE\r\n\x1a" and (major, minor) == (2, 0) and flags & ~3 == 0
     stored = data[24 : 24 + length]
     assert zlib.crc32(data[:20] + stored) == crc
+    at = 0
+
+    def take(count: int) -> bytes:
+        nonlocal at
+        at += count
+        assert at <= len(stored)
+        return stored[at - count : at]
+
+    def varint() -> int:
+        value, shift = 0, 0
+        while True:
+            byte = take(1)[0]
+            value |= (byte & 0x7F) << shift
+            shift += 7
+            if not byte & 0x80:
+                return value
+
+    decoder = take(32).hex()
+    dim, dtype_code = struct.unpack("<HB", take(3))
+    basis = take(32).hex() if flags & 2 else None
+    forms = []
+    for _ in range(take(1)[0]):
+        kind = take(1)[0]
+        assert kind in (0, 1)  # latent, graft
+        forms.append((kind, [varint() for _ in range(varint())] if kind == 1 else []))
+    index = []
+    for _ in range(varint()):
+        name = take(varint()).decode("utf-8")
+        index.append((name, *forms[take(1)[0]]))
+    (payload_crc,) = struct.unpack("<I", take(4))
+    block = stored[at:]
     if flags & 1:
         import zstandard
 
-        stored = zstandard.ZstdDecompressor().decompress(stored)
-    header = json.loads(stored)
-    dtype = {"float32": "<f4", "float16": "<f2"}[header["latent_dtype"]]
-    base = 24 + length
+        block = zstandard.ZstdDecompressor().decompress(block)
+    metadata = json.loads(block) if block else {}
+    start = 24 + length
+    assert zlib.crc32(data[start:]) == payload_crc
+    dtype = ("<f4", "<f2")[dtype_code]
     payloads = []
-    for entry in header["records"]:
-        raw = data[base + entry["offset"] : base + entry["offset"] + entry["length"]]
-        assert zlib.crc32(raw) == entry["crc32"]
-        payloads.append(np.frombuffer(raw, dtype=dtype))
-    last = header["records"][-1]
-    assert len(data) == base + last["offset"] + last["length"]
+    for _, _, dims in index:
+        size = (2 * dim + len(dims)) * np.dtype(dtype).itemsize
+        payloads.append(np.frombuffer(data[start : start + size], dtype=dtype))
+        start += size
+    assert start == len(data)
+    header = {"decoder": decoder, "basis": basis, "latent_dim": dim, "names": [n for n, _, _ in index],
+              "graft_dims": [d for _, _, d in index], "metadata": metadata}
     return header, payloads
 
 
@@ -79,7 +119,10 @@ def test_round_trip_and_independent_reader(dtype: str, compress: bool) -> None:
         np.testing.assert_allclose(back.mu, original.mu, rtol=tolerance, atol=tolerance)
         np.testing.assert_allclose(back.sigma, original.sigma, rtol=tolerance)
     header, payloads = spec_reader(data)
-    assert header["decoder"] == {"sha256": DECODER.sha256, "name": DECODER.name}
+    assert header["decoder"] == DECODER.sha256 and header["basis"] is None and header["latent_dim"] == 8
+    assert header["metadata"]["decoder_name"] == DECODER.name  # the records have metadata: so has the file
+    assert header["metadata"]["records"] == {r.name: r.meta for r in records if r.meta}
+    assert header["names"] == [r.name for r in records] and header["graft_dims"][-1] == [0, 7]
     np.testing.assert_array_equal(payloads[0][:8].astype(np.float32), parsed.records[0].mu)
     graft = parsed.records[-1]
     assert isinstance(graft, GraftRecord) and graft.graft_dims == (0, 7)
@@ -98,6 +141,8 @@ def test_spec_states_the_limits_the_code_uses() -> None:
     text = SPEC.read_text(encoding="utf-8")
     assert f"Format version {FORMAT_MAJOR}.{FORMAT_MINOR} " in text
     assert f"**{MAX_HEADER_BYTES:,}** bytes" in text
+    assert f"| header (index and stored metadata block) | {MAX_HEADER_BYTES:,} bytes |" in text
+    assert f"| record forms per file | {MAX_FORMS} |" in text and f"| records per file | {MAX_RECORDS:,} |" in text
     assert "`89 42 56 41 45 0D 0A 1A`" in text and MAGIC == bytes.fromhex("89 42 56 41 45 0D 0A 1A")
     assert "**64 bytes** for D = 8 in float32" in text
 
@@ -140,36 +185,133 @@ def test_invalid_records_are_refused() -> None:
 
 
 def _rewrap(data: bytes, *, flags: int | None = None, major: int | None = None, header_edit=None) -> bytes:
-    """Rebuild a file with a changed preamble field or header, with valid checksums."""
+    """Rebuild a file with a changed preamble field or header bytes, with a valid header CRC."""
     magic, old_major, minor, old_flags, length, _ = struct.unpack_from("<8sHHIII", data, 0)
     stored = data[24 : 24 + length]
-    assert not old_flags & 1
     if header_edit is not None:
-        stored = json.dumps(header_edit(json.loads(stored))).encode()
+        stored = header_edit(stored)
     head = struct.pack("<8sHHII", magic, old_major if major is None else major, minor,
                        old_flags if flags is None else flags, len(stored))
     return head + struct.pack("<I", zlib.crc32(head + stored)) + stored + data[24 + length :]
 
 
+def _metadata_at(stored: bytes) -> int:
+    """Where an uncompressed metadata block starts in a header written by :func:`encode_bvae`."""
+    return stored.index(b'{"created_by"')
+
+
 def test_unknown_versions_flags_and_kinds_are_refused() -> None:
     data = encode_bvae(library(1), DECODER, compress_header=False)
-    with pytest.raises(UnsupportedVersionError, match="version 2"):
-        parse_bvae(_rewrap(data, major=2))
+    with pytest.raises(UnsupportedVersionError, match="version 3"):
+        parse_bvae(_rewrap(data, major=3))
+    with pytest.raises(UnsupportedVersionError, match="development format 1.x"):
+        parse_bvae(_rewrap(data, major=1))
     with pytest.raises(UnsupportedVersionError, match="flag bits"):
-        parse_bvae(_rewrap(data, flags=2))
+        parse_bvae(_rewrap(data, flags=4))
+    # 32 bytes of decoder hash, latent_dim, latent_dtype, the form count: then the first form's kind.
+    with pytest.raises(UnsupportedVersionError, match="record kind 7"):
+        parse_bvae(_rewrap(data, header_edit=lambda h: h[:36] + b"\x07" + h[37:]))
+    with pytest.raises(UnsupportedVersionError, match="latent dtype code 5"):
+        parse_bvae(_rewrap(data, header_edit=lambda h: h[:34] + b"\x05" + h[35:]))
 
-    def new_kind(header: dict) -> dict:
-        header["records"][0]["kind"] = "neural-field"
-        return header
-
-    with pytest.raises(UnsupportedVersionError, match="neural-field"):
-        parse_bvae(_rewrap(data, header_edit=new_kind))
-
-    def extra_field(header: dict) -> dict:
-        header["future_optional"] = {"x": 1}
-        return header
+    def extra_field(stored: bytes) -> bytes:
+        at = _metadata_at(stored)
+        block = json.loads(stored[at:])
+        return stored[:at] + json.dumps({**block, "future_optional": {"x": 1}}).encode()
 
     assert parse_bvae(_rewrap(data, header_edit=extra_field)).header.names == ["mat-0", "grafted"]
+
+
+def test_a_default_file_is_names_descriptors_and_payloads() -> None:
+    """Without metadata a file holds no metadata block (no decoder name, no created_by) and states the decoder,
+    the latent dtype and each record form once: 24 + 32 + 3 + 1 + 1 + 1 + 4 fixed bytes and per record its
+    name, 2 bytes of descriptor and its payload."""
+    plain = [LatentRecord(f"m{i}", np.zeros(8), np.ones(8)) for i in range(3)]
+    data = encode_bvae(plain, DECODER)
+    assert len(data) == 24 + 32 + 3 + 1 + 1 + 1 + 4 + sum(len(r.name) + 2 + 64 for r in plain)
+    parsed = parse_bvae(data)
+    assert parsed.header.decoder == DecoderReference(DECODER.sha256, "") and parsed.header.created_by == ""
+    assert parsed.header.form_count == 1 and all(r.meta == {} for r in parsed.records)
+    assert DECODER.name.encode() not in data and b"created_by" not in data
+    with_meta = encode_bvae([LatentRecord("m0", np.zeros(8), np.ones(8), {"effort": 1}), *plain[1:]], DECODER)
+    assert parse_bvae(with_meta).header.decoder == DECODER  # a metadata block names the decoder and the writer
+
+
+def test_record_size_is_what_a_record_adds_beyond_its_name() -> None:
+    """:func:`record_size` is exact for every kind, form and number size (a count of 128 takes a 2-byte varint,
+    a name of 128 bytes too), so rate control can hold a budget on the file, not the payload."""
+    from brdfcodec.layers.basis import BasisLayer
+    from brdfcodec.layers.detail import DetailLayer
+    from brdfcodec.layers.record import LayeredRecord
+
+    rng = np.random.default_rng(1)
+    frame = _detail_frame()
+    made = [
+        LatentRecord("a", np.zeros(8), np.ones(8)),
+        LatentRecord("é" * 64, np.zeros(8), np.ones(8)),  # 128 bytes of name: a 2-byte length
+        GraftRecord("g", np.zeros(8), np.ones(8), (1, 2), [0.5, 1.0]),
+        LayeredRecord("b", np.linspace(-1, 1, 8), np.full(8, 0.1), basis=BasisLayer(
+            "cd" * 32, 0.5, rng.integers(-9, 9, 5).astype(np.int8), 8, 50), compact_mu=True, shared_sigma=True,
+            fixed_mu_grid=True),
+        LayeredRecord("c", np.linspace(-1, 1, 8), np.full(8, 0.1), basis=BasisLayer(
+            "cd" * 32, 0.5, rng.integers(-9, 9, 130).astype(np.int8), 0), compact_sigma=True),
+        LayeredRecord("d", np.zeros(8), np.ones(8), detail=DetailLayer(0.25, "int16", frame), basis=BasisLayer(
+            "cd" * 32, 0.5, rng.integers(-9, 9, 3).astype(np.int8), 8), compact_sigma=True),
+    ]
+    for dtype in ("float32", "float16"):
+        for record in made:
+            alone = encode_bvae([LatentRecord("z", np.zeros(8), np.ones(8)), record], DECODER,
+                                latent_dtype=dtype)  # type: ignore[arg-type]
+            twice = encode_bvae([LatentRecord("z", np.zeros(8), np.ones(8)), record,
+                                 replace(record, name=record.name + "2")], DECODER,
+                                latent_dtype=dtype)  # type: ignore[arg-type]
+            added = len(twice) - len(alone) - len((record.name + "2").encode())
+            second = replace(record, name=record.name + "2")
+            assert added == record_size(second, dtype), record.name  # type: ignore[arg-type]
+            assert record_overhead("x", basis_count=127) == 3 and record_overhead("x", basis_count=128) == 4
+        entries = parse_bvae(encode_bvae(made, DECODER, latent_dtype=dtype)).header.entries  # type: ignore[arg-type]
+        for record, entry in zip(made, entries, strict=True):
+            assert entry.length + entry.descriptor_bytes == record_size(record, dtype)  # type: ignore[arg-type]
+
+
+def _detail_frame() -> bytes:
+    from brdfcodec.conventions import NETWORK_INPUT_SHAPE
+    from brdfcodec.layers.detail import encode_detail
+
+    return encode_detail(np.zeros(NETWORK_INPUT_SHAPE, dtype=np.float32), 1.0).data
+
+
+def test_a_file_holds_one_shared_basis_and_provenance_only_when_kept() -> None:
+    from brdfcodec.layers.basis import BasisLayer
+    from brdfcodec.layers.record import LayeredRecord
+
+    def on(sha: str, name: str) -> LayeredRecord:
+        return LayeredRecord(name, np.zeros(8), np.ones(8), {"effort": 1, "relae": {"mapped": 0.1},
+                                                             "edit": {"op": "refine"}},
+                             basis=BasisLayer(sha, 0.5, np.ones(3, dtype=np.int8)), compact_sigma=True)
+
+    with pytest.raises(ValueError, match="one shared basis"):
+        encode_bvae([on("cd" * 32, "a"), on("ef" * 32, "b")], DECODER)
+    parsed = parse_bvae(encode_bvae([on("cd" * 32, "a"), on("cd" * 32, "b")], DECODER))
+    assert parsed.header.basis_sha256 == "cd" * 32 and parsed.header.form_count == 1
+    assert encode_bvae([on("cd" * 32, "a")], DECODER).count(bytes.fromhex("cd" * 32)) == 1  # stated once
+    lean = without_provenance([on("cd" * 32, "a"), LatentRecord("c", np.zeros(8), np.ones(8), {"source_sha256":
+                                                                                               "ab" * 32})])
+    assert [r.meta for r in lean] == [{"edit": {"op": "refine"}}, {}]  # an edit is the record's meaning, kept
+    assert all(set(PROVENANCE_KEYS).isdisjoint(r.meta) for r in lean)
+
+
+def test_a_corrupt_payload_is_refused_on_opening(tmp_path: Path) -> None:
+    path = tmp_path / "lib.bvae"
+    write_bvae(path, library(3), DECODER)
+    data = bytearray(path.read_bytes())
+    data[-70] ^= 0x04  # in a payload: one CRC-32 covers them all
+    path.write_bytes(bytes(data))
+    with pytest.raises(BvaeChecksumError, match="payload CRC-32"):
+        BvaeReader(path)
+    with pytest.raises(BvaeChecksumError, match="payload CRC-32"):
+        read_bvae(path)
+    assert read_header(path).names[0] == "mat-0"  # the header alone is intact
 
 
 def test_trailing_bytes_and_wrong_magic_are_refused() -> None:
@@ -199,7 +341,11 @@ def test_every_truncation_and_every_single_byte_change_is_detected(compress: boo
 def test_checksum_errors_are_typed() -> None:
     data = bytearray(encode_bvae(library(1), DECODER))
     data[-1] ^= 1
-    with pytest.raises(BvaeChecksumError, match="grafted"):
+    with pytest.raises(BvaeChecksumError, match="payload CRC-32"):
+        parse_bvae(bytes(data))
+    data[-1] ^= 1
+    data[30] ^= 1  # the decoder hash
+    with pytest.raises(BvaeChecksumError, match="header CRC-32"):
         parse_bvae(bytes(data))
 
 
@@ -237,12 +383,14 @@ def test_fuzz_mutations_of_a_valid_file(changes: list[tuple[int, int]]) -> None:
                     lambda c: st.lists(c, max_size=3) | st.dictionaries(st.text(max_size=4), c, max_size=3)),
                     max_size=4)
 )
-def test_fuzz_header_json_content(extra: dict) -> None:
-    """Arbitrary JSON substituted for header fields only raises format errors."""
-    def edit(header: dict) -> dict:
-        header["records"][0].update(extra)
-        header.update(extra)
-        return header
+def test_fuzz_metadata_json_content(extra: dict) -> None:
+    """Arbitrary JSON substituted for metadata fields only raises format errors."""
+    def edit(stored: bytes) -> bytes:
+        at = _metadata_at(stored)
+        block = json.loads(stored[at:])
+        block["records"]["mat-0"].update(extra)
+        block.update(extra)
+        return stored[:at] + json.dumps(block).encode()
 
     try:
         parse_bvae(_rewrap(_VALID, header_edit=edit))

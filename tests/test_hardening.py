@@ -9,7 +9,6 @@ import os
 import struct
 import tracemalloc
 import warnings
-import zlib
 from pathlib import Path
 
 import numpy as np
@@ -18,7 +17,6 @@ import pytest
 from brdfcodec import atomic
 from brdfcodec.atomic import atomic_output
 from brdfcodec.bvae_format import (
-    MAGIC,
     MAX_RECORDS,
     DecoderReference,
     GraftRecord,
@@ -31,6 +29,7 @@ from brdfcodec.bvae_format import (
 from brdfcodec.errors import BvaeChecksumError, BvaeFormatError, UnmeasuredMaterialError, UnsupportedVersionError
 from brdfcodec.material_names import check_material_name, material_file_path
 from brdfcodec.merl import MerlBRDF
+from bvae_bytes import bytes_writer
 
 DECODER = DecoderReference("ab" * 32, "test-decoder")
 VECTORS = Path(__file__).resolve().parents[1] / "spec" / "vectors"
@@ -40,21 +39,27 @@ def record(name: str = "a", meta: dict | None = None) -> LatentRecord:
     return LatentRecord(name, np.zeros(8), np.ones(8), meta or {})
 
 
-def raw_file(header: dict | bytes, payload: bytes = b"", *, flags: int = 0) -> bytes:
+PAYLOAD = np.array([0.0] * 8 + [1.0] * 8, dtype="<f4").tobytes()
+
+
+def raw_file(stored: bytes, payload: bytes = PAYLOAD, *, flags: int = 0) -> bytes:
     """A file written by hand (no writer checks): preamble, header, payload, valid header CRC."""
-    stored = header if isinstance(header, bytes) else json.dumps(header).encode()
-    head = MAGIC + struct.pack("<HHII", 1, 1, flags, len(stored))
-    return head + struct.pack("<I", zlib.crc32(stored, zlib.crc32(head))) + stored + payload
+    return bytes_writer.assemble(stored, payload, flags=flags)
 
 
-def one_record_file(name: object = "a", meta: object = None, **header_changes: object) -> bytes:
-    payload = np.array([0.0] * 8 + [1.0] * 8, dtype="<f4").tobytes()
-    entry = {"name": name, "kind": "latent", "offset": 0, "length": len(payload), "crc32": zlib.crc32(payload)}
-    if meta is not None:
-        entry["meta"] = meta
-    header = {"format": "bvae", "decoder": {"sha256": DECODER.sha256, "name": DECODER.name}, "latent_dim": 8,
-              "latent_dtype": "float32", "records": [entry], **header_changes}
-    return raw_file(header, payload)
+def one_record_header(name: str = "a", payload: bytes = PAYLOAD, *, form: bytes | None = None,
+                      metadata: bytes = b"") -> bytes:
+    """The binary header (format 2.0) of one record of D = 8 (a latent record by default), by hand."""
+    raw = name.encode("utf-8", "surrogatepass")
+    form = bytes_writer.latent_form() if form is None else form
+    return bytes_writer.header([form], [bytes_writer.descriptor(raw, 0)], payload, dim=8, decoder=DECODER.sha256,
+                               metadata=metadata)
+
+
+def one_record_file(name: str = "a", meta: object = None, **top: object) -> bytes:
+    """A one-record file; ``meta`` (any JSON) as the record's metadata, ``top`` as metadata fields."""
+    block = {**top, **({"records": {name: meta}} if meta is not None else {})}
+    return raw_file(one_record_header(name, metadata=json.dumps(block).encode() if block else b""))
 
 
 # --------------------------------------------------------------------------- 1, 4: names
@@ -111,10 +116,9 @@ def test_wrongly_typed_metadata_is_refused_on_read_and_write(meta: dict) -> None
 
 @pytest.mark.parametrize("number", ["1e400", "1e999", "-1e309", "9007199254740992", "-9007199254740993"])
 def test_overflowing_numbers_are_refused(number: str) -> None:
-    text = one_record_file(meta={"x": 0})
-    stored = text[24:-64].replace(b'"x": 0', f'"x": {number}'.encode())
+    stored = one_record_header(metadata=f'{{"records": {{"a": {{"x": {number}}}}}}}'.encode())
     with pytest.raises(BvaeFormatError, match="overflow|2\\^53"):
-        parse_bvae(raw_file(stored, text[-64:]))
+        parse_bvae(raw_file(stored))
 
 
 def test_writer_refuses_what_json_cannot_carry() -> None:
@@ -124,43 +128,38 @@ def test_writer_refuses_what_json_cannot_carry() -> None:
 
 
 def test_duplicate_keys_are_refused() -> None:
-    data = one_record_file()
-    stored = data[24:-64].replace(b'"latent_dim": 8', b'"latent_dim": 8, "latent_dim": 8')
+    stored = one_record_header(metadata=b'{"records": {"a": {"x": 0, "x": 0}}}')
     with pytest.raises(BvaeFormatError, match="duplicate key"):
-        parse_bvae(raw_file(stored, data[-64:]))
+        parse_bvae(raw_file(stored))
 
 
 def test_header_fields_the_spec_settles() -> None:
     with pytest.raises(BvaeFormatError, match="created_by"):
-        parse_bvae(one_record_file(created_by=3))
-    with pytest.raises(BvaeFormatError, match="'name'"):
-        parse_bvae(one_record_file(decoder={"sha256": DECODER.sha256}))
-    payload = np.array([0.0] * 8 + [1.0] * 8, dtype="<f4").tobytes()
-    entry = {"name": "a", "kind": "latent", "offset": 0, "length": 64, "crc32": zlib.crc32(payload), "graft_dims": [0]}
-    header = {"format": "bvae", "decoder": {"sha256": DECODER.sha256, "name": "d"}, "latent_dim": 8,
-              "latent_dtype": "float32", "records": [entry]}
-    with pytest.raises(BvaeFormatError, match="graft_dims"):
-        parse_bvae(raw_file(header, payload))
+        parse_bvae(one_record_file(meta={}, created_by=3))
+    with pytest.raises(BvaeFormatError, match="decoder_name"):
+        parse_bvae(one_record_file(meta={}, decoder_name=["d"]))
+    graft = np.array([0.0] * 8 + [1.0] * 8 + [0.5, 0.5], dtype="<f4").tobytes()
+    with pytest.raises(BvaeFormatError, match="graft dimensions"):
+        parse_bvae(raw_file(one_record_header("g", graft, form=bytes_writer.graft_form([0, 0])), graft))
+    with pytest.raises(BvaeFormatError, match="does not hold"):
+        parse_bvae(raw_file(one_record_header(metadata=b'{"records": {"b": {}}}')))
 
 
 def test_flag_bit_flipped_by_corruption_is_a_checksum_error() -> None:
     data = bytearray(encode_bvae([record()], DECODER, compress_header=False))
-    data[12] |= 0x02  # reserved flag bit, CRC not updated: corruption
+    data[12] |= 0x04  # reserved flag bit, CRC not updated: corruption
     with pytest.raises(BvaeChecksumError):
         parse_bvae(bytes(data))
     stored = bytes(data[24:-64])
     with pytest.raises(UnsupportedVersionError):  # the same flag under a valid CRC: a newer writer's feature
-        parse_bvae(raw_file(stored, bytes(data[-64:]), flags=2))
+        parse_bvae(raw_file(stored, bytes(data[-64:]), flags=4))
 
 
 def test_nan_mu_and_zero_sigma_are_malformed_not_checksum_errors() -> None:
     for values in ([np.nan] + [0.0] * 7 + [1.0] * 8, [0.0] * 8 + [0.0] + [1.0] * 7):
         payload = np.array(values, dtype="<f4").tobytes()
-        entry = {"name": "a", "kind": "latent", "offset": 0, "length": 64, "crc32": zlib.crc32(payload)}
-        header = {"format": "bvae", "decoder": {"sha256": DECODER.sha256, "name": "d"}, "latent_dim": 8,
-                  "latent_dtype": "float32", "records": [entry]}
         with pytest.raises(BvaeFormatError) as caught:
-            parse_bvae(raw_file(header, payload))
+            parse_bvae(raw_file(one_record_header(payload=payload), payload))
         assert type(caught.value) is BvaeFormatError
 
 
@@ -169,7 +168,7 @@ def test_nan_mu_and_zero_sigma_are_malformed_not_checksum_errors() -> None:
 
 def test_header_amplification_is_refused_without_building_the_objects() -> None:
     data = (VECTORS / "invalid" / "header-amplification.bvae").read_bytes()
-    assert len(data) < 1500
+    assert len(data) < 1600
     tracemalloc.start()
     try:
         with pytest.raises(BvaeFormatError, match="JSON objects and arrays"):
@@ -183,16 +182,18 @@ def test_header_amplification_is_refused_without_building_the_objects() -> None:
 def test_zstd_header_must_be_one_frame_with_nothing_after_it() -> None:
     import zstandard
 
-    data = encode_bvae([record()], DECODER, compress_header=True)
+    data = encode_bvae([record(meta={"effort": 1})], DECODER, compress_header=True)
     length = struct.unpack_from("<I", data, 16)[0]
-    frame, payload = data[24 : 24 + length], data[24 + length :]
-    assert parse_bvae(raw_file(frame, payload, flags=1)).header.names == ["a"]
+    stored, payload = data[24 : 24 + length], data[24 + length :]
+    index = stored[: stored.index(b"\x28\xb5\x2f\xfd")]  # the metadata block: a zstandard frame after the index
+    frame = stored[len(index) :]
+    assert parse_bvae(raw_file(index + frame, payload, flags=1)).header.names == ["a"]
     text = zstandard.ZstdDecompressor().decompress(frame)
-    for stored in (frame + b"\0", frame + zstandard.ZstdCompressor().compress(b" "),
-                   zstandard.ZstdCompressor(write_content_size=True).compress(text[:10])
-                   + zstandard.ZstdCompressor(write_content_size=True).compress(text[10:])):
-        with pytest.raises(BvaeFormatError, match="after the compressed header|not valid"):
-            parse_bvae(raw_file(stored, payload, flags=1))
+    for block in (frame + b"\0", frame + zstandard.ZstdCompressor().compress(b" "),
+                  zstandard.ZstdCompressor(write_content_size=True).compress(text[:10])
+                  + zstandard.ZstdCompressor(write_content_size=True).compress(text[10:])):
+        with pytest.raises(BvaeFormatError, match="after the compressed metadata|not valid"):
+            parse_bvae(raw_file(index + block, payload, flags=1))
 
 
 # --------------------------------------------------------------------------- 8: linear work at the record limit
@@ -348,7 +349,8 @@ def test_existing_files_still_read() -> None:
     from brdfcodec.examples import example_library
 
     library = parse_bvae(Path(example_library()).read_bytes())
-    assert (library.header.major, library.header.minor) == (1, 0) and len(library.records) == 90
+    assert (library.header.major, library.header.minor) == (2, 0) and len(library.records) == 90
+    assert all("relae" in r.meta for r in library.records)  # the example keeps its provenance
     assert os.fspath(example_library()).endswith(".bvae")
 
 

@@ -222,6 +222,7 @@ def _format_text(summary: dict[str, Any]) -> str:
         decoder = summary["decoder"]
         where = decoder["installed_at"] or "NOT INSTALLED: register the model folder that made this file"
         created = f" ({summary['created_by']})" if summary["created_by"] else ""
+        rest = summary["header_bytes"] - summary["names_bytes"] - summary["index_bytes"]
         metadata = "per-record metadata" if summary["metadata"] else "no metadata (names and records only)"
         lines += [
             f"  kind            .bvae latent file, format {summary['format_version']}{created}",
@@ -232,7 +233,7 @@ def _format_text(summary: dict[str, Any]) -> str:
             f"  shared basis    {summary['basis_sha256'] or '- (no basis layer)'}",
             f"  size            {summary['bytes']:,} bytes ({summary['bytes_per_material']:.1f} per material): "
             f"payloads {summary['payload_bytes']:,}, names {summary['names_bytes']:,}, index "
-            f"{summary['index_bytes']:,}, rest of the header {summary['header_bytes'] - summary['names_bytes'] - summary['index_bytes']:,}",
+            f"{summary['index_bytes']:,}, rest of the header {rest:,}",
             f"  records         {len(summary['materials'])} in {summary['record_forms']} "
             f"form{'s' if summary['record_forms'] != 1 else ''}; {metadata}"
             f"{' (zstd)' if summary['header_compressed'] else ''}",
