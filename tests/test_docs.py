@@ -3,7 +3,9 @@ navigation, and the generated command-line reference covers every sub-command an
 
 Each page's ```python blocks run in order, in an empty folder, in one namespace per page (as a reader
 would paste them). A page whose examples need an optional package says so on a line of its own:
-``<!-- docs-test: requires mitsuba -->``; the test then skips when the package is missing.
+``<!-- docs-test: requires mitsuba -->``; the test then skips when the package is missing. A page may
+also name the files its examples write, ``<!-- docs-test: creates edits.bvae gold.png -->``, and the
+test checks they were written.
 """
 
 from __future__ import annotations
@@ -19,6 +21,7 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 DOCS = ROOT / "docs"
 _REQUIRES = re.compile(r"^<!-- docs-test: requires ([\w.]+) -->$", re.M)
+_CREATES = re.compile(r"^<!-- docs-test: creates ([^>]+) -->$", re.M)
 
 
 def _pages() -> list[Path]:
@@ -56,6 +59,9 @@ def test_page_python_examples_run_as_written(page: Path, tmp_path: Path, monkeyp
         warnings.simplefilter("error", RuntimeWarning)
         for index, block in enumerate(python_blocks(page)):
             exec(compile(block, f"{page.relative_to(ROOT)} python block {index + 1}", "exec"), namespace)  # noqa: S102
+    for names in _CREATES.findall(page.read_text(encoding="utf-8")):
+        for name in names.split():
+            assert (tmp_path / name).is_file(), f"{page.name}'s examples did not write {name}"
 
 
 def test_every_page_is_in_the_navigation() -> None:

@@ -1,4 +1,8 @@
-"""Every Python snippet of the README runs as written, in order, in an empty folder."""
+"""Every Python snippet of the README runs as written, in order, in an empty folder.
+
+The documentation site's pages are tested the same way (tests/test_docs.py); .ci/run runs the README's
+first code block's two commands.
+"""
 
 from __future__ import annotations
 
@@ -18,7 +22,7 @@ def python_snippets() -> list[str]:
 
 def test_readme_has_the_snippets_it_documents() -> None:
     snippets = python_snippets()
-    assert len(snippets) >= 3
+    assert len(snippets) >= 1
     assert "wi = " in snippets[0] and "wo = " in snippets[0], "wi and wo are defined where they are first used"
 
 
@@ -32,6 +36,4 @@ def test_readme_python_snippets_run_as_written(tmp_path: Path, monkeypatch: pyte
             code = compile(snippet, f"README.md python snippet {index + 1}", "exec")
             exec(code, namespace)  # noqa: S102 - the README is the code under test
     assert np.asarray(namespace["rgb"]).shape == (2, 3) and np.isfinite(namespace["rgb"]).all()
-    assert (tmp_path / "edits.bvae").is_file() and (tmp_path / "gold.png").is_file()
-    # The editing snippet no longer touches a closed library (it used to work only while cached).
-    assert "library.record(" not in python_snippets()[1]
+    assert (tmp_path / "lib.bvae").is_file()
