@@ -55,7 +55,9 @@ def test_rows_compare_file_bytes_with_pca_of_the_same_training_materials(fold_mo
     # Plain PCA of 2/3 of 14 materials has at most 8 components: k is capped at the basis' rank.
     plain = [row for row in rows if row["point"] == "pca-int8" and row["budget_bytes"] == 64]
     assert plain[0]["coefficients"] <= 8
-    assert main(["bench", "table", str(tmp_path / "rows.jsonl"), "-o", str(tmp_path / "table.md")]) == 0
+    assert main(["bench", "table", str(tmp_path / "rows.jsonl"), "-o", str(tmp_path / "table.md"),
+                 "--plot", str(tmp_path / "rd.png")]) == 0
+    assert (tmp_path / "rd.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     table = (tmp_path / "table.md").read_text()
     assert "**cv, held-out analytic**" in table and "| 64 B |" in table
 
@@ -70,3 +72,24 @@ def test_config_errors_name_the_file(tmp_path: Path) -> None:
     path.write_text(json.dumps({"dataset": "x.h5", "experiments": [], "bugdets": [1]}))
     with pytest.raises(ValueError, match="unknown keys \\['bugdets'\\]"):
         load_config(path)
+
+
+def _row(group: str, point: str, budget: int, errors: list[float], size: float) -> dict:
+    return {"schema": "brdfcodec.rows/1", "group": group, "family": "merl", "point": point, "budget_bytes": budget,
+            "bytes_per_material": size, "per_material_mapped": errors}
+
+
+def test_summary_pools_the_folds_of_a_group_and_takes_the_best_pca(tmp_path: Path) -> None:
+    from brdfcodec.report.rows import rd_plot, summary_markdown
+
+    rows = [_row("cv", "bvae", 16, [0.01, 0.03], 15.0), _row("cv", "bvae", 16, [0.05], 16.0),  # pooled 0.03
+            _row("cv", "pca-int8", 16, [0.02, 0.04], 16), _row("cv", "pca-int8", 16, [0.06], 16),  # pooled 0.04
+            _row("cv", "pca-perm-int8", 16, [0.035, 0.035], 16), _row("cv", "pca-perm-int8", 16, [0.035], 16)]
+    table = summary_markdown(rows)
+    assert "| 16 B | 0.0300 | 15.3 | 0.0350 | pca-perm-int8 | 16 | yes |" in table, table
+    # Worse than the best PCA, or over the budget: "no".
+    rows[1]["per_material_mapped"] = [0.09]
+    assert "| 16 B | 0.0433 |" in summary_markdown(rows) and "| no |" in summary_markdown(rows)
+    rows[1]["per_material_mapped"], rows[1]["bytes_per_material"] = [0.05], 40.0
+    assert "| no |" in summary_markdown(rows)
+    assert rd_plot(rows, tmp_path / "p.png").read_bytes()[:4] == b"\x89PNG"

@@ -58,6 +58,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
                            description="Summary tables (Markdown) of rows written by `bvae bench rd`.")
     table.add_argument("rows", type=Path, nargs="+", help="row files (.jsonl)")
     table.add_argument("-o", "--output", type=Path, help="also write the table to this Markdown file")
+    table.add_argument("--plot", type=Path, help="also draw the rate–distortion panels (PNG), one per family")
     table.set_defaults(handler=run_table)
 
 
@@ -79,10 +80,12 @@ def run_rd(args: argparse.Namespace) -> int:
 def run_table(args: argparse.Namespace) -> int:
     """Print (and optionally write) the summary table of row files."""
     from brdfcodec.atomic import atomic_output
-    from brdfcodec.report.rows import read_rows, summary_markdown
+    from brdfcodec.report.rows import rd_plot, read_rows, summary_markdown
 
     rows = [row for path in args.rows for row in read_rows(path)]
     text = summary_markdown(rows)
+    if args.plot is not None:
+        rd_plot(rows, args.plot)
     if args.output is not None:
         with atomic_output(args.output, overwrite=True) as tmp:
             Path(tmp).write_text(text + "\n", encoding="utf-8")

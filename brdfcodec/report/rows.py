@@ -23,7 +23,7 @@ import numpy as np
 from brdfcodec.atomic import atomic_output
 from brdfcodec.version import __version__
 
-__all__ = ["SCHEMA", "current_commit", "read_rows", "stamp", "summary_markdown", "write_rows"]
+__all__ = ["SCHEMA", "current_commit", "rd_plot", "read_rows", "stamp", "summary_markdown", "write_rows"]
 
 #: Schema name and version of a result row.
 SCHEMA = "brdfcodec.rows/1"
@@ -112,3 +112,40 @@ def summary_markdown(rows: Sequence[dict[str, Any]]) -> str:
                          f"{pca[1][1]:.0f} | {'yes' if ours[0] < pca[1][0] and ours[1] <= budget else 'no'} |")
         lines.append("")
     return "\n".join(lines)
+
+
+def rd_plot(rows: Sequence[dict[str, Any]], path: str | os.PathLike[str]) -> Path:
+    """Rate–distortion panels, one per group and family: brdfcodec against the best PCA envelope.
+
+    x: bytes per material (log scale, file bytes for brdfcodec, payload for PCA); y: pooled mean mapped RelAE,
+    on the range of the plotted points only. Written atomically as PNG.
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    panels = sorted({(row["group"], row["family"]) for row in rows})
+    figure, axes = plt.subplots(1, len(panels), figsize=(4.2 * len(panels), 3.6), squeeze=False)
+    for axis, (group, family) in zip(axes[0], panels, strict=True):
+        chosen = [row for row in rows if row["group"] == group and row["family"] == family]
+        budgets = sorted({row["budget_bytes"] for row in chosen})
+        ours = [_pooled([r for r in chosen if r["point"] == "bvae" and r["budget_bytes"] == b]) for b in budgets]
+        envelope = []
+        for budget in budgets:
+            at = [r for r in chosen if r["budget_bytes"] == budget and r["point"] != "bvae"]
+            envelope.append(min((_pooled([r for r in at if r["point"] == p]) for p in {r["point"] for r in at}),
+                                key=lambda pooled: pooled[0]))
+        axis.plot([o[1] for o in ours], [o[0] for o in ours], "o-", label="brdfcodec (file bytes)")
+        axis.plot([e[1] for e in envelope], [e[0] for e in envelope], "s--", label="best PCA, same materials")
+        axis.set_xscale("log", base=2)
+        axis.set_title(f"{group}: held-out {family}", fontsize=10)
+        axis.set_xlabel("bytes per material")
+        axis.grid(True, which="both", alpha=0.3)
+    axes[0][0].set_ylabel("mean mapped RelAE")
+    axes[0][0].legend(fontsize=8)
+    figure.tight_layout()
+    with atomic_output(path, overwrite=True) as tmp:
+        figure.savefig(tmp, dpi=110, format="png")
+    plt.close(figure)
+    return Path(path)
