@@ -47,6 +47,7 @@ TARGETS = {
     # 16-128 B: a memory-bound pass over the basis' factors after the network)
     "decode-layered-64B-projected": 1.5,
     "encode-effort": 4.0,  # read + encode at the default effort (1: refinement) vs effort 0 (issue 14)
+    "rgl-write": 12.0,  # one material as an RGL .bsdf (parameterisation + tensor file) vs as a MERL .binary (issue 38)
 }
 
 #: Largest acceptable candidate median, in seconds, on 2 CPU cores (issue 4 targets).
@@ -57,6 +58,7 @@ ABSOLUTE_TARGETS = {
     "rgl-tabulate": 10.0,  # one RGL file on the MERL grid (issue 12)
     "studio-slider-to-paint": 0.100,  # median slider input → painted 256² preview (issue 10)
     "encode-effort": 2.0,  # `bvae compress` of one MERL file at the default effort, without process start (issue 14)
+    "rgl-write": 3.0,  # one material written as an RGL .bsdf file: "at most a few seconds" (issue 38)
 }
 
 
