@@ -11,6 +11,7 @@ with L2.
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Callable
 from typing import Final
 
@@ -136,6 +137,21 @@ def _mapped_l1(decoded: torch.Tensor, target: torch.Tensor, weight: torch.Tensor
     return ((decoded - target) * weight).abs().sum(1)
 
 
+def _read_only_tensor(values: npt.ArrayLike, device: torch.device, dtype: torch.dtype) -> torch.Tensor:
+    """A tensor of basis vectors that the fit only reads: the array's own memory when it is float32 on the CPU.
+
+    The vectors are the shared basis' cached float32 copy, read-only and large (K × E: over 100 MB for the
+    shipped basis); copying them for every fit doubled their memory at large budgets. Nothing here writes to
+    them (they hold no gradient), so torch may use them in place.
+    """
+    array = np.asarray(values)
+    if array.dtype == np.float32 and device.type == "cpu" and dtype == torch.float32 and array.flags.c_contiguous:
+        with warnings.catch_warnings():
+            warnings.filterwarnings("ignore", message="The given NumPy array is not writable")
+            return torch.from_numpy(array)
+    return torch.as_tensor(np.array(array, dtype=np.float32), device=device, dtype=dtype)
+
+
 def fit_basis_coefficients(
     decoder: torch.nn.Module,
     codes: npt.ArrayLike,
@@ -198,7 +214,7 @@ def fit_basis_coefficients(
     start = torch.as_tensor(np.array(codes, dtype=np.float32, ndmin=2), device=device, dtype=dtype)
     target = torch.as_tensor(np.asarray(inputs, dtype=np.float32), device=device, dtype=dtype).flatten(1)
     weight = torch.as_tensor(np.asarray(masks, dtype=np.float32), device=device, dtype=dtype).flatten(1)
-    basis = torch.as_tensor(np.array(components, dtype=np.float32), device=device, dtype=dtype)  # a writable copy
+    basis = _read_only_tensor(components, device, dtype)
     where = torch.as_tensor(np.asarray(entries, dtype=np.int64), device=device)
     grads = [p.requires_grad for p in decoder.parameters()]
     for p in decoder.parameters():
@@ -206,7 +222,7 @@ def fit_basis_coefficients(
 
     fixed_base: torch.Tensor | None = None
     if projection is not None:
-        p_vectors = torch.as_tensor(np.array(projection[0], dtype=np.float32), device=device, dtype=dtype)
+        p_vectors = _read_only_tensor(projection[0], device, dtype)
         p_centre = torch.as_tensor(np.array(projection[1], dtype=np.float32), device=device, dtype=dtype)
 
     def base_of(z: torch.Tensor) -> torch.Tensor:

@@ -1,0 +1,39 @@
+"""Peak memory of encoding one material at a large size budget (issue 37): ``bvae compress --bytes 262144``.
+
+The table is 35 MB; the encoder, the decoder and the shared basis' dense float32 vectors (which the basis fit
+reads again and again) are most of the rest. The basis fit used to copy those vectors (and the projection's) for
+every fit; it now reads them in place. Run with ``python -m pytest benchmarks/test_bench_memory.py -s``: the
+child process's peak resident memory is printed and held below :data:`PEAK_LIMIT_MB` (it is measured, not timed).
+"""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+#: Largest accepted peak resident memory of the child process, in MB (the bound the fix keeps; before it the
+#: peak was well above it).
+PEAK_LIMIT_MB = 720
+
+_CHILD = """
+import resource, sys
+from brdfcodec.cli import main
+code = main(sys.argv[1:])
+print("peak-rss-kb", resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)
+sys.exit(code)
+"""
+
+
+def peak_rss_mb(argv: list[str]) -> float:
+    """Peak resident memory, in MB, of ``bvae ARGV`` run in a fresh Python process."""
+    done = subprocess.run([sys.executable, "-c", _CHILD, *argv], capture_output=True, text=True, check=True)
+    line = next(line for line in done.stdout.splitlines() if line.startswith("peak-rss-kb"))
+    return int(line.split()[1]) / 1024
+
+
+def test_peak_memory_of_a_large_budget_encode(merl_file: Path, tmp_path: Path) -> None:
+    peak = peak_rss_mb(["compress", str(merl_file), "-o", str(tmp_path / "big.bvae"), "--bytes", "262144"])
+    print(f"\nbvae compress --bytes 262144: peak resident memory {peak:.0f} MB")
+    assert (tmp_path / "big.bvae").stat().st_size <= 262144 + 200
+    assert peak < PEAK_LIMIT_MB, f"peak {peak:.0f} MB"
