@@ -316,3 +316,26 @@ def test_write_table_and_cli_write_bsdf(mi: object, analytic_tables: dict[str, M
     write_merl(merl, analytic_tables["red-plastic"])
     assert export_rgl(merl, tmp_path, resolution=SMALL) == [tmp_path / "red.bsdf"]
     assert TABLE_SHAPE == (3, 90, 90, 180)
+
+
+def test_bvae_decompress_writes_bsdf_files(mi: object, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """``bvae decompress`` with a .bsdf output, one material or a folder; bad options leave nothing behind."""
+    from brdfcodec.cli import main
+    from brdfcodec.examples import example_library
+
+    library = str(example_library())
+    small = ["--bsdf-theta-i", "4", "--bsdf-grid", "8", "--bsdf-vndf", "16"]
+    target = tmp_path / "chrome.bsdf"
+    assert main(["decompress", library, "--material", "chrome", "-o", str(target), *small]) == 0
+    header = read_rgl_header(target)
+    assert header.description.startswith("chrome") and header.theta_i_count == 4
+    assert header.fields["rgb"].shape == (1, 4, 3, 8, 8) and header.fields["vndf"].shape == (1, 4, 16, 16)
+    folder = tmp_path / "lib"
+    assert main(["decompress", library, "--material", "chrome", "--material", "red-fabric", "-o", str(folder),
+                 "--format", "bsdf", *small]) == 0
+    assert sorted(p.name for p in folder.iterdir()) == ["chrome.bsdf", "red-fabric.bsdf"]
+    for bad in (["--phi-d", "0-3"], ["--bsdf-grid", "1"]):
+        assert main(["decompress", library, "--material", "chrome", "-o", str(tmp_path / "bad.bsdf"), *bad]) != 0
+        assert "bsdf" in capsys.readouterr().err
+    assert not (tmp_path / "bad.bsdf").exists()
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]  # no temporary file left
