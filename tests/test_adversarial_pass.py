@@ -21,11 +21,13 @@ import pytest
 
 from brdfcodec.cli import main
 from brdfcodec.merl import write_merl
+from brdfcodec.models.manifest import load_manifest
+from brdfcodec.models.registry import default_model_folder
 
 ROOT = Path(__file__).resolve().parents[1]
 VECTORS = ROOT / "spec" / "vectors"
 MANIFEST = json.loads((VECTORS / "manifest.json").read_text(encoding="utf-8"))
-SHIPPED = "e1e3ed1e24dc5a8746abbfb9194725e1a9d02808c2e81125c64f3d9e37b39491"
+SHIPPED = load_manifest(default_model_folder()).decoder_sha256
 
 
 def run(capsys: pytest.CaptureFixture[str], *argv: str) -> tuple[int, str, str]:
@@ -45,20 +47,12 @@ def hostile_library(folder: Path, names: list[str], meta: dict | None = None) ->
         import make_vectors as mv
     finally:
         sys.path.remove(str(VECTORS))
-    entries, payloads = [], []
-    for name in names:
-        entry, payload = mv.latent(name, [0.0] * 8, [1.0] * 8)
-        if meta is not None:
-            entry["meta"] = meta
-        entries.append(entry)
-        payloads.append(payload)
-    header = mv.base_header([], dim=8)
-    header["decoder"] = {"name": "bvae-nbrdf-proxy-small-v1", "sha256": SHIPPED}
-    stored, payload = mv.plain(list(zip(entries, payloads, strict=True)))
-    text = json.loads(stored)
-    text["decoder"], text["latent_dim"] = header["decoder"], 8
+    payload = np.array([0.0] * 8 + [1.0] * 8, dtype="<f4").tobytes() * len(names)
+    descriptors = [mv.descriptor(name, 0) for name in names]
+    metadata = b"" if meta is None else json.dumps({"records": {name: meta for name in names}}).encode()
+    stored = mv.header([mv.latent_form()], descriptors, payload, dim=8, decoder=SHIPPED, metadata=metadata)
     path = folder / "hostile.bvae"
-    path.write_bytes(mv.assemble(mv.canonical(text), payload))
+    path.write_bytes(mv.assemble(stored, payload))
     return path
 
 

@@ -3,20 +3,25 @@
 from __future__ import annotations
 
 import dataclasses
-import json
-import struct
-import zlib
 
 import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from brdfcodec.bvae_format import FORMAT_MINOR, DecoderReference, LatentRecord, encode_bvae, parse_bvae
+from brdfcodec.bvae_format import (
+    FORMAT_MAJOR,
+    FORMAT_MINOR,
+    DecoderReference,
+    LatentRecord,
+    encode_bvae,
+    parse_bvae,
+)
 from brdfcodec.conventions import NETWORK_INPUT_SHAPE
 from brdfcodec.errors import BvaeFormatError, RateTargetError, UnsupportedVersionError
 from brdfcodec.layers.detail import DetailLayer, decode_detail, encode_detail
 from brdfcodec.layers.record import LayeredRecord
+from bvae_bytes import bytes_writer
 
 DECODER = DecoderReference("ab" * 32, "test-decoder")
 
@@ -68,48 +73,33 @@ def test_layered_records_round_trip_with_plain_ones(dtype: str) -> None:
     record = layered()
     data = encode_bvae([plain, record], DECODER, latent_dtype=dtype)  # type: ignore[arg-type]
     library = parse_bvae(data)
-    assert library.header.minor == FORMAT_MINOR == 6
+    assert (library.header.major, library.header.minor) == (FORMAT_MAJOR, FORMAT_MINOR) == (2, 0)
     back = library.record("layered-0")
     assert isinstance(back, LayeredRecord) and back.detail == record.detail
     assert library.header.entries[1].length == 2 * 8 * (2 if dtype == "float16" else 4) + record.detail.nbytes
     assert type(library.record("plain")) is LatentRecord
 
 
-def _rewrap(data: bytes, edit) -> bytes:
-    magic, major, minor, flags, length, _ = struct.unpack_from("<8sHHIII", data, 0)
-    header = edit(json.loads(data[24 : 24 + length]))
-    stored = json.dumps(header).encode()
-    head = struct.pack("<8sHHII", magic, major, minor, flags, len(stored))
-    return head + struct.pack("<I", zlib.crc32(head + stored)) + stored + data[24 + length :]
-
-
 def test_unknown_layers_and_transforms_are_unsupported_and_bad_fields_malformed() -> None:
-    data = encode_bvae([layered()], DECODER, compress_header=False)
+    record = layered()
+    frame = record.detail.data
+    payload = np.concatenate([record.mu, record.sigma]).astype("<f4").tobytes() + frame
+    writer = bytes_writer
 
-    def with_detail(**changes):
-        def edit(header: dict) -> dict:
-            header["records"][0]["layers"]["detail"].update(changes)
-            return header
-        return edit
+    def layered_file(form: bytes, step: float = 0.05, length: int = len(frame)) -> bytes:
+        stored = writer.header([form], [writer.descriptor("l", 0, step=step, detail_length=length)], payload, dim=8)
+        return writer.assemble(stored, payload)
 
-    def extra_layer(header: dict) -> dict:
-        header["records"][0]["layers"]["hologram"] = {"k": 4}
-        return header
-
-    with pytest.raises(UnsupportedVersionError, match="hologram"):
-        parse_bvae(_rewrap(data, extra_layer))
-    with pytest.raises(UnsupportedVersionError, match="wavelet"):
-        parse_bvae(_rewrap(data, with_detail(transform="wavelet")))
-    for bad in ({"step": -1.0}, {"step": "x"}, {"dtype": "int8"}, {"length": 0}, {"length": True}):
+    assert parse_bvae(layered_file(writer.layered_form(detail=0))).records[0].detail == record.detail
+    with pytest.raises(UnsupportedVersionError, match="layers"):
+        parse_bvae(layered_file(writer.layered_form(detail=0, layer_bits=2 | 8)))  # an unknown layer
+    with pytest.raises(UnsupportedVersionError, match="detail form 7"):
+        parse_bvae(layered_file(writer.layered_form(detail=7)))  # an unknown transform or coefficient type
+    with pytest.raises(BvaeFormatError, match="neither"):
+        parse_bvae(layered_file(writer.layered_form(layer_bits=0)))
+    for bad in ({"step": -1.0}, {"step": float("nan")}, {"step": 101.0}, {"length": 0}):
         with pytest.raises(BvaeFormatError):
-            parse_bvae(_rewrap(data, with_detail(**bad)))
-
-    def no_layers(header: dict) -> dict:
-        del header["records"][0]["layers"]
-        return header
-
-    with pytest.raises(BvaeFormatError, match="layers"):
-        parse_bvae(_rewrap(data, no_layers))
+            parse_bvae(layered_file(writer.layered_form(detail=0), **bad))
 
 
 def test_a_layer_that_is_not_the_declared_frame_is_refused() -> None:
@@ -174,13 +164,14 @@ def test_rate_control_meets_budgets_and_targets(analytic_tables) -> None:
     for budget in (64, 2000, 20000):
         encoder = BrdfEncoder(effort=0, bytes=budget)
         record = encoder.encode(brdf, name="m")
-        stored = parse_bvae(encode_bvae([record], encoder.reference)).header.entries[0].length
-        assert stored == record.meta["rate"]["payload_bytes"] <= budget
+        entry = parse_bvae(encode_bvae([record], encoder.reference)).header.entries[0]
+        assert entry.length == record.meta["rate"]["payload_bytes"]
+        assert entry.length + entry.descriptor_bytes == record.meta["rate"]["record_bytes"] <= budget
     encoder = BrdfEncoder(effort=0, max_relae=0.02)
     record = measure(encoder.encode(brdf, name="m"), encoder.decoder, brdf)
     assert record.meta["relae"]["mapped"] <= 0.02
     with pytest.raises(RateTargetError):
-        BrdfEncoder(effort=0, bytes=11).encode(brdf)  # below the smallest layered record (12 B)
+        BrdfEncoder(effort=0, bytes=11).encode(brdf)  # below the smallest layered record (15 B with a short name)
 
 
 def test_refinement_never_worsens_and_edits_drop_the_layers(analytic_tables) -> None:
@@ -230,12 +221,12 @@ def test_cli_rate_control_flags(red_plastic_file, tmp_path, capsys) -> None:
 
     out = tmp_path / "m.bvae"
     assert main(["compress", str(red_plastic_file), "-o", str(out), "--bytes", "3000", "--float16",
-                 "--effort", "0"]) == 0
+                 "--effort", "0", "--provenance"]) == 0
     record = read_bvae(out).records[0]
-    assert isinstance(record, LayeredRecord) and record.meta["rate"]["payload_bytes"] <= 3000
+    assert isinstance(record, LayeredRecord) and record.meta["rate"]["record_bytes"] <= 3000
     assert record.meta["effort"] == 0
     assert main(["compress", str(red_plastic_file), "-o", str(out), "--force", "--max-relae", "0.03",
-                 "--metric", "linear", "--effort", "0"]) == 0
+                 "--metric", "linear", "--effort", "0", "--provenance"]) == 0
     assert read_bvae(out).records[0].meta["relae"]["linear"] <= 0.03
     capsys.readouterr()
     bad = tmp_path / "bad.bvae"
@@ -391,14 +382,15 @@ def test_an_error_target_searches_records_without_detail_first(all_coefficients_
 
 
 @pytest.mark.parametrize(("budget", "itemsize", "mu_max", "storage", "count"), [
-    (12, 4, 1.0, "int8-fixed", 1),  # the smallest layered record: 9 B of compact base, the step, one coefficient
-    (14, 4, 5.0, "int8", 1),  # μ past the fixed grid's ±3.97: its own step, 2 bytes more
-    (32, 2, 1.0, "int8-fixed", 21),
-    (32, 2, 5.0, "int8", 19),
-    (64, 4, 1.0, "int8-fixed", 53),  # compact whatever the latent dtype
-    (88, 4, 1.0, "int8-fixed", 75),  # 75 coefficients only fit beside a compact base (40 + 2 + 75 = 117 B otherwise)
-    (117, 4, 1.0, None, 75),  # all 75 fit beside μ in float32 and σ bytes: the base keeps its full precision
-    (101, 2, 5.0, None, 75),
+    # Each budget counts the record's 3-byte descriptor (name length, form, coefficient count) beside its payload.
+    (15, 4, 1.0, "int8-fixed", 1),  # the smallest layered record: 9 B of compact base, the step, one coefficient
+    (17, 4, 5.0, "int8", 1),  # μ past the fixed grid's ±3.97: its own step, 2 bytes more
+    (32, 2, 1.0, "int8-fixed", 18),
+    (32, 2, 5.0, "int8", 16),
+    (64, 4, 1.0, "int8-fixed", 50),  # compact whatever the latent dtype
+    (91, 4, 1.0, "int8-fixed", 75),  # 75 coefficients only fit beside a compact base (40 + 2 + 75 + 3 = 120 B else)
+    (120, 4, 1.0, None, 75),  # all 75 fit beside μ in float32 and σ bytes: the base keeps its full precision
+    (104, 2, 5.0, None, 75),
 ])
 def test_a_budget_too_small_for_every_coefficient_stores_a_compact_base(
     budget: int, itemsize: int, mu_max: float, storage: str | None, count: int
@@ -425,7 +417,8 @@ def test_a_budget_too_small_for_every_coefficient_stores_a_compact_base(
     # One basis size only: beside 32 coefficients none of these budgets has room for a detail layer (49 B at least).
     assert set(fitted) == {(count, storage)}
     stored = parse_bvae(encode_bvae([record], DECODER, latent_dtype="float32" if itemsize == 4 else "float16"))
-    assert stored.header.entries[0].length == result.payload_bytes <= budget
+    entry = stored.header.entries[0]
+    assert entry.length + entry.descriptor_bytes == result.payload_bytes <= budget
     if compact:  # a compact μ holds what is stored
         assert stored.records[0].mu.tolist() == record.mu.tolist()
     smallest = budget if count == 1 else None
