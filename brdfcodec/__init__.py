@@ -17,6 +17,7 @@ headers stays fast.
 
 from typing import Any
 
+from brdfcodec.blas_threads import get_num_threads, set_num_threads
 from brdfcodec.bvae_format import (
     BvaeReader,
     DecoderReference,
@@ -112,6 +113,7 @@ __all__ = [  # the codec's names (loaded on first use, above) and the light core
     "cosine_weighted_rmse",
     "error_report",
     "genuine_merl_name",
+    "get_num_threads",
     "interpolate_slices",
     "lookup",
     "map_values",
@@ -124,6 +126,7 @@ __all__ = [  # the codec's names (loaded on first use, above) and the light core
     "relae_linear",
     "relae_mapped",
     "select_kept_slices",
+    "set_num_threads",
     "stored_from_reflectance",
     "table_from_network_output",
     "unmap_values",

@@ -40,7 +40,7 @@ import numpy.typing as npt
 import torch
 
 from brdfcodec.atomic import atomic_output, check_output_path
-from brdfcodec.blas_threads import single_blas_thread
+from brdfcodec.blas_threads import codec_threads
 from brdfcodec.bvae_format import (
     BvaeHeader,
     BvaeReader,
@@ -398,7 +398,7 @@ class BrdfDecoder:
         if batch_size < 1:
             raise ValueError(f"batch_size must be at least 1, got {batch_size}")
         outputs = []
-        with torch.inference_mode(), _EvalMode(self.network):
+        with codec_threads(), torch.inference_mode(), _EvalMode(self.network):
             for start in range(0, len(batch), batch_size):
                 z = torch.from_numpy(batch[start : start + batch_size]).to(self.device, self.dtype)
                 out = self.network(z) if channels is None else self.network.forward_channels(z, channels)
@@ -619,7 +619,7 @@ class BrdfDecoder:
 
     def mapped_record(self, record: Record) -> npt.NDArray[np.float32]:
         """Mapped slices of a record; a graft record's green block is the second code's red block."""
-        with single_blas_thread():
+        with codec_threads():
             if isinstance(record, GraftRecord):
                 # One code at a time, so M1 is bit-identical to decoding V1 as a plain record.
                 out = self.decode_mapped(record.mu)
@@ -652,7 +652,7 @@ class BrdfDecoder:
         ndarray of float32, shape (3, 90, 90, K)
         """
         self._check_record(record)
-        with single_blas_thread():
+        with codec_threads():
             if phi_d_bins is None:
                 return _apply_mask(table_from_mapped(self.mapped_record(record)), None, masked)
             bins = validate_phi_d_bins(phi_d_bins)
@@ -676,7 +676,7 @@ class BrdfDecoder:
             if latent:
                 batch = iter(self.decode_mapped(np.stack([record.mu for record in latent]), batch_size=batch_size))
             for record in chunk:  # grafts need two codes each: decoded on their own
-                with single_blas_thread():
+                with codec_threads():
                     if isinstance(record, LatentRecord) and not _projected_vectors(record):
                         mapped = self._with_layers(record, next(batch))
                     else:
@@ -829,7 +829,8 @@ class BrdfEncoder:
             return records
         from brdfcodec.layers.encoding import layer_records
 
-        return layer_records(records, self.decoder, inputs, masks, sources, self.options)
+        with codec_threads():  # refinement and rate control: thousands of small torch operations
+            return layer_records(records, self.decoder, inputs, masks, sources, self.options)
 
     def posterior_from_inputs(
         self, inputs: npt.ArrayLike, *, batch_size: int = 8, log_variance: bool = False
@@ -857,7 +858,7 @@ class BrdfEncoder:
         if batch_size < 1:
             raise ValueError(f"batch_size must be at least 1, got {batch_size}")
         mus, spreads = [], []
-        with torch.inference_mode(), _EvalMode(self.network):
+        with codec_threads(), torch.inference_mode(), _EvalMode(self.network):
             for start in range(0, len(batch), batch_size):
                 x = torch.from_numpy(np.ascontiguousarray(batch[start : start + batch_size])).to(self.device)
                 mu, logvar = self.network(x)

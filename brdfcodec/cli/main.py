@@ -32,6 +32,7 @@ import warnings
 from collections.abc import Iterator, Sequence
 
 from brdfcodec.atomic import remove_unfinished_outputs
+from brdfcodec.blas_threads import MAX_DEFAULT_THREADS, default_thread_count
 from brdfcodec.cli import (
     analytic_command,
     bench_command,
@@ -50,7 +51,7 @@ from brdfcodec.cli.usage import UsageError
 from brdfcodec.errors import BrdfcodecError
 from brdfcodec.version import __version__
 
-__all__ = ["build_parser", "configure_threads", "main"]
+__all__ = ["MAX_DEFAULT_THREADS", "build_parser", "configure_threads", "default_thread_count", "main"]
 
 EXIT_OK = 0
 EXIT_ERROR = 1
@@ -59,18 +60,9 @@ EXIT_INTERNAL = 3
 EXIT_INTERRUPTED = 130
 EXIT_BROKEN_PIPE = 128 + 13
 EXIT_TERMINATED = 128 + 15
-#: Most threads ``bvae`` gives torch by default.
-MAX_DEFAULT_THREADS = 8
-
 
 class Terminated(BaseException):
     """SIGTERM arrived: unwinds like ``KeyboardInterrupt`` so that partial outputs are removed."""
-
-
-def default_thread_count(cpu_count: int | None = None) -> int:
-    """Threads for one ``bvae`` process: half the cores, at least 1, at most :data:`MAX_DEFAULT_THREADS`."""
-    cores = cpu_count if cpu_count is not None else (os.cpu_count() or 1)
-    return max(1, min(MAX_DEFAULT_THREADS, cores // 2))
 
 
 def configure_threads(environ: dict[str, str] | None = None) -> int:
