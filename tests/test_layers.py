@@ -426,16 +426,3 @@ def test_a_budget_too_small_for_every_coefficient_stores_a_compact_base(
         with pytest.raises(RateTargetError, match=f"{smallest - 1} bytes is below the base record's {smallest} bytes"):
             encode_layers(base, np.zeros_like(target), target, masks, bytes_budget=smallest - 1, basis_fit=fit,
                           basis_count=75)
-
-
-def test_fewer_coefficients_are_kept_within_the_decode_tolerance() -> None:
-    from brdfcodec.layers.rate import DECODE_TOLERANCE, fewest_coefficients_within_tolerance
-
-    assert DECODE_TOLERANCE == 0.02
-    close = {(75, 0.1): 100.0, (32, 0.12): 101.5, (0, None): 300.0}
-    assert fewest_coefficients_within_tolerance(close) == (32, 0.12)
-    far = {(75, 0.1): 100.0, (32, 0.12): 102.5, (0, None): 300.0}
-    assert fewest_coefficients_within_tolerance(far) == (75, 0.1)
-    same_count = {(32, 0.1): 100.0, (32, 0.2): 101.0}
-    assert fewest_coefficients_within_tolerance(same_count) == (32, 0.1)  # then the lower error
-    assert fewest_coefficients_within_tolerance({(0, None): 0.0, (5, None): 0.0}) == (0, None)  # a lossless base

@@ -9,10 +9,14 @@ halving every two rungs):
 - ``bytes_budget=N``: as many coefficients as fit (up to the basis' size
   K) without a detail layer, and at most :data:`DETAIL_BASIS_COUNT` under
   one, with the finest rung whose record payload (μ, σ and the layers) fits
-  in N bytes; of those records and the base alone, the one with the fewest
-  coefficients among those within :data:`DECODE_TOLERANCE` (2 %) of the
-  lowest kept-slice mapped L1 error — the largest quality within N bytes, up
-  to 2 % traded for decode time. The cap bounds every layered record's
+  in N bytes; of those records, the base alone and (past the budgets that
+  store the base compact) the compact base with all K coefficients, the one
+  with the lowest kept-slice mapped L1 error (fewer coefficients on a tie).
+  No error is traded for decode time, so that a larger budget never returns
+  a worse record than a smaller one (the base alone, and the compact base's
+  best, stay candidates of every budget that holds them; more coefficients
+  fit no worse than fewer: ``tests/test_rate_monotone.py``). The cap bounds
+  every layered record's
   decode time; where a detail layer has room, the bytes of coefficients past
   the first few dozen buy more as detail anyway
   (``reports/rd-study/basis-cap.json``);
@@ -57,10 +61,10 @@ from brdfcodec.metrics import RelaeAgainst
 from brdfcodec.transforms import table_from_network_output
 
 __all__ = [
-    "DECODE_TOLERANCE", "DETAIL_BASIS_COUNT", "STEP_LADDER", "BasisFit", "Metric", "MuStorage", "RateResult",
+    "DETAIL_BASIS_COUNT", "STEP_LADDER", "BasisFit", "Metric", "MuStorage", "RateResult",
     "compact_base_pays", "compact_mu_storage",
     "encode_layers",
-    "error_target_sequence", "fewest_coefficients_within_tolerance", "layered_mapped",
+    "error_target_sequence", "layered_mapped",
 ]
 
 Metric = Literal["mapped", "linear"]
@@ -108,8 +112,6 @@ _Candidate = tuple[bool, int, float | None]
 #: (``benchmarks/basis_cap_study.py``): at most 32 under a detail layer costs 0.5 % of mapped RelAE at 1 KB and
 #: nothing measurable at 4 KB and 16 KB against also trying all 75.
 DETAIL_BASIS_COUNT: Final = 32
-#: Relative kept-slice error a size budget gives up for fewer basis coefficients (each costs decode time).
-DECODE_TOLERANCE: Final = 0.02
 
 
 def layered_mapped(base_mapped: np.ndarray, record: LatentRecord) -> np.ndarray:
@@ -265,14 +267,25 @@ def encode_layers(
         if smallest_detail <= bytes_budget:
             fitting |= {(under_detail, s) for s in _finest_fitting_steps(cands, under_detail, bytes_budget, tried)}
 
-        # Among the fitting candidates, the lowest kept-slice L1 error (a very coarse layer can be worse than none);
-        # within DECODE_TOLERANCE of it, the one with the fewest coefficients (each costs decode time).
-        def slice_error(candidate: tuple[int, float | None]) -> float:
-            mapped = np.clip(cands.mapped(*candidate), 0.0, MAPPED_MAX)
+        # Past the budgets that store the base compact, their best record (the compact base with all K
+        # coefficients) stays a candidate, so that one byte more never loses what the compact base gave.
+        pools = {compact: cands}
+        if full and not compact:
+            pools[True] = _Candidates(base, base_mapped, target, weights, latent_itemsize, basis_fit, compact=True)
+        options = {(compact, *c) for c in fitting}
+        if True in pools and not compact and pools[True].size(full, None) <= bytes_budget:
+            options.add((True, full, None))
+
+        # Among the candidates, the lowest kept-slice L1 error (a very coarse layer can be worse than none), fewer
+        # coefficients on a tie. No error is traded for decode time: a budget whose smaller neighbours cannot hold
+        # the base alone would otherwise return the base alone, worse than what they return (issue 39).
+        def slice_error(candidate: _Candidate) -> float:
+            mapped = np.clip(pools[candidate[0]].mapped(*candidate[1:]), 0.0, MAPPED_MAX)
             return float((np.abs(mapped - target) * weights).sum())
 
-        chosen = fewest_coefficients_within_tolerance({c: slice_error(c) for c in fitting})
-        return RateResult(cands.record(*chosen), cands.size(*chosen), tried)
+        errors = {c: slice_error(c) for c in options}
+        chosen = min(errors, key=lambda c: (errors[c], c[1], c[0]))
+        return RateResult(pools[chosen[0]].record(*chosen[1:]), pools[chosen[0]].size(*chosen[1:]), tried)
     assert max_relae is not None
     if values is None or mask is None:
         raise ValueError(f"{base.name}: max_relae needs the source table to measure the error")
@@ -375,15 +388,6 @@ def _layered_base_bytes(latent_dim: int, latent_itemsize: int, mu_storage: MuSto
 def _empty_detail_bytes() -> int:
     """Payload of the smallest detail layer (all coefficients zero, coarsest step)."""
     return encode_detail(np.zeros(NETWORK_INPUT_SHAPE, dtype=np.float32), STEP_LADDER[0]).nbytes
-
-
-def fewest_coefficients_within_tolerance(
-    errors: dict[tuple[int, float | None], float], tolerance: float = DECODE_TOLERANCE
-) -> tuple[int, float | None]:
-    """The candidate ``(k, step)`` with the fewest basis coefficients among those within ``tolerance`` of the lowest
-    error (relative), and of those the lowest error."""
-    best = min(errors.values())
-    return min((c for c in errors if errors[c] <= best * (1 + tolerance)), key=lambda c: (c[0], errors[c]))
 
 
 def _finest_fitting_steps(cands: _Candidates, k: int, bytes_budget: int,
