@@ -339,3 +339,27 @@ def test_bvae_decompress_writes_bsdf_files(mi: object, tmp_path: Path, capsys: p
         assert "bsdf" in capsys.readouterr().err
     assert not (tmp_path / "bad.bsdf").exists()
     assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]  # no temporary file left
+
+
+def test_scalar_variant_reads_the_same_file(mi: object, analytic_tables: dict[str, MerlBRDF], tmp_path: Path) -> None:
+    """The scalar_rgb fallback's measured BSDF loads the file and agrees with llvm_ad_rgb's eval."""
+    m = mi
+    path = write_rgl_bsdf(tmp_path / "gold.bsdf", analytic_tables["gold"].values, resolution=SMALL)
+    rng = np.random.default_rng(6)
+    wi, wo = _hemisphere(rng, 64), _hemisphere(rng, 64)
+    previous = m.variant()  # type: ignore[attr-defined]
+    vector = _measured_eval(m, path, wi, wo)
+    try:
+        m.set_variant("scalar_rgb")  # type: ignore[attr-defined]
+        bsdf = m.load_dict({"type": "measured", "filename": str(path)})  # type: ignore[attr-defined]
+        si = m.SurfaceInteraction3f()  # type: ignore[attr-defined]
+        si.sh_frame = m.Frame3f(m.Normal3f(0, 0, 1))  # type: ignore[attr-defined]
+        scalar = []
+        for a, b in zip(wi, wo, strict=True):
+            si.wi = m.Vector3f(*a)  # type: ignore[attr-defined]
+            value = bsdf.eval(m.BSDFContext(), si, m.Vector3f(*b))  # type: ignore[attr-defined]
+            scalar.append(np.asarray(value, dtype=np.float64))
+    finally:
+        m.set_variant(previous)  # type: ignore[attr-defined]
+    np.testing.assert_allclose(np.array(scalar), vector, rtol=1e-3, atol=1e-5)
+    assert np.abs(vector).sum() > 0
