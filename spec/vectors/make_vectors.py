@@ -249,6 +249,24 @@ def invalid_vectors() -> dict[str, tuple[bytes, str, str]]:
     short = detail_frame([1], 63 * 90 * 90 - 1)
     add("layered-content-size", one("l", good + short, layered_form(detail=0), step=0.1, detail_length=len(short)),
         "malformed", "a detail frame declaring one int16 fewer than 63*90*90 (payload CRC valid)")
+    # The detail layer is exactly one frame, decompressed whole when the record is read (§4.4; issue 37): a reader
+    # that checks only the frame header, or stops after the first frame, accepts these.
+    frame_parts = detail_frame_blocks([1], 63 * 90 * 90)
+    truncated = b"".join(frame_parts[:-2]) + _last_block(frame_parts[-2])  # content size declared, a block missing
+    corrupt = bytearray(detail)
+    corrupt[9] = (corrupt[9] & ~0b110) | (3 << 1)  # the first block's type: 3, reserved (corrupt)
+    for label, data, why in [
+        ("detail-trailing-bytes", detail + b"\x00junk", "5 bytes after the detail layer's zstandard frame"),
+        ("detail-second-frame", detail + detail, "a second zstandard frame after the detail layer's"),
+        ("detail-skippable-frame", detail + struct.pack("<II", 0x184D2A50, 4) + b"skip",
+         "a skippable frame after the detail layer's zstandard frame"),
+        ("detail-truncated-frame", truncated,
+         "a detail frame whose blocks end before its declared content size (lengths and payload CRC valid)"),
+        ("detail-corrupt-block", bytes(corrupt),
+         "a detail frame whose first block has the reserved type 3 (its header valid, payload CRC valid)"),
+    ]:
+        add(label, one("l", good + data, layered_form(detail=0), step=0.1, detail_length=len(data)), "malformed",
+            why)
     # The basis layer (§4.5): mu as float32, sigma as one byte each, the step (float16) and 3 coefficients.
     basis_payload = f32(0.5, -1.0) + bytes([160, 176]) + f16(0.25) + bytes([3, 253, 0])
     basis_sha = "cd" * 32
@@ -297,6 +315,8 @@ def invalid_vectors() -> dict[str, tuple[bytes, str, str]]:
         ("name-not-nfc", "cafe\u0301", "'café' in NFD, not NFC"),
         ("name-empty", "", "the empty name"),
         ("name-device", "NUL", "a Windows device name"),
+        ("name-device-space", "CON .txt", "a Windows device name before its first '.', white space at its end "
+                                          "ignored (§4.3)"),
         ("name-too-long", "x" * 256, "a name of 256 characters"),
     ]:
         add(label, one(name), "malformed", why)
@@ -308,6 +328,23 @@ def invalid_vectors() -> dict[str, tuple[bytes, str, str]]:
     add("name-duplicate", assemble(header([latent_form()], [descriptor("a", 0), descriptor("a", 0)], good + good),
                                    good + good), "malformed", "the name 'a' twice")
     return out
+
+
+def detail_frame_blocks(head: list[int], total: int) -> list[bytes]:
+    """:func:`detail_frame` in parts: the frame header, then each block (its 3-byte header and body)."""
+    frame = detail_frame(head, total)
+    parts, at = [frame[:9]], 9
+    while at < len(frame):
+        header = int.from_bytes(frame[at : at + 3], "little")
+        size = 1 if (header >> 1) & 3 == 1 else header >> 3  # an RLE block's body is one byte
+        parts.append(frame[at : at + 3 + size])
+        at += 3 + size
+    return parts
+
+
+def _last_block(block: bytes) -> bytes:
+    """A block with its 'last block' bit set."""
+    return bytes([block[0] | 1]) + block[1:]
 
 
 def detail_frame(head: list[int], total: int) -> bytes:
@@ -374,6 +411,9 @@ def valid_records() -> dict[str, tuple[list, DecoderReference, str, bool | None]
            for i in range(3)]
     return {
         "one-material": ([LatentRecord("gold", halves(8), sigma(8))], TEST_DECODER, "float32", False),
+        # §4.3: format characters (category Cf) are allowed in names; the rules are a complete list (issue 37).
+        "name-format-characters": ([LatentRecord("gold\u200bleaf\u202e", np.full(8, 0.5, dtype=np.float32),
+                                                 np.full(8, 0.25, dtype=np.float32))], TEST_DECODER, "float32", False),
         "library": (lib, TEST_DECODER, "float32", False),
         "float16": ([LatentRecord(r.name, r.mu, r.sigma) for r in lib], TEST_DECODER, "float16", False),
         "graft": ([GraftRecord("gold.graft", halves(8), sigma(8), (3, 4), [0.5, -1.0],
