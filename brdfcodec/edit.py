@@ -56,7 +56,13 @@ def with_parameters(
 ) -> Record:
     """A record like ``record`` with new parameter values (same kind and graft dims), ``meta["edit"]`` set.
 
-    ``sigma`` (shape (latent_dim,)) defaults to the record's.
+    ``sigma`` (shape (latent_dim,)) defaults to the record's. A layered record
+    (:class:`~brdfcodec.layers.record.LayeredRecord`) stays layered: only its
+    ``mu`` changes and its basis and detail layers are kept as they are, so the
+    edited material is the edited base plus the original layers' residual in the
+    mapped domain (``spec/bvae-format.md`` §4.4, "Edits"). Its compact ``mu``
+    form is kept only where the new code is stored exactly in it; otherwise ``mu``
+    is stored in the file's latent dtype.
     """
     values = np.asarray(values, dtype=np.float32)
     meta = {"edit": edit}
@@ -64,7 +70,30 @@ def with_parameters(
     spread = record.sigma if sigma is None else np.asarray(sigma, dtype=np.float32)
     if isinstance(record, GraftRecord):
         return GraftRecord(name, values[:d], spread, record.graft_dims, values[d:], meta)
+    from brdfcodec.layers.record import LayeredRecord
+
+    if isinstance(record, LayeredRecord):
+        return _layered_with_code(record, values, name=name, sigma=spread, meta=meta)
     return LatentRecord(name, values, spread, meta)
+
+
+def _layered_with_code(
+    record: Any, mu: np.ndarray, *, name: str, sigma: np.ndarray, meta: dict[str, Any]
+) -> Record:
+    """``record`` (layered) with a new ``mu``: the same layers and σ form; compact μ only where it holds ``mu``
+    exactly."""
+    import dataclasses
+
+    from brdfcodec.layers.record import compact_mu_values
+
+    compact = bool(record.compact_mu)
+    if compact:
+        try:
+            compact = bool(np.array_equal(compact_mu_values(mu, record.fixed_mu_grid), mu))
+        except ValueError:  # not storable in the compact form at all
+            compact = False
+    return dataclasses.replace(record, name=name, mu=mu, sigma=sigma, meta=meta, compact_mu=compact,
+                               fixed_mu_grid=compact and record.fixed_mu_grid)
 
 
 def traverse(
@@ -109,7 +138,8 @@ def traverse(
 def _check_compatible(a: Record, b: Record) -> None:
     if a.latent_dim != b.latent_dim:
         raise ValueError(f"{a.name} and {b.name} have different latent dimensions")
-    # A layered record (issue 14) is a latent record here: edits act on its base and drop its layers.
+    # A layered record is a latent record here: edits move its base and keep its layers (spec §4.4, "Edits");
+    # interpolation and mixing keep the layers of ``a``, the material edited.
     if isinstance(a, GraftRecord) is not isinstance(b, GraftRecord) or (
         isinstance(a, GraftRecord) and a.graft_dims != b.graft_dims  # type: ignore[union-attr]
     ):
@@ -120,7 +150,11 @@ def _check_compatible(a: Record, b: Record) -> None:
 
 
 def interpolate(a: Record, b: Record, t: float, *, name: str | None = None) -> Record:
-    """Linear interpolation of all parameters: ``(1 − t)·a + t·b``; t = 0 gives a, t = 1 gives b exactly."""
+    """Linear interpolation of all parameters: ``(1 − t)·a + t·b``; t = 0 gives a, t = 1 gives b's code exactly.
+
+    ``a`` is the material edited: a layered ``a`` keeps its layers, so its code moves towards b's while its
+    residual stays (at t = 1 the result is b's code with a's layers); b's layers are not used.
+    """
     _check_compatible(a, b)
     pa, pb = parameter_vector(a), parameter_vector(b)
     values = pa if t == 0 else pb if t == 1 else (1 - t) * pa + t * pb
@@ -130,7 +164,10 @@ def interpolate(a: Record, b: Record, t: float, *, name: str | None = None) -> R
 
 
 def mix_factors(a: Record, b: Record, dims_from_a: Sequence[int], *, name: str | None = None) -> Record:
-    """Per-factor interpolation (paper, Fig. 9): the chosen parameters from ``a``, all others from ``b``."""
+    """Per-factor interpolation (paper, Fig. 9): the chosen parameters from ``a``, all others from ``b``.
+
+    As in :func:`interpolate`, ``a`` is the material edited: a layered ``a`` keeps its layers.
+    """
     _check_compatible(a, b)
     pa, pb = parameter_vector(a), parameter_vector(b)
     chosen = sorted({int(d) for d in dims_from_a})
@@ -141,7 +178,7 @@ def mix_factors(a: Record, b: Record, dims_from_a: Sequence[int], *, name: str |
     sigma = b.sigma.copy()
     latent_chosen = [d for d in chosen if d < sigma.size]
     sigma[latent_chosen] = a.sigma[latent_chosen]
-    return with_parameters(b, values, name=name or f"{a.name}+{b.name}", sigma=sigma,
+    return with_parameters(a, values, name=name or f"{a.name}+{b.name}", sigma=sigma,
                            edit={"op": "mix", "a": a.name, "b": b.name, "parameters_from_a": [d + 1 for d in chosen]})
 
 
@@ -159,6 +196,11 @@ def graft(
         values gives green = red.
     colour_dims : sequence of int
         The model's colour dimensions (``BrdfDecoder.colour_dims``).
+
+    Notes
+    -----
+    A layered record's layers are not kept: a ``graft`` record has none
+    (``spec/bvae-format.md`` §4.2, §4.4), so the graft is made of its base code.
     """
     if isinstance(record, GraftRecord):
         raise ValueError(f"{record.name} is already a graft; edit its parameters instead")

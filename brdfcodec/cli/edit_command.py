@@ -128,6 +128,9 @@ def run(args: argparse.Namespace) -> int:
         from brdfcodec.codec import BrdfDecoder
 
         decoder = BrdfDecoder.for_header(library.header)
+        if getattr(record, "basis", None) is not None or getattr(record, "detail", None) is not None:
+            print(f"{record.name}: a graft record has no layers (spec §4.4, \"Edits\"): the graft is made of its "
+                  "base code and leaves its enhancement layers out")
         if args.values is not None:
             if len(args.values) != len(decoder.colour_dims):
                 raise UsageError(f"the model has {len(decoder.colour_dims)} colour dimensions "

@@ -174,13 +174,21 @@ class Catalogue:
     def edited_record(self, body: dict[str, Any], *, name: str = "studio-edit") -> Record:
         """A record from a request body ``{"z": [...], "graft": [...] | null, "base": id?}``.
 
-        σ is the base material's when a base is named (for saving), else 1.
+        σ is the base material's when a base is named (for saving), else 1. When the base is a layered record
+        and nothing is grafted, the result keeps its layers with the new code (``spec/bvae-format.md`` §4.4,
+        "Edits"): the edited base plus the base material's residual.
         """
         z = self.parse_code(body.get("z"))
         graft = body.get("graft")
         base = self.record(body["base"]) if body.get("base") is not None else None
         sigma = base.sigma if base is not None else np.ones_like(z)
         if graft is None:
+            from brdfcodec.layers.record import LayeredRecord
+
+            if isinstance(base, LayeredRecord):
+                from brdfcodec.edit import with_parameters
+
+                return with_parameters(base, z, name=name, edit={"op": "studio"}, sigma=sigma)
             return LatentRecord(name, z, sigma)
         values = self.parse_code(graft, what="graft", length=len(self.colour_dims))
         return GraftRecord(name, z, sigma, self.colour_dims, values)

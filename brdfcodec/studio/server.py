@@ -215,6 +215,10 @@ class StudioServer:
         meta = {"edit": edit}
         if isinstance(record, GraftRecord):
             record = GraftRecord(name, record.mu, record.sigma, record.graft_dims, record.graft_values, meta)
+        elif getattr(record, "basis", None) is not None or getattr(record, "detail", None) is not None:
+            import dataclasses
+
+            record = dataclasses.replace(record, name=name, meta=meta)  # a layered edit keeps its layers
         else:
             record = LatentRecord(name, record.mu, record.sigma, meta)
         suffix = target.suffix.lower()

@@ -70,7 +70,8 @@ class Preview {
 
   // Ask for a new state; t0 is the input event's time stamp (performance.now() clock).
   request(state, t0 = performance.now()) {
-    this.pending = { z: [...state.z], graft: state.graft ? [...state.graft] : null };
+    // base: a layered material's edits keep its layers (the server adds them to the edited base).
+    this.pending = { base: state.base, z: [...state.z], graft: state.graft ? [...state.graft] : null };
     if (this.pendingSince === null) this.pendingSince = t0;  // the oldest input not shown yet
     if (!this.inflight) this.flush();
   }
