@@ -363,3 +363,19 @@ def test_scalar_variant_reads_the_same_file(mi: object, analytic_tables: dict[st
         m.set_variant(previous)  # type: ignore[attr-defined]
     np.testing.assert_allclose(np.array(scalar), vector, rtol=1e-3, atol=1e-5)
     assert np.abs(vector).sum() > 0
+
+
+def test_malformed_sources_fail_before_anything_is_written(tmp_path: Path) -> None:
+    from brdfcodec.errors import BvaeFormatError, MerlFormatError
+
+    out = tmp_path / "out"
+    out.mkdir()
+    truncated = tmp_path / "cut.binary"
+    truncated.write_bytes(b"\x5a\x00\x00\x00" * 3 + b"\x00" * 100)
+    with pytest.raises(MerlFormatError, match="cut.binary"):
+        export_rgl(truncated, out / "cut.bsdf")
+    broken = tmp_path / "broken.bvae"
+    broken.write_bytes(b"not a bvae file at all")
+    with pytest.raises(BvaeFormatError, match="broken.bvae"):
+        export_rgl(broken, out)
+    assert list(out.iterdir()) == []
