@@ -61,7 +61,7 @@ def check_output_path(path: str | os.PathLike[str], *, overwrite: bool) -> Path:
         raise IsADirectoryError(f"{target}: is a directory, expected a file name to write")
     if target.exists() and not overwrite:
         raise FileExistsError(
-            errno.EEXIST, "already exists (pass overwrite=True, or --force, to replace it)", str(target)
+            errno.EEXIST, "already exists (pass overwrite=True to replace it)", str(target)
         )
     parent = target.parent if str(target.parent) else Path(".")
     if not parent.is_dir():
@@ -84,14 +84,14 @@ def _publish(tmp: Path, target: Path, *, overwrite: bool) -> None:
         os.link(tmp, target)  # fails if target exists: create-if-absent, no window between check and rename
     except FileExistsError:
         raise FileExistsError(
-            errno.EEXIST, "already exists (pass overwrite=True, or --force, to replace it)", str(target)
+            errno.EEXIST, "already exists (pass overwrite=True to replace it)", str(target)
         ) from None
     except OSError:  # no hard links here (some network and FAT file systems): reserve the name exclusively
         try:
             fd = os.open(target, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
         except FileExistsError:
             raise FileExistsError(
-                errno.EEXIST, "already exists (pass overwrite=True, or --force, to replace it)", str(target)
+                errno.EEXIST, "already exists (pass overwrite=True to replace it)", str(target)
             ) from None
         os.close(fd)
         os.replace(tmp, target)

@@ -10,7 +10,10 @@ import numpy.typing as npt
 
 from brdfcodec.atomic import atomic_output
 
-__all__ = ["read_exr_rgb", "write_exr_rgb", "write_exr_slices"]
+__all__ = ["SLICE_UNITS", "read_exr_rgb", "read_exr_attributes", "write_exr_rgb", "write_exr_slices"]
+
+#: What every part of a φd-slice EXR holds, in its header (attribute ``brdfcodec_units``).
+SLICE_UNITS = "reflectance 1/sr (MERL stored value x channel scale); 0 below the horizon and where unmeasured"
 
 
 def _openexr():  # noqa: ANN202 - module object
@@ -44,6 +47,9 @@ def write_exr_slices(
 ) -> None:
     """Write φd slices of a table as a multi-part EXR, one 90×90 RGB part per bin.
 
+    Each part's header names what it holds: ``brdfcodec_units`` (:data:`SLICE_UNITS`) and
+    ``brdfcodec_phi_d_bin``.
+
     Parameters
     ----------
     path : str or os.PathLike
@@ -58,11 +64,19 @@ def write_exr_slices(
     if table.ndim != 4 or table.shape[0] != 3 or table.shape[3] != len(phi_d_bins):
         raise ValueError(f"expected shape (3, 90, 90, {len(phi_d_bins)}), got {table.shape}")
     parts = [
-        openexr.Part(_header(openexr), {"RGB": np.ascontiguousarray(np.moveaxis(table[..., k], 0, -1))}, f"phid{b:03d}")
+        openexr.Part({**_header(openexr), "brdfcodec_units": SLICE_UNITS, "brdfcodec_phi_d_bin": str(int(b))},
+                     {"RGB": np.ascontiguousarray(np.moveaxis(table[..., k], 0, -1))}, f"phid{b:03d}")
         for k, b in enumerate(phi_d_bins)
     ]
     with atomic_output(path, overwrite=overwrite) as tmp:
         openexr.File(parts).write(str(tmp))
+
+
+def read_exr_attributes(path: str | os.PathLike[str], name: str) -> dict[str, object]:
+    """The header attribute ``name`` of every part of an EXR file, keyed by part name (None where absent)."""
+    openexr = _openexr()
+    with openexr.File(os.fspath(path)) as handle:
+        return {part.name(): part.header.get(name) for part in handle.parts}
 
 
 def read_exr_rgb(path: str | os.PathLike[str]) -> dict[str, np.ndarray]:

@@ -46,10 +46,15 @@ def write_table(
     Parameters
     ----------
     path : str or os.PathLike
-        ``.binary``: a MERL file (needs all 180 bins). ``.npy``: the float32
-        array as given, shape (3, 90, 90, K). ``.exr``: one 90×90 RGB part per
-        φd bin holding reflectance in 1/sr (stored × channel scale; negative,
-        unmeasured entries written as 0). ``.bsdf``: an RGL tensor file for
+        The unit follows the output type, on purpose: ``.binary``: a MERL file
+        (needs all 180 bins), MERL's stored units. ``.npy``: the float32 array
+        as given, shape (3, 90, 90, K), in the same stored MERL units (a
+        ``.npy`` holds no metadata: it keeps the units of ``.binary`` and of
+        :func:`brdfcodec.decompress`, and -1 where MERL marks "unmeasured").
+        ``.exr`` (an image format, for viewers and renderers): one 90×90 RGB
+        part per φd bin holding reflectance in 1/sr (stored × channel scale;
+        negative, unmeasured entries written as 0), named in each part's
+        header (:data:`brdfcodec.exr.SLICE_UNITS`). ``.bsdf``: an RGL tensor file for
         Mitsuba's ``measured`` BSDF (needs all 180 bins; see
         :func:`brdfcodec.rgl_writer.write_rgl_bsdf`).
     table : array_like, shape (3, 90, 90, K)

@@ -41,8 +41,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
         "decompress",
         help="decode a .bvae file to MERL .binary, .npy, EXR slices or RGL .bsdf",
         description="Decode materials of a .bvae file with the decoder it names (found by SHA-256). The output "
-        "type follows the suffix: .binary (MERL), .npy (float32 table in MERL units), .exr (one 90x90 RGB part "
-        "per phi_d bin, reflectance in 1/sr), .bsdf (RGL tensor file for Mitsuba's built-in measured BSDF). "
+        "type follows the suffix, and so does the unit: .binary (MERL) and .npy (float32 table) hold MERL's "
+        "stored units, -1 below the horizon; .exr (one 90x90 RGB part per phi_d bin, for viewers) holds "
+        "reflectance in 1/sr, 0 below the horizon, and says so in each part's header; .bsdf (RGL tensor file "
+        "for Mitsuba's built-in measured BSDF). "
         "With several materials and no --material, OUT is a folder that "
         "receives NAME.binary for each (or the suffix of --format).",
     )
@@ -53,8 +55,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
                         help="file type written into an output folder (default binary)")
     parser.add_argument("--phi-d", type=parse_bins, metavar="BINS",
                         help="only these phi_d bins, e.g. 0,90,170-179 (.npy and .exr only)")
-    parser.add_argument("--masked", choices=("unmeasured", "zero"), default="unmeasured",
-                        help="below-horizon entries: -1 as MERL's unmeasured marker (default), or 0")
+    parser.add_argument("--masked", choices=("unmeasured", "zero"), default=None,
+                        help="below-horizon entries of .binary and .npy outputs: -1 as MERL's unmeasured marker "
+                        "(default), or 0 (.exr always holds 0 there)")
     parser.add_argument("--reference", type=Path, metavar="SOURCE.binary",
                         help="the original MERL file: print the RelAE of the decoded table against it")
     parser.add_argument("--force", action="store_true", help="replace existing output files")
@@ -94,13 +97,16 @@ def run(args: argparse.Namespace) -> int:
         rgl_resolution = _rgl_resolution(args) if "bsdf" in kinds else None
         if "bsdf" in kinds and args.phi_d is not None:
             raise UsageError("--phi-d: an RGL .bsdf file needs all 180 phi_d bins (use .npy or .exr for a subset)")
+        if "binary" in kinds and args.phi_d is not None:
+            raise UsageError("--phi-d: a MERL .binary file needs all 180 phi_d bins (use .npy or .exr for a subset)")
+        _check_masked(args.masked, kinds)
         if args.reference is not None and not single:
             raise UsageError("--reference needs a single material (use --material)")
         # Measured before writing: a bad reference must not fail the command after its output exists.
         reference_line = None if args.reference is None else _reference_error(args.reference, library[names[0]])
         for name, target in tqdm(targets.items(), desc="decompress", unit="material", disable=len(targets) < 2 or None):
             material = library[name]
-            table = material.table(phi_d_bins=args.phi_d, masked=args.masked)
+            table = material.table(phi_d_bins=args.phi_d, masked=args.masked or "unmeasured")
             note = _stored_error_note(material.record.meta)  # before writing: nothing may fail after a write
             kind = write_table(target, table, phi_d_bins=args.phi_d, overwrite=args.force,
                                rgl_resolution=rgl_resolution, name=name)
@@ -108,6 +114,15 @@ def run(args: argparse.Namespace) -> int:
         if reference_line is not None:
             print(reference_line)
     return 0
+
+
+def _check_masked(masked: str | None, kinds: set[str]) -> None:
+    """Refuse a ``--masked`` choice the output type cannot hold (a UsageError naming the flag)."""
+    if masked == "unmeasured" and "exr" in kinds:
+        raise UsageError("--masked unmeasured: an .exr file holds reflectance in 1/sr with 0 below the horizon; "
+                         "use .binary or .npy to keep MERL's -1 marker")
+    if masked is not None and "bsdf" in kinds:
+        raise UsageError("--masked: an RGL .bsdf file holds no below-horizon entries; leave --masked out")
 
 
 def _rgl_resolution(args: argparse.Namespace) -> RglResolution:

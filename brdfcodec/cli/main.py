@@ -26,6 +26,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import os
+import re
 import signal
 import sys
 import warnings
@@ -148,16 +149,34 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _describe(error: BaseException) -> str:
+    if isinstance(error, FileExistsError) and error.filename is not None:
+        return f"{error.filename}: already exists (use --force to replace it)"
     if isinstance(error, OSError) and error.filename is not None and error.strerror:
         return f"{error.filename}: {error.strerror}"
     return str(error) or type(error).__name__
+
+
+#: A list of numbers that starts with a minus sign (``-2,0,2``), which argparse would take for an option.
+_NEGATIVE_LIST = re.compile(r"^-\.?\d[\d.eE+-]*(,[\d.eE+-]*)+$")
+
+
+def _join_negative_lists(argv: Sequence[str]) -> list[str]:
+    """``--values -2,0,2`` as ``--values=-2,0,2``: argparse reads a value that starts with ``-`` and holds a comma
+    as an option and fails with a bare "expected one argument"."""
+    out: list[str] = []
+    for token in argv:
+        if out and out[-1].startswith("--") and "=" not in out[-1] and _NEGATIVE_LIST.match(token):
+            out[-1] = f"{out[-1]}={token}"
+        else:
+            out.append(token)
+    return out
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run ``bvae`` with ``argv`` (``sys.argv[1:]`` by default) and return the exit code."""
     parser = build_parser()
     try:
-        args = parser.parse_args(argv)
+        args = parser.parse_args(_join_negative_lists(sys.argv[1:] if argv is None else argv))
     except SystemExit as stop:  # --help, --version, usage errors
         return int(stop.code or 0)
     if argv is None:  # a real command-line run, not a call from Python: size torch's thread pool
