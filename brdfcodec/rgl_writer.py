@@ -22,6 +22,9 @@ the study that check the result):
    use) to a normal m, the outgoing direction is ωo = reflect(ωi, m), and
    the stored value is f(ωi, ωo) cos θo · 4 σ(ωi) / D(m) (the file's
    ``jacobian`` flag is 1: readers multiply by D(m) / (4 σ(ωi)) again).
+   Values more than four times the 99th percentile of their θi slice (normals
+   the NDF barely weights, where the division by D(m) explodes) are scaled
+   down to that bound.
 5. **Luminance** ``luminance`` — the luminance (Rec. 709 Y) of those RGB
    values: readers sample it before the VNDF warp, so directions are drawn
    in proportion to the luminance of f cos θo up to the tables' resolution.
@@ -55,9 +58,9 @@ from brdfcodec.rgl import TENSOR_FILE_MAGIC
 
 __all__ = [
     "LUMINANCE_WEIGHTS",
-    "export_rgl",
     "RglResolution",
     "RglWriteError",
+    "export_rgl",
     "power_iteration_ndf",
     "rgl_fields",
     "tensor_file_bytes",
@@ -242,7 +245,7 @@ def _cap_outliers(value: np.ndarray, up: np.ndarray) -> np.ndarray:
     Where the warp lands on normals the NDF gives almost no weight (θm near π/2, or facing away from ωi),
     f cos θo · 4σ / D(m) takes values thousands of times those of the neighbouring vertices; bilinear
     interpolation would carry them into cells whose D is not small, so readers would return a spike. The
-    bound is :data:`_OUTLIER_FACTOR` times the 99th percentile of the slice's positive luminances.
+    bound is four times the 99th percentile of the slice's positive luminances (above the horizon).
     """
     lum = value @ np.asarray(LUMINANCE_WEIGHTS)
     positive = lum[up & (lum > 0)]
