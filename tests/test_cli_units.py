@@ -71,3 +71,25 @@ def test_a_value_list_may_start_with_a_minus_sign(capsys, library: Path, tmp_pat
                        "--values", "-2,0,2", "-o", str(tmp_path / "t.bvae"))
     assert code == 0, err
     assert len(read_bvae(tmp_path / "t.bvae").records) == 3
+
+
+def test_relae_figures_come_with_a_legend_once(capsys, tmp_path: Path, tiny_model_folder: Path,
+                                               analytic_tables: dict[str, MerlBRDF],
+                                               monkeypatch: pytest.MonkeyPatch) -> None:
+    from brdfcodec.cli.legend import RELAE_LEGEND
+
+    monkeypatch.setenv("BRDFCODEC_MODEL_PATH", str(tiny_model_folder))
+    for name in ("gold", "chrome"):
+        write_merl(tmp_path / f"{name}.binary", analytic_tables[name])
+    lib = tmp_path / "lib.bvae"
+    code, out, err = run(capsys, "compress", str(tmp_path / "gold.binary"), str(tmp_path / "chrome.binary"),
+                         "-o", str(lib), "--model", str(tiny_model_folder))
+    assert code == 0, err
+    assert out.count("RelAE mapped") == 2 and out.count(RELAE_LEGEND) == 1
+    assert "Read 'mapped'" in RELAE_LEGEND and "README" in RELAE_LEGEND
+    code, out, err = run(capsys, "decompress", str(lib), "--material", "gold", "-o", str(tmp_path / "g.binary"),
+                         "--reference", str(tmp_path / "gold.binary"))
+    assert code == 0, err
+    assert out.count(RELAE_LEGEND) == 1
+    readme = (Path(__file__).resolve().parents[1] / "README.md").read_text()
+    assert "**Reading RelAE.**" in readme

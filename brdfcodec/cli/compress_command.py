@@ -14,6 +14,7 @@ from tqdm import tqdm
 
 from brdfcodec.atomic import check_output_path
 from brdfcodec.bvae_format import Record, without_provenance, write_bvae
+from brdfcodec.cli.legend import RELAE_LEGEND
 from brdfcodec.cli.usage import UsageError
 from brdfcodec.dataset import HDF5_SIGNATURE
 from brdfcodec.inputs import default_material_name, is_measured_file, read_measured
@@ -216,6 +217,7 @@ def run(args: argparse.Namespace) -> int:
     measured = [r.meta["relae"]["mapped"] for r in records if "relae" in r.meta]
     if measured:
         print(f"  mean RelAE (mapped) over {len(measured)} materials: {np.mean(measured):.4f}")
+        print(f"  {RELAE_LEGEND}")
     model_name = encoder.manifest.name if encoder.manifest is not None else "?"
     print(
         f"wrote {args.output}: {len(records)} material{'s' if len(records) != 1 else ''}, {size:,} bytes "

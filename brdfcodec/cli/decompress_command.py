@@ -9,6 +9,7 @@ from typing import TYPE_CHECKING
 from tqdm import tqdm
 
 from brdfcodec.atomic import check_output_path
+from brdfcodec.cli.legend import RELAE_LEGEND
 from brdfcodec.cli.usage import UsageError
 from brdfcodec.conventions import N_PHI_D
 from brdfcodec.material_names import material_file_path
@@ -104,6 +105,7 @@ def run(args: argparse.Namespace) -> int:
             raise UsageError("--reference needs a single material (use --material)")
         # Measured before writing: a bad reference must not fail the command after its output exists.
         reference_line = None if args.reference is None else _reference_error(args.reference, library[names[0]])
+        legend = False
         for name, target in tqdm(targets.items(), desc="decompress", unit="material", disable=len(targets) < 2 or None):
             material = library[name]
             table = material.table(phi_d_bins=args.phi_d, masked=args.masked or "unmeasured")
@@ -111,8 +113,11 @@ def run(args: argparse.Namespace) -> int:
             kind = write_table(target, table, phi_d_bins=args.phi_d, overwrite=args.force,
                                rgl_resolution=rgl_resolution, name=name)
             print(f"wrote {target} ({name}, {kind}){note}")
+            legend = legend or bool(note)
         if reference_line is not None:
             print(reference_line)
+        if legend or reference_line is not None:
+            print(RELAE_LEGEND)
     return 0
 
 
