@@ -223,13 +223,14 @@ def _format_text(summary: dict[str, Any]) -> str:
         where = decoder["installed_at"] or "NOT INSTALLED: register the model folder that made this file"
         created = f" ({summary['created_by']})" if summary["created_by"] else ""
         rest = summary["header_bytes"] - summary["names_bytes"] - summary["index_bytes"]
+        floats = sum(summary["latent_dtype"] in (item["mu"], item["sigma"]) for item in summary["materials"])
         metadata = "per-record metadata" if summary["metadata"] else "no metadata (names and records only)"
         lines += [
             f"  kind            .bvae latent file, format {summary['format_version']}{created}",
             f"  decoder         {decoder['name'] or '(name not stored)'}  sha256 {decoder['sha256']}",
             f"                  {where}",
-            f"  latents         {summary['latent_dim']} dimensions; values stored as floats are "
-            f"{summary['latent_dtype']} (each record says how it stores μ and σ)",
+            f"  latents         {summary['latent_dim']} dimensions; {summary['latent_dtype']} where a record "
+            f"stores μ or σ as floats ({floats} of {len(summary['materials'])}; per record below)",
             f"  shared basis    {summary['basis_sha256'] or '- (no basis layer)'}",
             f"  size            {summary['bytes']:,} bytes ({summary['bytes_per_material']:.1f} per material): "
             f"payloads {summary['payload_bytes']:,}, names {summary['names_bytes']:,}, index "
