@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import warnings
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -218,6 +219,13 @@ def run(args: argparse.Namespace) -> int:
     if measured:
         print(f"  mean RelAE (mapped) over {len(measured)} materials: {np.mean(measured):.4f}")
         print(f"  {RELAE_LEGEND}")
+    if encoder.manifest is not None:
+        from brdfcodec.card_range import card_range_warning
+
+        for record in records:
+            warning = card_range_warning(record.name, record.meta, encoder.manifest.info, encoder.manifest.name)
+            if warning is not None:
+                warnings.warn(warning, stacklevel=1)
     model_name = encoder.manifest.name if encoder.manifest is not None else "?"
     print(
         f"wrote {args.output}: {len(records)} material{'s' if len(records) != 1 else ''}, {size:,} bytes "
