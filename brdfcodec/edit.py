@@ -348,10 +348,15 @@ def fit_graft(
         k grafted values move and only the green channel is fitted.
     steps, learning_rate : int, float
         Adam iterations and step size (latent units).
+
+    Returns
+    -------
+    GraftRecord
+        Named ``NAME.graft`` after the record, as :func:`graft` names its result.
     """
     dims = [int(d) for d in (decoder.colour_dims if colour_dims is None else colour_dims)]
     code, values, loss = _fit(decoder, record, target_mapped, target_mask, dims, optimise_code, steps, learning_rate)
     if values is None:  # _fit returns graft values whenever it is given graft dimensions
         raise RuntimeError("graft fitting returned no grafted values")
     meta = {"edit": {"op": "fit-graft", "source": record.name, "l1_mapped": loss}}
-    return GraftRecord(record.name, code, record.sigma, tuple(dims), values, meta)
+    return GraftRecord(f"{record.name}.graft", code, record.sigma, tuple(dims), values, meta)

@@ -88,6 +88,7 @@ def test_fitting_brings_a_code_closer_to_the_target(analytic_tables: dict[str, M
     assert l1(decoder.mapped_record(refined)) < 0.8 * before  # 0.16 measured: Adam moves the code, not a no-op
     fitted = fit_graft(decoder, start, inputs, mask, colour_dims=(0, 1), steps=15)
     assert isinstance(fitted, GraftRecord) and fitted.graft_dims == (0, 1)
+    assert fitted.name == f"{start.name}.graft"  # named as graft() names its result (issue 39, 6)
     assert np.isfinite(fitted.graft_values).all()
     after = l1(decoder.mapped_record(fitted))
     assert after < 0.8 * before

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import warnings
 from pathlib import Path
 
 from brdfcodec.bvae_format import LatentRecord, ParsedBvae, Record, read_bvae, write_bvae
@@ -144,13 +145,20 @@ def run(args: argparse.Namespace) -> int:
             source = prepare_source(read_measured(args.fit))  # MERL or RGL; clamped as for compress
             inputs, mask = material_arrays(source)
             base = record.base() if hasattr(record, "base") else record  # a layered record: its base code
-            before = measure(base, decoder, source).meta.get("relae", {}).get("mapped", float("nan"))
+            alone = measure(base, decoder, source)
+            before = alone.meta.get("relae", {}).get("mapped", float("nan"))
             fitted = measure(edit.fit_graft(decoder, base, inputs, mask), decoder, source)
             if "relae" not in fitted.meta:
                 raise ValueError(f"{args.fit}: the material reflects nothing (black): there is no colour to fit")
+            after = fitted.meta["relae"]["mapped"]
             print(f"{record.name}: RelAE (mapped) {before:.4f} from the code alone, "
-                  f"{fitted.meta['relae']['mapped']:.4f} with the fitted graft")
-            records = [fitted]
+                  f"{after:.4f} with the fitted graft")
+            if after < before:
+                records = [fitted]
+            else:  # the fit (on the kept slices) lost on the full table: keep the better record, and say so
+                warnings.warn(f"{record.name}: the fitted graft ({after:.4f}) is no better than the code alone "
+                              f"({before:.4f}); writing the code alone, as {record.name}", stacklevel=1)
+                records = [alone]
     size = write_bvae(args.output, records, library.header.decoder, latent_dtype=library.header.latent_dtype,
                       overwrite=args.force)
     print(f"wrote {args.output}: {len(records)} material{'s' if len(records) != 1 else ''} "
