@@ -106,6 +106,24 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
                        help="relative margin over the library's largest albedo (default 0.1)")
     plaus.add_argument("--json", action="store_true", help="print one JSON object")
     plaus.set_defaults(handler=run_plausibility)
+    dis = actions.add_parser(
+        "disentanglement", help="MIG and DCI of models' codes (and PCA-8) on materials with known factors",
+        description="Draw analytic materials whose factors (albedo level and hue, specular level, roughness, "
+        "grazing Fresnel, sheen, metalness) are sampled independently, encode them (the encoder's mean), and "
+        "score each code with MIG and DCI disentanglement / completeness / informativeness "
+        "(brdfcodec.report.disentanglement), beside PCA-8 of the same materials. Prints a table and, per "
+        "latent dimension, the factor it moves most.",
+    )
+    dis.add_argument("models", nargs="*", metavar="MODEL",
+                     help="model folders or decoder SHA-256s (default: the shipped default model)")
+    dis.add_argument("--materials", type=int, default=300, metavar="N",
+                     help="analytic materials to draw (default 300; at least 30)")
+    dis.add_argument("--seed", type=int, default=0, help="seed of the factor sampler (default 0)")
+    dis.add_argument("--no-pca", action="store_true", help="leave out the PCA-8 baseline")
+    dis.add_argument("-o", "--output", type=Path, metavar="ROWS.jsonl",
+                     help="also write the result rows (brdfcodec.report.rows, study 'disentanglement')")
+    dis.add_argument("--force", action="store_true", help="replace an existing output file")
+    dis.set_defaults(handler=run_disentanglement)
 
 
 def run_export(args: argparse.Namespace) -> int:
@@ -273,4 +291,26 @@ def run_plausibility(args: argparse.Namespace) -> int:
         for o in report.worst:
             where = f" at (colour, φd bin, θd bin) {o.where}" if o.where else ""
             print(f"  {o.kind:<9} {o.material} z{o.dim + 1}{o.step:+g}σ: {o.score:.4g}{where}")
+    return 0
+
+
+def run_disentanglement(args: argparse.Namespace) -> int:
+    """Run the disentanglement benchmark, print its table, write its rows."""
+    from brdfcodec.report.disentanglement import format_table, run_benchmark
+    from brdfcodec.report.rows import stamp, write_rows
+
+    if args.materials < 30:
+        raise UsageError(f"--materials must be at least 30 (DCI trains on 2/3 of them), got {args.materials}")
+    if args.output is not None and args.output.exists() and not args.force:
+        raise FileExistsError(f"{args.output}: exists; use --force to replace it")
+    models = list(args.models) or [None]
+    rows = run_benchmark(models, count=args.materials, seed=args.seed, pca=not args.no_pca,
+                         progress=lambda message: print(message, file=sys.stderr, flush=True))
+    print(format_table(rows))
+    if args.output is not None:
+        command = "bvae model disentanglement " + shlex.join(
+            [*args.models, "--materials", str(args.materials), "--seed", str(args.seed)]
+            + (["--no-pca"] if args.no_pca else []))
+        write_rows(args.output, stamp(rows, study="disentanglement", command=command))
+        print(f"wrote {args.output}: {len(rows)} rows")
     return 0
