@@ -88,7 +88,7 @@ def main() -> None:
     figure.tight_layout()
     figure.savefig(args.output, dpi=90)
     print(f"wrote {args.output}")
-    for (_, title), image in zip(panels, images, strict=True):
+    for _, title in panels:
         print(f"  {title.replace(chr(10), ' | ')}")
 
 

@@ -180,7 +180,7 @@ def mig(codes: npt.ArrayLike, factors: npt.ArrayLike, *, bins: int | None = None
 
 @dataclass(frozen=True)
 class StumpEnsemble:
-    """Gradient-boosted regression stumps: ``predict(x) = offset + Σ (left if x[:, feature] ≤ threshold else right)``.
+    """Gradient-boosted regression stumps: ``offset + Σ (left if x[:, feature] ≤ threshold else right)``.
 
     Attributes
     ----------
