@@ -246,8 +246,9 @@ def mutate_rgl(seed: bytes, rng: random.Random) -> tuple[bytes, str]:
         data[at + 2] = rng.randrange(256) if rng.random() < 0.3 else rng.randrange(12)
         return bytes(data), "type code"
     if how < 0.6:
-        struct.pack_into("<Q", data, at + 3, rng.choice((0, len(data) - 4, len(data), 2**63, rng.randrange(2**64),
-                                                        struct.unpack_from("<Q", data, at + 3)[0] + rng.randint(-9, 9))))
+        near = struct.unpack_from("<Q", data, at + 3)[0] + rng.randint(-9, 9)
+        choices = (0, len(data) - 4, len(data), 2**63, rng.randrange(2**64), near)
+        struct.pack_into("<Q", data, at + 3, rng.choice(choices))
         return bytes(data), "offset"
     if how < 0.68:
         struct.pack_into("<H", data, at, rng.choice((0, 1, 3, 4, 5, 9, 65535)))

@@ -10,7 +10,9 @@ import os
 import struct
 import subprocess
 import sys
+from collections.abc import Iterator
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 import pytest
@@ -19,6 +21,11 @@ from tensor_files import field_shape_position, small_rgl_fields, tensor_file
 from brdfcodec.cli import main
 from brdfcodec.errors import BrdfcodecError, SourceFormatError
 from brdfcodec.rgl import check_supported, read_rgl_header
+
+if TYPE_CHECKING:
+    from brdfcodec.codec import BrdfDecoder
+    from brdfcodec.layers.basis import BasisLayer
+    from brdfcodec.layers.detail import DetailLayer
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 
@@ -174,7 +181,7 @@ def test_rgl_shape_wrap_on_the_real_file(shared_dir: Path, tmp_path: Path) -> No
 
 
 @pytest.fixture(scope="module")
-def shipped_decoder():  # type: ignore[no-untyped-def]
+def shipped_decoder() -> BrdfDecoder:
     from brdfcodec.codec import BrdfDecoder
 
     decoder = BrdfDecoder()
@@ -182,7 +189,8 @@ def shipped_decoder():  # type: ignore[no-untyped-def]
     return decoder
 
 
-def _layered_file(tmp_path: Path, decoder, *, detail=None, basis=None, name: str = "gold") -> Path:  # type: ignore[no-untyped-def]
+def _layered_file(tmp_path: Path, decoder: BrdfDecoder, *, detail: DetailLayer | None = None,
+                  basis: BasisLayer | None = None, name: str = "gold") -> Path:
     """A one-record ``.bvae`` file written by the library's own writer, so every CRC and length is right."""
     from brdfcodec.bvae_format import write_bvae
     from brdfcodec.layers.record import LayeredRecord
@@ -207,7 +215,7 @@ def _skippable(payload: bytes) -> bytes:
 
 
 @pytest.mark.parametrize("how", ["corrupt", "truncated", "two-frames", "trailing-garbage", "skippable-frame"])
-def test_broken_detail_layer_is_refused_at_read(tmp_path: Path, shipped_decoder, how: str,  # type: ignore[no-untyped-def]
+def test_broken_detail_layer_is_refused_at_read(tmp_path: Path, shipped_decoder: BrdfDecoder, how: str,
                                                 capsys: pytest.CaptureFixture[str]) -> None:
     """A detail frame that is corrupt or truncated under a correct record CRC, or followed by anything:
     refused when the record is read (``info`` included), as a format error naming the file and the record."""
@@ -234,7 +242,7 @@ def test_broken_detail_layer_is_refused_at_read(tmp_path: Path, shipped_decoder,
     assert not out.exists() or not any(out.iterdir())
 
 
-def test_a_good_detail_layer_still_reads_and_decodes(tmp_path: Path, shipped_decoder) -> None:  # type: ignore[no-untyped-def]
+def test_a_good_detail_layer_still_reads_and_decodes(tmp_path: Path, shipped_decoder: BrdfDecoder) -> None:
     from brdfcodec.codec import MaterialLibrary
     from brdfcodec.layers.detail import DetailLayer
 
@@ -244,7 +252,8 @@ def test_a_good_detail_layer_still_reads_and_decodes(tmp_path: Path, shipped_dec
         assert library["gold"].table(phi_d_bins=[90]).shape == (3, 90, 90, 1)
 
 
-def _basis_layer(decoder, *, count: int = 5, first: int = 0, project: int = 0, sha: str | None = None):  # type: ignore[no-untyped-def]
+def _basis_layer(decoder: BrdfDecoder, *, count: int = 5, first: int = 0, project: int = 0,
+                 sha: str | None = None) -> BasisLayer:
     from brdfcodec.layers.basis import BasisLayer
 
     return BasisLayer(sha or decoder.shared_basis.sha256, 0.25, np.ones(count, dtype=np.int8), first, project)
@@ -255,8 +264,9 @@ def _basis_layer(decoder, *, count: int = 5, first: int = 0, project: int = 0, s
     ({"count": 10, "first": 70}, "vectors 71 to 80"),
     ({"count": 5, "first": 8, "project": 76}, "projected on 76"),
 ])
-def test_basis_fields_beyond_the_shared_basis_are_refused_on_open(tmp_path: Path, shipped_decoder, fields: dict,  # type: ignore[no-untyped-def]
-                                                                  what: str, capsys: pytest.CaptureFixture[str]) -> None:
+def test_basis_fields_beyond_the_shared_basis_are_refused_on_open(
+        tmp_path: Path, shipped_decoder: BrdfDecoder, fields: dict, what: str,
+        capsys: pytest.CaptureFixture[str]) -> None:
     from brdfcodec.bvae_format import read_bvae
     from brdfcodec.codec import MaterialLibrary
     from brdfcodec.errors import BasisError
@@ -273,7 +283,7 @@ def test_basis_fields_beyond_the_shared_basis_are_refused_on_open(tmp_path: Path
 
 
 @pytest.mark.parametrize("project", [0, 50])
-def test_unknown_basis_hash_is_a_basis_mismatch_for_projected_records_too(tmp_path: Path, shipped_decoder,  # type: ignore[no-untyped-def]
+def test_unknown_basis_hash_is_a_basis_mismatch_for_projected_records_too(tmp_path: Path, shipped_decoder: BrdfDecoder,
                                                                           project: int) -> None:
     from brdfcodec.bvae_format import read_bvae
     from brdfcodec.codec import MaterialLibrary
@@ -327,15 +337,22 @@ def test_layer_keys_and_values_have_the_spec_error_classes(layers: dict, error: 
 
 
 @pytest.fixture(scope="module")
-def studio(tmp_path_factory: pytest.TempPathFactory):  # type: ignore[no-untyped-def]
+def studio(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[str, Path]]:
     pytest.importorskip("starlette", reason="the studio needs the studio extra (starlette, uvicorn)")
     pytest.importorskip("uvicorn", reason="the studio needs the studio extra (starlette, uvicorn)")
     from brdfcodec.studio.browser import running_studio
     from brdfcodec.studio.catalogue import Catalogue
     from brdfcodec.studio.server import StudioServer, create_app
 
+    from brdfcodec.bvae_format import LatentRecord, write_bvae
+    from brdfcodec.codec import BrdfDecoder
+
+    library = tmp_path_factory.mktemp("studio-library") / "lib.bvae"  # its own library: any format version
+    write_bvae(library, [LatentRecord(f"m{i}", np.full(8, 0.1 * i), np.ones(8)) for i in range(3)],
+               BrdfDecoder().reference)
     save_dir = tmp_path_factory.mktemp("studio-saves")
-    server = StudioServer(Catalogue(), save_dir=save_dir, manifold_cache=tmp_path_factory.mktemp("umap"))
+    server = StudioServer(Catalogue([str(library)]), save_dir=save_dir,
+                          manifold_cache=tmp_path_factory.mktemp("umap"))
     with running_studio(create_app(server)) as url:
         yield url, save_dir
 
@@ -375,7 +392,7 @@ def _save_body(**changes: object) -> bytes:
     ("save", _save_body(file="nul.bvae"), "reserved device name"),
     ("save", _save_body(file="lpt1.png"), "reserved device name"),
 ])
-def test_studio_bad_bodies_are_400_not_500(studio, route: str, data: bytes, fragment: str) -> None:  # type: ignore[no-untyped-def]
+def test_studio_bad_bodies_are_400_not_500(studio: tuple[str, Path], route: str, data: bytes, fragment: str) -> None:
     url, save_dir = studio
     status, body = _post(f"{url}/api/{route}", data)
     assert status == 400, body
@@ -383,7 +400,7 @@ def test_studio_bad_bodies_are_400_not_500(studio, route: str, data: bytes, frag
     assert not any(save_dir.iterdir())
 
 
-def test_studio_slow_body_is_cut_off(studio, monkeypatch: pytest.MonkeyPatch) -> None:  # type: ignore[no-untyped-def]
+def test_studio_slow_body_is_cut_off(studio: tuple[str, Path], monkeypatch: pytest.MonkeyPatch) -> None:
     import socket
     import time
     from urllib.parse import urlparse
@@ -402,7 +419,7 @@ def test_studio_slow_body_is_cut_off(studio, monkeypatch: pytest.MonkeyPatch) ->
     assert answer.startswith(b"HTTP/1.1 408") and waited < 10, (answer[:200], waited)
 
 
-def test_studio_saves_a_good_body(studio) -> None:  # type: ignore[no-untyped-def]
+def test_studio_saves_a_good_body(studio: tuple[str, Path]) -> None:
     url, save_dir = studio
     status, body = _post(f"{url}/api/save", _save_body(file="fine.bvae", edit={"t": 0.5, "dims_from_a": [1, 2]}))
     assert status == 200 and (save_dir / "fine.bvae").is_file(), body

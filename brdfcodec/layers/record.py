@@ -298,7 +298,8 @@ def _detail_length(detail: object, where: str) -> int:
         raise ValueError(f"{where} detail dtype {dtype!r} is not a string")
     if dtype not in _DTYPES:
         raise UnsupportedLayerError(
-            f"{where} detail dtype {dtype!r} is unknown to this reader ({', '.join(sorted(_DTYPES))}); upgrade brdfcodec"
+            f"{where} detail dtype {dtype!r} is unknown to this reader ({', '.join(sorted(_DTYPES))}); "
+            "upgrade brdfcodec"
         )
     if not isinstance(length, int) or isinstance(length, bool) or not 1 <= length <= MAX_DETAIL_BYTES:
         raise ValueError(f"{where} detail length {length!r} is not an integer in [1, {MAX_DETAIL_BYTES}]")
