@@ -95,7 +95,7 @@ class StudioServer:
         from brdfcodec.render import Environment, sky_environment
 
         self.catalogue = catalogue
-        self.save_dir = Path(save_dir)
+        self.save_dir = Path(save_dir).resolve()  # shown to the user: absolute, never "."
         if not self.save_dir.is_dir():
             raise NotADirectoryError(f"{self.save_dir}: the save folder does not exist")
         self.environments: dict[str, Any] = {"sky": sky_environment()}

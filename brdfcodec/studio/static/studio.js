@@ -434,20 +434,28 @@ class Explorer {
   }
 
   async load() {
+    const started = performance.now();
+    const progress = $("map-progress");
     for (;;) {
       let response;
       try {
         response = await api("/api/manifold");
       } catch (error) {
+        progress.hidden = true;
         $("map-status").textContent = error.message;
         $("map-status").classList.add("error");
         return;
       }
       const body = await response.json();
       if (response.status === 200) { this.map = body; break; }
-      $("map-status").textContent = body.status;
+      // The first map of a library takes a while on a busy machine: say what runs and for how long so far.
+      const seconds = Math.round((performance.now() - started) / 1000);
+      progress.hidden = false;
+      $("map-status").textContent = `computing the UMAP map of ${this.info.materials.length} materials ` +
+        `(once per library, cached afterwards): ${seconds} s so far`;
       await new Promise((resolve) => setTimeout(resolve, 1000));  // poll until the background fit is done
     }
+    progress.hidden = true;
     $("map-status").textContent = `${this.map.points.length} materials; the grey grid: ${this.samples}×${this.samples} ` +
       "samples of the paper's figure; hover a point for its thumbnail";
     const [x0, x1, y0, y1] = this.map.bounds;
@@ -526,6 +534,29 @@ class Explorer {
     tip.hidden = false;
   }
 
+  // Labels that neither overlap one another nor leave the canvas: each point tries four places around it (right or
+  // left, above or below) and keeps the first that is free; a point with no free place goes unlabelled (hover
+  // still names it). Returns [{id, text, x, y, w, h}] (the label's box, canvas pixels).
+  placeLabels(ctx, w, h) {
+    const placed = [], height = 10, gap = 4;
+    const overlaps = (a, b) => a.x < b.x + b.w && b.x < a.x + a.w && a.y < b.y + b.h && b.y < a.y + a.h;
+    for (const p of this.map.points) {
+      const [cx, cy] = this.toCanvas(p.x, p.y);
+      const text = p.id.split("/").pop();
+      const width = Math.ceil(ctx.measureText(text).width);
+      const places = [[cx + gap, cy - height - 1], [cx - gap - width, cy - height - 1], [cx + gap, cy + 1],
+                      [cx - gap - width, cy + 1]];
+      for (const [x, y] of places) {
+        const box = { id: p.id, text, x, y, w: width, h: height };
+        if (x < 0 || y < 0 || x + width > w || y + height > h) continue;
+        if (placed.some((other) => overlaps(box, other))) continue;
+        placed.push(box);
+        break;
+      }
+    }
+    return placed;
+  }
+
   draw() {
     const ctx = this.context, w = this.canvas.width, h = this.canvas.height;
     ctx.clearRect(0, 0, w, h);
@@ -537,14 +568,16 @@ class Explorer {
         ctx.fillRect(cx - 2, cy - 2, 4, 4);
       }
     }
-    ctx.font = "9px system-ui, sans-serif";
+    ctx.fillStyle = "#7fb2ff";
     for (const p of this.map.points) {
       const [cx, cy] = this.toCanvas(p.x, p.y);
-      ctx.fillStyle = "#7fb2ff";
       ctx.beginPath(); ctx.arc(cx, cy, 3.2, 0, 2 * Math.PI); ctx.fill();
-      ctx.fillStyle = "#bbb";
-      ctx.fillText(p.id.split("/").pop(), cx + 4, cy - 3);
     }
+    ctx.font = "9px system-ui, sans-serif";
+    ctx.fillStyle = "#bbb";
+    ctx.textBaseline = "alphabetic";
+    this.labels = this.placeLabels(ctx, w, h);
+    for (const label of this.labels) ctx.fillText(label.text, label.x, label.y + label.h - 2);
     if (this.cursor) {
       const [cx, cy] = this.toCanvas(this.cursor[0], this.cursor[1]);
       ctx.strokeStyle = "#ffcc66"; ctx.lineWidth = 2;
