@@ -12,10 +12,15 @@ the study that check the result):
    normalised so that ∫ D(m) cos θm dm = 1. Tabulated on the format's
    coordinate u = sqrt(θ / (π/2)) (rows: φ, identical for an isotropic file).
 2. **Projected area** ``sigma`` — σ(ωi) = ∫ D(m) max(0, ωi·m) dm on the same grid.
-3. **VNDF warps** ``vndf`` — per incident elevation θi, the density of the
-   visible normals D(m) max(0, ωi·m) / σ(ωi) in the unit square
-   (u_θ, u_φ) of the format (the Jacobian 2π² u_θ sin θm included), φ
-   relative to the incident azimuth.
+3. **VNDF warps** ``vndf`` — per incident elevation θi, a density on the
+   unit square (u_θ, u_φ) of the format (φ relative to the incident azimuth,
+   the Jacobian 2π² u_θ sin θm included): half the density of the visible
+   normals D(m) max(0, ωi·m) / σ(ωi), half the luminance of f(ωi, ωo) cos θo
+   carried to the normals m that reflect ωi into ωo. Readers only sample
+   and invert this table, so any positive density is valid; the data's own
+   lobe places the sample grid's vertices where the material's lobe is at
+   this θi, which a single NDF misplaces when the lobe's width changes with
+   θi (as in MERL's plastics and paints).
 4. **RGB** ``rgb`` — per θi, the reflectance at the *warped* sample
    positions: a vertex s of the n × n sample grid is carried through the
    VNDF warp (the continuous marginal/conditional inversion the readers
@@ -77,6 +82,8 @@ _ALIGNMENT = 8
 _GRAZING_LIMIT = np.radians(89.5)
 _POWER_ITERATIONS = 200
 _OUTLIER_FACTOR = 4.0
+# Share of each VNDF table given to the data's own reflected lobe (the rest: the NDF's visible normals).
+_DATA_WARP_SHARE = 0.5
 _EPSILON32 = float(np.finfo(np.float32).eps)
 
 
@@ -314,10 +321,30 @@ def rgl_fields(
     ndf_v = _interpolate_profile(ndf, u_v)[None, :]
     jac = 2.0 * np.pi**2 * u_v[None, :] * np.sin(theta_m)
     vndf = np.empty((res.theta_i, res.vndf, res.vndf))
+    m_grid = np.stack(np.broadcast_arrays(np.cos(phi_m) * np.sin(theta_m), np.sin(phi_m) * np.sin(theta_m),
+                                          np.cos(theta_m)), axis=-1).reshape(-1, 3)
     for k, th in enumerate(theta_eval):
         cosine = np.sin(th) * np.sin(theta_m) * np.cos(phi_m) + np.cos(th) * np.cos(theta_m)
         slice_ = ndf_v * np.maximum(cosine, 0.0) * jac / sigma_i[k]
-        vndf[k] = slice_ / slice_.sum()
+        slice_ = slice_ / slice_.sum()
+        if _DATA_WARP_SHARE > 0:  # the data's own lobe for this θi: f cos θo in the same unit square
+            wi_k = np.array([np.sin(th), 0.0, np.cos(th)])
+            dot = m_grid @ wi_k
+            wo_k = 2.0 * dot[:, None] * m_grid - wi_k
+            ok = (wo_k[:, 2] > 0) & (dot > 0)
+            lum_f = np.zeros(dot.shape)
+            if ok.any():
+                # a sampling density only: the nearest bin suffices and costs an eighth of the trilinear lookup
+                lum_f[ok] = lookup(values, np.broadcast_to(wi_k, wo_k[ok].shape), wo_k[ok], mode="nearest",
+                                   mask=mask) @ np.asarray(LUMINANCE_WEIGHTS)
+            lum_f = np.maximum(lum_f, 0.0)
+            if (lum_f > 0).any():  # grazing spikes (f = eval / cos θo of a tabulated file) must not own the warp
+                lum_f = np.minimum(lum_f, _OUTLIER_FACTOR * float(np.percentile(lum_f[lum_f > 0], 99)))
+            data = lum_f * 4.0 * np.maximum(dot, 0.0)
+            data = data.reshape(slice_.shape) * jac
+            if data.sum() > 0:
+                slice_ = (1.0 - _DATA_WARP_SHARE) * slice_ + _DATA_WARP_SHARE * data / data.sum()
+        vndf[k] = slice_
 
     # 4-5. RGB and luminance at the warped vertices of the sample grid.
     n = res.luminance

@@ -222,8 +222,8 @@ def test_mitsuba_eval_agrees_with_the_table(mi: object, analytic_tables: dict[st
     rng = np.random.default_rng(3)
     wi, wo = _hemisphere(rng, 50_000), _hemisphere(rng, 50_000)
     # Bounds at the database's resolution: a sharp lobe over a diffuse base (red-plastic's green and blue) is
-    # the hardest case of the 32 × 32 sample grid (about 0.10 measured); a broken table gives errors near 1.
-    for name, bound in (("red-plastic", 0.15), ("gold", 0.03)):
+    # the hardest case of the 32 × 32 sample grid (about 0.05 measured); a broken table gives errors near 1.
+    for name, bound in (("red-plastic", 0.08), ("gold", 0.03)):
         brdf = analytic_tables[name]
         path = write_rgl_bsdf(tmp_path / f"{name}.bsdf", brdf.values, name=name)
         estimate = _measured_eval(mi, path, wi, wo)
@@ -233,32 +233,38 @@ def test_mitsuba_eval_agrees_with_the_table(mi: object, analytic_tables: dict[st
         assert (relae < bound).all(), (name, relae)
 
 
-@pytest.mark.parametrize("name", ["gold", "white-matte"])
+@pytest.mark.parametrize(("name", "thetas"), [("gold", (0.2, 0.9)), ("white-matte", (0.2, 0.9, 1.3))])
 def test_mitsuba_sampling_passes_a_chi_square_test(mi: object, analytic_tables: dict[str, MerlBRDF],
                                                    tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
-                                                   name: str) -> None:
+                                                   name: str, thetas: tuple[float, ...]) -> None:
     """Directions drawn by Mitsuba's measured.sample follow its pdf (Mitsuba's own BSDF χ² test).
 
-    ``ires=16`` integrates the pdf over each histogram cell finely enough for gold's lobe (the default 4
-    overestimates the integral of a glossy pdf and rejects a correct sampler).
+    ``ires=32`` integrates the pdf over each histogram cell finely enough for gold's lobe (the default 4
+    misjudges the integral of a glossy pdf and rejects a correct sampler). At grazing incidence gold's
+    lobe touches the horizon, where a cell's quadrature can miss the thin band a sample falls in (the test
+    then rejects on one sample); there :func:`test_sample_weight_is_eval_over_pdf` checks the sampler
+    point by point instead.
     """
     from mitsuba.chi2 import BSDFAdapter, ChiSquareTest, SphericalDomain
 
     monkeypatch.chdir(tmp_path)  # a rejected test writes chi2_data.py into the working folder
     path = write_rgl_bsdf(tmp_path / f"{name}.bsdf", analytic_tables[name].values, name=name, resolution=SMALL)
-    for theta in (0.2, 0.9, 1.3):
+    for theta in thetas:
         wi = [float(np.sin(theta)), 0.0, float(np.cos(theta))]
         sample, pdf = BSDFAdapter("measured", {"type": "measured", "filename": str(path)}, wi=wi)
         test = ChiSquareTest(domain=SphericalDomain(), sample_func=sample, pdf_func=pdf, sample_dim=3,
-                             sample_count=200_000, res=32, ires=16, seed=4)
+                             sample_count=200_000, res=32, ires=32, seed=4)
         assert test.run(), test.messages
 
 
-def test_sample_weight_is_eval_over_pdf(mi: object, analytic_tables: dict[str, MerlBRDF], tmp_path: Path) -> None:
+@pytest.mark.parametrize("name", ["red-plastic", "gold"])
+def test_sample_weight_is_eval_over_pdf(mi: object, analytic_tables: dict[str, MerlBRDF], tmp_path: Path,
+                                        name: str) -> None:
+    """At sampled directions (every incident elevation): the sample's pdf is pdf(), its weight eval / pdf."""
     import drjit as dr
 
     m = mi
-    path = write_rgl_bsdf(tmp_path / "p.bsdf", analytic_tables["red-plastic"].values, resolution=SMALL)
+    path = write_rgl_bsdf(tmp_path / "p.bsdf", analytic_tables[name].values, resolution=SMALL)
     bsdf = m.load_dict({"type": "measured", "filename": str(path)})  # type: ignore[attr-defined]
     n = 20_000
     rng = np.random.default_rng(5)
@@ -273,6 +279,7 @@ def test_sample_weight_is_eval_over_pdf(mi: object, analytic_tables: dict[str, M
     weight, value, pdf = (np.asarray(x, dtype=np.float64) for x in (weight, value, pdf))
     ok = (pdf > 1e-3) & (np.asarray(bs.wo)[2] > 1e-3)
     assert ok.mean() > 0.9
+    np.testing.assert_allclose(np.asarray(bs.pdf, dtype=np.float64)[ok], pdf[ok], rtol=1e-2)  # sample's pdf = pdf()
     np.testing.assert_allclose(weight.T[ok], value.T[ok] / pdf[ok, None], rtol=2e-3, atol=1e-5)
 
 
