@@ -415,7 +415,11 @@ def test_a_budget_too_small_for_every_coefficient_stores_a_compact_base(
     assert record.compact_mu == record.shared_sigma == compact and record.compact_sigma != compact
     assert record.fixed_mu_grid == (storage == "int8-fixed")
     # One basis size only: beside 32 coefficients none of these budgets has room for a detail layer (49 B at least).
-    assert set(fitted) == {(count, storage)}
+    # Just past the compact budgets the compact base's best (all 75 on a compact μ) stays a candidate too, so that
+    # rate control stays monotone (issue 39); on a tie the full-precision base is kept.
+    from brdfcodec.layers.rate import compact_mu_storage
+
+    assert set(fitted) == {(count, storage)} | (set() if compact else {(count, compact_mu_storage(base.mu))})
     stored = parse_bvae(encode_bvae([record], DECODER, latent_dtype="float32" if itemsize == 4 else "float16"))
     entry = stored.header.entries[0]
     assert entry.length + entry.descriptor_bytes == result.payload_bytes <= budget

@@ -13,9 +13,10 @@ halving every two rungs):
   store the base compact) the compact base with all K coefficients, the one
   with the lowest kept-slice mapped L1 error (fewer coefficients on a tie).
   No error is traded for decode time, so that a larger budget never returns
-  a worse record than a smaller one (the base alone, and the compact base's
-  best, stay candidates of every budget that holds them; more coefficients
-  fit no worse than fewer: ``tests/test_rate_monotone.py``). The cap bounds
+  a worse record than a smaller one (the base alone stays a candidate of
+  every budget that holds it, the compact base's best of the budgets just
+  past the compact ones; more coefficients fit no worse than fewer:
+  ``tests/test_rate_monotone.py``). The cap bounds
   every layered record's
   decode time; where a detail layer has room, the bytes of coefficients past
   the first few dozen buy more as detail anyway
@@ -267,14 +268,15 @@ def encode_layers(
         if smallest_detail <= bytes_budget:
             fitting |= {(under_detail, s) for s in _finest_fitting_steps(cands, under_detail, bytes_budget, tried)}
 
-        # Past the budgets that store the base compact, their best record (the compact base with all K
-        # coefficients) stays a candidate, so that one byte more never loses what the compact base gave.
+        # Just past the budgets that store the base compact (up to the first with room for a detail layer), their
+        # best record (the compact base with all K coefficients) stays a candidate, so that one byte more never
+        # loses what the compact base gave; it costs a refit of the coefficients to the compact μ.
         pools = {compact: cands}
-        if full and not compact:
-            pools[True] = _Candidates(base, base_mapped, target, weights, latent_itemsize, basis_fit, compact=True)
         options = {(compact, *c) for c in fitting}
-        if True in pools and not compact and pools[True].size(full, None) <= bytes_budget:
-            options.add((True, full, None))
+        if full and not compact and smallest_detail > bytes_budget:
+            pools[True] = _Candidates(base, base_mapped, target, weights, latent_itemsize, basis_fit, compact=True)
+            if pools[True].size(full, None) <= bytes_budget:
+                options.add((True, full, None))
 
         # Among the candidates, the lowest kept-slice L1 error (a very coarse layer can be worse than none), fewer
         # coefficients on a tie. No error is traded for decode time: a budget whose smaller neighbours cannot hold
