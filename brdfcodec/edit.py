@@ -5,6 +5,10 @@ Every edit returns a record (:class:`~brdfcodec.bvae_format.LatentRecord` or
 ``.bvae`` file and decoded like any other. A graft record has D + k
 parameters (its code and the k grafted colour values); edits act on all of
 them, so interpolating two grafted materials also interpolates their green.
+A layered record (:class:`~brdfcodec.layers.record.LayeredRecord`) stays
+layered: an edit moves its ``mu`` and keeps its basis and detail layers, so
+the edited material is the edited base plus the original layers' residual
+(``spec/bvae-format.md`` §4.4, "Edits"); moving ``mu`` back undoes the edit.
 
 Edited records carry provenance, not measurements (``spec/bvae-format.md``
 §5.1): ``meta`` holds only ``edit`` (the operation and its operands, with

@@ -174,7 +174,8 @@ class LayeredRecord(LatentRecord):
         return np.concatenate(parts) if parts else np.zeros(0, dtype=np.float32)
 
     def base(self) -> LatentRecord:
-        """The base alone (what edits act on): a plain latent record with the same μ, σ and meta."""
+        """The base alone: a plain latent record with the same μ, σ and meta (what a graft is made of; other
+        edits keep the layers, ``spec/bvae-format.md`` §4.4)."""
         return LatentRecord(self.name, self.mu, self.sigma, self.meta)
 
     def layer_bytes(self) -> bytes:
