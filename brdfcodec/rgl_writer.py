@@ -241,6 +241,19 @@ def _invert_linear(v0: np.ndarray, v1: np.ndarray, mass: np.ndarray) -> np.ndarr
     return np.where(constant, flat, linear)
 
 
+def _bilinear(table: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """Bilinear interpolation of a (ny, nx) vertex table of the unit square at points (N, 2) = (x, y)."""
+    ny, nx = table.shape
+    x = np.clip(points[:, 0], 0.0, 1.0) * (nx - 1)
+    y = np.clip(points[:, 1], 0.0, 1.0) * (ny - 1)
+    x0 = np.minimum(x.astype(np.intp), nx - 2)
+    y0 = np.minimum(y.astype(np.intp), ny - 2)
+    fx, fy = x - x0, y - y0
+    top = (1 - fx) * table[y0, x0] + fx * table[y0, x0 + 1]
+    bottom = (1 - fx) * table[y0 + 1, x0] + fx * table[y0 + 1, x0 + 1]
+    return (1 - fy) * top + fy * bottom
+
+
 def _interpolate_profile(values: np.ndarray, u: np.ndarray) -> np.ndarray:
     """Linear interpolation of a profile tabulated on a uniform grid of [0, 1] (as the readers do)."""
     return np.interp(u, np.linspace(0.0, 1.0, values.size), values)
@@ -321,12 +334,14 @@ def rgl_fields(
     ndf_v = _interpolate_profile(ndf, u_v)[None, :]
     jac = 2.0 * np.pi**2 * u_v[None, :] * np.sin(theta_m)
     vndf = np.empty((res.theta_i, res.vndf, res.vndf))
+    visible = np.empty_like(vndf)  # the NDF's visible normals alone, for the luminance tables
     m_grid = np.stack(np.broadcast_arrays(np.cos(phi_m) * np.sin(theta_m), np.sin(phi_m) * np.sin(theta_m),
                                           np.cos(theta_m)), axis=-1).reshape(-1, 3)
     for k, th in enumerate(theta_eval):
         cosine = np.sin(th) * np.sin(theta_m) * np.cos(phi_m) + np.cos(th) * np.cos(theta_m)
         slice_ = ndf_v * np.maximum(cosine, 0.0) * jac / sigma_i[k]
         slice_ = slice_ / slice_.sum()
+        visible[k] = slice_
         if _DATA_WARP_SHARE > 0:  # the data's own lobe for this θi: f cos θo in the same unit square
             wi_k = np.array([np.sin(th), 0.0, np.cos(th)])
             dot = m_grid @ wi_k
@@ -352,6 +367,7 @@ def rgl_fields(
     sx, sy = np.meshgrid(grid, grid)  # [y, x]
     samples = np.stack([sx.ravel(), sy.ravel()], axis=1)
     rgb = np.zeros((res.theta_i, 3, n, n))
+    weight = np.ones((res.theta_i, n, n))
     above = np.zeros((res.theta_i, n, n), dtype=bool)
     for k, th in enumerate(theta_eval):
         u_m = _sample_marginal(vndf[k], samples)
@@ -369,7 +385,12 @@ def rgl_fields(
         value = _cap_outliers(np.maximum(value, 0.0), up)
         rgb[k] = value.T.reshape(3, n, n)
         above[k] = up.reshape(n, n)
-    luminance = np.tensordot(np.asarray(LUMINANCE_WEIGHTS), rgb, axes=([0], [1]))
+        # Readers sample luminance, then the VNDF table; weighting by visible / table density makes the
+        # product follow the luminance of f cos θo (the table's data half only moves the grid's vertices).
+        table_density, visible_density = _bilinear(vndf[k], u_m), _bilinear(visible[k], u_m)
+        ratio = np.divide(visible_density, table_density, out=np.ones_like(table_density), where=table_density > 0)
+        weight[k] = ratio.reshape(n, n)
+    luminance = np.tensordot(np.asarray(LUMINANCE_WEIGHTS), rgb, axes=([0], [1])) * weight
 
     sigma2 = np.broadcast_to(sigma, (2, res.ndf))
     ndf2 = np.broadcast_to(ndf, (2, res.ndf))
