@@ -186,3 +186,28 @@ def test_the_studio_edits_a_layered_record_with_its_layers(layered: dict[str, An
                  "edit": {"source": "rp", "changed": [2]}})
     saved = read_bvae(tmp_path / "saved.bvae").records[0]
     assert isinstance(saved, LayeredRecord) and saved.detail == record.detail and saved.meta["edit"]["op"] == "studio"
+
+
+def test_a_projected_compact_record_edits_by_the_same_rule(layered: dict[str, Any]) -> None:
+    """A 64 B record: μ on the fixed int8 grid, a basis layer only, the base projected on the shared basis."""
+    from brdfcodec.analytic import ANALYTIC_PRESETS
+    from brdfcodec.cli.main import main
+    from brdfcodec.merl import write_merl
+
+    folder, decoder = layered["folder"], layered["decoder"]
+    source, path = folder / "rp.binary", folder / "rp64.bvae"
+    write_merl(source, ANALYTIC_PRESETS["red-plastic"].to_merl(), overwrite=True)
+    assert main(["compress", str(source), "--bytes", "64", "--project-base", "always", "--no-measure",
+                 "-o", str(path), "--force"]) == 0
+    record = read_bvae(path).records[0]
+    assert isinstance(record, LayeredRecord) and record.basis is not None and record.basis.project > 0
+    assert record.compact_mu and record.fixed_mu_grid and record.detail is None
+    original = decoder.mapped_record(record)
+    for dim, step, stays_compact in ((0, 1.5, True), (3, -0.37, False)):
+        edited = traverse(record, dim, [step])[0]
+        assert isinstance(edited, LayeredRecord) and edited.basis == record.basis
+        assert edited.compact_mu is stays_compact
+        want = clamp_mapped(base_decode(decoder, record, edited.mu) + layers_sum(decoder, record))
+        np.testing.assert_allclose(decoder.mapped_record(edited), want, rtol=0, atol=1e-5)
+        back = traverse(edited, dim, [-step])[0]
+        assert np.abs(decoder.mapped_record(back) - original).max() < UNDO_TOLERANCE
