@@ -16,6 +16,7 @@ from brdfcodec.dataset import BrdfDataset
 from brdfcodec.image_metrics import compare_images
 from brdfcodec.metrics import relae_between_mapped, relae_linear
 from brdfcodec.render import MaterialTable, render_sphere
+from brdfcodec.layers.points import rate_distortion_points
 from brdfcodec.report.points import Material, OperatingPoint, standard_points
 from brdfcodec.representation import map_values, reflectance_from_stored
 from brdfcodec.version import __version__
@@ -108,6 +109,7 @@ def evaluate_dataset(
         }
         if points is None:
             points = standard_points(dataset.inputs(train), pca_sizes, extra_models)
+            points += rate_distortion_points(dataset.inputs(train))
         rows: list[dict[str, Any]] = []
         for index in tqdm(indices, desc="report", unit="material", disable=not progress or None):
             brdf = dataset.table(index)

@@ -189,16 +189,14 @@ def standard_points(
     train_inputs: np.ndarray,
     pca_sizes: Sequence[int] = (8, 16, 32),
     extra_models: Sequence[Any] = (),
-    rate_distortion: bool = True,
 ) -> list[OperatingPoint]:
-    """The report's operating points: the shipped model (float32, float16 latents), other models, every baseline."""
+    """The report's operating points: the shipped model (float32, float16 latents), other models, every baseline.
+
+    The rate–distortion points (:func:`brdfcodec.layers.points.rate_distortion_points`) are added by the
+    caller, :func:`brdfcodec.report.evaluate.evaluate_dataset`.
+    """
     points: list[OperatingPoint] = [BvaeCodec("float32"), BvaeCodec("float16")]
     points += [BvaeCodec("float32", model) for model in extra_models]
     points += [Pca(train_inputs, k) for k in pca_sizes if k <= len(train_inputs)]
     points += [KeptSlices(), RawTable("float32"), RawTable("float16"), ZstdTable("float32"), ZstdTable("float16")]
-    if rate_distortion:  # issue 14: layered brdfcodec and fairly packed baselines, held-out materials only
-        from brdfcodec.layers.points import rate_distortion_points
-
-        points += rate_distortion_points(train_inputs)
     return points
-
