@@ -15,8 +15,9 @@ the study that check the result):
 3. **VNDF warps** ``vndf`` — per incident elevation θi, a density on the
    unit square (u_θ, u_φ) of the format (φ relative to the incident azimuth,
    the Jacobian 2π² u_θ sin θm included): half the density of the visible
-   normals D(m) max(0, ωi·m) / σ(ωi), half the luminance of f(ωi, ωo) cos θo
-   carried to the normals m that reflect ωi into ωo. Readers only sample
+   normals D(m) max(0, ωi·m) / σ(ωi), half the luminance of f(ωi, ωo)
+   (nearest-bin lookup, spikes capped) carried to the normals m that reflect
+   ωi into ωo. Readers only sample
    and invert this table, so any positive density is valid; the data's own
    lobe places the sample grid's vertices where the material's lobe is at
    this θi, which a single NDF misplaces when the lobe's width changes with
@@ -31,8 +32,10 @@ the study that check the result):
    the NDF barely weights, where the division by D(m) explodes) are scaled
    down to that bound.
 5. **Luminance** ``luminance`` — the luminance (Rec. 709 Y) of those RGB
-   values: readers sample it before the VNDF warp, so directions are drawn
-   in proportion to the luminance of f cos θo up to the tables' resolution.
+   values times the ratio of the visible-normal density to the VNDF table's
+   density at the warped point (between 0 and 2): readers sample it before
+   the VNDF warp, so directions are drawn in proportion to the luminance of
+   f cos θo up to the tables' resolution.
 
 f is looked up in the MERL table with :func:`brdfcodec.lookup.lookup`
 (``trilinear``, unmeasured entries left out). Values are linear RGB
