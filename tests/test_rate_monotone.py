@@ -45,3 +45,26 @@ def test_a_larger_budget_never_returns_the_base_alone_when_a_smaller_one_did_bet
         errors.append((budget, _slice_error(mapped, target)))
     worse = [(a, b) for a, b in zip(errors, errors[1:]) if b[1] > a[1]]
     assert not worse, f"a larger budget returned a worse record: {worse[:3]}"
+
+
+@pytest.mark.slow
+def test_a_ladder_of_budgets_on_real_encodes_is_monotone(analytic_tables) -> None:
+    """The shipped model, effort 1, float16 latents, several materials: along a ladder of budgets the kept-slice
+    error rate control ranks by never rises, nor (beyond float rounding) the measured full-table RelAE."""
+    from brdfcodec.codec import BrdfEncoder, measure
+    from brdfcodec.representation import network_input_from_table
+
+    budgets = (24, 32, 48, 64, 96, 128, 256, 1024)
+    encoders = [BrdfEncoder(effort=1, bytes=b, latent_dtype="float16") for b in budgets]
+    decoder = encoders[0].decoder
+    for name in ("gold", "green-satin", "white-matte"):
+        brdf = analytic_tables[name]
+        inputs, mask = network_input_from_table(brdf.values, brdf.mask)
+        ladder = []
+        for budget, encoder in zip(budgets, encoders):
+            record = measure(encoder.encode(brdf, name=name), decoder, brdf)
+            kept = float((np.abs(np.clip(decoder.mapped_record(record), 0.0, None) - inputs) * mask).sum())
+            ladder.append((budget, kept, record.meta["relae"]["mapped"]))
+        for (small, kept_small, relae_small), (large, kept_large, relae_large) in zip(ladder, ladder[1:]):
+            assert kept_large <= kept_small * (1 + 1e-6), (name, small, large, ladder)
+            assert relae_large <= relae_small * (1 + 1e-3), (name, small, large, ladder)

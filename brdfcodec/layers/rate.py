@@ -14,8 +14,9 @@ halving every two rungs):
   with the lowest kept-slice mapped L1 error (fewer coefficients on a tie).
   No error is traded for decode time, so that a larger budget never returns
   a worse record than a smaller one (the base alone stays a candidate of
-  every budget that holds it, the compact base's best of the budgets just
-  past the compact ones; more coefficients fit no worse than fewer:
+  every budget that holds it, the compact base's best of the budgets past
+  the compact ones unless a detail layer wins by far; more coefficients fit
+  no worse than fewer:
   ``tests/test_rate_monotone.py``). The cap bounds
   every layered record's
   decode time; where a detail layer has room, the bytes of coefficients past
@@ -107,6 +108,9 @@ BasisFit = Callable[[int, MuStorage, bool], tuple[LatentRecord, BasisLayer, np.n
 _BASIS_COUNTS: Final = (4, 8, 16, 32)
 #: A candidate of an error target: compact base or not, basis coefficients, detail step (None: no detail layer).
 _Candidate = tuple[bool, int, float | None]
+#: How much lower than all K coefficients on the full base another candidate's kept-slice error must be for a size
+#: budget to skip the compact base's best (how the two store μ moves the error by a fraction of that).
+_COMPACT_MARGIN: Final = 0.02
 #: The most basis coefficients a record with a detail layer carries, so that decoding any layered record stays
 #: within 1.5 times its base-only decode (the basis sum reads every factor its coefficients use; 32 coefficients
 #: use 28 of the 64 factors, 75 all of them). Measured on the held-out materials of the NBRDF proxy
@@ -126,12 +130,13 @@ class _Candidates:
     """Records made of the base, k basis coefficients (0: none) and a detail layer at step s (None: none)."""
 
     def __init__(self, base: LatentRecord, base_mapped: np.ndarray, inputs: np.ndarray, masks: np.ndarray,
-                 latent_itemsize: int, basis_fit: BasisFit | None, compact: bool = False) -> None:
+                 latent_itemsize: int, basis_fit: BasisFit | None, compact: bool = False,
+                 fixed_grid: bool = False) -> None:
         self.base, self.inputs, self.masks = base, inputs, masks
         d = base.latent_dim
         # a latent record: μ and σ in the latent dtype, and its descriptor
         self.plain_bytes = 2 * d * latent_itemsize + record_overhead(base.name)
-        self.mu_storage = compact_mu_storage(base.mu) if compact else None
+        self.mu_storage = (MU_INT8_FIXED if fixed_grid else compact_mu_storage(base.mu)) if compact else None
         self.layered_bytes = _layered_base_bytes(d, latent_itemsize, self.mu_storage)
         self.basis_fit = basis_fit
         self.stages: dict[tuple[int, bool], tuple[LatentRecord, BasisLayer | None, np.ndarray]] = {
@@ -247,6 +252,10 @@ def encode_layers(
     compact = bytes_budget is not None and compact_base_pays(
         bytes_budget - record_overhead(base.name, basis_count=max(full, 1)), d, latent_itemsize, full)
     cands = _Candidates(base, base_mapped, target, weights, latent_itemsize, basis_fit, compact)
+    if cands.mu_storage == MU_INT8 and bytes_budget is not None and not _smallest_layered_fits(cands, bytes_budget):
+        # μ past the fixed grid's ±3.97 with its own step does not fit beside its descriptor: the grid's end holds it
+        # (spec §4.5; the coefficients are fitted to the clipped code), so every material fits the smallest budgets.
+        cands = _Candidates(base, base_mapped, target, weights, latent_itemsize, basis_fit, compact, fixed_grid=True)
     base_bytes = cands.plain_bytes
     if full:
         base_bytes = min(base_bytes, cands.layered_bytes + STEP_BYTES + 1 + cands.overhead(1))
@@ -268,15 +277,8 @@ def encode_layers(
         if smallest_detail <= bytes_budget:
             fitting |= {(under_detail, s) for s in _finest_fitting_steps(cands, under_detail, bytes_budget, tried)}
 
-        # Just past the budgets that store the base compact (up to the first with room for a detail layer), their
-        # best record (the compact base with all K coefficients) stays a candidate, so that one byte more never
-        # loses what the compact base gave; it costs a refit of the coefficients to the compact μ.
         pools = {compact: cands}
         options = {(compact, *c) for c in fitting}
-        if full and not compact and smallest_detail > bytes_budget:
-            pools[True] = _Candidates(base, base_mapped, target, weights, latent_itemsize, basis_fit, compact=True)
-            if pools[True].size(full, None) <= bytes_budget:
-                options.add((True, full, None))
 
         # Among the candidates, the lowest kept-slice L1 error (a very coarse layer can be worse than none), fewer
         # coefficients on a tie. No error is traded for decode time: a budget whose smaller neighbours cannot hold
@@ -286,6 +288,16 @@ def encode_layers(
             return float((np.abs(mapped - target) * weights).sum())
 
         errors = {c: slice_error(c) for c in options}
+        # Past the budgets that store the base compact, their best record (the compact base with all K coefficients)
+        # stays a candidate wherever nothing beats all K on the full base by more than what μ's storage can change
+        # (_COMPACT_MARGIN), so that one byte more never loses what the compact base gave (a refit of the
+        # coefficients to the compact μ; a 16 KB budget, whose detail layer wins by far, does not pay it).
+        full_plain = (False, full, None)
+        if full and not compact and full_plain in errors and (
+                min(errors.values()) > (1 - _COMPACT_MARGIN) * errors[full_plain]):
+            pools[True] = _Candidates(base, base_mapped, target, weights, latent_itemsize, basis_fit, compact=True)
+            if pools[True].size(full, None) <= bytes_budget:
+                errors[True, full, None] = slice_error((True, full, None))
         chosen = min(errors, key=lambda c: (errors[c], c[1], c[0]))
         return RateResult(pools[chosen[0]].record(*chosen[1:]), pools[chosen[0]].size(*chosen[1:]), tried)
     assert max_relae is not None
@@ -376,6 +388,12 @@ def compact_mu_storage(mu: npt.ArrayLike) -> str:
     (0.0298 against 0.0299).
     """
     return MU_INT8_FIXED if fits_fixed_mu_grid(mu) else MU_INT8
+
+
+def _smallest_layered_fits(cands: _Candidates, bytes_budget: int) -> bool:
+    """Whether the candidates' smallest layered record (their base, the step, one coefficient and the record's
+    descriptor) fits the budget."""
+    return cands.layered_bytes + STEP_BYTES + 1 + cands.overhead(1) <= bytes_budget
 
 
 def _layered_base_bytes(latent_dim: int, latent_itemsize: int, mu_storage: MuStorage) -> int:
