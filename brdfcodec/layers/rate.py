@@ -14,8 +14,9 @@ halving every two rungs):
   with the lowest kept-slice mapped L1 error (fewer coefficients on a tie).
   No error is traded for decode time, so that a larger budget never returns
   a worse record than a smaller one (the base alone stays a candidate of
-  every budget that holds it, the compact base's best of the budgets just
-  past the compact ones; more coefficients fit no worse than fewer:
+  every budget that holds it, the compact base's best of the budgets past
+  the compact ones unless a detail layer wins by far; more coefficients fit
+  no worse than fewer:
   ``tests/test_rate_monotone.py``). The cap bounds
   every layered record's
   decode time; where a detail layer has room, the bytes of coefficients past
@@ -107,6 +108,9 @@ BasisFit = Callable[[int, MuStorage, bool], tuple[LatentRecord, BasisLayer, np.n
 _BASIS_COUNTS: Final = (4, 8, 16, 32)
 #: A candidate of an error target: compact base or not, basis coefficients, detail step (None: no detail layer).
 _Candidate = tuple[bool, int, float | None]
+#: How much lower than all K coefficients on the full base another candidate's kept-slice error must be for a size
+#: budget to skip the compact base's best (how the two store μ moves the error by a fraction of that).
+_COMPACT_MARGIN: Final = 0.02
 #: The most basis coefficients a record with a detail layer carries, so that decoding any layered record stays
 #: within 1.5 times its base-only decode (the basis sum reads every factor its coefficients use; 32 coefficients
 #: use 28 of the 64 factors, 75 all of them). Measured on the held-out materials of the NBRDF proxy
@@ -273,15 +277,8 @@ def encode_layers(
         if smallest_detail <= bytes_budget:
             fitting |= {(under_detail, s) for s in _finest_fitting_steps(cands, under_detail, bytes_budget, tried)}
 
-        # Just past the budgets that store the base compact (up to the first with room for a detail layer), their
-        # best record (the compact base with all K coefficients) stays a candidate, so that one byte more never
-        # loses what the compact base gave; it costs a refit of the coefficients to the compact μ.
         pools = {compact: cands}
         options = {(compact, *c) for c in fitting}
-        if full and not compact and smallest_detail > bytes_budget:
-            pools[True] = _Candidates(base, base_mapped, target, weights, latent_itemsize, basis_fit, compact=True)
-            if pools[True].size(full, None) <= bytes_budget:
-                options.add((True, full, None))
 
         # Among the candidates, the lowest kept-slice L1 error (a very coarse layer can be worse than none), fewer
         # coefficients on a tie. No error is traded for decode time: a budget whose smaller neighbours cannot hold
@@ -291,6 +288,16 @@ def encode_layers(
             return float((np.abs(mapped - target) * weights).sum())
 
         errors = {c: slice_error(c) for c in options}
+        # Past the budgets that store the base compact, their best record (the compact base with all K coefficients)
+        # stays a candidate wherever nothing beats all K on the full base by more than what μ's storage can change
+        # (_COMPACT_MARGIN), so that one byte more never loses what the compact base gave (a refit of the
+        # coefficients to the compact μ; a 16 KB budget, whose detail layer wins by far, does not pay it).
+        full_plain = (False, full, None)
+        if full and not compact and full_plain in errors and (
+                min(errors.values()) > (1 - _COMPACT_MARGIN) * errors[full_plain]):
+            pools[True] = _Candidates(base, base_mapped, target, weights, latent_itemsize, basis_fit, compact=True)
+            if pools[True].size(full, None) <= bytes_budget:
+                errors[True, full, None] = slice_error((True, full, None))
         chosen = min(errors, key=lambda c: (errors[c], c[1], c[0]))
         return RateResult(pools[chosen[0]].record(*chosen[1:]), pools[chosen[0]].size(*chosen[1:]), tried)
     assert max_relae is not None
