@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from brdfcodec.bvae_format import FORMAT_MINOR, read_bvae
+from brdfcodec.bvae_format import FORMAT_MAJOR, FORMAT_MINOR, read_bvae
 from brdfcodec.cli import main
 from brdfcodec.exr import read_exr_rgb
 from brdfcodec.merl import MerlBRDF, read_merl, write_merl
@@ -41,11 +41,18 @@ def test_compress_decompress_round_trip(capsys, merl_folder: Path, tmp_path: Pat
     assert "RelAE mapped" in out and "3 materials" in out and "bytes per material" in out
     library = read_bvae(lib)
     assert library.header.names == ["chrome", "gold", "red-plastic"]
-    assert all("relae" in r.meta for r in library.records)
+    assert all(not r.meta for r in library.records)  # RelAE printed, not stored: provenance is opt-in
 
     code, out, err = run(capsys, "info", str(lib))
     assert code == 0, err
-    assert "tiny-test-model" in out and f"format 1.{FORMAT_MINOR}" in out and "gold" in out
+    assert "tiny-test-model" in out and f"format {FORMAT_MAJOR}.{FORMAT_MINOR}" in out and "gold" in out
+
+    kept = tmp_path / "kept.bvae"
+    code, out, err = run(capsys, "compress", str(merl_folder), "-o", str(kept), "--model", str(tiny_model_folder),
+                         "--provenance")
+    assert code == 0, err
+    assert all("relae" in r.meta and "source_sha256" in r.meta for r in read_bvae(kept).records)
+    assert kept.stat().st_size > lib.stat().st_size
 
     code, _, err = run(capsys, "decompress", str(lib), "--material", "gold", "-o", str(tmp_path / "gold.binary"),
                        "--reference", str(merl_folder / "gold.binary"))

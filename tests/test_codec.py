@@ -173,8 +173,10 @@ def test_graft_with_equal_codes_copies_red_into_green(decoder: BrdfDecoder) -> N
 def test_encode_and_decode_are_inverse_on_bytes(tiny_model_folder: Path, analytic_tables: dict[str, MerlBRDF],
                                                 tmp_path: Path) -> None:
     gold, chrome = analytic_tables["gold"], analytic_tables["chrome"]
-    data = encode([gold, chrome], names=["gold", "chrome"], model=tiny_model_folder)
+    data = encode([gold, chrome], names=["gold", "chrome"], model=tiny_model_folder, provenance=True)
     assert isinstance(data, bytes) and data.startswith(MAGIC)
+    lean = parse_bvae(encode([gold, chrome], names=["gold", "chrome"], model=tiny_model_folder))
+    assert all(not r.meta for r in lean.records) and lean.header.file_size < len(data)  # provenance is opt-in
     parsed = parse_bvae(data)
     encoder = BrdfEncoder(tiny_model_folder)
     assert parsed.header.decoder == encoder.reference and parsed.header.names == ["gold", "chrome"]
@@ -191,7 +193,8 @@ def test_encode_and_decode_are_inverse_on_bytes(tiny_model_folder: Path, analyti
         assert record.meta["relae"] == {"mapped": report.relae_mapped.overall, "linear": report.relae_linear.overall}
     assert list(library) == ["gold", "chrome"] and library.path is None
     # The file helpers write exactly encode()'s bytes and read them back.
-    size = compress([gold, chrome], tmp_path / "two.bvae", names=["gold", "chrome"], model=tiny_model_folder)
+    size = compress([gold, chrome], tmp_path / "two.bvae", names=["gold", "chrome"], model=tiny_model_folder,
+                    provenance=True)
     assert (tmp_path / "two.bvae").read_bytes() == data and size == len(data)
     with pytest.raises(FileExistsError):
         compress(gold, tmp_path / "two.bvae", model=tiny_model_folder)
