@@ -389,10 +389,11 @@ def test_the_basis_layer_follows_the_decoder_output_it_was_fitted_on(analytic_ta
     assert isinstance(record, LayeredRecord) and record.compact_mu and record.shared_sigma and record.detail is None
     assert record.fixed_mu_grid and np.abs(record.mu).max() <= 127 / 32
     assert np.array_equal(record.mu * 32, np.rint(record.mu * 32))  # on the grid
-    assert record.basis is not None and record.basis.count == 64 - 9 - 2
+    assert record.basis is not None and record.basis.count == 64 - 9 - 2 - 3  # and 3 bytes of index entry
     assert record.basis.first == 8  # the shipped decoder's linear path spans the basis' first 8 vectors
-    stored = parse_bvae(encode_bvae([record], encoder.reference, latent_dtype="float16")).header.entries[0].length
-    assert stored == record.meta["rate"]["payload_bytes"] == 64
+    entry = parse_bvae(encode_bvae([record], encoder.reference, latent_dtype="float16")).header.entries[0]
+    assert entry.length == record.meta["rate"]["payload_bytes"] == 61
+    assert entry.length + entry.descriptor_bytes == record.meta["rate"]["record_bytes"] == 64
     layered_error = measure(record, encoder.decoder, brdf).meta["relae"]["mapped"]
     assert layered_error < 0.9 * base_error
     # The coefficients are fitted to the quantised μ the record stores: refitting them to it gives the same ones.
@@ -402,10 +403,11 @@ def test_the_basis_layer_follows_the_decoder_output_it_was_fitted_on(analytic_ta
     inputs, masks = network_input_from_table(brdf.values, brdf.mask)
     basis = encoder.decoder.shared_basis
     _, refitted = fit_basis_coefficients(encoder.decoder.network, record.mu[None], inputs[None], masks[None],
-                                         basis.vectors(8, 53), basis.entries, 1, fit_latent=False)
+                                         basis.vectors(8, 50), basis.entries, 1, fit_latent=False)
     assert quantise_coefficients(basis.sha256, refitted[0], 8).q.tolist() == record.basis.q.tolist()
-    tiny = BrdfEncoder(effort=1, bytes=12).encode(brdf, name="t")  # the smallest record: compact base, 1 coefficient
+    tiny = BrdfEncoder(effort=1, bytes=15).encode(brdf, name="t")  # the smallest record: compact base, 1 coefficient
     assert tiny.basis.count == 1 and tiny.meta["rate"]["payload_bytes"] == 12
+    assert tiny.meta["rate"]["record_bytes"] == 15  # with its index entry: name length, form, count
     no_basis = BrdfEncoder(effort=1, bytes=64, latent_dtype="float16", basis=False).encode(brdf, name="m")
     assert getattr(no_basis, "basis", None) is None
 
