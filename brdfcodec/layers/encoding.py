@@ -5,7 +5,7 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, Literal, get_args
+from typing import TYPE_CHECKING, Any, Literal, Protocol, get_args
 
 import numpy as np
 
@@ -23,8 +23,25 @@ from brdfcodec.layers.record import MU_INT8_FIXED, LayeredRecord, compact_mu_val
 from brdfcodec.layers.refine import EFFORT_STEPS, fit_basis_coefficients, refine_latent
 
 if TYPE_CHECKING:
-    from brdfcodec.codec import BrdfDecoder
     from brdfcodec.merl import MerlBRDF
+    from brdfcodec.models.network import Decoder
+
+
+class LayerDecoder(Protocol):
+    """What layer encoding needs of a decoder (:class:`brdfcodec.codec.BrdfDecoder` is one): its network, base
+    decodes in the mapped domain, its shared basis and the projected base of ``spec/bvae-format.md`` §4.5."""
+
+    network: Decoder
+
+    @property
+    def shared_basis(self) -> SharedBasis | None: ...
+
+    @property
+    def projection_centre(self) -> np.ndarray: ...
+
+    def decode_mapped(self, codes: np.ndarray) -> np.ndarray: ...
+
+    def project_base(self, record: LayeredRecord, mapped: np.ndarray) -> None: ...
 
 __all__ = ["PROJECTED_BASE_VECTORS", "EncodeOptions", "ProjectBase", "layer_records", "projected_base_vectors"]
 
@@ -45,7 +62,7 @@ ProjectBase = Literal["auto", "always", "never"]
 _PROJECT_BASE_CHOICES: tuple[str, ...] = get_args(ProjectBase)
 
 
-def projected_base_vectors(decoder: BrdfDecoder, basis: SharedBasis) -> int:
+def projected_base_vectors(decoder: LayerDecoder, basis: SharedBasis) -> int:
     """How many vectors brdfcodec's writer projects a layered base on: :data:`PROJECTED_BASE_VECTORS` (at most
     the basis' size), or 0 when the decoder has no linear-path mean over the basis' entries to centre it on."""
     try:
@@ -118,7 +135,7 @@ class EncodeOptions:
 
 def layer_records(
     records: Sequence[LatentRecord],
-    decoder: BrdfDecoder,
+    decoder: LayerDecoder,
     inputs: np.ndarray,
     masks: np.ndarray,
     sources: Sequence[MerlBRDF | None],
@@ -173,7 +190,7 @@ def _as_stored(codes: np.ndarray, itemsize: int) -> np.ndarray:
 
 
 def _basis_fit(
-    decoder: BrdfDecoder, basis: SharedBasis, base: LatentRecord, inputs: np.ndarray, masks: np.ndarray,
+    decoder: LayerDecoder, basis: SharedBasis, base: LatentRecord, inputs: np.ndarray, masks: np.ndarray,
     options: EncodeOptions,
 ) -> BasisFit:
     """The basis fit of one material for :func:`~brdfcodec.layers.rate.encode_layers`."""
