@@ -867,7 +867,9 @@ def _parse_form(path: str, cursor: _Cursor, i: int, latent_dim: int, basis_sha: 
         first, project = cursor.varint(f"{where}'s basis first"), cursor.varint(f"{where}'s basis projection")
         if basis_sha is None:
             raise _fail(path, f"{where} has a basis layer, but the header names no shared basis")
-        layers["basis"] = {"sha256": basis_sha, "count": 1, "first": first, **({"project": project} if project else {})}
+        # as brdfcodec.layers.record.layers_entry writes it: ``first`` and ``project`` only when not 0
+        layers["basis"] = {"sha256": basis_sha, "count": 1, **({"first": first} if first else {}),
+                           **({"project": project} if project else {})}
     if layer_bits & _LAYER_DETAIL:
         dtypes = {v: k for k, v in _DETAIL_CODES.items()}
         code = cursor.u8(f"{where}'s detail form")

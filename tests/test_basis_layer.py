@@ -445,24 +445,28 @@ def test_cli_bytes_writes_the_basis_layer(red_plastic_file, tmp_path, capsys) ->
     from brdfcodec.cli.main import main
 
     out = tmp_path / "r.bvae"
-    assert main(["compress", str(red_plastic_file), "-o", str(out), "--bytes", "64", "--float16"]) == 0
+    assert main(["compress", str(red_plastic_file), "-o", str(out), "--bytes", "64", "--float16",
+                 "--provenance"]) == 0
     entry = parse_bvae(out.read_bytes()).header.entries[0]
-    assert entry.kind == "layered" and entry.length == 64 and entry.layers["basis"]["count"] == 53
+    # 64 B beyond the name: 61 B of payload (9 of compact base, 2 of step, 50 coefficients) and 3 of index entry
+    assert entry.kind == "layered" and entry.length == 61 and entry.layers["basis"]["count"] == 50
+    assert entry.length + entry.descriptor_bytes == 64
     assert entry.meta["relae"]["mapped"] > 0  # measured on the record that was written
     capsys.readouterr()
     assert main(["info", str(out)]) == 0
     shown = capsys.readouterr().out
-    assert "64 B" in shown and "[μ int8 fixed grid + σ shared + basis 53 (vectors 9–61)" in shown
+    assert "μ int8 grid, σ shared u8, basis 50 (vectors 9–58)" in shown
+    assert "61 B payload, 64 B with its index entry" in shown
     projected = entry.layers["basis"].get("project") == 50  # auto: chosen per material
     assert ("base projected on 50" in shown) == projected
     smallest = tmp_path / "s.bvae"
-    assert main(["compress", str(red_plastic_file), "-o", str(smallest), "--bytes", "12"]) == 0
+    assert main(["compress", str(red_plastic_file), "-o", str(smallest), "--bytes", "15"]) == 0
     capsys.readouterr()
     assert main(["info", str(smallest)]) == 0
     shown = capsys.readouterr().out
-    assert "[μ int8 fixed grid + σ shared + basis 1 (vector 9)" in shown and "] 12 B" in shown
-    assert main(["compress", str(red_plastic_file), "-o", str(tmp_path / "t.bvae"), "--bytes", "11"]) != 0
-    assert "11 bytes is below the base record's 12 bytes" in capsys.readouterr().err
+    assert "μ int8 grid, σ shared u8, basis 1 (vector 9)" in shown and "12 B payload, 15 B with its index" in shown
+    assert main(["compress", str(red_plastic_file), "-o", str(tmp_path / "t.bvae"), "--bytes", "14"]) != 0
+    assert "--bytes 14 is below the smallest record" in capsys.readouterr().err
     assert not (tmp_path / "t.bvae").exists()
 
 
