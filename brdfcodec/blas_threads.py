@@ -21,10 +21,9 @@ several times as long with 2 torch threads as with 1 (benchmark
 (basis sum, inverse DCT of the detail layer, slice interpolation) one after
 the other. OpenBLAS' worker threads keep spinning for a while after each
 call, so on a machine with few cores they take the cores torch's threads
-need next: on 2 cores a layered decode took 27.3 ms with BLAS threaded and
-21.6 ms with BLAS on one thread, a base-only decode 11.9 ms either way
-(``python -m pytest benchmarks/test_bench_codec.py -k layered``, measured
-with an earlier, slower basis sum). The limit
+need next: on 2 cores a layered decode was markedly slower with BLAS
+threaded than with BLAS on one thread, a base-only decode was not
+(``python -m pytest benchmarks/test_bench_codec.py -k layered``). The limit
 is set for the duration of a call only, through threadpoolctl, and the
 caller's own BLAS setting is restored afterwards; decodes that overlap on
 several threads share one limit (:class:`~brdfcodec.shared_limit.SharedLimit`).

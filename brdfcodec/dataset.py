@@ -112,8 +112,7 @@ def build_dataset(
     seed : int, default 0
         Seed of the split.
     include_tables : bool, default True
-        Also store full 90×90×180 tables (float32; about 6 MB a material
-        compressed), needed to measure RelAE on the full table.
+        Also store full 90×90×180 tables (float32, compressed), needed to measure RelAE on the full table.
     overwrite : bool, default False
         Replace an existing file.
     progress : bool, default True

@@ -2,7 +2,8 @@
 
 ``nbrdf-proxy-90.bvae`` is a library of the 90 materials of the NBRDF proxy
 of MERL (neural fits of MERL materials evaluated on the MERL grid; see the
-README's data section), encoded by the shipped default model's encoder alone (written in format 1.0
+documentation's data page, ``docs/data.md``), encoded by the shipped default
+model's encoder alone (written in format 1.0
 before encode-time refinement existed: what ``bvae compress
 merl-nbrdf-proxy.h5 -o nbrdf-proxy-90.bvae --effort 0 --provenance`` gives,
 its ``source_sha256`` then hashes of the dataset tables; rewritten in format

@@ -112,8 +112,8 @@ class PlausibilityCriteria:
     ----------
     inversion_tolerance : float, default 0.1
         τ, mapped units: a cell is inverted when its specular deficit exceeds it.
-        Over the 90 μ decodes of the shipped library with the default model the
-        largest deficit is 0.057.
+        Over the 90 μ decodes of the shipped library with the default model no
+        deficit reaches the default (``bvae model plausibility``).
     energy_margin : float, default 0.1
         Relative margin over the library's largest white-sky albedo.
     """
@@ -254,7 +254,7 @@ def white_sky_albedo(mapped: npt.ArrayLike) -> FloatArray:
     Evaluated from the kept φd slices by quadrature on the MERL grid (the
     Rusinkiewicz Jacobian 4 cos θd, exact ∫ sin θ dθ per bin, cosines at bin
     midpoints, trapezoids in periodic φd; entries below the horizon weigh 0):
-    a Lambertian BRDF of albedo a gives a to within 0.01 %. Energy
+    a Lambertian BRDF of albedo a gives a (``tests/test_plausibility.py``). Energy
     conservation requires ≤ 1.
 
     Parameters

@@ -3,7 +3,7 @@
 Each sub-command lives in its own module with ``register(subparsers)``; its
 handler returns an exit code. Errors about data or files are printed as one
 line naming the file and the problem; nothing prints a traceback unless
-``BVAE_DEBUG=1`` is set. Exit codes (README, "Command line"):
+``BVAE_DEBUG=1`` is set. Exit codes (``docs/cli-notes.md``, on the command-line reference page):
 
 ====  ==========================================================
 0     success

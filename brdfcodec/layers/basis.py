@@ -18,12 +18,10 @@ held-out NBRDF proxy of MERL, kept-slice mapped RelAE, base refined at
 effort 3, least-squares coefficients): the principal components of the
 training *data* beat those of the training *residuals* (what the decoder
 leaves on the materials it was trained on, which it fits far better than
-new ones) from 16 coefficients on — with 30, 0.0308 against 0.0381; with
-64, 0.0258 against 0.0344 — while the residual basis is better below (4:
-0.0440 against 0.0492). Fitting μ and the coefficients together on the L1
-error (the encoder's way) lowers the data basis' figures to 0.0354 (16),
-0.0285 (30) and 0.0239 (64), below PCA of the same size with least squares
-(0.0387, 0.0298, 0.0241).
+new ones) from 16 coefficients on, while the residual basis is better with
+fewer. Fitting μ and the coefficients together on the L1 error (the
+encoder's way) lowers the data basis' error below PCA of the same size with
+least squares.
 
 This module does not import torch (the encoder's joint fit is in
 :mod:`brdfcodec.layers.refine`).
@@ -708,9 +706,9 @@ def basis_offset(linear_rank: int, basis_count: int, k: int) -> int:
     spans the shared basis' leading vectors, which are the same components,
     so coefficients buy more on the vectors after them. On the held-out NBRDF
     proxy of MERL (kept-slice mapped RelAE, effort 1, ``benchmarks/basis_offset_study.py``)
-    skipping the first 8 lowered the error at every count up to 38
-    (6: 0.0468 → 0.0393, 14: 0.0385 → 0.0350, 30: 0.0299 → 0.0285) and
-    matched it at 54. The offset shrinks where k would run past the basis' end.
+    skipping the first 8 lowered the error at small and medium counts and
+    matched it at the largest (``reports/rd-study/basis-offset.json``). The
+    offset shrinks where k would run past the basis' end.
     """
     return max(0, min(linear_rank, basis_count - k))
 

@@ -95,9 +95,10 @@ class EncodeOptions:
     project_base : {"auto", "always", "never"}
         Whether a record with a basis layer projects its base decode on the basis (format 1.6,
         :data:`PROJECTED_BASE_VECTORS`; :data:`ProjectBase`). On held-out materials of the NBRDF proxy
-        projecting lowers the mean error by 4 to 11 % at 16 to 128 B, but not on every material (13 of 14
-        gain at 16 B), so ``"auto"`` (the default) fits both on each material and keeps the lower error, in
-        records without a detail layer (with one, a projected record decodes in 1.7-1.8x a base-only decode);
+        projecting lowers the mean error at 16 to 128 B, but not on every material
+        (``reports/rd-study/projected-base.json``), so ``"auto"`` (the default) fits both on each material
+        and keeps the lower error, in records without a detail layer (with one, a projected record decodes
+        past the 1.5× decode-time target of the ``decode-layered`` benchmark);
         it doubles the basis layer's fitting time. ``True`` and ``False`` mean ``"always"`` and ``"never"``.
     """
 

@@ -383,9 +383,8 @@ def compact_mu_storage(mu: npt.ArrayLike) -> str:
 
     The 2 bytes saved go to basis coefficients. On the held-out NBRDF proxy of MERL (full-table mapped RelAE,
     effort 1, float16 latents, ``benchmarks/compact_mu_study.py``, ``reports/rd-study/compact-mu.json``)
-    that lowered the error at 16 B from 0.0480 to 0.0441, at 24 B from 0.0404 to 0.0395 and at 32 B from
-    0.0357 to 0.0352; at 64 B the coarser μ costs about as much as 2 more coefficients gain
-    (0.0298 against 0.0299).
+    that lowered the error at the smallest budgets; at 64 B the coarser μ costs about as much as 2 more
+    coefficients gain.
     """
     return MU_INT8_FIXED if fits_fixed_mu_grid(mu) else MU_INT8
 

@@ -4,9 +4,8 @@ The encoder's μ is a fast guess. Refinement starts from it and takes a few
 Adam steps on the mapped-domain L1 error of the decoded kept slices over the
 valid entries — the numerator of the mapped RelAE — and keeps the best code
 seen (never worse than μ on the material). L1 was chosen by measurement
-(``benchmarks/rd_study.py``): on the NBRDF proxy of MERL, 30 steps lower the
-held-out kept-slice mapped RelAE from 0.0508 to 0.0478 with L1 and to 0.0493
-with L2.
+(``benchmarks/rd_study.py``): on the NBRDF proxy of MERL, refinement lowers
+the held-out kept-slice mapped RelAE more with L1 than with L2.
 """
 
 from __future__ import annotations
@@ -95,9 +94,8 @@ class _Adam:
     """Adam (Kingma and Ba 2015) on one tensor, with ``torch.optim.Adam``'s defaults and update formula.
 
     Written out because ``torch.optim.Adam``'s first ``step`` imports
-    ``torch._dynamo``, which took 1.1 to 1.8 s on the 2-core development
-    machine: more than the whole default-effort refinement of a material
-    (0.2 s warm), and paid by every ``bvae compress`` process. The update is
+    ``torch._dynamo``, which took longer than the whole default-effort
+    refinement of a material, and was paid by every ``bvae compress`` process. The update is
     the same as ``torch.optim.Adam(lr=lr)`` (betas 0.9, 0.999, eps 1e-8, no
     weight decay): ``tests/test_layers.py`` checks it against torch's.
     """

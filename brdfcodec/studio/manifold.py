@@ -1,11 +1,10 @@
 """The manifold explorer's map: a UMAP embedding (umap-learn) of a library's latents, and its inverse.
 
 The paper maps the latents to 2-D with UMAP and maps a dragged point back
-with UMAP's inverse transform. One call of ``inverse_transform`` costs about
-0.8 s on this project's 2-core machine whatever the number of points (it
-rebuilds its search structures), far too slow for a live drag, so the map
-tabulates the inverse on a regular grid over the map once (about 2 s for
-49×49 points) and the explorer interpolates it bilinearly. The embedding
+with UMAP's inverse transform. One call of ``inverse_transform`` costs
+about the same whatever the number of points (it rebuilds its search
+structures), far too slow for a live drag, so the map tabulates the inverse
+on a regular grid over the map once and the explorer interpolates it bilinearly. The embedding
 and the grid are cached as ``.npz`` (no pickles) in the user cache folder
 (``$BRDFCODEC_CACHE_DIR``, else ``$XDG_CACHE_HOME/brdfcodec``, else
 ``~/.cache/brdfcodec``), keyed by the codes, the names, the decoder and the

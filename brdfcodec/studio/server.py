@@ -1,13 +1,13 @@
 """The studio's web application (Starlette): a JSON and binary API plus the static front-end.
 
-Design (measured; see the README's studio section):
+Design (see the documentation's studio page, ``docs/studio.md``):
 
 * **The preview is rendered in the browser.** The server decodes a latent
-  code to the 21 kept φd slices (63×90×90, sent as uint16: 1 MB; the decode
-  takes about 6–15 ms on 2 cores) and the page renders the 256×256 sphere from them in JavaScript
+  code to the 21 kept φd slices (63×90×90, sent as uint16: 1 MB) and the page
+  renders the 256×256 sphere from them in JavaScript
   (nearest-bin lookup, slice interpolation and unmapping as
   :func:`brdfcodec.render.render_sphere` does). A server-side render of the
-  same preview (full decode + ``render_sphere``) costs 40–50 ms before any
+  same preview (full decode + ``render_sphere``) costs several times the decode before any
   PNG encoding and transfer, and a light drag would need the server again;
   in the browser a light drag costs no request at all.
 * **No stale frames**: the page keeps at most one decode request in flight

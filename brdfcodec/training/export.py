@@ -76,8 +76,8 @@ def export_run(
     basis_colour_permutations : bool, default True
         Fit that basis on the training materials in all 6 orders of their colour channels (at most
         5N − 1 vectors, :func:`~brdfcodec.layers.basis.shared_basis_rank`), not as measured only: it spans
-        new materials better (held-out NBRDF proxy of MERL, ``bvae compress --bytes``: 0.0348 against
-        0.0357 at 32 B, 0.0286 against 0.0298 at 64 B; ``reports/rd-study/colour-permutations.json``).
+        new materials better (held-out NBRDF proxy of MERL, ``bvae compress --bytes``;
+        ``reports/rd-study/colour-permutations.json``).
     """
     run = Path(run_dir)
     run_info = json.loads((run / "run.json").read_text())

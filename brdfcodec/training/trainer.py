@@ -177,7 +177,7 @@ def _resident(data: _TrainingData, device: torch.device) -> None:
     blend, colour permutation) runs there instead of on the host and crossing to the device.
 
     On a GPU the host-side augmentation was most of a step's time (``reports/model-v2-trials``, GPU sweep);
-    100 materials take about 260 MB of device memory.
+    the inputs and masks of a hundred materials fit in a small share of a GPU's memory.
     """
     data.inputs = data.inputs.to(device)
     data.masks = data.masks.to(device)
