@@ -514,6 +514,8 @@ def _unique_keys(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
 
 def _varint(value: int) -> bytes:
     """Unsigned LEB128 (§2.1): 7 bits a byte, lowest group first, the high bit set on every byte but the last."""
+    if not 0 <= value < 1 << (7 * _VARINT_MAX_BYTES):
+        raise ValueError(f"{value!r} cannot be stored as a .bvae varint (0 to 2^28 - 1)")
     out = bytearray()
     while True:
         byte, value = value & 0x7F, value >> 7
