@@ -32,7 +32,6 @@ several threads share one limit (:class:`~brdfcodec.shared_limit.SharedLimit`).
 from __future__ import annotations
 
 import contextlib
-import functools
 import os
 import sys
 import threading
@@ -138,8 +137,9 @@ def codec_threads() -> Iterator[None]:
         yield
 
 
-@functools.cache
 def _controller() -> Any:
+    """The BLAS libraries loaded now (about 1 ms to scan): one loaded since the last call (scipy's own OpenBLAS,
+    say) is limited too."""
     from threadpoolctl import ThreadpoolController
 
     return ThreadpoolController()
@@ -181,6 +181,6 @@ def single_blas_thread() -> contextlib.AbstractContextManager[None]:
 
     Safe to nest and to enter from several threads at once: the BLAS setting
     found when the first block began is restored when the last one ends.
-    The BLAS libraries are those loaded at the first call (numpy's).
+    The BLAS libraries are those loaded when the outermost block begins (numpy's, and any other, such as scipy's).
     """
     return _ONE_BLAS_THREAD.held()

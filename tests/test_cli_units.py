@@ -92,4 +92,4 @@ def test_relae_figures_come_with_a_legend_once(capsys, tmp_path: Path, tiny_mode
     assert code == 0, err
     assert out.count(RELAE_LEGEND) == 1
     readme = (Path(__file__).resolve().parents[1] / "README.md").read_text()
-    assert "**Reading RelAE.**" in readme
+    assert "### Reading RelAE" in readme

@@ -120,7 +120,7 @@ def test_both_proxy_archives_give_two_families(shared_dir: Path) -> None:
 
 
 def test_records_encoded_from_a_dataset_keep_the_sources_provenance(tmp_path: Path) -> None:
-    """A dataset row of an RGL measurement encodes to the same source_kind and source_sha256 as its file would."""
+    """A dataset row of an RGL measurement encodes (with --provenance) to the same source_kind and source_sha256 as its file would."""
     from dataclasses import replace
 
     from brdfcodec.bvae_format import read_bvae
@@ -139,7 +139,7 @@ def test_records_encoded_from_a_dataset_keep_the_sources_provenance(tmp_path: Pa
     assert [r.source_kind for r in rows] == [None, RGL_SOURCE_KIND]
     assert rows[0].source_sha256 == gold.load().source_sha256 and rows[1].source_sha256 == bsdf_sha
     bvae = tmp_path / "two.bvae"
-    assert main(["compress", str(out), "-o", str(bvae), "--effort", "0"]) == 0
+    assert main(["compress", str(out), "-o", str(bvae), "--effort", "0", "--provenance"]) == 0
     meta = {r.name: r.meta for r in read_bvae(bvae).records}
     assert meta["paper"]["source_kind"] == RGL_SOURCE_KIND and meta["paper"]["source_sha256"] == bsdf_sha
     assert "source_kind" not in meta["gold"] and meta["gold"]["source_sha256"] == rows[0].source_sha256

@@ -174,7 +174,7 @@ def test_rate_control_meets_budgets_and_targets(analytic_tables) -> None:
         BrdfEncoder(effort=0, bytes=11).encode(brdf)  # below the smallest layered record (15 B with a short name)
 
 
-def test_refinement_never_worsens_and_edits_drop_the_layers(analytic_tables) -> None:
+def test_refinement_never_worsens_and_edits_keep_the_layers(analytic_tables) -> None:
     from brdfcodec.codec import BrdfEncoder, measure
     from brdfcodec.edit import interpolate, traverse
 
@@ -187,10 +187,11 @@ def test_refinement_never_worsens_and_edits_drop_the_layers(analytic_tables) -> 
     encoder = BrdfEncoder(effort=0, bytes=4000)
     record = encoder.encode(brdf, name="m")
     assert isinstance(record, LayeredRecord)
-    edited = traverse(record, 0, [0.5])[0]
-    assert type(edited) is LatentRecord
+    edited = traverse(record, 0, [0.5])[0]  # spec §4.4: an edit moves μ and keeps the record's layers
+    assert isinstance(edited, LayeredRecord) and edited.detail is record.detail and edited.basis is record.basis
+    assert edited.mu[0] != record.mu[0] and np.array_equal(edited.mu[1:], record.mu[1:])
     mixed = interpolate(record, LatentRecord("b", np.zeros(8), np.ones(8)), 0.5)
-    assert type(mixed) is LatentRecord
+    assert isinstance(mixed, LayeredRecord) and mixed.detail is record.detail and mixed.basis is record.basis
 
 
 def test_layered_decode_adds_the_layer_and_partial_decode_matches(analytic_tables) -> None:
