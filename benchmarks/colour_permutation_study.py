@@ -35,7 +35,7 @@ from brdfcodec.codec import BrdfEncoder
 from brdfcodec.dataset import BrdfDataset
 from brdfcodec.layers import encoding
 from brdfcodec.layers.basis import SharedBasis, fit_shared_basis, with_colour_permutations
-from brdfcodec.layers.points import PcaPacked
+from brdfcodec.report.rd_points import PcaPacked
 from brdfcodec.metrics import error_report
 from brdfcodec.report.points import Material
 

@@ -61,8 +61,8 @@ def test_report_records_and_files(small_dataset: Path, tmp_path: Path) -> None:
 def test_rate_distortion_points_are_held_out_only_and_meet_their_budgets(small_dataset: Path, tmp_path: Path) -> None:
     from brdfcodec.baselines.pca import fit_pca
     from brdfcodec.dataset import BrdfDataset
-    from brdfcodec.layers.points import DctSlices, LayeredBvae, PcaPacked, ZstdSlices
-    from brdfcodec.layers.rd_report import rd_markdown
+    from brdfcodec.report.rd_points import DctSlices, LayeredBvae, PcaPacked, ZstdSlices
+    from brdfcodec.report.rd_markdown import rd_markdown
 
     with BrdfDataset(small_dataset) as dataset:
         train_inputs = dataset.inputs(dataset.indices("train"))
@@ -85,7 +85,7 @@ def test_rate_distortion_points_are_held_out_only_and_meet_their_budgets(small_d
 def test_the_report_compares_with_pca_of_colour_permuted_training_materials() -> None:
     from brdfcodec.baselines.pca import fit_pca
     from brdfcodec.layers.basis import with_colour_permutations
-    from brdfcodec.layers.points import PcaPacked, rate_distortion_points
+    from brdfcodec.report.rd_points import PcaPacked, rate_distortion_points
     from brdfcodec.report.points import Material
     from brdfcodec.transforms import table_from_network_output
 
@@ -128,7 +128,7 @@ def test_rate_distortion_plot_draws_every_family_in_its_own_style(monkeypatch: p
                                                                   tmp_path: Path) -> None:
     import matplotlib.pyplot as plt
 
-    from brdfcodec.layers.rd_report import write_rd_plots
+    from brdfcodec.report.rd_markdown import write_rd_plots
 
     families = [f"family-{k:02d}" for k in range(23)]
     records = [{"name": f, "family": f, "bytes_per_material": 2.0**b, "lossless": False,
@@ -146,7 +146,7 @@ def test_rate_distortion_plot_draws_every_family_in_its_own_style(monkeypatch: p
 
 
 def test_the_report_has_projected_base_points_up_to_256_bytes() -> None:
-    from brdfcodec.layers.points import LayeredBvae, rate_distortion_points
+    from brdfcodec.report.rd_points import LayeredBvae, rate_distortion_points
 
     train = np.random.default_rng(6).uniform(0.0, 1.0, size=(3, 63, 90, 90)).astype(np.float32)
     points = rate_distortion_points(train)

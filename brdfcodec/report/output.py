@@ -100,7 +100,7 @@ def write_report(folder: str | os.PathLike[str], records: Sequence[dict[str, Any
         with atomic_output(out / name, overwrite=True) as tmp:
             tmp.write_text("".join(json.dumps(item, sort_keys=True) + "\n" for item in items), encoding="utf-8")
         written.append(out / name)
-    from brdfcodec.layers.rd_report import rd_markdown, write_rd_plots  # issue 14: rate–distortion section
+    from brdfcodec.report.rd_markdown import rd_markdown, write_rd_plots  # issue 14: rate–distortion section
 
     with atomic_output(out / "report.md", overwrite=True) as tmp:
         tmp.write_text(markdown_table(records) + rd_markdown(records), encoding="utf-8")

@@ -192,7 +192,7 @@ def standard_points(
 ) -> list[OperatingPoint]:
     """The report's operating points: the shipped model (float32, float16 latents), other models, every baseline.
 
-    The rate–distortion points (:func:`brdfcodec.layers.points.rate_distortion_points`) are added by the
+    The rate–distortion points (:func:`brdfcodec.report.rd_points.rate_distortion_points`) are added by the
     caller, :func:`brdfcodec.report.evaluate.evaluate_dataset`.
     """
     points: list[OperatingPoint] = [BvaeCodec("float32"), BvaeCodec("float16")]

@@ -43,7 +43,7 @@ def rd_markdown(records: Sequence[dict[str, Any]]) -> str:
         "",
         "Best point of each side whose mean payload is within the size (held-out mean mapped RelAE; lower is "
         "better). brdfcodec points start with `bvae`; every baseline is packed as its own family says "
-        "(`brdfcodec/layers/points.py`).",
+        "(`brdfcodec/report/rd_points.py`).",
         "",
         "| size | brdfcodec point | RelAE | best baseline | RelAE | winner |",
         "|---|---|---|---|---|---|",
