@@ -5,7 +5,7 @@ materials, and the SHA-256 of the decoder that turns them back into BRDF
 tables. This module does not import torch: inspecting a file (``bvae info``)
 is instant, and a file can be checked on a machine without a model.
 
-Layout (format 2.0, little-endian)::
+Layout (format 2.1, little-endian)::
 
     preamble  24 bytes   magic, version, flags, header length, header CRC-32
     header    N bytes    binary: decoder SHA-256, latent size and dtype, the shared
@@ -77,7 +77,8 @@ MAGIC = b"\x89BVAE\r\n\x1a"
 #: 2.0 (issue 40): a binary header and index, file-level facts stated once, metadata opt-in in a JSON block.
 FORMAT_MAJOR = 2
 #: Minor version written; readers accept any minor version of their major version.
-FORMAT_MINOR = 0
+#: 2.1: basis-only layered records (``layers.mu`` and ``layers.sigma`` ``"none"``: no latent, spec §4.6).
+FORMAT_MINOR = 1
 #: Largest stored header (binary index and stored metadata block), in bytes.
 MAX_HEADER_BYTES = 1 << 24
 #: Largest metadata block, decompressed, in bytes.
@@ -579,8 +580,8 @@ def _payload(record: Record, dtype: np.dtype) -> bytes:
 
 #: Codes of the form table (§3.2): record kinds, how μ and σ are stored, the detail layer's coefficient type.
 _KIND_CODES = {"latent": 0, "graft": 1, "layered": 2}
-_MU_CODES: dict[str | None, int] = {None: 0, "int8": 1, "int8-fixed": 2}
-_SIGMA_CODES: dict[str | None, int] = {None: 0, "log2-u8": 1, "log2-u8-shared": 2}
+_MU_CODES: dict[str | None, int] = {None: 0, "int8": 1, "int8-fixed": 2, "none": 3}
+_SIGMA_CODES: dict[str | None, int] = {None: 0, "log2-u8": 1, "log2-u8-shared": 2, "none": 3}
 _DETAIL_CODES = {"int16": 0, "int32": 1}  # transform "dct3-ycc", the only one
 _LAYER_BASIS, _LAYER_DETAIL = 1, 2
 #: Most entries of a file's form table (its count is one byte).
@@ -625,7 +626,7 @@ def encode_bvae(
     latent_dtype: LatentDtype = "float32",
     compress_header: bool | None = None,
 ) -> bytes:
-    """Serialise records to the bytes of a ``.bvae`` file (format 2.0).
+    """Serialise records to the bytes of a ``.bvae`` file (format 2.1).
 
     Parameters
     ----------
@@ -860,6 +861,12 @@ def _parse_form(path: str, cursor: _Cursor, i: int, latent_dim: int, basis_sha: 
             f"{layer_bits}); upgrade brdfcodec")
     if not layer_bits:
         raise _fail(path, f"{where}: a layered form holds neither a basis nor a detail layer")
+    # A record without a latent (2.1, spec §4.6) stores neither mu nor sigma, and needs a basis layer.
+    if (mus[mu_code] == "none") != (sigmas[sigma_code] == "none"):
+        raise _fail(path, f"{where} stores {'no mu but a sigma' if mus[mu_code] == 'none' else 'no sigma but a mu'}: "
+                    "only a record without a latent (mu and sigma 'none') stores neither")
+    if mus[mu_code] == "none" and not layer_bits & _LAYER_BASIS:
+        raise _fail(path, f"{where} stores no latent and no basis layer: a record without a latent needs one")
     layers: dict[str, Any] = {}
     if mus[mu_code] is not None:
         layers["mu"] = mus[mu_code]
@@ -869,6 +876,9 @@ def _parse_form(path: str, cursor: _Cursor, i: int, latent_dim: int, basis_sha: 
         first, project = cursor.varint(f"{where}'s basis first"), cursor.varint(f"{where}'s basis projection")
         if basis_sha is None:
             raise _fail(path, f"{where} has a basis layer, but the header names no shared basis")
+        if project and mus[mu_code] == "none":
+            raise _fail(path, f"{where} stores no latent but projects its base on {project} basis vectors (a record "
+                        "without a latent has no base decode to project: project must be 0)")
         # as brdfcodec.layers.record.layers_entry writes it: ``first`` and ``project`` only when not 0
         layers["basis"] = {"sha256": basis_sha, "count": 1, **({"first": first} if first else {}),
                            **({"project": project} if project else {})}

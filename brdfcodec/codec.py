@@ -83,7 +83,7 @@ from brdfcodec.representation import (
 
 if TYPE_CHECKING:
     from brdfcodec.layers.basis import SharedBasis
-    from brdfcodec.layers.encoding import ProjectBase
+    from brdfcodec.layers.encoding import LatentChoice, ProjectBase
     from brdfcodec.layers.record import LayeredRecord
 
 __all__ = [
@@ -247,6 +247,11 @@ def _projected_vectors(record: Record) -> int:
     return 0 if layer is None else int(layer.project)
 
 
+def _has_latent(record: Record) -> bool:
+    """False for a basis-only record (format 2.1, ``layers.mu = "none"``), whose base is the linear-path mean."""
+    return bool(getattr(record, "has_latent", True))
+
+
 def _apply_mask(table: np.ndarray, bins: Sequence[int] | None, masked: MaskedEntries) -> np.ndarray:
     if masked == "keep":
         return table
@@ -381,7 +386,14 @@ class BrdfDecoder:
         from brdfcodec.layers.basis import check_basis_layers
 
         own = self.manifest.basis_sha256 if self.manifest is not None else None
-        check_basis_layers(header.entries, self.basis_named, os.fspath(path) or "<bvae>", own)
+        where = os.fspath(path) or "<bvae>"
+        check_basis_layers(header.entries, self.basis_named, where, own)
+        for entry in header.entries:  # records without a latent start from the linear-path mean (format 2.1)
+            layers = entry.layers or {}
+            if layers.get("mu") == "none":
+                basis = self.basis_named(str(layers["basis"]["sha256"]))
+                assert basis is not None  # checked just above
+                self._centre_for(entry.name, basis, where)
 
     def _codes(self, codes: npt.ArrayLike) -> tuple[np.ndarray, bool]:
         array = np.asarray(codes, dtype=np.float32)
@@ -436,7 +448,10 @@ class BrdfDecoder:
         if len(slots) > N_KEPT_SLICES // 2 or _projected_vectors(record):  # a projection needs every entry
             return self.mapped_record(record)
         out = np.zeros(NETWORK_INPUT_SHAPE, dtype=np.float32)
-        if isinstance(record, GraftRecord):
+        if not _has_latent(record):  # no network at all: the mean's channels, then the layers' for those slots
+            channels = network_channels_for_slots(slots)
+            out[channels] = self._with_layers(record, self._mean_base(record)[channels], slots)
+        elif isinstance(record, GraftRecord):
             own = network_channels_for_slots(slots, colours=(0, 2))
             out[own] = self.decode_channels(record.mu, own)
             green = network_channels_for_slots(slots, colours=(1,))
@@ -487,14 +502,33 @@ class BrdfDecoder:
         if basis.sha256 not in cache:
             mean, index = getattr(self.network, "basis_mean", None), getattr(self.network, "valid_index", None)
             if mean is None or index is None:
-                raise BasisError("a projected base is centred on the decoder's linear-path mean; this decoder has "
-                                 "none")
+                raise BasisError("a projected base is centred on the decoder's linear-path mean, and a record without "
+                                 "a latent starts from it; this decoder has no linear path")
             index_np = index.cpu().numpy()
             position = np.minimum(np.searchsorted(index_np, basis.entries), len(index_np) - 1)
             if not np.array_equal(index_np[position], basis.entries):
                 raise BasisError("the decoder's linear path does not cover every entry of the shared basis")
             cache[basis.sha256] = mean.float().cpu().numpy()[position]
         return cache[basis.sha256]
+
+    def _centre_for(self, name: str, basis: SharedBasis, where: str = "") -> npt.NDArray[np.float32]:
+        """:meth:`_centre_on` for a record without a latent; its :class:`BasisError` names the file and the
+        record."""
+        from brdfcodec.layers.basis import BasisError
+
+        try:
+            return self._centre_on(basis)
+        except BasisError as error:
+            place = f"{where}: " if where else ""
+            raise BasisError(f"{place}record {name!r} has no latent (format 2.1) and decodes from the decoder's "
+                             f"linear-path mean: {error}") from None
+
+    def _mean_base(self, record: Record) -> npt.NDArray[np.float32]:
+        """The base of a record without a latent (``spec/bvae-format.md`` §4.6): the decoder's linear-path mean m
+        at the shared basis' entries and 0 elsewhere, shape (63, 90, 90), a new array. No network runs."""
+        layer = record.basis  # type: ignore[union-attr]  # a record without a latent has a basis layer
+        basis = self._basis_of(record, layer.sha256)
+        return basis.on_grid(self._centre_for(record.name, basis))
 
     def _projection_plan(self, basis: SharedBasis) -> _ProjectionPlan:
         """What a fast projected decode needs for every vector of ``basis``, computed once per decoder and basis
@@ -618,8 +652,11 @@ class BrdfDecoder:
         return clamp_mapped(mapped, out=mapped)
 
     def mapped_record(self, record: Record) -> npt.NDArray[np.float32]:
-        """Mapped slices of a record; a graft record's green block is the second code's red block."""
+        """Mapped slices of a record; a graft record's green block is the second code's red block; a record
+        without a latent (format 2.1) is the linear-path mean plus its layers, clamped."""
         with codec_threads():
+            if not _has_latent(record):
+                return self._with_layers(record, self._mean_base(record))
             if isinstance(record, GraftRecord):
                 # One code at a time, so M1 is bit-identical to decoding V1 as a plain record.
                 out = self.decode_mapped(record.mu)
@@ -670,14 +707,16 @@ class BrdfDecoder:
             self._check_record(record)
         for start in range(0, len(records), batch_size):
             chunk = records[start : start + batch_size]
-            # Projected records decode on their own (their network pass also yields the projection's terms).
-            latent = [r for r in chunk if isinstance(r, LatentRecord) and not _projected_vectors(r)]
+            # Projected records decode on their own (their network pass also yields the projection's terms), and
+            # records without a latent run no network (format 2.1).
+            latent = [r for r in chunk if isinstance(r, LatentRecord) and not _projected_vectors(r)
+                      and _has_latent(r)]
             batch: Iterator[np.ndarray] = iter(())
             if latent:
                 batch = iter(self.decode_mapped(np.stack([record.mu for record in latent]), batch_size=batch_size))
             for record in chunk:  # grafts need two codes each: decoded on their own
                 with codec_threads():
-                    if isinstance(record, LatentRecord) and not _projected_vectors(record):
+                    if isinstance(record, LatentRecord) and not _projected_vectors(record) and _has_latent(record):
                         mapped = self._with_layers(record, next(batch))
                     else:
                         mapped = self.mapped_record(record)
@@ -755,6 +794,10 @@ class BrdfEncoder:
         ``"auto"`` fits both and keeps
         the better per material; ``True``/``False`` mean ``"always"``/``"never"``. Ignored where the model's
         decoder has no linear path to centre the projection on.
+    latent : {"auto", "always"}, default "auto"
+        With ``bytes`` or ``max_relae``: ``"auto"`` lets rate control pick a record without a latent (format 2.1,
+        the decoder's linear-path mean plus basis coefficients) where its error is lower; it decodes like any
+        other but cannot be edited. ``"always"``: every record keeps a latent code that edits can move.
     """
 
     manifest: ModelManifest | None
@@ -772,12 +815,14 @@ class BrdfEncoder:
         latent_dtype: LatentDtype = "float32",
         basis: bool = True,
         project_base: ProjectBase | bool = "auto",
+        latent: LatentChoice = "auto",
     ) -> None:
         from brdfcodec.layers.encoding import EncodeOptions
 
         self.options = EncodeOptions(
             effort=effort, bytes_budget=bytes, max_relae=max_relae, metric=metric, detail_step=detail_step,
             latent_itemsize=2 if latent_dtype == "float16" else 4, basis=basis, project_base=project_base,
+            latent=latent,
         )
         manifest = resolve_model(model)
         network, _, loaded = load_model(manifest.folder, parts=("encoder",), device=str(device))
@@ -1221,6 +1266,7 @@ def encode(
     max_relae: float | None = None,
     metric: Literal["mapped", "linear"] = "mapped",
     provenance: bool = False,
+    latent: LatentChoice = "auto",
 ) -> bytes:
     """Encode MERL tables into the bytes of one ``.bvae`` file (one material, or a library of many).
 
@@ -1242,6 +1288,8 @@ def encode(
     provenance : bool, default False
         Store each record's provenance in the file (``spec/bvae-format.md`` §5: source SHA-256 and kind,
         RelAE, encoder, effort, rate control). By default the file holds names and records only.
+    latent : {"auto", "always"}, default "auto"
+        Whether rate control may write records without a latent, as for :class:`BrdfEncoder`.
 
     Returns
     -------
@@ -1260,7 +1308,8 @@ def encode(
     """
     items = [sources] if isinstance(sources, MerlBRDF | MaterialInput | str | os.PathLike) else sources
     encoder = BrdfEncoder(
-        model, effort=effort, bytes=bytes, max_relae=max_relae, metric=metric, latent_dtype=latent_dtype
+        model, effort=effort, bytes=bytes, max_relae=max_relae, metric=metric, latent_dtype=latent_dtype,
+        latent=latent,
     )
     records = encode_records(items, names=names, encoder=encoder, measure_error=measure_error, batch_size=batch_size)
     if encoder.reference is None:  # loaded from a model folder, so it has one
@@ -1306,6 +1355,7 @@ def compress(
     max_relae: float | None = None,
     metric: Literal["mapped", "linear"] = "mapped",
     provenance: bool = False,
+    latent: LatentChoice = "auto",
 ) -> int:
     """Write :func:`encode` of the sources to a ``.bvae`` file, atomically (options as for :func:`encode`).
 
@@ -1317,7 +1367,7 @@ def compress(
     check_output_path(output, overwrite=overwrite)  # before the work, not after
     data = encode(
         sources, names=names, model=model, latent_dtype=latent_dtype, measure_error=measure_error,
-        effort=effort, bytes=bytes, max_relae=max_relae, metric=metric, provenance=provenance,
+        effort=effort, bytes=bytes, max_relae=max_relae, metric=metric, provenance=provenance, latent=latent,
     )
     with atomic_output(output, overwrite=overwrite) as tmp:
         Path(tmp).write_bytes(data)

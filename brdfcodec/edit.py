@@ -9,6 +9,8 @@ A layered record (:class:`~brdfcodec.layers.record.LayeredRecord`) stays
 layered: an edit moves its ``mu`` and keeps its basis and detail layers, so
 the edited material is the edited base plus the original layers' residual
 (``spec/bvae-format.md`` §4.4, "Edits"); moving ``mu`` back undoes the edit.
+A basis-only record (format 2.1, no latent) cannot be edited: every edit
+refuses it with :class:`~brdfcodec.errors.NoLatentError`.
 
 Edited records carry provenance, not measurements (``spec/bvae-format.md``
 §5.1): ``meta`` holds only ``edit`` (the operation and its operands, with
@@ -30,6 +32,7 @@ import numpy.typing as npt
 
 from brdfcodec.bvae_format import GraftRecord, LatentRecord, Record
 from brdfcodec.conventions import N_KEPT_SLICES
+from brdfcodec.errors import NoLatentError
 
 __all__ = [
     "fit_graft",
@@ -38,13 +41,33 @@ __all__ = [
     "interpolate",
     "mix_factors",
     "parameter_vector",
+    "require_latent",
     "traverse",
     "with_parameters",
 ]
 
 
+def require_latent(record: Record) -> None:
+    """Refuse a record without a latent code (a basis-only record, format 2.1): there is nothing to edit.
+
+    Raises
+    ------
+    NoLatentError
+        Names the record and says how to get an editable one (``bvae compress --latent always``).
+    """
+    if not getattr(record, "has_latent", True):
+        raise NoLatentError(record.name)
+
+
 def parameter_vector(record: Record) -> np.ndarray:
-    """All editable parameters: the code, then (for a graft) the grafted values."""
+    """All editable parameters: the code, then (for a graft) the grafted values.
+
+    Raises
+    ------
+    NoLatentError
+        The record has no latent code (:func:`require_latent`).
+    """
+    require_latent(record)
     if isinstance(record, GraftRecord):
         return np.concatenate([record.mu, record.graft_values])
     return record.mu.copy()
@@ -68,6 +91,7 @@ def with_parameters(
     form is kept only where the new code is stored exactly in it; otherwise ``mu``
     is stored in the file's latent dtype.
     """
+    require_latent(record)
     values = np.asarray(values, dtype=np.float32)
     meta = {"edit": edit}
     d = record.latent_dim
@@ -208,6 +232,7 @@ def graft(
     """
     if isinstance(record, GraftRecord):
         raise ValueError(f"{record.name} is already a graft; edit its parameters instead")
+    require_latent(record)
     return GraftRecord(
         name or f"{record.name}.graft",
         record.mu,
@@ -257,6 +282,7 @@ def _fit(
     """Adam on the mapped L1 error over valid entries; returns the best code, graft values and loss."""
     import torch
 
+    require_latent(record)
     target = torch.as_tensor(np.asarray(target_mapped, dtype=np.float32))
     mask = torch.as_tensor(np.asarray(target_mask, dtype=bool))
     network = decoder.network

@@ -25,6 +25,7 @@ __all__ = [
     "MerlFormatError",
     "ModelChecksumError",
     "ModelNotFoundError",
+    "NoLatentError",
     "NonFiniteValueError",
     "OptionalDependencyError",
     "RateTargetError",
@@ -110,6 +111,29 @@ class BasisMismatchError(DecoderMismatchError):
 class BasisError(BrdfcodecError, ValueError):
     """A shared basis file that is malformed or not the one named, or a record that needs basis vectors its
     model's shared basis does not hold (``spec/bvae-format.md`` §4.5)."""
+
+
+class NoLatentError(BrdfcodecError, ValueError):
+    """A record stores no latent code (a basis-only layered record, ``spec/bvae-format.md`` §4.6), so it cannot be
+    edited: edits move a latent code.
+
+    Parameters
+    ----------
+    record : str
+        The record's name.
+    path : str or os.PathLike, optional
+        The file that holds it, when known.
+    """
+
+    def __init__(self, record: str, path: str | os.PathLike[str] | None = None) -> None:
+        self.record = record
+        self.path = None if path is None else os.fspath(path)
+        where = f"{self.path}: " if self.path else ""
+        super().__init__(
+            f"{where}record {record!r} has no latent code (a basis-only record, format 2.1), so it cannot be "
+            "edited; re-encode the material with `bvae compress --latent always` for a record whose latent code "
+            "can be edited"
+        )
 
 
 class ModelNotFoundError(DecoderNotFoundError):

@@ -382,7 +382,8 @@ def test_the_basis_layer_follows_the_decoder_output_it_was_fitted_on(analytic_ta
     base = BrdfEncoder(effort=1, latent_dtype="float16")
     base_error = measure(base.encode(brdf, name="m"), base.decoder, brdf).meta["relae"]["mapped"]
     # Unprojected, so that the refit below needs no projection (test_projected_base.py covers projected fits).
-    encoder = BrdfEncoder(effort=1, bytes=64, latent_dtype="float16", project_base="never")
+    # latent="always": this test is about the basis layer beside a latent (records without one: test_basis_only.py)
+    encoder = BrdfEncoder(effort=1, bytes=64, latent_dtype="float16", project_base="never", latent="always")
     record = encoder.encode(brdf, name="m")
     # 64 B cannot hold all 75 coefficients beside a float16 μ, so the base is compact: 8 bytes of μ on the fixed
     # grid (its μ fits ±3.97), 1 of σ.
@@ -416,17 +417,18 @@ def test_an_error_target_takes_the_smallest_candidate_that_meets_it(analytic_tab
     from brdfcodec.codec import BrdfEncoder, measure
 
     brdf = analytic_tables["red-plastic"]
-    probe = BrdfEncoder(effort=0, bytes=40, latent_dtype="float16")
+    probe = BrdfEncoder(effort=0, bytes=40, latent_dtype="float16", latent="always")
     record = probe.encode(brdf, name="m")
     reached = measure(record, probe.decoder, brdf).meta["relae"]["mapped"]
-    encoder = BrdfEncoder(effort=0, max_relae=reached * 1.05, latent_dtype="float16")
+    # latent="always": the candidates with a latent (records without one: test_basis_only.py)
+    encoder = BrdfEncoder(effort=0, max_relae=reached * 1.05, latent_dtype="float16", latent="always")
     chosen = encoder.encode(brdf, name="m")
     assert measure(chosen, encoder.decoder, brdf).meta["relae"]["mapped"] <= reached * 1.05
     assert isinstance(chosen, LayeredRecord) and chosen.basis is not None and chosen.detail is None
     # a record without a detail layer stores its base compact, as a size budget does: at most 32 coefficients
     assert chosen.compact_mu and chosen.shared_sigma and chosen.fixed_mu_grid
     assert chosen.meta["rate"]["payload_bytes"] == 8 + 1 + 2 + chosen.basis.count <= 43
-    loose = BrdfEncoder(effort=0, max_relae=1.0, latent_dtype="float16").encode(brdf, name="m")
+    loose = BrdfEncoder(effort=0, max_relae=1.0, latent_dtype="float16", latent="always").encode(brdf, name="m")
     assert loose.compact_mu and loose.basis.count == 4 and loose.meta["rate"]["payload_bytes"] == 15
 
 
@@ -446,7 +448,7 @@ def test_cli_bytes_writes_the_basis_layer(red_plastic_file, tmp_path, capsys) ->
 
     out = tmp_path / "r.bvae"
     assert main(["compress", str(red_plastic_file), "-o", str(out), "--bytes", "64", "--float16",
-                 "--provenance"]) == 0
+                 "--provenance", "--latent", "always"]) == 0  # records without a latent: test_basis_only.py
     entry = parse_bvae(out.read_bytes()).header.entries[0]
     # 64 B beyond the name: 61 B of payload (9 of compact base, 2 of step, 50 coefficients) and 3 of index entry
     assert entry.kind == "layered" and entry.length == 61 and entry.layers["basis"]["count"] == 50
@@ -460,12 +462,13 @@ def test_cli_bytes_writes_the_basis_layer(red_plastic_file, tmp_path, capsys) ->
     projected = entry.layers["basis"].get("project") == 50  # auto: chosen per material
     assert ("base projected on 50" in shown) == projected
     smallest = tmp_path / "s.bvae"
-    assert main(["compress", str(red_plastic_file), "-o", str(smallest), "--bytes", "15"]) == 0
+    assert main(["compress", str(red_plastic_file), "-o", str(smallest), "--bytes", "15", "--latent", "always"]) == 0
     capsys.readouterr()
     assert main(["info", str(smallest)]) == 0
     shown = capsys.readouterr().out
     assert "μ int8 grid, σ shared u8, basis 1 (vector 9)" in shown and "12 B payload, 15 B with its index" in shown
-    assert main(["compress", str(red_plastic_file), "-o", str(tmp_path / "t.bvae"), "--bytes", "14"]) != 0
+    assert main(["compress", str(red_plastic_file), "-o", str(tmp_path / "t.bvae"), "--bytes", "14",
+                 "--latent", "always"]) != 0
     assert "--bytes 14 is below the smallest record" in capsys.readouterr().err
     assert not (tmp_path / "t.bvae").exists()
 

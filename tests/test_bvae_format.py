@@ -53,7 +53,7 @@ def library(count: int = 3, dim: int = 8) -> list[LatentRecord | GraftRecord]:
 def spec_reader(data: bytes) -> tuple[dict, list[np.ndarray]]:
     """A reader of latent and graft records written from spec/bvae-format.md alone (no brdfcodec code)."""
     magic, major, minor, flags, length, crc = struct.unpack_from("<8sHHIII", data, 0)
-    assert magic == b"\x89BVAE\r\n\x1a" and (major, minor) == (2, 0) and flags & ~3 == 0
+    assert magic == b"\x89BVAE\r\n\x1a" and (major, minor) == (2, 1) and flags & ~3 == 0
     stored = data[24 : 24 + length]
     assert zlib.crc32(data[:20] + stored) == crc
     at = 0

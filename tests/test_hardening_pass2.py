@@ -440,7 +440,8 @@ def test_bytes_out_of_range_is_a_usage_error_before_the_model_loads(tmp_path: Pa
 
     monkeypatch.setattr(brdfcodec.codec.BrdfEncoder, "__init__", no_model)
     output = tmp_path / "out.bvae"
-    assert main(["compress", str(red_plastic_file), "-o", str(output), "--bytes", budget]) == 2
+    # --latent always: the floor of records with a latent (without one, from 6 B: test_basis_only.py)
+    assert main(["compress", str(red_plastic_file), "-o", str(output), "--bytes", budget, "--latent", "always"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "--bytes" in err[0] and "Traceback" not in err[0]
     assert not output.exists()

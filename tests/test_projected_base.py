@@ -44,7 +44,7 @@ def test_project_round_trips_and_is_written_only_when_set() -> None:
     assert "project" not in quantise_coefficients(SHA, [1.0], first=8).entry()  # a 1.5 reader reads it
     record = LayeredRecord("p", np.zeros(8), np.ones(8), basis=layer, compact_sigma=True)
     parsed = parse_bvae(encode_bvae([record], DECODER))
-    assert (parsed.header.major, parsed.header.minor) == (2, 0)
+    assert (parsed.header.major, parsed.header.minor) == (2, 1)
     assert parsed.header.entries[0].layers["basis"]["project"] == 50
     assert parsed.records[0].basis.project == 50
     for bad in (-1, 4097, True, 2.0):
@@ -134,7 +134,8 @@ def test_the_encoder_projects_where_that_lowers_the_error(analytic_tables, budge
     inputs, masks = network_input_from_table(table.values, table.mask)
     records, errors = {}, {}
     for way in ("never", "always", "auto"):
-        encoder = BrdfEncoder(bytes=budget, latent_dtype="float16", project_base=way)
+        # latent="always": projection concerns records with a latent (those without one: test_basis_only.py)
+        encoder = BrdfEncoder(bytes=budget, latent_dtype="float16", project_base=way, latent="always")
         records[way] = encoder.encode(table, name="m")
         errors[way] = float((np.abs(encoder.decoder.mapped_record(records[way]) - inputs) * masks).sum())
         assert records[way].meta["rate"]["payload_bytes"] <= budget
@@ -190,14 +191,16 @@ def test_cli_project_base(red_plastic_file, tmp_path, capsys) -> None:
     from brdfcodec.cli.main import main
 
     out = tmp_path / "p.bvae"
-    assert main(["compress", str(red_plastic_file), "-o", str(out), "--bytes", "64", "--project-base"]) == 0
+    assert main(["compress", str(red_plastic_file), "-o", str(out), "--bytes", "64", "--project-base",
+                 "--latent", "always"]) == 0
     entry = parse_bvae(out.read_bytes()).header.entries[0]
     assert entry.layers["basis"]["project"] == 50 and entry.length <= 64
     capsys.readouterr()
     assert main(["info", str(out)]) == 0
     assert "base projected on 50" in capsys.readouterr().out
     never = tmp_path / "n.bvae"
-    assert main(["compress", str(red_plastic_file), "-o", str(never), "--bytes", "64", "--project-base", "never"]) == 0
+    assert main(["compress", str(red_plastic_file), "-o", str(never), "--bytes", "64", "--project-base", "never",
+                 "--latent", "always"]) == 0
     assert parse_bvae(never.read_bytes()).header.entries[0].layers["basis"].get("project") is None
     lonely = tmp_path / "l.bvae"
     assert main(["compress", str(red_plastic_file), "-o", str(lonely), "--project-base"]) != 0

@@ -46,6 +46,13 @@ def test_manifest_covers_what_the_spec_asks_for() -> None:
             "basis-unknown-sigma", "basis-count-zero", "basis-count-payload", "basis-step-nan", "basis-step-zero",
             "basis-first-range", "basis-project-range", "compact-mu-unknown", "compact-mu-step-nan",
             "compact-sigma-length", "compact-mu-fixed-with-step"} <= invalid
+    # Records without a latent (2.1): the pairing of mu and sigma "none", the basis layer they need, no projection.
+    assert {"basis-only-sigma-with-mu", "basis-only-mu-with-sigma", "basis-only-no-basis", "basis-only-projected",
+            "basis-only-unknown-sigma"} <= invalid
+    assert {"basis-only", "version-2.0"} <= valid
+    without = [r for v in MANIFEST["valid"] for r in v["records"] if r.get("layers", {}).get("mu") == "none"]
+    assert len(without) == 4 and all(r["mu"] is None and r["layers"]["sigma"] == "none" for r in without)
+    assert {"reference.basis-only", "reference.basis-only-detail"} <= set(MANIFEST["decode_layers"]["values"])
     projected = [r for v in MANIFEST["valid"] for r in v["records"]
                  if "project" in r.get("layers", {}).get("basis", {})]
     assert len(projected) == 2 and all(r["layers"]["basis"]["project"] == 50 for r in projected)
@@ -61,7 +68,8 @@ def test_manifest_covers_what_the_spec_asks_for() -> None:
 def test_valid_vector_reads_as_listed(vector: dict[str, Any]) -> None:
     parsed = parse_bvae((VECTORS / vector["file"]).read_bytes(), vector["file"])
     header = parsed.header
-    assert (header.major, header.minor) == (FORMAT_MAJOR, FORMAT_MINOR) == (2, 0)
+    assert (FORMAT_MAJOR, FORMAT_MINOR) == (2, 1) and MANIFEST["format_version"] == "2.1"
+    assert f"{header.major}.{header.minor}" == vector.get("format_version", MANIFEST["format_version"])
     assert header.decoder.sha256 == vector["decoder_sha256"]
     assert header.basis_sha256 == vector["basis_sha256"]
     assert header.latent_dtype == vector["latent_dtype"]
@@ -69,8 +77,11 @@ def test_valid_vector_reads_as_listed(vector: dict[str, Any]) -> None:
     assert len(parsed.records) == len(vector["records"])
     for record, expected in zip(parsed.records, vector["records"], strict=True):
         assert record.name == expected["name"] and record.kind == expected["kind"]
-        np.testing.assert_array_equal(record.mu, np.float32(expected["mu"]))
-        np.testing.assert_array_equal(record.sigma, np.float32(expected["sigma"]))
+        if expected["mu"] is None:  # a record without a latent (2.1, §4.6): neither mu nor sigma
+            assert expected["sigma"] is None and not record.has_latent  # type: ignore[union-attr]
+        else:
+            np.testing.assert_array_equal(record.mu, np.float32(expected["mu"]))
+            np.testing.assert_array_equal(record.sigma, np.float32(expected["sigma"]))
         assert dict(record.meta) == expected["meta"]
         if isinstance(record, GraftRecord):
             assert list(record.graft_dims) == expected["graft_dims"]

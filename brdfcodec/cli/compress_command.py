@@ -64,7 +64,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
                         help="largest quality within N bytes per material: what each adds to the file beyond its "
                         "name, its record and its index entry (adds enhancement "
                         "layers: basis coefficients, then a detail layer; from 12 B, where the base is stored "
-                        "compact: μ as int8 on a fixed grid, or with a step where it does not fit, one σ byte)")
+                        "compact: μ as int8 on a fixed grid, or with a step where it does not fit, one σ byte; "
+                        "from 6 B with --latent auto, without a latent)")
     target.add_argument("--max-relae", type=float, metavar="X",
                         help="smallest record whose measured RelAE on its material is at most X (adds enhancement "
                         "layers)")
@@ -79,6 +80,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
                         "records without a detail layer), always (the flag alone) or never; projecting lowers the "
                         "error by 4-11 %% at 16-128 B on held-out materials and takes about 2-3 ms more to decode "
                         "per material")
+    parser.add_argument("--latent", choices=("auto", "always"), default=None,
+                        help="with --bytes/--max-relae: auto (default) may write a record without a latent code "
+                        "where that is better (format 2.1: the model's mean plus basis coefficients; from 6 B): it "
+                        "decodes like any other, but cannot be edited; always keeps a latent code in every record, "
+                        "so that every record can be edited")
     parser.set_defaults(handler=run)
 
 
@@ -143,8 +149,10 @@ def collect_items(inputs: list[Path], split: str | None) -> list[_Item]:
 MAX_BYTES_BUDGET = 1 << 30
 
 
-def _check_bytes_floor(budget: int, model: str | None, latent_itemsize: int, basis: bool) -> None:
-    """Refuse a ``--bytes`` below the smallest record the model can write (a usage error, exit 2)."""
+def _check_bytes_floor(budget: int, model: str | None, latent_itemsize: int, basis: bool,
+                       without_latent: bool = False) -> None:
+    """Refuse a ``--bytes`` below the smallest record the model can write (a usage error, exit 2); records
+    without a latent (``without_latent``: ``--latent auto``) count where the model has a basis and a linear path."""
     from brdfcodec.layers.rate import smallest_bytes_budget
     from brdfcodec.models.manifest import load_manifest
     from brdfcodec.models.registry import default_model_folder, find_model
@@ -157,8 +165,9 @@ def _check_bytes_floor(budget: int, model: str | None, latent_itemsize: int, bas
         manifest = find_model(text)
     else:
         manifest = load_manifest(text)
-    floor = smallest_bytes_budget(manifest.config.latent_dim, latent_itemsize,
-                                  basis and manifest.basis_sha256 is not None)
+    has_basis = basis and manifest.basis_sha256 is not None
+    floor = smallest_bytes_budget(manifest.config.latent_dim, latent_itemsize, has_basis,
+                                  without_latent=has_basis and without_latent and bool(manifest.config.linear_basis))
     if budget < floor:
         raise UsageError(f"--bytes {budget} is below the smallest record model {manifest.name} can write "
                          f"({floor} bytes per material)")
@@ -180,9 +189,12 @@ def run(args: argparse.Namespace) -> int:
     if args.project_base is not None and (args.no_basis or (args.bytes is None and args.max_relae is None)):
         raise UsageError("--project-base applies to records with a basis layer: give --bytes or --max-relae, "
                          "without --no-basis")
+    if args.latent is not None and args.bytes is None and args.max_relae is None:
+        raise UsageError("--latent chooses between the records of rate control: give --bytes or --max-relae")
+    latent = args.latent or "auto"
     dtype = "float16" if args.float16 else "float32"
     if args.bytes is not None:  # the floor, from the model's manifest: before loading the model or any input
-        _check_bytes_floor(args.bytes, args.model, 2 if args.float16 else 4, not args.no_basis)
+        _check_bytes_floor(args.bytes, args.model, 2 if args.float16 else 4, not args.no_basis, latent == "auto")
     check_output_path(args.output, overwrite=args.force)
     if args.output.suffix != ".bvae":
         raise ValueError(f"{args.output}: the output must end in .bvae")
@@ -190,7 +202,7 @@ def run(args: argparse.Namespace) -> int:
     encoder = BrdfEncoder(
         args.model, effort=args.effort, bytes=args.bytes, max_relae=args.max_relae, metric=args.metric or "mapped",
         basis=not args.no_basis, project_base=args.project_base or "auto",
-        latent_dtype=dtype,
+        latent_dtype=dtype, latent=latent,
     )
     with tqdm(total=len(items), desc="compress", unit="material", disable=len(items) < 2 or None) as bar:
         records: list[Record] = encode_records(
@@ -202,14 +214,16 @@ def run(args: argparse.Namespace) -> int:
         )
     lines = []
     for record in records:
+        # a record without a latent (format 2.1) decodes like any other, but edits refuse it: say so
+        tag = "" if getattr(record, "has_latent", True) else "  (no latent: basis only, not editable)"
         if "relae" in record.meta:
             relae = record.meta["relae"]
-            lines.append(f"  {record.name:<32} RelAE mapped {relae['mapped']:.4f}  linear {relae['linear']:.4f}")
+            lines.append(f"  {record.name:<32} RelAE mapped {relae['mapped']:.4f}  linear {relae['linear']:.4f}{tag}")
         elif args.no_measure or "source_sha256" not in record.meta:
             why = "--no-measure" if args.no_measure else "no source table"
-            lines.append(f"  {record.name:<32} (RelAE not measured: {why})")
+            lines.append(f"  {record.name:<32} (RelAE not measured: {why}){tag}")
         else:
-            lines.append(f"  {record.name:<32} (RelAE undefined: the material reflects nothing)")
+            lines.append(f"  {record.name:<32} (RelAE undefined: the material reflects nothing){tag}")
     if encoder.reference is None:  # loaded from a model folder, so it has one
         raise RuntimeError("the encoder has no decoder reference")
     stored = records if args.provenance else without_provenance(records)

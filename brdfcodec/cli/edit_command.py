@@ -8,6 +8,7 @@ from pathlib import Path
 
 from brdfcodec.bvae_format import LatentRecord, ParsedBvae, Record, read_bvae, write_bvae
 from brdfcodec.cli.usage import UsageError
+from brdfcodec.errors import NoLatentError
 
 __all__ = ["parse_floats", "register"]
 
@@ -72,12 +73,20 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
         op.set_defaults(handler=run)
 
 
+def _editable(record: Record, path: str | Path) -> Record:
+    """The record, unless it has no latent code to edit (a basis-only record, format 2.1): then
+    :class:`NoLatentError` naming the file and the record, before anything is written."""
+    if not getattr(record, "has_latent", True):
+        raise NoLatentError(record.name, path)
+    return record
+
+
 def _pick(library: ParsedBvae, path: Path, name: str | None) -> Record:
     if name is None:
         if len(library.records) != 1:
             raise UsageError(f"{path}: holds {len(library.records)} materials; name one with --material")
-        return library.records[0]
-    return library.record(name)
+        return _editable(library.records[0], path)
+    return _editable(library.record(name), path)
 
 
 def _operand(library: ParsedBvae, path: Path, spec: str) -> tuple[Record, ParsedBvae]:
@@ -86,8 +95,8 @@ def _operand(library: ParsedBvae, path: Path, spec: str) -> tuple[Record, Parsed
         other = read_bvae(other_path)
         if other.header.decoder.sha256 != library.header.decoder.sha256:
             raise ValueError(f"{other_path}: made for another decoder than {path}; both must use the same model")
-        return other.record(name), other
-    return library.record(spec), library
+        return _editable(other.record(name), other_path), other
+    return _editable(library.record(spec), path), library
 
 
 def _parameter_count(record: Record) -> int:

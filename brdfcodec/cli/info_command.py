@@ -99,10 +99,11 @@ def _bvae_summary(path: Path) -> dict[str, Any]:
     except DecoderNotFoundError:
         installed = None
     else:  # basis layers checked against the model's shared bases, as opening the file for decoding does (§4.5)
-        from brdfcodec.layers.basis import check_basis_layers, model_basis_lookup
+        from brdfcodec.layers.basis import check_basis_layers, check_records_without_latent, model_basis_lookup
 
         bases = model_basis_lookup(model.folder, model.basis_sha256, {})  # one basis per model (issue 40)
         check_basis_layers(header.entries, bases, str(path), model.basis_sha256)
+        check_records_without_latent(header.entries, bases, str(path), bool(model.config.linear_basis))
     name = header.decoder.name or (model.name if installed is not None else "")
     materials = [_record_summary(entry, header.latent_dtype) for entry in header.entries]
     names = sum(len(entry.name.encode("utf-8")) for entry in header.entries)
@@ -135,6 +136,7 @@ def _record_summary(entry: RecordEntry, latent_dtype: str) -> dict[str, Any]:
     item: dict[str, Any] = {
         "name": entry.name, "kind": entry.kind,
         "mu": layers.get("mu", latent_dtype), "sigma": layers.get("sigma", latent_dtype),
+        "latent": layers.get("mu") != "none",  # False: a basis-only record (format 2.1), which cannot be edited
         "payload_bytes": entry.length, "record_bytes": entry.length + entry.descriptor_bytes,
     }
     if entry.graft_dims:
@@ -153,7 +155,7 @@ def _stored_forms(item: dict[str, Any], latent_dtype: str) -> str:
     """One line of what a record stores: μ, σ, the layers."""
     mu = {"int8-fixed": "μ int8 grid", "int8": "μ int8+step"}.get(item["mu"], f"μ {item['mu']}")
     sigma = {"log2-u8": "σ u8", "log2-u8-shared": "σ shared u8"}.get(item["sigma"], f"σ {item['sigma']}")
-    parts = [mu, sigma]
+    parts = [mu, sigma] if item["latent"] else ["latent: none (basis only)"]
     if item["kind"] == "graft":  # parameters numbered from 1, like every number the CLI shows
         parts.append("graft z" + ",".join(str(d + 1) for d in item["graft_dims"]))
     if "basis" in item:

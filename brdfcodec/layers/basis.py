@@ -57,6 +57,7 @@ __all__ = [
     "basis_layer_from_bytes",
     "basis_offset",
     "check_basis_layers",
+    "check_records_without_latent",
     "dequantise_int8",
     "fit_factorised_basis",
     "fit_shared_basis",
@@ -841,6 +842,58 @@ def check_basis_layers(
                 f"{where}: record {entry.name!r}: its base is projected on {project} basis vectors, but shared "
                 f"basis {sha[:12]}… holds {basis.count}"
             )
+
+
+@functools.cache
+def linear_path_entries() -> npt.NDArray[np.int64]:
+    """Flat positions, in the ``(63, 90, 90)`` layout, of the entries a ``linear_basis`` decoder's linear path
+    covers: those above the horizon (``spec/model.md`` §1), in increasing order (read-only)."""
+    from brdfcodec.mask import kept_slice_horizon_mask
+    from brdfcodec.representation.layout import to_network_layout
+
+    mask = to_network_layout(kept_slice_horizon_mask()[None].repeat(3, axis=0))
+    entries = np.flatnonzero(mask.reshape(-1)).astype(np.int64)
+    entries.setflags(write=False)
+    return entries
+
+
+def check_records_without_latent(
+    entries: Sequence[Any], basis_named: Callable[[str], SharedBasis | None], where: str, linear_path: bool
+) -> None:
+    """Refuse, when a file is opened for decoding, a record without a latent (format 2.1) whose decoder cannot
+    give its base: the decoder's linear-path mean must cover every entry of the shared basis
+    (``spec/bvae-format.md`` §4.6). Torch-free (``bvae info``); the decoder itself checks its own network.
+
+    Parameters
+    ----------
+    entries : sequence of RecordEntry
+        A file's index, its basis layers already checked (:func:`check_basis_layers`).
+    basis_named : callable
+        As for :func:`check_basis_layers`.
+    where : str
+        The file, for the messages.
+    linear_path : bool
+        Whether the decoder has a linear path (``ModelConfig.linear_basis``).
+
+    Raises
+    ------
+    BasisError
+        Naming the file and the record.
+    """
+    for entry in entries:
+        layers = entry.layers or {}
+        if layers.get("mu") != "none":
+            continue
+        problem = None
+        if not linear_path:
+            problem = "the decoder has no linear path"
+        else:
+            basis = basis_named(str(layers["basis"]["sha256"]))
+            if basis is not None and not np.isin(basis.entries, linear_path_entries()).all():
+                problem = "the decoder's linear path does not cover every entry of the shared basis"
+        if problem is not None:
+            raise BasisError(f"{where}: record {entry.name!r} has no latent (format 2.1) and decodes from the "
+                             f"decoder's linear-path mean, but {problem}")
 
 
 def model_basis_lookup(folder: str | os.PathLike[str], current: str | None,

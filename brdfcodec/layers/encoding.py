@@ -18,9 +18,16 @@ from brdfcodec.layers.basis import (
     basis_offset,
     quantise_coefficients,
 )
-from brdfcodec.layers.rate import BasisFit, Metric, MuStorage, encode_layers
+from brdfcodec.layers.rate import BasisFit, BasisOnlyFit, Metric, MuStorage, encode_layers
 from brdfcodec.layers.record import MU_INT8_FIXED, LayeredRecord, compact_mu_values
-from brdfcodec.layers.refine import EFFORT_STEPS, fit_basis_coefficients, refine_latent
+from brdfcodec.layers.refine import (
+    EFFORT_STEPS,
+    POLISH_PASSES,
+    fit_basis_coefficients,
+    fit_basis_only_coefficients,
+    polish_quantised_coefficients,
+    refine_latent,
+)
 
 if TYPE_CHECKING:
     from brdfcodec.merl import MerlBRDF
@@ -43,7 +50,9 @@ class LayerDecoder(Protocol):
 
     def project_base(self, record: LayeredRecord, mapped: np.ndarray) -> None: ...
 
-__all__ = ["PROJECTED_BASE_VECTORS", "EncodeOptions", "ProjectBase", "layer_records", "projected_base_vectors"]
+__all__ = [
+    "PROJECTED_BASE_VECTORS", "EncodeOptions", "LatentChoice", "ProjectBase", "layer_records", "projected_base_vectors",
+]
 
 #: Basis vectors a writer projects a layered record's base decode on (``layers.basis.project``, format 1.6) when
 #: asked to (``EncodeOptions.project_base``). The decoder's output carries what its 8 numbers say about a material
@@ -60,6 +69,13 @@ PROJECTED_BASE_VECTORS = 50
 #: only); ``"always"``; ``"never"``.
 ProjectBase = Literal["auto", "always", "never"]
 _PROJECT_BASE_CHOICES: tuple[str, ...] = get_args(ProjectBase)
+
+#: Whether rate control may write records without a latent (format 2.1, :class:`EncodeOptions`): ``"auto"`` makes
+#: them candidates beside the latent ones wherever the model has a shared basis and a linear path covering it,
+#: and keeps whichever has the lower error (a latent on a tie); ``"always"`` writes a latent in every record, so
+#: every record can be edited.
+LatentChoice = Literal["auto", "always"]
+_LATENT_CHOICES: tuple[str, ...] = get_args(LatentChoice)
 
 
 def projected_base_vectors(decoder: LayerDecoder, basis: SharedBasis) -> int:
@@ -100,6 +116,11 @@ class EncodeOptions:
         and keeps the lower error, in records without a detail layer (with one, a projected record decodes
         past the 1.5× decode-time target of the ``decode-layered`` benchmark);
         it doubles the basis layer's fitting time. ``True`` and ``False`` mean ``"always"`` and ``"never"``.
+    latent : {"auto", "always"}
+        ``"auto"`` (the default): a size budget or an error target may pick a record without a latent (format
+        2.1: the decoder's linear-path mean plus basis coefficients from the first vector), where its error is
+        lower (:data:`LatentChoice`); such a record decodes but cannot be edited. ``"always"``: every record
+        keeps a latent code. Nothing changes without a target, or without a shared basis.
     """
 
     effort: int = 1
@@ -110,8 +131,11 @@ class EncodeOptions:
     latent_itemsize: int = 4
     basis: bool = True
     project_base: ProjectBase = "auto"
+    latent: LatentChoice = "auto"
 
     def __post_init__(self) -> None:
+        if self.latent not in _LATENT_CHOICES:
+            raise ValueError(f"latent must be one of {list(_LATENT_CHOICES)}, got {self.latent!r}")
         if isinstance(self.project_base, bool):
             object.__setattr__(self, "project_base", "always" if self.project_base else "never")
         if self.project_base not in _PROJECT_BASE_CHOICES:
@@ -170,6 +194,7 @@ def layer_records(
             step=options.detail_step, latent_itemsize=options.latent_itemsize,
             basis_fit=None if basis is None else _basis_fit(decoder, basis, base, inputs[i], masks[i], options),
             basis_count=0 if basis is None else basis.count,
+            basis_only_fit=None if basis is None else _basis_only_fit(decoder, basis, inputs[i], masks[i], options),
         )
         chosen = result.record
         # record_bytes: what the budget caps (payload and index descriptor); payload_bytes: the payload alone
@@ -188,6 +213,41 @@ def layer_records(
 def _as_stored(codes: np.ndarray, itemsize: int) -> np.ndarray:
     """Codes rounded as the file will store them (layers code what the stored code decodes to)."""
     return codes.astype(np.float16).astype(np.float32) if itemsize == 2 else codes.astype(np.float32)
+
+
+def _basis_only_fit(
+    decoder: LayerDecoder, basis: SharedBasis, inputs: np.ndarray, masks: np.ndarray, options: EncodeOptions
+) -> BasisOnlyFit | None:
+    """The fit of one material's records without a latent (format 2.1) for
+    :func:`~brdfcodec.layers.rate.encode_layers`, or None where they are off (``latent="always"``) or the
+    decoder has no linear-path mean over the basis' entries to start from.
+
+    k coefficients on the vectors 0 … k − 1: least squares, then Adam on the mapped L1 error
+    (:func:`~brdfcodec.layers.refine.fit_basis_only_coefficients`), quantised as every basis layer (s = max |c| /
+    127 in float16), then the integers polished on the same error
+    (:func:`~brdfcodec.layers.refine.polish_quantised_coefficients`).
+    """
+    if options.latent != "auto":
+        return None
+    try:
+        centre = decoder.projection_centre
+    except BasisError:
+        return None
+    on_basis = basis.entry_mask
+    target = np.asarray(inputs, dtype=np.float32).reshape(-1)[on_basis]
+    weights = np.asarray(masks, dtype=np.float32).reshape(-1)[on_basis]
+
+    def fit(k: int) -> tuple[BasisLayer, np.ndarray]:
+        components = basis.vectors(0, k)
+        coefficients = fit_basis_only_coefficients(target, weights, centre, components, options.effort)
+        layer = quantise_coefficients(basis.sha256, coefficients)
+        if POLISH_PASSES[options.effort]:
+            q = polish_quantised_coefficients(layer.step, layer.q, target, weights, centre, components,
+                                              POLISH_PASSES[options.effort])
+            layer = BasisLayer(basis.sha256, layer.step, q)
+        return layer, basis.on_grid(centre + basis.weighted_sum(layer.coefficients()))
+
+    return fit
 
 
 def _basis_fit(

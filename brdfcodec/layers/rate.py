@@ -41,6 +41,14 @@ compact (μ as int8 on the fixed grid μ = q / 32 where it fits ±3.97, else
 with a float16 step; σ as one shared byte: 9 or 11 bytes for D = 8,
 :func:`compact_base_pays`, :func:`compact_mu_storage`), which makes budgets
 from 12 bytes possible.
+
+Records without a latent (format 2.1, ``spec/bvae-format.md`` §4.6) are candidates too when a
+:data:`BasisOnlyFit` is given (``EncodeOptions.latent = "auto"``): k coefficients from the basis' first vector
+on the decoder's linear-path mean, as many as fit the budget beside the step and the descriptor (for an error
+target, the same counts as the compact base's). Rate control compares them with the latent candidates as it
+compares those: the lower kept-slice mapped L1 error for a budget (the latent record on a tie, since it can be
+edited), the smaller record meeting an error target. Budgets too small for any record with a latent (from
+6 bytes with a one-byte name) then hold one without.
 """
 
 from __future__ import annotations
@@ -63,7 +71,7 @@ from brdfcodec.metrics import RelaeAgainst
 from brdfcodec.transforms import table_from_network_output
 
 __all__ = [
-    "DETAIL_BASIS_COUNT", "STEP_LADDER", "BasisFit", "Metric", "MuStorage", "RateResult",
+    "DETAIL_BASIS_COUNT", "STEP_LADDER", "BasisFit", "BasisOnlyFit", "Metric", "MuStorage", "RateResult",
     "compact_base_pays", "compact_mu_storage",
     "encode_layers",
     "error_target_sequence", "layered_mapped",
@@ -104,6 +112,10 @@ MuStorage = str | None
 #: jointly refined μ, the layer, and the decoder's mapped output before the detail layer (clamped base decode
 #: plus the basis residual).
 BasisFit = Callable[[int, MuStorage, bool], tuple[LatentRecord, BasisLayer, np.ndarray]]
+#: What a fit of a record without a latent (format 2.1) returns for k coefficients on the basis' vectors
+#: 0 … k − 1: the layer (quantised as stored) and the decode's mapped kept slices before the clamp (the decoder's
+#: linear-path mean at the basis' entries plus the layer's sum).
+BasisOnlyFit = Callable[[int], tuple[BasisLayer, np.ndarray]]
 #: Basis sizes tried by an error target below the basis' full size.
 _BASIS_COUNTS: Final = (4, 8, 16, 32)
 #: A candidate of an error target: compact base or not, basis coefficients, detail step (None: no detail layer).
@@ -207,6 +219,7 @@ def encode_layers(
     latent_itemsize: int = 4,
     basis_fit: BasisFit | None = None,
     basis_count: int = 0,
+    basis_only_fit: BasisOnlyFit | None = None,
 ) -> RateResult:
     """A base record, layered to a size budget, an error target or a fixed step.
 
@@ -235,11 +248,14 @@ def encode_layers(
         Fits k coefficients on the model's shared basis (with the base's μ); None when the model has no basis.
     basis_count : int
         Size K of that basis (the most coefficients a record may carry).
+    basis_only_fit : callable, optional
+        Fits k coefficients of a record without a latent (format 2.1); with it, such records are candidates of a
+        size budget or an error target too (not of a fixed ``step``). Needs ``basis_count``.
 
     Raises
     ------
     RateTargetError
-        The budget is below the base record's size, or no candidate meets ``max_relae``.
+        The budget is below the smallest record's size, or no candidate meets ``max_relae``.
     """
     if sum(x is not None for x in (bytes_budget, max_relae, step)) != 1:
         raise ValueError("give exactly one of bytes_budget, max_relae or step")
@@ -264,9 +280,17 @@ def encode_layers(
         return RateResult(cands.record(count, float(step)), cands.size(count, float(step)),
                           [(float(step), cands.size(count, float(step)), None)])
     tried: list[tuple[float | None, int, float | None]] = []
+    without = None
+    if basis_only_fit is not None and basis_count > 0:
+        without = _WithoutLatent(base, basis_only_fit, basis_count, target, weights)
     if bytes_budget is not None:
+        only = None if without is None else without.for_budget(bytes_budget)
         if bytes_budget < base_bytes:
-            raise RateTargetError(f"{base.name}: {bytes_budget} bytes is below the base record's {base_bytes} bytes")
+            if only is not None and without is not None:  # too small for a latent: the record without one
+                return RateResult(without.record(only), without.size(only), tried)
+            smallest = base_bytes if without is None else min(base_bytes, without.size(1))
+            what = "base record's" if smallest == base_bytes else "smallest record's"
+            raise RateTargetError(f"{base.name}: {bytes_budget} bytes is below the {what} {smallest} bytes")
         k = cands.most_coefficients(bytes_budget, full)
         under_detail = min(k, DETAIL_BASIS_COUNT)
         fitting: set[tuple[int, float | None]] = {c for c in ((0, None), (k, None)) if cands.size(*c) <= bytes_budget}
@@ -299,6 +323,8 @@ def encode_layers(
             if pools[True].size(full, None) <= bytes_budget:
                 errors[True, full, None] = slice_error((True, full, None))
         chosen = min(errors, key=lambda c: (errors[c], c[1], c[0]))
+        if only is not None and without is not None and without.error(only) < errors[chosen]:
+            return RateResult(without.record(only), without.size(only), tried)  # strictly lower: a latent on a tie
         return RateResult(pools[chosen[0]].record(*chosen[1:]), pools[chosen[0]].size(*chosen[1:]), tried)
     assert max_relae is not None
     if values is None or mask is None:
@@ -325,6 +351,9 @@ def encode_layers(
     search = sequence[:plain] if error(sequence[plain - 1]) <= max_relae else sequence[plain:]
     bracket = _bisect(lambda c: error(c) <= max_relae, len(search), search)
     if bracket is None:
+        only = None if without is None else without.meeting(relae, max_relae, None, tried)
+        if only is not None and without is not None:
+            return RateResult(without.record(only), without.size(only), tried)
         best = min(errors.values())
         raise RateTargetError(
             f"{base.name}: RelAE ({metric}) {max_relae} is not reachable; the finest step reaches {best:.4g}"
@@ -341,7 +370,67 @@ def encode_layers(
                 low = mid_step
     candidates = [c for c in errors if errors[c] <= max_relae]
     chosen = min(candidates, key=lambda c: pools[c[0]].size(*c[1:]))
-    return RateResult(pools[chosen[0]].record(*chosen[1:]), pools[chosen[0]].size(*chosen[1:]), tried)
+    size = pools[chosen[0]].size(*chosen[1:])
+    only = None if without is None else without.meeting(relae, max_relae, size, tried)
+    if only is not None and without is not None:  # a smaller record without a latent meets the target too
+        return RateResult(without.record(only), without.size(only), tried)
+    return RateResult(pools[chosen[0]].record(*chosen[1:]), size, tried)
+
+
+class _WithoutLatent:
+    """Candidates without a latent (format 2.1): k coefficients from the basis' first vector on the linear-path
+    mean, fitted once per k."""
+
+    def __init__(self, base: LatentRecord, fit: BasisOnlyFit, basis_count: int, inputs: np.ndarray,
+                 masks: np.ndarray) -> None:
+        self.base, self.fit, self.basis_count = base, fit, basis_count
+        self.inputs, self.masks = inputs, masks
+        self.fits: dict[int, tuple[BasisLayer, np.ndarray]] = {}
+
+    def layer(self, k: int) -> tuple[BasisLayer, np.ndarray]:
+        if k not in self.fits:
+            self.fits[k] = self.fit(k)
+        return self.fits[k]
+
+    def size(self, k: int) -> int:
+        """Payload (the step and k coefficients) and descriptor."""
+        return STEP_BYTES + k + record_overhead(self.base.name, basis_count=k)
+
+    def for_budget(self, bytes_budget: int) -> int | None:
+        """The most coefficients (at most K) whose record fits the budget; None when not even one does."""
+        k = min(self.basis_count, bytes_budget - STEP_BYTES - record_overhead(self.base.name, basis_count=1))
+        while k > 0 and self.size(k) > bytes_budget:  # a count of 128 or more takes 2 bytes
+            k -= 1
+        return k if k > 0 else None
+
+    def error(self, k: int) -> float:
+        """The kept-slice mapped L1 error of the clamped decode (what a size budget ranks candidates by)."""
+        mapped = np.clip(self.layer(k)[1], 0.0, MAPPED_MAX)
+        return float((np.abs(mapped - self.inputs) * self.masks).sum())
+
+    def record(self, k: int) -> LayeredRecord:
+        return LayeredRecord.without_latent(self.base.name, self.base.latent_dim, self.layer(k)[0],
+                                            meta=self.base.meta)
+
+    def meeting(self, relae: RelaeAgainst, max_relae: float, smaller_than: int | None,
+                tried: list[tuple[float | None, int, float | None]]) -> int | None:
+        """The fewest coefficients, of the error target's counts for a compact base (those whose record is
+        smaller than ``smaller_than`` bytes, when given), whose decode meets ``max_relae``; None when none does."""
+        counts = [c[1] for c in error_target_sequence(self.basis_count) if c[0] and c[2] is None]
+        counts = [n for n in counts if smaller_than is None or self.size(n) < smaller_than]
+        if not counts:
+            return None
+        measured: dict[int, float] = {}
+
+        def meets(candidate: _Candidate) -> bool:
+            k = candidate[1]
+            if k not in measured:
+                measured[k] = relae(table_from_network_output(self.layer(k)[1])).overall
+                tried.append((None, self.size(k), measured[k]))
+            return measured[k] <= max_relae
+
+        bracket = _bisect(meets, len(counts), [(True, n, None) for n in counts])
+        return None if bracket is None else bracket[1][1]
 
 
 def error_target_sequence(basis_count: int) -> list[_Candidate]:
@@ -460,11 +549,14 @@ def _bisect(
     return sequence[lo], sequence[hi]
 
 
-def smallest_bytes_budget(latent_dim: int, latent_itemsize: int, basis: bool) -> int:
+def smallest_bytes_budget(
+    latent_dim: int, latent_itemsize: int, basis: bool, *, without_latent: bool = False
+) -> int:
     """The smallest ``bytes_budget`` that any material can be encoded within, for a model's latent size.
 
     The smallest record is a compact base (μ on the fixed grid, one σ byte) with one basis coefficient, or, without
-    a basis layer, a latent record (μ and σ in the latent dtype); each with the descriptor of a one-byte name. A
+    a basis layer, a latent record (μ and σ in the latent dtype); each with the descriptor of a one-byte name. Where
+    records without a latent may be written (format 2.1), one basis coefficient alone: 6 bytes. A
     material whose μ leaves the fixed grid, or whose name is longer, needs a little more: :func:`encode_layers`
     refuses it then. Checked before any model is loaded (``bvae compress --bytes``).
 
@@ -476,6 +568,9 @@ def smallest_bytes_budget(latent_dim: int, latent_itemsize: int, basis: bool) ->
         Bytes of one value in the latent dtype (4 or 2).
     basis : bool
         Whether records may hold a basis layer (the model has a shared basis and it is not turned off).
+    without_latent : bool, default False
+        Whether records without a latent may be written (``EncodeOptions.latent = "auto"``, a shared basis and a
+        decoder whose linear path covers it).
 
     Returns
     -------
@@ -484,5 +579,7 @@ def smallest_bytes_budget(latent_dim: int, latent_itemsize: int, basis: bool) ->
     plain = 2 * latent_dim * latent_itemsize + record_overhead("a")
     if not basis:
         return plain
+    if without_latent:
+        return STEP_BYTES + 1 + record_overhead("a", basis_count=1)
     compact = _layered_base_bytes(latent_dim, latent_itemsize, MU_INT8_FIXED) + STEP_BYTES + 1
     return min(plain, compact + record_overhead("a", basis_count=1))

@@ -6,6 +6,12 @@ base path — works on it unchanged) that also carries a
 :class:`~brdfcodec.layers.detail.DetailLayer`. This module holds the
 format's view of the layers: the index-entry object, the payload bytes, and
 their validation when a file is read. It does not import torch.
+
+A *basis-only* record (format 2.1, ``layers.mu = "none"``; :meth:`LayeredRecord.without_latent`) stores no
+latent at all: its base is the decoder's linear-path mean, and its basis layer (and detail layer, if any) code the
+rest. Its ``has_latent`` is False and its ``mu`` and ``sigma`` are NaN (so that code which would decode or edit a
+latent it does not have fails loudly instead of using a made-up code); edits refuse it
+(:class:`~brdfcodec.errors.NoLatentError`).
 """
 
 from __future__ import annotations
@@ -37,8 +43,10 @@ __all__ = [
     "LAYERED_KIND",
     "MU_INT8",
     "MU_INT8_FIXED",
+    "MU_NONE",
     "SIGMA_LOG2_U8",
     "SIGMA_LOG2_U8_SHARED",
+    "SIGMA_NONE",
     "LayeredRecord",
     "compact_mu_code",
     "compact_mu_values",
@@ -62,6 +70,10 @@ SIGMA_LOG2_U8_SHARED = "log2-u8-shared"
 MU_INT8 = "int8"
 #: ``layers.mu`` of a record that stores μ as D int8 values q on the fixed grid: μ = q / 32 (since 1.5).
 MU_INT8_FIXED = "int8-fixed"
+#: ``layers.mu`` (and ``layers.sigma``, :data:`SIGMA_NONE`) of a basis-only record, which stores no latent (since 2.1).
+MU_NONE = "none"
+#: ``layers.sigma`` of a basis-only record: no σ (only with ``layers.mu = "none"``).
+SIGMA_NONE = "none"
 _MU_MODES = (MU_INT8, MU_INT8_FIXED)
 _SIGMA_LOG2_MIN, _SIGMA_STEPS_PER_OCTAVE = -12.0, 16.0
 _SIGMA_MODES = (SIGMA_LOG2_U8, SIGMA_LOG2_U8_SHARED)
@@ -124,6 +136,12 @@ class LayeredRecord(LatentRecord):
     fixed_mu_grid : bool
         With ``compact_mu``: store μ as one signed byte per dimension on the fixed grid μ = q / 32
         (``layers.mu = "int8-fixed"``: D bytes, no step; values past ±3.97 are stored as the grid's end).
+    has_latent : bool
+        False: a basis-only record (format 2.1, ``layers.mu = layers.sigma = "none"``; make one with
+        :meth:`without_latent`). It stores neither μ nor σ; its base is the decoder's linear-path mean
+        (``spec/bvae-format.md`` §4.6). It needs a basis layer whose base is not projected; ``mu`` and ``sigma``
+        then hold NaN (only their length, the file's latent dimension, means something) and the compact forms
+        are off.
     """
 
     detail: DetailLayer | None = None
@@ -133,9 +151,46 @@ class LayeredRecord(LatentRecord):
     shared_sigma: bool = False
     compact_mu: bool = False
     fixed_mu_grid: bool = False
+    has_latent: bool = True
+
+    @classmethod
+    def without_latent(
+        cls, name: str, latent_dim: int, basis: BasisLayer, *, detail: DetailLayer | None = None,
+        meta: Mapping[str, Any] | None = None,
+    ) -> LayeredRecord:
+        """A basis-only record (format 2.1): no μ, no σ; the base is the decoder's linear-path mean.
+
+        Parameters
+        ----------
+        name : str
+        latent_dim : int
+            The latent dimension of the file's decoder (every record of a file has it).
+        basis : BasisLayer
+            The coefficients (its ``project`` must be 0).
+        detail : DetailLayer, optional
+        meta : mapping, optional
+        """
+        return cls(name, np.zeros(latent_dim, dtype=np.float32), np.ones(latent_dim, dtype=np.float32),
+                   {} if meta is None else meta, detail=detail, basis=basis, has_latent=False)
 
     def __post_init__(self) -> None:
+        if not self.has_latent:  # placeholders that pass the latent record's checks, replaced by NaN below
+            size = int(np.asarray(self.mu).size)
+            self._hold("mu", np.zeros(size))
+            self._hold("sigma", np.ones(size))
         super().__post_init__()
+        if not self.has_latent:
+            if self.basis is None:
+                raise ValueError(f"{self.name}: a record without a latent needs a basis layer")
+            if not isinstance(self.basis, BasisLayer):
+                raise ValueError(f"{self.name}: basis must be a BasisLayer, got {type(self.basis).__name__}")
+            if self.basis.project:
+                raise ValueError(f"{self.name}: a record without a latent has no base decode to project "
+                                 f"(basis project must be 0, got {self.basis.project})")
+            if self.compact_sigma or self.shared_sigma or self.compact_mu or self.fixed_mu_grid:
+                raise ValueError(f"{self.name}: a record without a latent stores no mu or sigma, compact or not")
+            self._hold("mu", np.full(self.mu.size, np.nan))
+            self._hold("sigma", np.full(self.sigma.size, np.nan))
         if self.detail is None and self.basis is None:
             raise ValueError(f"{self.name}: a layered record needs a basis layer, a detail layer or both")
         if self.detail is not None and not isinstance(self.detail, DetailLayer):
@@ -168,14 +223,37 @@ class LayeredRecord(LatentRecord):
         """Whether σ is stored as bytes after the latent values (per dimension or shared) rather than among them."""
         return self.compact_sigma or self.shared_sigma
 
+    @property
+    def mu_storage(self) -> str | None:
+        """How μ is stored (``layers.mu``): None in the file's latent dtype, :data:`MU_INT8`, :data:`MU_INT8_FIXED`,
+        or :data:`MU_NONE` (no latent)."""
+        if not self.has_latent:
+            return MU_NONE
+        if self.compact_mu:
+            return MU_INT8_FIXED if self.fixed_mu_grid else MU_INT8
+        return None
+
     def payload_values(self) -> np.ndarray:
-        """Values stored in the latent dtype: ``mu`` unless it is compact, ``sigma`` unless it is stored as bytes."""
+        """Values stored in the latent dtype: ``mu`` unless it is compact, ``sigma`` unless it is stored as bytes
+        (none for a record without a latent)."""
+        if not self.has_latent:
+            return np.zeros(0, dtype=np.float32)
         parts = ([] if self.compact_mu else [self.mu]) + ([] if self.sigma_bytes_stored else [self.sigma])
         return np.concatenate(parts) if parts else np.zeros(0, dtype=np.float32)
 
     def base(self) -> LatentRecord:
         """The base alone: a plain latent record with the same μ, σ and meta (what a graft is made of; other
-        edits keep the layers, ``spec/bvae-format.md`` §4.4)."""
+        edits keep the layers, ``spec/bvae-format.md`` §4.4).
+
+        Raises
+        ------
+        NoLatentError
+            A basis-only record has no latent base.
+        """
+        if not self.has_latent:
+            from brdfcodec.errors import NoLatentError
+
+            raise NoLatentError(self.name)
         return LatentRecord(self.name, self.mu, self.sigma, self.meta)
 
     def layer_bytes(self) -> bytes:
@@ -194,6 +272,8 @@ class LayeredRecord(LatentRecord):
 def layers_entry(record: LayeredRecord) -> dict[str, Any]:
     """The ``layers`` object of a layered record's index entry."""
     entry: dict[str, Any] = {}
+    if not record.has_latent:
+        entry["mu"], entry["sigma"] = MU_NONE, SIGMA_NONE
     if record.compact_mu:
         entry["mu"] = MU_INT8_FIXED if record.fixed_mu_grid else MU_INT8
     if record.compact_sigma:
@@ -208,7 +288,8 @@ def layers_entry(record: LayeredRecord) -> dict[str, Any]:
 
 
 def latent_values_stored(layers: Mapping[str, Any], latent_dim: int) -> int:
-    """Values a layered record stores in the latent dtype (its ``layers`` already validated): 0, D or 2·D."""
+    """Values a layered record stores in the latent dtype (its ``layers`` already validated): 0, D or 2·D (0 for a
+    record without a latent, whose ``mu`` and ``sigma`` are ``"none"``)."""
     return (0 if "mu" in layers else latent_dim) + (0 if "sigma" in layers else latent_dim)
 
 
@@ -233,14 +314,23 @@ def layers_length(layers: object, where: str, latent_dim: int = 0) -> int:
     for key in ("mu", "sigma"):
         if key in layers and not isinstance(layers[key], str):
             raise ValueError(f"{where} layers.{key} is not a string")
-    if "mu" in layers:
+    no_latent = layers.get("mu") == MU_NONE
+    if no_latent != (layers.get("sigma") == SIGMA_NONE):
+        raise ValueError(f"{where} stores no {'mu' if no_latent else 'sigma'} but a "
+                         f"{'sigma' if no_latent else 'mu'}: only a record without a latent stores neither")
+    if no_latent:
+        if "basis" not in layers:
+            raise ValueError(f"{where} stores no latent and no basis layer (a record without a latent needs one)")
+        if isinstance(layers["basis"], Mapping) and layers["basis"].get("project", 0) != 0:
+            raise ValueError(f"{where} stores no latent but projects its base on the basis (project must be 0)")
+    elif "mu" in layers:
         if layers["mu"] not in _MU_MODES:
             raise UnsupportedLayerError(
                 f"{where} stores mu as {layers['mu']!r}, unknown to this reader ({' or '.join(_MU_MODES)}); "
                 "upgrade brdfcodec"
             )
         length += latent_dim + (STEP_BYTES if layers["mu"] == MU_INT8 else 0)
-    if "sigma" in layers:
+    if "sigma" in layers and not no_latent:
         if layers["sigma"] not in _SIGMA_MODES:
             raise UnsupportedLayerError(
                 f"{where} stores sigma as {layers['sigma']!r}, unknown to this reader "
@@ -317,6 +407,15 @@ def layered_from_payload(
     """A layered record from its validated entry, the values stored in the latent dtype (μ unless compact,
     then σ unless stored as bytes: :func:`latent_values_stored` of them) and the payload bytes after them."""
     d = latent_dim
+    if layers.get("mu") == MU_NONE:  # a basis-only record (format 2.1): the basis layer, then any detail layer
+        size = STEP_BYTES + int(layers["basis"]["count"])
+        coefficients = basis_layer_from_bytes(layers["basis"], bytes(tail[:size]))
+        residual = None
+        if "detail" in layers:
+            entry = layers["detail"]
+            residual = DetailLayer(float(entry["step"]), str(entry["dtype"]), bytes(tail[size:]))
+            check_detail_frame(residual.data, residual.dtype)  # decompressed whole at read, as below
+        return LayeredRecord.without_latent(name, d, coefficients, detail=residual, meta=meta)
     compact_mu = layers.get("mu") in _MU_MODES
     fixed_mu_grid = layers.get("mu") == MU_INT8_FIXED
     if fixed_mu_grid:

@@ -1,4 +1,5 @@
-"""Encode-time refinement of the latent against the decoder (closing the amortisation gap).
+"""Encode-time refinement of the latent against the decoder (closing the amortisation gap), and the fit of the
+basis coefficients of a record without a latent (format 2.1).
 
 The encoder's μ is a fast guess. Refinement starts from it and takes a few
 Adam steps on the mapped-domain L1 error of the decoded kept slices over the
@@ -18,7 +19,16 @@ import numpy as np
 import numpy.typing as npt
 import torch
 
-__all__ = ["BASIS_STEPS", "EFFORT_STEPS", "fit_basis_coefficients", "refine_latent"]
+__all__ = [
+    "BASIS_ONLY_STEPS",
+    "BASIS_STEPS",
+    "EFFORT_STEPS",
+    "POLISH_PASSES",
+    "fit_basis_coefficients",
+    "fit_basis_only_coefficients",
+    "polish_quantised_coefficients",
+    "refine_latent",
+]
 
 #: Adam steps per effort level (0 = the encoder's μ as is).
 EFFORT_STEPS: Final = {0: 0, 1: 4, 2: 20, 3: 60}
@@ -269,3 +279,145 @@ def fit_basis_coefficients(
     if not (np.isfinite(out_z).all() and np.isfinite(out_c).all()):
         return start.float().cpu().numpy(), c0.float().cpu().numpy()
     return out_z, out_c
+
+
+#: Adam steps of the coefficients of a record without a latent (format 2.1), per effort level (0: least squares
+#: only). Only the coefficients move, and each step is one pass over k basis vectors (no network), so they are
+#: cheaper than the joint fit's and more of them fit in the same time.
+BASIS_ONLY_STEPS: Final = {0: 0, 1: 40, 2: 100, 3: 250}
+#: Adam learning rate of those coefficients (mapped units): larger than the joint fit's, which starts from a fitted
+#: latent; here the least-squares start is all there is.
+BASIS_ONLY_RATE: Final = 0.2
+#: Passes of the integer polish of a quantised basis layer without a latent, per effort level.
+POLISH_PASSES: Final = {0: 0, 1: 2, 2: 4, 3: 8}
+
+
+def fit_basis_only_coefficients(
+    inputs: npt.ArrayLike,
+    masks: npt.ArrayLike,
+    centre: npt.ArrayLike,
+    components: npt.ArrayLike,
+    effort: int,
+) -> npt.NDArray[np.float32]:
+    """Basis coefficients of a record without a latent (format 2.1): its decode is clamp(m + Σ cᵢ vᵢ).
+
+    Starts from the least-squares coefficients of ``x − m`` over the valid entries (the projection of the
+    masked residual on the vectors), then takes :data:`BASIS_ONLY_STEPS` ``[effort]`` Adam steps on the mapped
+    L1 error of the clamped sum over the valid entries, and keeps the best coefficients seen (the start
+    included): the joint fit of :func:`fit_basis_coefficients` with no latent.
+
+    Parameters
+    ----------
+    inputs, masks : array_like, shape (E,)
+        The material's mapped kept slices and their validity at the basis' entries.
+    centre : array_like, shape (E,)
+        m: the decoder's linear-path mean at those entries.
+    components : array_like, shape (k, E)
+        The basis vectors ``0 … k − 1``.
+    effort : int
+        0 to 3.
+
+    Returns
+    -------
+    ndarray of float32, shape (k,)
+    """
+    from brdfcodec.conventions import MAPPED_MAX
+
+    if effort not in BASIS_ONLY_STEPS:
+        raise ValueError(f"effort must be one of {sorted(BASIS_ONLY_STEPS)}, got {effort!r}")
+    device, dtype = torch.device("cpu"), torch.float32
+    target = torch.as_tensor(np.asarray(inputs, dtype=np.float32).reshape(-1))
+    weight = torch.as_tensor(np.asarray(masks, dtype=np.float32).reshape(-1))
+    mean = torch.as_tensor(np.asarray(centre, dtype=np.float32).reshape(-1))
+    basis = _read_only_tensor(components, device, dtype)
+
+    def error(c: torch.Tensor) -> torch.Tensor:
+        return ((torch.clamp(mean + c @ basis, 0.0, MAPPED_MAX) - target) * weight).abs().sum()
+
+    with torch.no_grad():
+        start = ((target - mean) * weight) @ basis.T
+        best, best_error = start.clone(), error(start)
+    steps = BASIS_ONLY_STEPS[effort]
+    if steps:
+        c = start.clone().requires_grad_(True)
+        adam = _Adam(c, BASIS_ONLY_RATE)
+        with torch.enable_grad():
+            for step in range(steps + 1):
+                current = error(c)
+                if current.detach() < best_error:
+                    best, best_error = c.detach().clone(), current.detach()
+                if step == steps:
+                    break
+                c.grad = None
+                current.backward()
+                adam.step()
+    out = best.numpy().astype(np.float32)
+    return out if np.isfinite(out).all() else start.numpy().astype(np.float32)
+
+
+def polish_quantised_coefficients(
+    step: float,
+    q: npt.ArrayLike,
+    inputs: npt.ArrayLike,
+    masks: npt.ArrayLike,
+    centre: npt.ArrayLike,
+    components: npt.ArrayLike,
+    passes: int,
+) -> npt.NDArray[np.int8]:
+    """Integer coefficients moved a step at a time while that lowers the mapped L1 error of clamp(m + s·Σ qᵢ vᵢ).
+
+    Rounding each coefficient to the step s = max |c| / 127 adds an error the float fit never saw; this
+    coordinate descent (each qᵢ tried one step up and down, a move kept while it lowers the error; at most
+    ``passes`` sweeps, fewer when a sweep moves nothing) takes some of it back. The step is kept, so the
+    layer's bytes keep their meaning; values stay within −127 … 127 as the writer's.
+
+    Parameters
+    ----------
+    step : float
+        s (the layer's float16 step).
+    q : array_like of int, shape (k,)
+        The rounded coefficients.
+    inputs, masks, centre : array_like, shape (E,)
+        As for :func:`fit_basis_only_coefficients`.
+    components : array_like, shape (k, E)
+    passes : int
+
+    Returns
+    -------
+    ndarray of int8, shape (k,)
+    """
+    from brdfcodec.conventions import MAPPED_MAX
+
+    codes = np.asarray(q, dtype=np.int64).copy()
+    vectors = np.asarray(components, dtype=np.float32)
+    x = np.asarray(inputs, dtype=np.float32).reshape(-1)
+    w = np.asarray(masks, dtype=np.float32).reshape(-1)
+    scratch = np.empty_like(x)
+
+    def error(values: np.ndarray) -> float:
+        np.clip(values, 0.0, MAPPED_MAX, out=scratch)
+        np.subtract(scratch, x, out=scratch)
+        np.abs(scratch, out=scratch)
+        return float(np.dot(scratch, w))
+
+    mean = np.asarray(centre, dtype=np.float32).reshape(-1)
+    decoded = mean + (np.float32(step) * codes.astype(np.float32)) @ vectors
+    current = error(decoded)
+    for _ in range(passes):
+        moved = False
+        for i in range(len(codes)):
+            for direction in (1, -1):
+                change = np.float32(direction * step) * vectors[i]
+                steps = 0
+                while abs(codes[i] + direction) <= 127:  # further while each step lowers the error
+                    trial = decoded + change
+                    trial_error = error(trial)
+                    if trial_error >= current:
+                        break
+                    decoded, current, codes[i], steps = trial, trial_error, codes[i] + direction, steps + 1
+                if steps:  # moved up: no need to try down
+                    moved = True
+                    break
+        if not moved:
+            break
+    return codes.astype(np.int8)

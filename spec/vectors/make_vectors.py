@@ -106,7 +106,7 @@ def header(forms: list[bytes], descriptors: list[bytes], payload: bytes, *, dim:
     return out + struct.pack("<I", zlib.crc32(payload)) + metadata
 
 
-def assemble(stored: bytes, payload: bytes, *, flags: int = 0, major: int = 2, minor: int = 0,
+def assemble(stored: bytes, payload: bytes, *, flags: int = 0, major: int = 2, minor: int = 1,
              crc_flags: int | None = None) -> bytes:
     """Preamble + header + payload; ``crc_flags`` computes the CRC over other flags (a flipped bit)."""
     def head(f: int) -> bytes:
@@ -276,7 +276,7 @@ def invalid_vectors() -> dict[str, tuple[bytes, str, str]]:
         return assemble(header([form], [descriptor("b", 0, count=count)], payload, basis=basis), payload,
                         flags=flags)
 
-    add("basis-unknown-sigma", basis_file(layered_form(0, 3, basis=(0, 0))), "unsupported", "sigma code 3")
+    add("basis-unknown-sigma", basis_file(layered_form(0, 4, basis=(0, 0))), "unsupported", "sigma code 4")
     add("basis-count-zero", basis_file(payload=basis_payload[:12], count=0), "malformed",
         "a basis layer of 0 coefficients")
     add("basis-count-payload", basis_file(count=4), "malformed",
@@ -295,14 +295,29 @@ def invalid_vectors() -> dict[str, tuple[bytes, str, str]]:
         "malformed", "a shared basis named (flag bit 1) in a file without basis layers")
     # Compact mu and the shared sigma byte: mu as a float16 step and int8 values, one sigma byte.
     compact_payload = f16(0.5) + bytes([2, 254]) + bytes([160]) + basis_payload[10:]
-    add("compact-mu-unknown", basis_file(layered_form(3, 2, basis=(0, 0)), compact_payload), "unsupported",
-        "mu code 3")
+    add("compact-mu-unknown", basis_file(layered_form(4, 2, basis=(0, 0)), compact_payload), "unsupported",
+        "mu code 4")
     add("compact-mu-step-nan", basis_file(layered_form(1, 2, basis=(0, 0)), f16(np.nan) + compact_payload[2:]),
         "malformed", "the compact mu step is NaN (payload CRC valid)")
     add("compact-sigma-length", basis_file(layered_form(1, 1, basis=(0, 0)), compact_payload), "malformed",
         "sigma as one byte per dimension, but the payload holds one shared byte (the file one byte short)")
     add("compact-mu-fixed-with-step", basis_file(layered_form(2, 2, basis=(0, 0)), compact_payload), "malformed",
         "mu on the fixed grid (no step) followed by a step's 2 bytes (two trailing bytes)")
+    # Records without a latent (2.1, §4.6): mu and sigma "none" (code 3) only together, with a basis layer whose
+    # base is not projected; the payload is the basis layer's bytes (then a detail layer's).
+    only = f16(0.25) + bytes([3, 253, 0])
+    add("basis-only-sigma-with-mu", basis_file(layered_form(0, 3, basis=(0, 0))), "malformed",
+        "sigma 'none' (code 3) beside a mu stored in the latent dtype")
+    add("basis-only-mu-with-sigma", basis_file(layered_form(3, 2, basis=(0, 0)), bytes([160]) + only), "malformed",
+        "mu 'none' (code 3) beside a shared sigma byte")
+    add("basis-only-no-basis", one("l", detail, layered_form(3, 3, detail=0), step=0.1, detail_length=len(detail)),
+        "malformed", "mu and sigma 'none' with a detail layer but no basis layer")
+    add("basis-only-projected", basis_file(layered_form(3, 3, basis=(0, 50)), only), "malformed",
+        "mu and sigma 'none' with a base projected on 50 vectors (there is no decoder output to project)")
+    add("basis-only-trailing-bytes", basis_file(layered_form(3, 3, basis=(0, 0)), only + f32(0.5, -1.0)),
+        "malformed", "a record without a latent followed by the 8 bytes of a float32 mu (trailing bytes)")
+    add("basis-only-unknown-sigma", basis_file(layered_form(3, 4, basis=(0, 0)), only), "unsupported",
+        "mu 'none' with sigma code 4: an unknown code is unsupported before the pairing is checked")
     for label, name, why in [
         ("name-parent", "../UP", "a name holding '/' and '..'"),
         ("name-absolute", "/tmp/ESCAPED", "an absolute path as a name"),
@@ -395,6 +410,17 @@ def basis_record(name: str, mu: np.ndarray, sigma: np.ndarray, sha256: str, *, d
     return LayeredRecord(name, mu, sigma, {"effort": 1}, detail=layer, basis=basis, **storage)
 
 
+def basis_only_record(name: str, sha256: str, *, detail: bool = False) -> LatentRecord:
+    """A record without a latent (§4.6, since 2.1): 5 coefficients from vector 0 (and a detail layer)."""
+    from brdfcodec.layers.basis import BasisLayer
+    from brdfcodec.layers.detail import N_DETAIL_VALUES, DetailLayer
+    from brdfcodec.layers.record import LayeredRecord
+
+    layer = DetailLayer(0.125, "int16", detail_frame([8, -4, 2], N_DETAIL_VALUES)) if detail else None
+    basis = BasisLayer(sha256, 0.5, np.array([24, -7, 3, 0, -1], dtype=np.int8))
+    return LayeredRecord.without_latent(name, 8, basis, detail=layer)
+
+
 def valid_records() -> dict[str, tuple[list, DecoderReference, str, bool | None]]:
     """name -> (records, decoder, latent dtype, compress header)."""
     rng = np.random.default_rng(2026)
@@ -436,8 +462,15 @@ def valid_records() -> dict[str, tuple[list, DecoderReference, str, bool | None]
                                                   SHIPPED_BASIS, first=8, compact_base=True, fixed_grid=True),
                                      basis_record("reference.basis-projected", halves16(8), np.full(8, 0.125),
                                                   SHIPPED_BASIS, first=8, compact_base=True, fixed_grid=True,
-                                                  project=50)],
+                                                  project=50),
+                                     basis_only_record("reference.basis-only", SHIPPED_BASIS),
+                                     basis_only_record("reference.basis-only-detail", SHIPPED_BASIS, detail=True)],
                                     SHIPPED_DECODER, "float16", False),
+        # Records without a latent (since 2.1) beside one with: the payload is the basis layer's bytes.
+        "basis-only": ([basis_only_record("gold.basis-only", "cd" * 32),
+                        basis_only_record("gold.basis-only-detail", "cd" * 32, detail=True),
+                        basis_record("gold.basis", halves16(8), sigma(8), "cd" * 32)],
+                       TEST_DECODER, "float32", False),
         "layered": ([layered_record("gold.layered", halves(8), sigma(8)),
                      LatentRecord("gold", halves(8), sigma(8), {"effort": 0, "source_kind": "rgl-measured"}),
                      basis_record("gold.basis", halves(8), sigma(8), "cd" * 32, detail=True),
@@ -452,8 +485,9 @@ def valid_records() -> dict[str, tuple[list, DecoderReference, str, bool | None]
 
 
 def describe(record: LatentRecord | GraftRecord) -> dict[str, Any]:
-    item: dict[str, Any] = {"name": record.name, "kind": record.kind, "mu": record.mu.tolist(),
-                            "sigma": record.sigma.tolist(), "meta": dict(record.meta)}
+    latent = getattr(record, "has_latent", True)  # a record without a latent (§4.6): mu and sigma null
+    item: dict[str, Any] = {"name": record.name, "kind": record.kind, "mu": record.mu.tolist() if latent else None,
+                            "sigma": record.sigma.tolist() if latent else None, "meta": dict(record.meta)}
     if isinstance(record, GraftRecord):
         item["graft_dims"] = list(record.graft_dims)
         item["graft_values"] = record.graft_values.tolist()
@@ -482,7 +516,7 @@ def generate(folder: Path, *, with_reference: bool = True) -> dict[str, Any]:
     (folder / "valid").mkdir(parents=True, exist_ok=True)
     (folder / "invalid").mkdir(parents=True, exist_ok=True)
     manifest: dict[str, Any] = {
-        "format_version": "2.0",
+        "format_version": "2.1",
         "error_classes": {
             "malformed": "BvaeFormatError",
             "checksum": "BvaeChecksumError",
@@ -521,6 +555,14 @@ def generate(folder: Path, *, with_reference: bool = True) -> dict[str, Any]:
     manifest["valid"].append({
         "file": "valid/metadata-empty.bvae", "decoder_sha256": TEST_DECODER.sha256, "basis_sha256": None,
         "latent_dtype": "float32", "header_compressed": False,
+        "records": [{"name": "a", "kind": "latent", "mu": [0.5, -1.0], "sigma": [0.25, 0.5], "meta": {}}],
+    })
+    # Written by hand: a file of version 2.0 (a 2.1 reader reads every 2.0 file as before).
+    (folder / "valid" / "version-2.0.bvae").write_bytes(assemble(header(
+        [latent_form()], [descriptor("a", 0)], empty), empty, minor=0))
+    manifest["valid"].append({
+        "file": "valid/version-2.0.bvae", "format_version": "2.0", "decoder_sha256": TEST_DECODER.sha256,
+        "basis_sha256": None, "latent_dtype": "float32", "header_compressed": False,
         "records": [{"name": "a", "kind": "latent", "mu": [0.5, -1.0], "sigma": [0.25, 0.5], "meta": {}}],
     })
     for name, (data, error, why) in invalid_vectors().items():
