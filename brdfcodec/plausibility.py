@@ -419,8 +419,9 @@ def plausible_range(
         implausible decode on that side (0 when the first step already is);
         an editor can keep traversals within them.
     """
-    from brdfcodec.edit import traverse
+    from brdfcodec.edit import require_latent, traverse
 
+    require_latent(record)  # a record without a latent (format 2.1) has nothing to traverse
     tol = (criteria or PlausibilityCriteria()).inversion_tolerance
     steps = tuple(sorted(float(s) for s in steps if s != 0))
     source = decoder.decode_mapped(np.asarray(record.mu, dtype=np.float32)[None])
@@ -477,11 +478,13 @@ def measure_plausibility(
     -------
     PlausibilityReport
     """
-    from brdfcodec.edit import traverse
+    from brdfcodec.edit import require_latent, traverse
 
     criteria = criteria or PlausibilityCriteria()
     if not records:
         raise ValueError("no records to traverse")
+    for record in [*records, *(reference or ())]:
+        require_latent(record)  # records without a latent (format 2.1) have nothing to traverse
     dims = tuple(range(decoder.latent_dim)) if dims is None else tuple(int(d) for d in dims)
     if any(not 0 <= d < decoder.latent_dim for d in dims):
         raise ValueError(f"dims must lie in [0, {decoder.latent_dim}), got {list(dims)}")

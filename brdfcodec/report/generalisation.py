@@ -9,7 +9,8 @@ materials, :func:`run_experiment` measures
 
 - ``bvae``: the held-out materials of that family encoded into one library
   with ``bvae compress --bytes N`` (effort 1, float16 latents, no
-  provenance) through the public API; its size is the **file's** bytes less
+  provenance, ``--latent auto`` unless the experiment says ``"latent":
+  "always"``) through the public API; its size is the **file's** bytes less
   the materials' names (UTF-8), divided by the number of materials;
 - ``pca-*``: PCA of the mapped kept slices fitted on the *same training
   materials* as the model (as measured, ``pca``, and in all six colour
@@ -56,12 +57,15 @@ class Experiment:
     held_out : tuple of str, optional
         Material names to measure on; by default every dataset material the
         model's ``model.json`` does not list as trained on.
+    latent : {"auto", "always"}
+        Whether rate control may write records without a latent (format 2.1; ``bvae compress --latent``).
     """
 
     label: str
     model: Path
     group: str = ""
     held_out: tuple[str, ...] | None = None
+    latent: str = "auto"
 
 
 @dataclass(frozen=True)
@@ -80,7 +84,8 @@ def load_config(path: str | os.PathLike[str]) -> RdConfig:
     """Read a runner configuration; relative paths are taken from the file's folder.
 
     The file is a JSON object: ``dataset`` (path), ``experiments`` (list of
-    objects with ``label``, ``model``, optional ``group`` and ``held_out``),
+    objects with ``label``, ``model``, optional ``group``, ``held_out`` and
+    ``latent``: ``"auto"``, the default, or ``"always"``, as ``bvae compress --latent``),
     optional ``budgets`` (list of int), ``effort`` (int), ``limit`` (int:
     only the first N held-out materials of each family, a quick look).
 
@@ -100,12 +105,15 @@ def load_config(path: str | os.PathLike[str]) -> RdConfig:
     experiments = []
     for item in data["experiments"]:
         if not isinstance(item, dict) or not {"label", "model"} <= set(item) or set(item) - {
-                "label", "model", "group", "held_out"}:
+                "label", "model", "group", "held_out", "latent"}:
             raise ValueError(f"{path}: each experiment is an object with 'label', 'model' (and optionally "
-                             f"'group', 'held_out'), got {item!r}")
+                             f"'group', 'held_out', 'latent'), got {item!r}")
+        if item.get("latent", "auto") not in ("auto", "always"):
+            raise ValueError(f"{path}: an experiment's 'latent' is 'auto' or 'always', got {item['latent']!r}")
         held = item.get("held_out")
         experiments.append(Experiment(str(item["label"]), base / item["model"], str(item.get("group", "")),
-                                      None if held is None else tuple(str(n) for n in held)))
+                                      None if held is None else tuple(str(n) for n in held),
+                                      str(item.get("latent", "auto"))))
     budgets = tuple(int(n) for n in data.get("budgets", DEFAULT_BUDGETS))
     if not budgets or min(budgets) < 1:
         raise ValueError(f"{path}: budgets must be positive integers")
@@ -162,7 +170,7 @@ def _error_summary(errors: Sequence[tuple[float, float]]) -> dict[str, Any]:
 
 def _bvae_rows(model: Path, names: Sequence[str], inputs: np.ndarray, masks: np.ndarray,
                references: Sequence[Any], budgets: Sequence[int], effort: int,
-               error: Callable[[Any, np.ndarray], tuple[float, float]]) -> list[dict[str, Any]]:
+               error: Callable[[Any, np.ndarray], tuple[float, float]], latent: str = "auto") -> list[dict[str, Any]]:
     import brdfcodec as bc
 
     decoder = bc.BrdfDecoder(model)
@@ -171,11 +179,13 @@ def _bvae_rows(model: Path, names: Sequence[str], inputs: np.ndarray, masks: np.
     for budget in budgets:
         items = [bc.MaterialInput(n, x, r, m) for n, x, r, m in zip(names, inputs, references, masks, strict=True)]
         data = bc.encode(items, model=model, latent_dtype="float16", measure_error=False, effort=effort,
-                         bytes=budget)
+                         bytes=budget, latent=latent)  # type: ignore[arg-type]
         library = bc.decode(data, decoder=decoder)
         errors = [error(r, library[n].table(masked="unmeasured")) for n, r in zip(names, references, strict=True)]
+        without = sum(not getattr(library.record(n), "has_latent", True) for n in names)
         rows.append({"point": "bvae", "budget_bytes": budget, "file_bytes": len(data),
-                     "bytes_per_material": (len(data) - name_bytes) / len(names), **_error_summary(errors)})
+                     "bytes_per_material": (len(data) - name_bytes) / len(names), "latent": latent,
+                     "records_without_latent": without, **_error_summary(errors)})
     return rows
 
 
@@ -228,7 +238,7 @@ def run_experiment(config: RdConfig, experiment: Experiment,
             inputs, masks = dataset.inputs(rows_of), dataset.input_masks(rows_of)
             references = [dataset.table(i) for i in rows_of]
             family_rows = _bvae_rows(experiment.model, names, inputs, masks, references, config.budgets,
-                                     config.effort, error)
+                                     config.effort, error, experiment.latent)
             for label, basis in bases.items():
                 family_rows += _pca_rows(label, basis, inputs, references, config.budgets, error)
             rows += [{**common, "family": family, "materials": names, **row} for row in family_rows]

@@ -2,7 +2,9 @@
 
 The client names materials only by the ids this module hands out; it never
 names a file. All libraries must use one decoder (the one given, or the one
-the first library names).
+the first library names). Records without a latent code (basis-only records,
+format 2.1) have nothing a slider could move: they are left out of the
+editor and listed by name (``without_latent``), so the client can say why.
 """
 
 from __future__ import annotations
@@ -70,7 +72,7 @@ class Catalogue:
     BvaeFormatError, DecoderNotFoundError, DecoderMismatchError
         A library that cannot be read, or that needs another decoder.
     ValueError
-        No material in the libraries.
+        No material with a latent code in the libraries.
     """
 
     def __init__(self, paths: Sequence[str | os.PathLike[str]] | None = None, *, model: Any = None) -> None:
@@ -82,14 +84,23 @@ class Catalogue:
         first = read_header(self.paths[0])
         self.decoder = BrdfDecoder(model) if model is not None else BrdfDecoder.for_header(first)
         self.materials: dict[str, StudioMaterial] = {}
+        #: Ids of the records left out because they have no latent code to edit (basis-only records).
+        self.without_latent: list[str] = []
         labels = _labels(self.paths)
         for path, label in zip(self.paths, labels, strict=True):
             with MaterialLibrary(path, decoder=self.decoder) as library:
                 for name in library.names:
                     material_id = name if len(self.paths) == 1 else f"{label}/{name}"
-                    self.materials[material_id] = StudioMaterial(material_id, label, library.record(name))
+                    record = library.record(name)
+                    if not getattr(record, "has_latent", True):
+                        self.without_latent.append(material_id)
+                        continue
+                    self.materials[material_id] = StudioMaterial(material_id, label, record)
         if not self.materials:
-            raise ValueError(f"{self.paths[0]}: no material to edit in the given libraries")
+            why = (f" ({len(self.without_latent)} record{'s' if len(self.without_latent) != 1 else ''} without a "
+                   "latent code, which cannot be edited: re-encode them with `bvae compress --latent always`)"
+                   if self.without_latent else "")
+            raise ValueError(f"{self.paths[0]}: no material to edit in the given libraries{why}")
 
     @property
     def latent_dim(self) -> int:
@@ -155,6 +166,7 @@ class Catalogue:
             "colour_dims": list(self.colour_dims),
             "slider_range": self.slider_range(),
             "model": {"name": reference.name, "decoder_sha256": reference.sha256},
+            "without_latent": list(self.without_latent),
         }
 
     # ----------------------------------------------------------------- requests

@@ -622,7 +622,10 @@ async function start() {
     });
     const explorer = new Explorer(info, explorerPreview, editor);
     window.studio = { info, editor, explorer, previews: { editor: editorPreview, explorer: explorerPreview }, ready: true };
-    setStatus("ready");
+    const skipped = info.without_latent || [];  // basis-only records (format 2.1): no latent code to edit
+    setStatus(skipped.length ? `ready; not shown, no latent code to edit (re-encode with bvae compress --latent ` +
+      `always): ${skipped.slice(0, 5).join(", ")}${skipped.length > 5 ? `, … (${skipped.length} in all)` : ""}`
+      : "ready");
     window.dispatchEvent(new CustomEvent("studio-ready"));
   } catch (error) {
     setStatus(`could not start: ${error.message}`, true);
