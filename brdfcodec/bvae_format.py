@@ -33,17 +33,25 @@ import re
 import struct
 import zlib
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, BinaryIO, Literal
 
 import numpy as np
-import numpy.typing as npt
 
 from brdfcodec.atomic import atomic_output
 from brdfcodec.errors import BvaeChecksumError, BvaeFormatError, UnsupportedVersionError
+from brdfcodec.layers.record import (
+    UnsupportedLayerError,
+    latent_values_stored,
+    layered_from_payload,
+    layers_entry,
+    layers_length,
+)
 from brdfcodec.material_names import MAX_NAME_LENGTH as MAX_NAME_LENGTH  # re-exported
 from brdfcodec.material_names import check_material_name, name_collision_key
+from brdfcodec.records import MAX_LATENT_DIM as MAX_LATENT_DIM  # re-exported
+from brdfcodec.records import GraftRecord, LatentRecord, meta_problem
 from brdfcodec.version import __version__
 
 __all__ = [
@@ -85,8 +93,6 @@ MAX_HEADER_BYTES = 1 << 24
 MAX_HEADER_JSON_BYTES = 16 << 20
 #: Largest number of records in one file.
 MAX_RECORDS = 65536
-#: Largest latent dimension a file may declare.
-MAX_LATENT_DIM = 1024
 #: Most JSON objects and arrays (nested ones included) a header may hold: bounds the work of parsing.
 MAX_HEADER_CONTAINERS = 1 << 19
 #: Deepest nesting of JSON objects and arrays in a header.
@@ -114,7 +120,7 @@ LatentDtype = Literal["float32", "float16"]
 _DTYPES: dict[str, np.dtype] = {"float32": np.dtype("<f4"), "float16": np.dtype("<f2")}
 _DTYPE_CODES = {"float32": 0, "float16": 1}
 _SHA256 = re.compile(r"^[0-9a-f]{64}$")
-_RECORD_KINDS = ("latent", "graft", "layered")  # "layered": brdfcodec.layers.record
+_RECORD_KINDS = ("latent", "graft", "layered")  # "layered": brdfcodec.layers.record.LayeredRecord
 
 
 @dataclass(frozen=True)
@@ -137,154 +143,6 @@ class DecoderReference:
             raise ValueError(f"decoder SHA-256 must be 64 lower-case hex digits, got {self.sha256!r}")
         if not isinstance(self.name, str):
             raise ValueError(f"decoder name must be a string, got {self.name!r}")
-
-
-def _as_latent(values: npt.ArrayLike, label: str) -> np.ndarray:
-    array = np.array(values, dtype=np.float32).reshape(-1)
-    array.setflags(write=False)
-    if not np.isfinite(array).all():
-        raise ValueError(f"{label} must be finite, got {array}")
-    return array
-
-
-def _check_name(name: object) -> str:
-    return check_material_name(name)
-
-
-def _is_number(value: object) -> bool:
-    return isinstance(value, int | float) and not isinstance(value, bool)
-
-
-def _meta_problem(meta: Mapping[str, Any]) -> str | None:
-    """Why a record's ``meta`` breaks the types of §5, or None (other keys are free JSON)."""
-    for key in ("source_sha256", "encoder_sha256"):
-        if key in meta and not (isinstance(meta[key], str) and _SHA256.match(meta[key])):
-            return f"meta field {key!r} must be 64 lower-case hex digits, got {meta[key]!r}"
-    if "relae" in meta:
-        relae = meta["relae"]
-        if not isinstance(relae, Mapping):
-            return f"meta field 'relae' must be an object, got {type(relae).__name__}"
-        for part in ("mapped", "linear"):
-            if part in relae and not (_is_number(relae[part]) and math.isfinite(relae[part]) and relae[part] >= 0):
-                return f"meta field 'relae.{part}' must be a finite number >= 0, got {relae[part]!r}"
-    if "edit" in meta:
-        edit = meta["edit"]
-        if not isinstance(edit, Mapping) or not isinstance(edit.get("op"), str):
-            return "meta field 'edit' must be an object with a string 'op'"
-    if "source_kind" in meta and not isinstance(meta["source_kind"], str):
-        return f"meta field 'source_kind' must be a string, got {meta['source_kind']!r}"
-    if "effort" in meta:
-        effort = meta["effort"]
-        if not (isinstance(effort, int) and not isinstance(effort, bool) and 0 <= effort <= 3):
-            return f"meta field 'effort' must be an integer in [0, 3], got {effort!r}"
-    if "rate" in meta and not isinstance(meta["rate"], Mapping):
-        return f"meta field 'rate' must be an object, got {type(meta['rate']).__name__}"
-    return None
-
-
-@dataclass(frozen=True)
-class LatentRecord:
-    """One material as the encoder's posterior ``N(mu, diag(sigma²))``.
-
-    Attributes
-    ----------
-    name : str
-        Material name, unique in its file.
-    mu, sigma : ndarray of float32, shape (latent_dim,)
-        Posterior mean (the code that is decoded) and standard deviation (> 0),
-        in latent units (the prior is N(0, 1)).
-    meta : dict
-        Optional facts (``spec/bvae-format.md`` §5): ``source_sha256``,
-        ``relae`` (``{"mapped": float, "linear": float}``), ``encoder_sha256``,
-        ``source_kind`` (str), ``effort`` (int, 0–3), ``rate`` (object),
-        ``edit`` (how an edited material was made), and any other JSON value.
-    """
-
-    name: str
-    mu: np.ndarray
-    sigma: np.ndarray
-    meta: Mapping[str, Any] = field(default_factory=dict)
-
-    kind: Literal["latent"] = field(default="latent", init=False)
-
-    def __post_init__(self) -> None:
-        _check_name(self.name)
-        object.__setattr__(self, "mu", _as_latent(self.mu, "mu"))
-        object.__setattr__(self, "sigma", _as_latent(self.sigma, "sigma"))
-        if self.mu.shape != self.sigma.shape:
-            raise ValueError(f"mu and sigma differ in length: {self.mu.shape} and {self.sigma.shape}")
-        if not 1 <= self.mu.size <= MAX_LATENT_DIM:
-            raise ValueError(f"latent dimension must be 1 to {MAX_LATENT_DIM}, got {self.mu.size}")
-        if not (self.sigma > 0).all():
-            raise ValueError(f"sigma must be > 0, got {self.sigma}")
-        if not isinstance(self.meta, Mapping):
-            raise ValueError(f"meta must be a mapping, got {type(self.meta).__name__}")
-        problem = _meta_problem(self.meta)
-        if problem is not None:
-            raise ValueError(f"{self.name}: {problem}")
-        object.__setattr__(self, "meta", dict(self.meta))
-
-    @property
-    def latent_dim(self) -> int:
-        """Length of the latent code."""
-        return int(self.mu.size)
-
-    def payload_values(self) -> np.ndarray:
-        """Values in payload order: ``mu`` then ``sigma``."""
-        return np.concatenate([self.mu, self.sigma])
-
-
-@dataclass(frozen=True)
-class GraftRecord:
-    """A composite material made by green-channel grafting (paper §5; spec §4.2).
-
-    The material decodes ``mu`` (M1) and a second code equal to ``mu`` except
-    at ``graft_dims``, where it takes ``graft_values`` (M2); its table is M1
-    with M1's green channel replaced by M2's red channel.
-
-    Attributes
-    ----------
-    name, mu, sigma, meta
-        As in :class:`LatentRecord` (``mu``/``sigma`` are V1's).
-    graft_dims : tuple of int
-        Latent dimensions that control colour (the model's colour dimensions).
-    graft_values : ndarray of float32, shape (len(graft_dims),)
-        V2's values at those dimensions: the extra parameters.
-    """
-
-    name: str
-    mu: np.ndarray
-    sigma: np.ndarray
-    graft_dims: tuple[int, ...]
-    graft_values: np.ndarray
-    meta: Mapping[str, Any] = field(default_factory=dict)
-
-    kind: Literal["graft"] = field(default="graft", init=False)
-
-    def __post_init__(self) -> None:
-        LatentRecord.__post_init__(self)  # type: ignore[arg-type]  # same checks on the shared fields
-        dims = tuple(int(d) for d in self.graft_dims)
-        if not dims or len(set(dims)) != len(dims) or not all(0 <= d < self.mu.size for d in dims):
-            raise ValueError(f"graft_dims must be distinct latent indices in [0, {self.mu.size}), got {dims}")
-        object.__setattr__(self, "graft_dims", dims)
-        object.__setattr__(self, "graft_values", _as_latent(self.graft_values, "graft_values"))
-        if self.graft_values.size != len(dims):
-            raise ValueError(f"need one graft value per graft dimension, got {self.graft_values.size} for {dims}")
-
-    @property
-    def latent_dim(self) -> int:
-        """Length of the latent code."""
-        return int(self.mu.size)
-
-    def second_code(self) -> np.ndarray:
-        """V2: ``mu`` with ``graft_values`` at ``graft_dims``."""
-        v2 = self.mu.copy()
-        v2[list(self.graft_dims)] = self.graft_values
-        return v2
-
-    def payload_values(self) -> np.ndarray:
-        """Values in payload order: ``mu``, ``sigma``, ``graft_values``."""
-        return np.concatenate([self.mu, self.sigma, self.graft_values])
 
 
 Record = LatentRecord | GraftRecord
@@ -594,8 +452,6 @@ def _form_of(record: Record) -> tuple[Any, ...]:
         return ("graft", tuple(record.graft_dims))
     if record.kind != "layered":
         return ("latent",)
-    from brdfcodec.layers.record import layers_entry
-
     layers = layers_entry(record)  # type: ignore[arg-type]
     basis, detail = layers.get("basis"), layers.get("detail")
     return ("layered", layers.get("mu"), layers.get("sigma"),
@@ -927,7 +783,7 @@ def _parse_header(path: str, stored: bytes, preamble_fields: tuple[int, ...], fi
         start = cursor.at
         raw_name = cursor.take(cursor.varint(f"{where}'s name length"), f"{where}'s name")
         try:
-            entry_name = _check_name(raw_name.decode("utf-8"))
+            entry_name = check_material_name(raw_name.decode("utf-8"))
         except UnicodeDecodeError as error:  # a lone surrogate's bytes (CESU-8) included
             raise _fail(path, f"{where}: its name is not UTF-8 text ({error.reason} at byte {error.start})") from None
         except ValueError as error:
@@ -945,7 +801,6 @@ def _parse_header(path: str, stored: bytes, preamble_fields: tuple[int, ...], fi
         form = forms[index]
         layers = None
         if form.kind == "layered":  # --- layered records (issue 14): validated by brdfcodec.layers.record
-            from brdfcodec.layers.record import UnsupportedLayerError, latent_values_stored, layers_length
 
             assert form.layers is not None
             layers = {key: dict(value) if isinstance(value, dict) else value for key, value in form.layers.items()}
@@ -1020,7 +875,7 @@ def _parse_metadata(
             raise _fail(path, f"metadata names the material {name!r}, which the file does not hold")
         if not isinstance(meta, dict):
             raise _fail(path, f"metadata of {name!r} is not a JSON object")
-        problem = _meta_problem(meta)
+        problem = meta_problem(meta)
         if problem is not None:
             raise _fail(path, f"metadata of {name!r}: {problem}")
         metas[name] = meta
@@ -1057,14 +912,12 @@ def _decode_record(path: str, header: BvaeHeader, entry: RecordEntry, payload: b
     itemsize = _DTYPES[header.latent_dtype].itemsize
     n_latent = (2 * d + len(entry.graft_dims)) * itemsize
     if entry.kind == "layered":
-        from brdfcodec.layers.record import latent_values_stored
 
         assert entry.layers is not None
         n_latent = latent_values_stored(entry.layers, d) * itemsize
     values = np.frombuffer(payload[:n_latent], dtype=_DTYPES[header.latent_dtype]).astype(np.float32)
     try:
         if entry.kind == "layered":  # --- layered records (issue 14)
-            from brdfcodec.layers.record import layered_from_payload
 
             assert entry.layers is not None
             tail = payload[n_latent:]

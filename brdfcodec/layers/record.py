@@ -1,6 +1,6 @@
 """Layered records: the β-VAE latent (the base) plus enhancement layers (``spec/bvae-format.md`` §4.4).
 
-A :class:`LayeredRecord` is a :class:`~brdfcodec.bvae_format.LatentRecord`
+A :class:`LayeredRecord` is a :class:`~brdfcodec.records.LatentRecord`
 (so everything that reads a base latent — edits, parameters, the decoder's
 base path — works on it unchanged) that also carries a
 :class:`~brdfcodec.layers.detail.DetailLayer`. This module holds the
@@ -23,7 +23,6 @@ from typing import Any, Literal
 import numpy as np
 import numpy.typing as npt
 
-from brdfcodec.bvae_format import LatentRecord
 from brdfcodec.hashing import is_sha256_hex
 from brdfcodec.layers.basis import (
     FIXED_MU_STEP,
@@ -38,6 +37,7 @@ from brdfcodec.layers.basis import (
     int8_with_step,
 )
 from brdfcodec.layers.detail import _DTYPES, DETAIL_TRANSFORM, MAX_STEP, MIN_STEP, DetailLayer, check_detail_frame
+from brdfcodec.records import LatentRecord
 
 __all__ = [
     "LAYERED_KIND",
@@ -116,7 +116,7 @@ class LayeredRecord(LatentRecord):
     Attributes
     ----------
     name, mu, sigma, meta
-        As in :class:`~brdfcodec.bvae_format.LatentRecord`: ``mu`` is the
+        As in :class:`~brdfcodec.records.LatentRecord`: ``mu`` is the
         base code (refined at encode time, see ``spec/bvae-format.md`` §4.4),
         ``sigma`` the encoder's posterior width.
     detail : DetailLayer or None
