@@ -723,9 +723,6 @@ class BrdfDecoder:
                     table = _apply_mask(table_from_mapped(mapped), None, masked)
                 yield table
 
-    #: Former name of :meth:`decode_many`.
-    tables = decode_many
-
     def _check_record(self, record: Record) -> None:
         if record.latent_dim != self.latent_dim:
             raise ValueError(f"{record.name}: latent dimension {record.latent_dim}, decoder needs {self.latent_dim}")

@@ -61,8 +61,8 @@ def test_report_records_and_files(small_dataset: Path, tmp_path: Path) -> None:
 def test_rate_distortion_points_are_held_out_only_and_meet_their_budgets(small_dataset: Path, tmp_path: Path) -> None:
     from brdfcodec.baselines.pca import fit_pca
     from brdfcodec.dataset import BrdfDataset
-    from brdfcodec.report.rd_points import DctSlices, LayeredBvae, PcaPacked, ZstdSlices
     from brdfcodec.report.rd_markdown import rd_markdown
+    from brdfcodec.report.rd_points import DctSlices, LayeredBvae, PcaPacked, ZstdSlices
 
     with BrdfDataset(small_dataset) as dataset:
         train_inputs = dataset.inputs(dataset.indices("train"))
@@ -85,9 +85,9 @@ def test_rate_distortion_points_are_held_out_only_and_meet_their_budgets(small_d
 def test_the_report_compares_with_pca_of_colour_permuted_training_materials() -> None:
     from brdfcodec.baselines.pca import fit_pca
     from brdfcodec.layers.basis import with_colour_permutations
-    from brdfcodec.report.rd_points import PcaPacked, rate_distortion_points
     from brdfcodec.report.points import Material
-    from brdfcodec.transforms import table_from_network_output
+    from brdfcodec.report.rd_points import PcaPacked, rate_distortion_points
+    from brdfcodec.representation import table_from_network_output
 
     rng = np.random.default_rng(5)
     train = rng.uniform(0.0, 1.0, size=(3, 63, 90, 90)).astype(np.float32)

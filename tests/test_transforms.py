@@ -17,12 +17,12 @@ from brdfcodec.conventions import (
     TABLE_SHAPE,
 )
 from brdfcodec.mask import horizon_mask, kept_slice_horizon_mask
-from brdfcodec.transforms import (
-    from_network_input,
+from brdfcodec.representation import (
+    from_network_layout,
     interpolate_slices,
     map_values,
-    network_input,
     select_kept_slices,
+    to_network_layout,
     unmap_values,
 )
 
@@ -102,13 +102,13 @@ def test_channel_axis_argument() -> None:
 def test_network_layout_round_trip_and_order() -> None:
     rng = np.random.default_rng(1)
     kept = rng.random((3, 90, 90, 21)).astype(np.float32)
-    net = network_input(kept)
+    net = to_network_layout(kept)
     assert net.shape == (63, 90, 90)
     # Channel k is colour k // 21 at kept slice k % 21.
     np.testing.assert_array_equal(net[21 * 2 + 5], kept[2, :, :, 5])
-    np.testing.assert_array_equal(from_network_input(net), kept)
+    np.testing.assert_array_equal(from_network_layout(net), kept)
     batch = np.stack([kept, kept * 2])
-    np.testing.assert_array_equal(from_network_input(network_input(batch)), batch)
+    np.testing.assert_array_equal(from_network_layout(to_network_layout(batch)), batch)
 
 
 def test_interpolation_returns_kept_slices_exactly_and_is_linear_between() -> None:
@@ -142,7 +142,7 @@ def test_shape_errors() -> None:
     with pytest.raises(ValueError, match="21"):
         interpolate_slices(np.zeros((3, 20)))
     with pytest.raises(ValueError, match="network layout"):
-        from_network_input(np.zeros((62, 90, 90)))
+        from_network_layout(np.zeros((62, 90, 90)))
 
 
 def test_horizon_mask_counts() -> None:

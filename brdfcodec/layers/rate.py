@@ -68,7 +68,7 @@ from brdfcodec.layers.basis import STEP_BYTES, BasisLayer, fits_fixed_mu_grid
 from brdfcodec.layers.detail import DetailLayer, decode_detail, encode_detail
 from brdfcodec.layers.record import MU_INT8, MU_INT8_FIXED, LayeredRecord
 from brdfcodec.metrics import RelaeAgainst
-from brdfcodec.transforms import table_from_network_output
+from brdfcodec.representation.network_io import table_from_network_output
 
 __all__ = [
     "DETAIL_BASIS_COUNT", "STEP_LADDER", "BasisFit", "BasisOnlyFit", "Metric", "MuStorage", "RateResult",

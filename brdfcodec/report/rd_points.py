@@ -43,7 +43,7 @@ import numpy as np
 from brdfcodec.conventions import MAPPED_MAX
 from brdfcodec.merl import MerlBRDF
 from brdfcodec.report.points import Material, OperatingPoint
-from brdfcodec.transforms import table_from_network_output
+from brdfcodec.representation import table_from_network_output
 
 if TYPE_CHECKING:
     from brdfcodec.layers.encoding import ProjectBase
@@ -121,9 +121,9 @@ class LayeredBvae(OperatingPoint):
 
 
 def _input_mask(material: Material) -> np.ndarray:
-    from brdfcodec.transforms import network_input, select_kept_slices
+    from brdfcodec.representation import select_kept_slices, to_network_layout
 
-    return network_input(select_kept_slices(material.mask))
+    return to_network_layout(select_kept_slices(material.mask))
 
 
 class PcaPacked(OperatingPoint):
