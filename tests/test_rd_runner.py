@@ -50,6 +50,7 @@ def test_rows_compare_file_bytes_with_pca_of_the_same_training_materials(fold_mo
         assert set(row["materials"]) <= held and len(row["per_material_mapped"]) == len(row["materials"])
         names = sum(len(n.encode()) for n in row["materials"])
         assert row["bytes_per_material"] == (row["file_bytes"] - names) / len(row["materials"])
+        assert row["bytes_per_material"] <= row["budget_bytes"] and row["bytes_flag"] < row["budget_bytes"]
     pca = {row["point"] for row in rows} - {"bvae"}
     assert pca == {"pca-int8", "pca-float16", "pca-perm-int8", "pca-perm-float16"}
     # Plain PCA of 2/3 of 14 materials has at most 8 components: k is capped at the basis' rank.

@@ -8,10 +8,12 @@ family never seen). For each size budget N and each family of the held-out
 materials, :func:`run_experiment` measures
 
 - ``bvae``: the held-out materials of that family encoded into one library
-  with ``bvae compress --bytes N`` (effort 1, float16 latents, no
+  with ``bvae compress --bytes N'`` (effort 1, float16 latents, no
   provenance, ``--latent auto`` unless the experiment says ``"latent":
-  "always"``) through the public API; its size is the **file's** bytes less
-  the materials' names (UTF-8), divided by the number of materials;
+  "always"``) through the public API, where N' ≤ N leaves room for the
+  materials' share of the file's header (``bytes_flag`` in the rows): the
+  **file's** bytes less the materials' names (UTF-8), divided by the number
+  of materials, is at most N;
 - ``pca-*``: PCA of the mapped kept slices fitted on the *same training
   materials* as the model (as measured, ``pca``, and in all six colour
   orders, ``pca-perm``), with k coefficients as int8 plus one float16 scale
@@ -27,6 +29,7 @@ decoder hash and the data it came from (:mod:`brdfcodec.report.rows`).
 from __future__ import annotations
 
 import json
+import math
 import os
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -37,6 +40,9 @@ import numpy as np
 
 __all__ = ["DEFAULT_BUDGETS", "Experiment", "RdConfig", "load_config", "run_config", "run_experiment"]
 
+#: Bytes of a file's header besides the records' descriptors (preamble, decoder and basis hashes, a few forms,
+#: the payload CRC): a first guess of what the materials share, corrected by measuring the file.
+_HEADER_ESTIMATE = 120
 #: Size budgets of the comparison, bytes per material.
 DEFAULT_BUDGETS = (16, 32, 64, 128)
 
@@ -176,14 +182,22 @@ def _bvae_rows(model: Path, names: Sequence[str], inputs: np.ndarray, masks: np.
     decoder = bc.BrdfDecoder(model)
     name_bytes = sum(len(n.encode("utf-8")) for n in names)
     rows = []
+    items = [bc.MaterialInput(n, x, r, m) for n, x, r, m in zip(names, inputs, references, masks, strict=True)]
     for budget in budgets:
-        items = [bc.MaterialInput(n, x, r, m) for n, x, r, m in zip(names, inputs, references, masks, strict=True)]
-        data = bc.encode(items, model=model, latent_dtype="float16", measure_error=False, effort=effort,
-                         bytes=budget, latent=latent)  # type: ignore[arg-type]
+        # The file's fixed header is shared by the materials: --bytes is lowered by its share (and again by
+        # the excess, if any) so that the file's bytes less the names stay within N per material.
+        flag = budget - math.ceil(_HEADER_ESTIMATE / len(names))
+        for _ in range(4):
+            data = bc.encode(items, model=model, latent_dtype="float16", measure_error=False, effort=effort,
+                             bytes=max(flag, 1), latent=latent)  # type: ignore[arg-type]
+            excess = len(data) - name_bytes - budget * len(names)
+            if excess <= 0 or flag <= 1:
+                break
+            flag -= math.ceil(excess / len(names))
         library = bc.decode(data, decoder=decoder)
         errors = [error(r, library[n].table(masked="unmeasured")) for n, r in zip(names, references, strict=True)]
         without = sum(not getattr(library.record(n), "has_latent", True) for n in names)
-        rows.append({"point": "bvae", "budget_bytes": budget, "file_bytes": len(data),
+        rows.append({"point": "bvae", "budget_bytes": budget, "bytes_flag": max(flag, 1), "file_bytes": len(data),
                      "bytes_per_material": (len(data) - name_bytes) / len(names), "latent": latent,
                      "records_without_latent": without, **_error_summary(errors)})
     return rows

@@ -107,7 +107,8 @@ def summary_markdown(rows: Sequence[dict[str, Any]]) -> str:
             at = [row for row in chosen if row["budget_bytes"] == budget]
             ours = _pooled([row for row in at if row["point"] == "bvae"])
             pca = min(((point, _pooled([row for row in at if row["point"] == point]))
-                       for point in sorted({row["point"] for row in at} - {"bvae"})), key=lambda item: item[1][0])
+                       for point in sorted({row["point"] for row in at if row["point"].startswith("pca")})),
+                      key=lambda item: item[1][0])
             lines.append(f"| {budget} B | {ours[0]:.4f} | {ours[1]:.1f} | {pca[1][0]:.4f} | {pca[0]} | "
                          f"{pca[1][1]:.0f} | {'yes' if ours[0] < pca[1][0] and ours[1] <= budget else 'no'} |")
         lines.append("")
@@ -133,7 +134,7 @@ def rd_plot(rows: Sequence[dict[str, Any]], path: str | os.PathLike[str]) -> Pat
         ours = [_pooled([r for r in chosen if r["point"] == "bvae" and r["budget_bytes"] == b]) for b in budgets]
         envelope = []
         for budget in budgets:
-            at = [r for r in chosen if r["budget_bytes"] == budget and r["point"] != "bvae"]
+            at = [r for r in chosen if r["budget_bytes"] == budget and r["point"].startswith("pca")]
             envelope.append(min((_pooled([r for r in at if r["point"] == p]) for p in {r["point"] for r in at}),
                                 key=lambda pooled: pooled[0]))
         axis.plot([o[1] for o in ours], [o[0] for o in ours], "o-", label="brdfcodec (file bytes)")
