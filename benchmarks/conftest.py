@@ -51,6 +51,8 @@ TARGETS = {
     # a 16 KB encode through the library with its default threads, beside one CPU-bound process per core, vs the
     # best explicit bc.set_num_threads(n) in the same rounds (issue 39)
     "encode-16KB-busy": 1.5,
+    # write + read 65,536 records vs 8,192 in the same rounds: 8 for linear work, 64 for quadratic (issue 36)
+    "record-limit-round-trip": 16.0,
 }
 
 #: Largest acceptable candidate median, in seconds, on 2 CPU cores (issue 4 targets).
