@@ -320,6 +320,12 @@ def test_folds_and_train_families_choose_the_held_out_materials(tiny_dataset: Pa
         assert set(data["validation"]) == expected and not expected & set(data["train"])
         held |= expected
     assert held == set(names)  # every material is held out once
+    config = TrainConfig(**{**one_epoch, "all_materials": True, "keep": "last"})  # a release: nothing held out
+    train(tiny_dataset, tmp_path / "all", model_config=TINY_CONFIG, train_config=config, progress=False)
+    data = json.loads((tmp_path / "all" / "run.json").read_text())["data"]
+    assert set(data["train"]) == set(names) and data["validation"] == []
+    with pytest.raises(ValueError, match="keep='last' and no folds"):
+        TrainConfig(**{**one_epoch, "all_materials": True})  # keep "best" would choose on nothing
     config = TrainConfig(**{**one_epoch, "train_families": "rgl"})
     with pytest.raises(ValueError, match="families the dataset does not hold"):
         train(tiny_dataset, tmp_path / "nofamily", model_config=TINY_CONFIG, train_config=config, progress=False)

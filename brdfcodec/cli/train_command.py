@@ -57,6 +57,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     parser.add_argument("--fold", type=int, help="the fold held out (0 to folds - 1)")
     parser.add_argument("--train-families", help="comma-separated families to train on; every other family "
                         "is held out (a family never seen)")
+    parser.add_argument("--all-materials", action="store_true", default=None,
+                        help="train on every material (the stored split ignored, nothing held out; needs "
+                        "--keep last): the release model, once the recipe is chosen by cross-validation")
     parser.add_argument("--keep", choices=("best", "last"),
                         help="weights to keep: best on the held-out materials (default), or the last ones "
                         "(use it when the held-out materials are the test set)")

@@ -91,6 +91,11 @@ class TrainConfig:
         Comma-separated families to train on (for example ``"merl"``); the
         materials of every other family are held out, whatever the stored
         split or fold says. Empty (the default): every family.
+    all_materials : bool
+        Train on every material of the dataset: the stored split is
+        ignored and nothing is held out (a release model, after the recipe
+        was chosen by cross-validation); ``train_families`` still applies.
+        Needs ``keep="last"`` (there is nothing to choose on) and no folds.
     keep : {"best", "last"}
         Which weights ``best.pt`` (and so an export) holds: those of the
         evaluation with the lowest held-out RelAE (the default), or the last
@@ -122,6 +127,7 @@ class TrainConfig:
     folds: int = 0
     fold: int = 0
     train_families: str = ""
+    all_materials: bool = False
     keep: Literal["best", "last"] = "best"
 
     def __post_init__(self) -> None:
@@ -146,6 +152,8 @@ class TrainConfig:
             raise ValueError(f"folds must be 0 or at least 2 and fold in [0, folds), got {self.folds}, {self.fold}")
         if self.keep not in ("best", "last"):
             raise ValueError(f"keep must be 'best' or 'last', got {self.keep!r}")
+        if self.all_materials and (self.folds or self.keep != "last"):
+            raise ValueError("all_materials holds nothing out: it needs keep='last' and no folds")
         if not 0 <= self.decoder_dropout < 1:
             raise ValueError(f"decoder_dropout must be in [0, 1), got {self.decoder_dropout}")
 

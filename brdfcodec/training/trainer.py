@@ -222,9 +222,11 @@ def _check_run_folder(out: Path, run_info: dict[str, Any], resume: bool) -> None
 
 
 def _held_out(dataset: BrdfDataset, config: TrainConfig) -> list[bool]:
-    """Which materials the run holds out: the stored split, or a fold (``config.folds``), and every family
-    outside ``config.train_families``."""
-    if config.folds:
+    """Which materials the run holds out: the stored split, a fold (``config.folds``) or none
+    (``config.all_materials``), and every family outside ``config.train_families``."""
+    if config.all_materials:
+        held = [False] * len(dataset.names)
+    elif config.folds:
         seed = int(dataset.attribute("split_seed"))
         held = [fold == config.fold for fold in fold_by_family(dataset.names, dataset.families, folds=config.folds,
                                                                   seed=seed)]
