@@ -16,8 +16,8 @@ from brdfcodec.dataset import BrdfDataset
 from brdfcodec.image_metrics import compare_images
 from brdfcodec.metrics import relae_between_mapped, relae_linear
 from brdfcodec.render import MaterialTable, render_sphere
-from brdfcodec.report.rd_points import rate_distortion_points
 from brdfcodec.report.points import Material, OperatingPoint, standard_points
+from brdfcodec.report.rd_points import rate_distortion_points
 from brdfcodec.representation import map_values, reflectance_from_stored
 from brdfcodec.version import __version__
 
