@@ -73,6 +73,11 @@ def test_config_errors_name_the_file(tmp_path: Path) -> None:
     path.write_text(json.dumps({"dataset": "x.h5", "experiments": [], "bugdets": [1]}))
     with pytest.raises(ValueError, match="unknown keys \\['bugdets'\\]"):
         load_config(path)
+    path.write_text(json.dumps({"dataset": "x.h5", "experiments": [], "header_in_budget": "yes"}))
+    with pytest.raises(ValueError, match="bad.json: 'header_in_budget' is true or false"):
+        load_config(path)
+    path.write_text(json.dumps({"dataset": "x.h5", "experiments": [], "header_in_budget": False}))
+    assert load_config(path).header_in_budget is False and load_config(path).dataset == tmp_path / "x.h5"
 
 
 def _row(group: str, point: str, budget: int, errors: list[float], size: float) -> dict:

@@ -84,6 +84,7 @@ class RdConfig:
     effort: int = 1
     limit: int | None = None
     extra: dict[str, Any] = field(default_factory=dict)
+    header_in_budget: bool = True
 
 
 def load_config(path: str | os.PathLike[str]) -> RdConfig:
@@ -93,7 +94,11 @@ def load_config(path: str | os.PathLike[str]) -> RdConfig:
     objects with ``label``, ``model``, optional ``group``, ``held_out`` and
     ``latent``: ``"auto"``, the default, or ``"always"``, as ``bvae compress --latent``),
     optional ``budgets`` (list of int), ``effort`` (int), ``limit`` (int:
-    only the first N held-out materials of each family, a quick look).
+    only the first N held-out materials of each family, a quick look),
+    ``header_in_budget`` (bool, default true: brdfcodec's file bytes less
+    the names stay within N per material, its share of the header
+    included; false: ``--bytes N`` as given, the header on top — the curve
+    of a single-material file, whose header alone exceeds the small budgets).
 
     Raises
     ------
@@ -102,7 +107,7 @@ def load_config(path: str | os.PathLike[str]) -> RdConfig:
     """
     base = Path(path).parent
     data = json.loads(Path(path).read_text(encoding="utf-8"))
-    known = {"dataset", "experiments", "budgets", "effort", "limit", "description"}
+    known = {"dataset", "experiments", "budgets", "effort", "limit", "description", "header_in_budget"}
     if not isinstance(data, dict) or "dataset" not in data or "experiments" not in data:
         raise ValueError(f"{path}: a runner configuration is an object with 'dataset' and 'experiments'")
     unknown = sorted(set(data) - known)
@@ -124,8 +129,12 @@ def load_config(path: str | os.PathLike[str]) -> RdConfig:
     if not budgets or min(budgets) < 1:
         raise ValueError(f"{path}: budgets must be positive integers")
     limit = data.get("limit")
+    header_in_budget = data.get("header_in_budget", True)
+    if not isinstance(header_in_budget, bool):
+        raise ValueError(f"{path}: 'header_in_budget' is true or false, got {header_in_budget!r}")
     return RdConfig(base / data["dataset"], tuple(experiments), budgets, int(data.get("effort", 1)),
-                    None if limit is None else int(limit), {"description": data.get("description", "")})
+                    None if limit is None else int(limit), {"description": data.get("description", "")},
+                    header_in_budget)
 
 
 def _pca_payload_counts(budget: int, rank: int) -> dict[str, int]:
@@ -176,7 +185,8 @@ def _error_summary(errors: Sequence[tuple[float, float]]) -> dict[str, Any]:
 
 def _bvae_rows(model: Path, names: Sequence[str], inputs: np.ndarray, masks: np.ndarray,
                references: Sequence[Any], budgets: Sequence[int], effort: int,
-               error: Callable[[Any, np.ndarray], tuple[float, float]], latent: str = "auto") -> list[dict[str, Any]]:
+               error: Callable[[Any, np.ndarray], tuple[float, float]], latent: str = "auto",
+               header_in_budget: bool = True) -> list[dict[str, Any]]:
     import brdfcodec as bc
 
     decoder = bc.BrdfDecoder(model)
@@ -186,8 +196,8 @@ def _bvae_rows(model: Path, names: Sequence[str], inputs: np.ndarray, masks: np.
     for budget in budgets:
         # The file's fixed header is shared by the materials: --bytes is lowered by its share (and again by
         # the excess, if any) so that the file's bytes less the names stay within N per material.
-        flag = budget - math.ceil(_HEADER_ESTIMATE / len(names))
-        for _ in range(4):
+        flag = budget - math.ceil(_HEADER_ESTIMATE / len(names)) if header_in_budget else budget
+        for _ in range(4 if header_in_budget else 1):
             data = bc.encode(items, model=model, latent_dtype="float16", measure_error=False, effort=effort,
                              bytes=max(flag, 1), latent=latent)  # type: ignore[arg-type]
             excess = len(data) - name_bytes - budget * len(names)
@@ -252,7 +262,7 @@ def run_experiment(config: RdConfig, experiment: Experiment,
             inputs, masks = dataset.inputs(rows_of), dataset.input_masks(rows_of)
             references = [dataset.table(i) for i in rows_of]
             family_rows = _bvae_rows(experiment.model, names, inputs, masks, references, config.budgets,
-                                     config.effort, error, experiment.latent)
+                                     config.effort, error, experiment.latent, config.header_in_budget)
             for label, basis in bases.items():
                 family_rows += _pca_rows(label, basis, inputs, references, config.budgets, error)
             rows += [{**common, "family": family, "materials": names, **row} for row in family_rows]
