@@ -43,6 +43,8 @@ __all__ = ["DEFAULT_BUDGETS", "Experiment", "RdConfig", "load_config", "run_conf
 #: Bytes of a file's header besides the records' descriptors (preamble, decoder and basis hashes, a few forms,
 #: the payload CRC): a first guess of what the materials share, corrected by measuring the file.
 _HEADER_ESTIMATE = 120
+#: The smallest record brdfcodec writes, its descriptor included (a record without a latent, one coefficient).
+_SMALLEST_RECORD = 6
 #: Size budgets of the comparison, bytes per material.
 DEFAULT_BUDGETS = (16, 32, 64, 128)
 
@@ -197,6 +199,8 @@ def _bvae_rows(model: Path, names: Sequence[str], inputs: np.ndarray, masks: np.
         # The file's fixed header is shared by the materials: --bytes is lowered by its share (and again by
         # the excess, if any) so that the file's bytes less the names stay within N per material.
         flag = budget - math.ceil(_HEADER_ESTIMATE / len(names)) if header_in_budget else budget
+        if flag < _SMALLEST_RECORD:  # too few materials to share the header within this budget: no point
+            continue
         for _ in range(4 if header_in_budget else 1):
             data = bc.encode(items, model=model, latent_dtype="float16", measure_error=False, effort=effort,
                              bytes=max(flag, 1), latent=latent)  # type: ignore[arg-type]

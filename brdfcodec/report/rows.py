@@ -98,13 +98,18 @@ def summary_markdown(rows: Sequence[dict[str, Any]]) -> str:
     for group, family in groups:
         chosen = [row for row in rows if row["group"] == group and row["family"] == family]
         budgets = sorted({row["budget_bytes"] for row in chosen})
-        materials = _pooled([r for r in chosen if r["point"] == "bvae" and r["budget_bytes"] == budgets[0]])[2]
+        first_pca = min(r["point"] for r in chosen if r["point"].startswith("pca"))
+        materials = _pooled([r for r in chosen if r["point"] == first_pca and r["budget_bytes"] == budgets[0]])[2]
         lines += [f"**{group}, held-out {family}** ({materials} materials; mean mapped RelAE, full table; "
                   "bytes per material)", "",
                   "| budget | brdfcodec | bytes | best PCA | PCA point | bytes | brdfcodec below? |",
                   "|---|---|---|---|---|---|---|"]
         for budget in budgets:
             at = [row for row in chosen if row["budget_bytes"] == budget]
+            if not any(row["point"] == "bvae" for row in at):
+                lines.append(f"| {budget} B | — | — | | | | no (the header's share per material exceeds the "
+                             "budget) |")
+                continue
             ours = _pooled([row for row in at if row["point"] == "bvae"])
             pca = min(((point, _pooled([row for row in at if row["point"] == point]))
                        for point in sorted({row["point"] for row in at if row["point"].startswith("pca")})),
@@ -131,7 +136,8 @@ def rd_plot(rows: Sequence[dict[str, Any]], path: str | os.PathLike[str]) -> Pat
     for axis, (group, family) in zip(axes[0], panels, strict=True):
         chosen = [row for row in rows if row["group"] == group and row["family"] == family]
         budgets = sorted({row["budget_bytes"] for row in chosen})
-        ours = [_pooled([r for r in chosen if r["point"] == "bvae" and r["budget_bytes"] == b]) for b in budgets]
+        ours = [_pooled([r for r in chosen if r["point"] == "bvae" and r["budget_bytes"] == b]) for b in budgets
+                if any(r["point"] == "bvae" and r["budget_bytes"] == b for r in chosen)]
         envelope = []
         for budget in budgets:
             at = [r for r in chosen if r["budget_bytes"] == budget and r["point"].startswith("pca")]
