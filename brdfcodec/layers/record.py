@@ -111,7 +111,8 @@ def compact_mu_values(mu: npt.ArrayLike, fixed_grid: bool, what: str = "mu") -> 
 
 @dataclass(frozen=True)
 class LayeredRecord(LatentRecord):
-    """A base latent record plus enhancement layers: a basis layer, a detail layer, or both.
+    """A base latent record plus enhancement layers: a basis layer, a detail layer, or both; or, without a latent
+    (``has_latent=False``, format 2.1), a basis layer (and a detail layer) on the decoder's linear-path mean.
 
     Attributes
     ----------
