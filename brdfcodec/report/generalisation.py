@@ -7,13 +7,15 @@ model folder and the materials it held out (by default those its
 family never seen). For each size budget N and each family of the held-out
 materials, :func:`run_experiment` measures
 
-- ``bvae``: the held-out materials of that family encoded into one library
-  with ``bvae compress --bytes N'`` (effort 1, float16 latents, no
+- ``bvae``: the held-out materials (of every family, limited per family)
+  encoded into one library with ``bvae compress --bytes N'`` (effort 1, float16 latents, no
   provenance, ``--latent auto`` unless the experiment says ``"latent":
   "always"``) through the public API, where N' ≤ N leaves room for the
   materials' share of the file's header (``bytes_flag`` in the rows): the
   **file's** bytes less the materials' names (UTF-8), divided by the number
-  of materials, is at most N;
+  of materials, is at most N; a family's bytes per material are its
+  records' (descriptor and payload, names aside) plus an equal share of the
+  header per material;
 - ``pca-*``: PCA of the mapped kept slices fitted on the *same training
   materials* as the model (as measured, ``pca``, and in all six colour
   orders, ``pca-perm``), with k coefficients as int8 plus one float16 scale
@@ -185,15 +187,18 @@ def _error_summary(errors: Sequence[tuple[float, float]]) -> dict[str, Any]:
             "linear_relae_mean": float(linear.mean()), "per_material_mapped": [float(v) for v in mapped]}
 
 
-def _bvae_rows(model: Path, names: Sequence[str], inputs: np.ndarray, masks: np.ndarray,
+def _bvae_rows(model: Path, names: Sequence[str], families: Sequence[str], inputs: np.ndarray, masks: np.ndarray,
                references: Sequence[Any], budgets: Sequence[int], effort: int,
                error: Callable[[Any, np.ndarray], tuple[float, float]], latent: str = "auto",
-               header_in_budget: bool = True) -> list[dict[str, Any]]:
+               header_in_budget: bool = True) -> dict[str, list[dict[str, Any]]]:
+    """brdfcodec's rows per family: every held-out material in one library at each budget, each family's bytes
+    its records' (descriptor and payload, names aside) plus its materials' equal share of the header."""
     import brdfcodec as bc
+    from brdfcodec.bvae_format import parse_bvae
 
     decoder = bc.BrdfDecoder(model)
     name_bytes = sum(len(n.encode("utf-8")) for n in names)
-    rows = []
+    rows: dict[str, list[dict[str, Any]]] = {family: [] for family in families}
     items = [bc.MaterialInput(n, x, r, m) for n, x, r, m in zip(names, inputs, references, masks, strict=True)]
     for budget in budgets:
         # The file's fixed header is shared by the materials: --bytes is lowered by its share (and again by
@@ -208,12 +213,19 @@ def _bvae_rows(model: Path, names: Sequence[str], inputs: np.ndarray, masks: np.
             if excess <= 0 or flag <= 1:
                 break
             flag -= math.ceil(excess / len(names))
+        entries = {entry.name: entry for entry in parse_bvae(data).header.entries}
+        record_bytes = {n: entries[n].length + entries[n].descriptor_bytes for n in names}
+        header_share = (len(data) - name_bytes - sum(record_bytes.values())) / len(names)
         library = bc.decode(data, decoder=decoder)
-        errors = [error(r, library[n].table(masked="unmeasured")) for n, r in zip(names, references, strict=True)]
-        without = sum(not getattr(library.record(n), "has_latent", True) for n in names)
-        rows.append({"point": "bvae", "budget_bytes": budget, "bytes_flag": max(flag, 1), "file_bytes": len(data),
-                     "bytes_per_material": (len(data) - name_bytes) / len(names), "latent": latent,
-                     "records_without_latent": without, **_error_summary(errors)})
+        for family in rows:
+            chosen = [i for i, f in enumerate(families) if f == family]
+            errors = [error(references[i], library[names[i]].table(masked="unmeasured")) for i in chosen]
+            without = sum(not getattr(library.record(names[i]), "has_latent", True) for i in chosen)
+            rows[family].append({
+                "point": "bvae", "budget_bytes": budget, "bytes_flag": max(flag, 1), "file_bytes": len(data),
+                "library_materials": len(names), "header_share_bytes": header_share,
+                "bytes_per_material": sum(record_bytes[names[i]] for i in chosen) / len(chosen) + header_share,
+                "latent": latent, "records_without_latent": without, **_error_summary(errors)})
     return rows
 
 
@@ -258,18 +270,26 @@ def run_experiment(config: RdConfig, experiment: Experiment,
         common = {"experiment": experiment.label, "group": experiment.group or experiment.label,
                   "model": manifest.name, "decoder_sha256": manifest.decoder_sha256,
                   "trained_materials": len(train_rows), "dataset_description": dataset.description}
-        for family in sorted({dataset.families[i] for i in held}):
-            rows_of = [i for i in held if dataset.families[i] == family][: config.limit]
-            if progress is not None:
-                progress(f"{experiment.label}: {len(rows_of)} held-out {family} materials")
-            names = [dataset.names[i] for i in rows_of]
-            inputs, masks = dataset.inputs(rows_of), dataset.input_masks(rows_of)
-            references = [dataset.table(i) for i in rows_of]
-            family_rows = _bvae_rows(experiment.model, names, inputs, masks, references, config.budgets,
-                                     config.effort, error, experiment.latent, config.header_in_budget)
+        families = sorted({dataset.families[i] for i in held})
+        measured = [i for family in families
+                    for i in [j for j in held if dataset.families[j] == family][: config.limit]]
+        if progress is not None:
+            counts = ", ".join(f"{sum(dataset.families[i] == f for i in measured)} {f}" for f in families)
+            progress(f"{experiment.label}: held-out materials in one library: {counts}")
+        names = [dataset.names[i] for i in measured]
+        inputs, masks = dataset.inputs(measured), dataset.input_masks(measured)
+        references = [dataset.table(i) for i in measured]
+        ours = _bvae_rows(experiment.model, names, [dataset.families[i] for i in measured], inputs, masks,
+                          references, config.budgets, config.effort, error, experiment.latent,
+                          config.header_in_budget)
+        for family in families:
+            chosen = [k for k, i in enumerate(measured) if dataset.families[i] == family]
+            family_rows = list(ours[family])
             for label, basis in bases.items():
-                family_rows += _pca_rows(label, basis, inputs, references, config.budgets, error)
-            rows += [{**common, "family": family, "materials": names, **row} for row in family_rows]
+                family_rows += _pca_rows(label, basis, inputs[chosen], [references[k] for k in chosen],
+                                         config.budgets, error)
+            rows += [{**common, "family": family, "materials": [names[k] for k in chosen], **row}
+                     for row in family_rows]
     return rows
 
 
