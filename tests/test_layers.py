@@ -282,15 +282,20 @@ def test_cli_graft_fit_of_a_layered_record_starts_from_its_base(red_plastic_file
     from brdfcodec.merl import read_merl
 
     layered_file, fitted = tmp_path / "m.bvae", tmp_path / "f.bvae"
-    assert main(["compress", str(red_plastic_file), "-o", str(layered_file), "--bytes", "3000", "--effort", "0"]) == 0
+    assert main(["compress", str(red_plastic_file), "-o", str(layered_file), "--bytes", "3000", "--effort", "0",
+                 "--latent", "always", "--provenance"]) == 0  # the record's RelAE is stored only with --provenance
     record = read_bvae(layered_file).records[0]
     assert isinstance(record, LayeredRecord)
     base_relae = measure(record.base(), BrdfDecoder(), read_merl(red_plastic_file)).meta["relae"]["mapped"]
     assert record.meta["relae"]["mapped"] < base_relae - 1e-3  # the two differ: the message tells which
     capsys.readouterr()
     assert main(["edit", "graft", str(layered_file), "--fit", str(red_plastic_file), "-o", str(fitted)]) == 0
-    assert f"{base_relae:.4f} from the code alone" in capsys.readouterr().out
-    assert type(read_bvae(fitted).records[0]).__name__ == "GraftRecord"
+    out = capsys.readouterr().out
+    assert f"{base_relae:.4f} from the code alone" in out
+    after = float(out.split(" with the fitted graft")[0].rsplit(" ", 1)[1])
+    # The better of the two is written: the graft where it wins, else the code alone (with a warning).
+    expected = "GraftRecord" if after < base_relae else "LatentRecord"
+    assert type(read_bvae(fitted).records[0]).__name__ == expected
 
 
 def test_cli_reference_that_reflects_nothing_is_bad_input(tmp_path, capsys) -> None:
