@@ -111,7 +111,7 @@ def test_tabulation_matches_mitsubas_eval(paper_white: object, rgl_file: Path) -
 def test_compress_and_decompress_round_trip(rgl_file: Path, mitsuba_llvm: None, tmp_path: Path,
                                             capsys: pytest.CaptureFixture[str]) -> None:
     bvae = tmp_path / "p.bvae"
-    assert main(["compress", str(rgl_file), "-o", str(bvae)]) == 0
+    assert main(["compress", str(rgl_file), "-o", str(bvae), "--provenance"]) == 0  # source kind and hash stored
     assert "paper_white" in capsys.readouterr().out
     from brdfcodec.bvae_format import read_bvae
 
