@@ -125,11 +125,14 @@ def test_query_decoded_material(benchmark, decoder: BrdfDecoder, record: LatentR
 #: (32 basis coefficients, the most a record with a detail layer carries, + a 16 KB detail layer; the default
 #: ``--project-base auto`` leaves a record with a detail layer unprojected), and the low-rate one (a 64 B record:
 #: compact base + 53 basis coefficients), with its base never and always projected on the shared basis (format
-#: 1.6; the default picks per material).
+#: 1.6; the default picks per material); all three with a latent (``latent="always"``: the baseline is the
+#: record's base decode, which a record without a latent, format 2.1, does not have).
 _LAYERED_CASES = {
     "decode-layered": ({"bytes": 16384}, True),
-    "decode-layered-64B": ({"bytes": 64, "latent_dtype": "float16", "project_base": "never"}, False),
-    "decode-layered-64B-projected": ({"bytes": 64, "latent_dtype": "float16", "project_base": "always"}, False),
+    "decode-layered-64B": ({"bytes": 64, "latent_dtype": "float16", "project_base": "never", "latent": "always"},
+                           False),
+    "decode-layered-64B-projected": ({"bytes": 64, "latent_dtype": "float16", "project_base": "always",
+                                      "latent": "always"}, False),
 }
 
 

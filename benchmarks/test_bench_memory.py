@@ -20,7 +20,12 @@ _CHILD = """
 import resource, sys
 from brdfcodec.cli import main
 code = main(sys.argv[1:])
-print("peak-rss-kb", resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)
+try:  # the high-water mark of this address space: ru_maxrss also counts the parent's pages from before exec
+    with open("/proc/self/status") as status:
+        peak = next(int(line.split()[1]) for line in status if line.startswith("VmHWM:"))
+except OSError:  # no /proc (macOS): ru_maxrss, which may include the forking parent's size
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+print("peak-rss-kb", peak)
 sys.exit(code)
 """
 
