@@ -194,7 +194,6 @@ def _bvae_rows(model: Path, names: Sequence[str], families: Sequence[str], input
     """brdfcodec's rows per family: every held-out material in one library at each budget, each family's bytes
     its records' (descriptor and payload, names aside) plus its materials' equal share of the header."""
     import brdfcodec as bc
-    from brdfcodec.bvae_format import parse_bvae
 
     decoder = bc.BrdfDecoder(model)
     name_bytes = sum(len(n.encode("utf-8")) for n in names)
@@ -213,10 +212,10 @@ def _bvae_rows(model: Path, names: Sequence[str], families: Sequence[str], input
             if excess <= 0 or flag <= 1:
                 break
             flag -= math.ceil(excess / len(names))
-        entries = {entry.name: entry for entry in parse_bvae(data).header.entries}
+        library = bc.decode(data, decoder=decoder)
+        entries = {entry.name: entry for entry in library.header.entries}
         record_bytes = {n: entries[n].length + entries[n].descriptor_bytes for n in names}
         header_share = (len(data) - name_bytes - sum(record_bytes.values())) / len(names)
-        library = bc.decode(data, decoder=decoder)
         for family in rows:
             chosen = [i for i, f in enumerate(families) if f == family]
             errors = [error(references[i], library[names[i]].table(masked="unmeasured")) for i in chosen]
