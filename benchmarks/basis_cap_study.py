@@ -7,7 +7,7 @@ Usage::
 Encodes the dataset's held-out (validation) materials with the default model
 at several size budgets (``BrdfEncoder(bytes=N)``, effort 1, float32 latents) under five
 policies for the basis layer — the encoder's own search (all coefficients
-that fit, and at most :data:`~brdfcodec.layers.rate.DETAIL_BASIS_COUNT`),
+that fit, and at most :data:`~brdfcodec.codec.rate.DETAIL_BASIS_COUNT`),
 all that fit only, and at most 32, 16 or 0 — and records the mean
 full-table mapped RelAE, the mean payload and the coefficient counts used.
 """
@@ -25,11 +25,11 @@ import numpy as np
 # sibling script: Python puts the running script's folder on sys.path
 from basis_study import held_out_materials, study_arguments
 
-import brdfcodec.layers.encoding as encoding
-import brdfcodec.layers.rate as rate
+import brdfcodec.codec.encoding as encoding
+import brdfcodec.codec.rate as rate
 from brdfcodec.codec import BrdfEncoder
-from brdfcodec.layers.record import LayeredRecord
-from brdfcodec.metrics import error_report
+from brdfcodec.format.layered_record import LayeredRecord
+from brdfcodec.representation.metrics import error_report
 
 BUDGETS = (128, 256, 1024, 4096, 16384)
 #: policy → (largest basis count allowed, whether the encoder's smaller second count is tried)

@@ -9,7 +9,7 @@ principal components of its training materials, and its shared basis'
 leading vectors are the same components. On the dataset's held-out
 (validation) materials this measures the kept-slice mapped RelAE (valid
 entries, clamped) of the encoder's layered base at effort 1 — μ and k
-coefficients fitted jointly (:func:`brdfcodec.layers.refine.fit_basis_coefficients`),
+coefficients fitted jointly (:func:`brdfcodec.codec.refine.fit_basis_coefficients`),
 the coefficients quantised to int8 as in a file, μ rounded to float16 —
 with the coefficients on vectors ``0 … k−1`` and on ``8 … 8+k−1``
 (``first`` = 8, format 1.3). PCA-k of the training split with the same
@@ -28,9 +28,9 @@ from basis_study import (  # sibling script: Python puts the running script's fo
 )
 
 from brdfcodec.codec import BrdfEncoder
-from brdfcodec.dataset import BrdfDataset
+from brdfcodec.datasets.hdf5 import BrdfDataset
 from brdfcodec.layers.basis import quantise_coefficients
-from brdfcodec.layers.refine import fit_basis_coefficients
+from brdfcodec.codec.refine import fit_basis_coefficients
 
 COUNTS = (6, 14, 22, 30, 38, 54)
 OFFSETS = (0, 8)

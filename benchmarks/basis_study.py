@@ -14,7 +14,7 @@ On the dataset's held-out (validation) materials, kept-slice mapped RelAE
   materials' *residuals* (what the decoder leaves on the materials it was
   trained on);
 - ``base+data joint``: μ and the k coefficients fitted together on the
-  mapped L1 error (:func:`brdfcodec.layers.refine.fit_basis_coefficients`
+  mapped L1 error (:func:`brdfcodec.codec.refine.fit_basis_coefficients`
   at effort 3), as the encoder does, before quantisation.
 """
 
@@ -34,8 +34,8 @@ import torch
 
 from brdfcodec.codec import BrdfEncoder
 from brdfcodec.conventions import MAPPED_MAX
-from brdfcodec.dataset import BrdfDataset
-from brdfcodec.layers.refine import fit_basis_coefficients, refine_latent
+from brdfcodec.datasets.hdf5 import BrdfDataset
+from brdfcodec.codec.refine import fit_basis_coefficients, refine_latent
 
 COUNTS = (4, 8, 16, 30, 48, 64)
 

@@ -34,8 +34,8 @@ import numpy as np
 import torch
 from basis_study import replaced
 
-from brdfcodec.analytic import ANALYTIC_PRESETS
-from brdfcodec.blas_threads import single_blas_thread
+from brdfcodec.datasets.analytic import ANALYTIC_PRESETS
+from brdfcodec.runtime.threads import single_blas_thread
 from brdfcodec.codec import BrdfEncoder
 from brdfcodec.conventions import MAPPED_MAX
 from brdfcodec.layers import detail as detail_module

@@ -29,7 +29,7 @@ import numpy as np
 from basis_study import held_out_materials, study_arguments
 
 from brdfcodec.codec import BrdfEncoder
-from brdfcodec.metrics import error_report
+from brdfcodec.representation.metrics import error_report
 
 BUDGETS = (16, 32, 64)
 EFFORTS = (1, 2, 3)

@@ -30,13 +30,13 @@ import numpy as np
 # sibling script: Python puts the running script's folder on sys.path
 from basis_study import held_out_materials, replaced, study_arguments
 
-from brdfcodec.baselines.pca import fit_pca
+from brdfcodec.models.pca import fit_pca
 from brdfcodec.codec import BrdfEncoder
-from brdfcodec.dataset import BrdfDataset
-from brdfcodec.layers import encoding
+from brdfcodec.datasets.hdf5 import BrdfDataset
+from brdfcodec.codec import encoding
 from brdfcodec.layers.basis import SharedBasis, fit_shared_basis, with_colour_permutations
 from brdfcodec.report.rd_points import PcaPacked
-from brdfcodec.metrics import error_report
+from brdfcodec.representation.metrics import error_report
 from brdfcodec.report.points import Material
 
 BUDGETS = (32, 64, 128)

@@ -8,7 +8,7 @@ Encodes the dataset's held-out (validation) materials with the default model
 at small size budgets (``BrdfEncoder(bytes=N)``, effort 1, float16 latents),
 once as the encoder does (a compact base — μ as int8 with a float16 step, σ
 as one shared byte — where the budget cannot hold all the basis
-coefficients beside μ in the latent dtype, :func:`~brdfcodec.layers.rate.compact_base_pays`)
+coefficients beside μ in the latent dtype, :func:`~brdfcodec.codec.rate.compact_base_pays`)
 and once with the base in the latent dtype (σ one byte per dimension), and
 records the mean full-table mapped RelAE, payloads and coefficient counts of
 each. It also records what the compact base costs on its own: the base
@@ -27,11 +27,11 @@ import numpy as np
 # sibling script: Python puts the running script's folder on sys.path
 from basis_study import held_out_materials, replaced, study_arguments
 
-import brdfcodec.layers.rate as rate
+import brdfcodec.codec.rate as rate
 from brdfcodec.codec import BrdfEncoder
 from brdfcodec.layers.basis import int8_with_step
-from brdfcodec.layers.record import LayeredRecord, shared_sigma_code, sigma_from_codes
-from brdfcodec.metrics import error_report
+from brdfcodec.format.layered_record import LayeredRecord, shared_sigma_code, sigma_from_codes
+from brdfcodec.representation.metrics import error_report
 
 BUDGETS = (16, 32, 64, 96)
 

@@ -24,10 +24,10 @@ import numpy as np
 # sibling script: Python puts the running script's folder on sys.path
 from basis_study import held_out_materials, replaced, study_arguments
 
-import brdfcodec.layers.rate as rate
+import brdfcodec.codec.rate as rate
 from brdfcodec.codec import BrdfEncoder
-from brdfcodec.layers.record import MU_INT8, LayeredRecord
-from brdfcodec.metrics import error_report
+from brdfcodec.format.layered_record import MU_INT8, LayeredRecord
+from brdfcodec.representation.metrics import error_report
 
 BUDGETS = (16, 24, 32, 64)
 

@@ -22,8 +22,8 @@ from pathlib import Path
 
 import pytest
 
-from brdfcodec.analytic import ANALYTIC_PRESETS
-from brdfcodec.merl import write_merl
+from brdfcodec.datasets.analytic import ANALYTIC_PRESETS
+from brdfcodec.io.merl import write_merl
 
 #: Highest acceptable candidate/baseline ratio of median times, per group.
 TARGETS = {

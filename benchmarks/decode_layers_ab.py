@@ -28,8 +28,8 @@ import time
 import numpy as np
 import torch
 
-from brdfcodec.analytic import ANALYTIC_PRESETS
-from brdfcodec.blas_threads import single_blas_thread
+from brdfcodec.datasets.analytic import ANALYTIC_PRESETS
+from brdfcodec.runtime.threads import single_blas_thread
 from brdfcodec.codec import BrdfDecoder, BrdfEncoder, _apply_mask
 from brdfcodec.layers.detail import decode_detail
 from brdfcodec.representation import clamp_mapped, table_from_mapped

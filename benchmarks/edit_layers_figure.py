@@ -20,13 +20,13 @@ from pathlib import Path
 
 import numpy as np
 
-from brdfcodec.analytic import ANALYTIC_PRESETS
-from brdfcodec.bvae_format import LatentRecord, read_bvae
+from brdfcodec.datasets.analytic import ANALYTIC_PRESETS
+from brdfcodec.format.bvae import LatentRecord, read_bvae
 from brdfcodec.codec import BrdfDecoder, DecodedMaterial, compress
-from brdfcodec.edit import traverse
-from brdfcodec.images import auto_exposure, encode_srgb
+from brdfcodec.edit.latent_edits import traverse
+from brdfcodec.render.images import auto_exposure, encode_srgb
 from brdfcodec.layers.layer_sum import layered_residual
-from brdfcodec.metrics import relae_mapped
+from brdfcodec.representation.metrics import relae_mapped
 from brdfcodec.representation import clamp_mapped
 
 DIM, STEP, LIGHT = 0, -1.5, (-1.0, 1.0, 1.0)
@@ -41,7 +41,7 @@ def main() -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from brdfcodec.render import render_sphere
+    from brdfcodec.render.preview import render_sphere
 
     source = ANALYTIC_PRESETS["red-plastic"].to_merl()
     with tempfile.TemporaryDirectory() as folder:

@@ -17,7 +17,7 @@ import time
 import numpy as np
 
 from brdfcodec.codec import BrdfEncoder, measure
-from brdfcodec.dataset import BrdfDataset
+from brdfcodec.datasets.hdf5 import BrdfDataset
 
 
 def main() -> None:

@@ -15,7 +15,7 @@ way, on the dataset's held-out (validation) materials:
   on the shared basis from vector 8 on (as the encoder places them), a
   float16 step and k int8 values. μ and the coefficients are fitted together
   at effort 1, μ rounded to its int8 code and the coefficients refitted to
-  it, as :mod:`brdfcodec.layers.encoding` does;
+  it, as :mod:`brdfcodec.codec.encoding` does;
 - ``bvae-exp-golomb``: the same base and fit, the coefficients quantised with
   a uniform step s from :data:`STEPS` and stored as signed Exp-Golomb codes
   (zig-zag, order 0–3 chosen per record: 2 bits) after a float16 step;
@@ -41,12 +41,12 @@ import numpy as np
 # sibling script: Python puts the running script's folder on sys.path
 from basis_study import kept_slice_relae, study_arguments
 
-from brdfcodec.baselines.pca import fit_pca
+from brdfcodec.models.pca import fit_pca
 from brdfcodec.codec import BrdfEncoder
-from brdfcodec.dataset import BrdfDataset
+from brdfcodec.datasets.hdf5 import BrdfDataset
 from brdfcodec.layers.basis import basis_offset, dequantise_int8, int8_with_step
-from brdfcodec.layers.refine import fit_basis_coefficients, refine_latent
-from brdfcodec.metrics import error_report
+from brdfcodec.codec.refine import fit_basis_coefficients, refine_latent
+from brdfcodec.representation.metrics import error_report
 from brdfcodec.representation.network_io import table_from_network_output
 
 #: Coefficient counts tried (0: the base alone, for the bvae side).

@@ -7,7 +7,7 @@ Usage::
 Encodes the dataset's held-out (validation) materials with the default model
 at several error targets (``BrdfEncoder(max_relae=X)``, effort 1, float16
 latents, mapped RelAE), once with the encoder's sequence
-(:func:`~brdfcodec.layers.rate.error_target_sequence`: basis-only records on
+(:func:`~brdfcodec.codec.rate.error_target_sequence`: basis-only records on
 a compact base) and once with the sequence before it (the base alone, then
 4, 8, 16 and K coefficients, all on the base in the latent dtype), and
 records per target and policy the mean payload, how many materials met the
@@ -25,7 +25,7 @@ import numpy as np
 # sibling script: Python puts the running script's folder on sys.path
 from basis_study import held_out_materials, replaced, study_arguments
 
-import brdfcodec.layers.rate as rate
+import brdfcodec.codec.rate as rate
 from brdfcodec.codec import BrdfEncoder, measure
 
 TARGETS = (0.06, 0.05, 0.04, 0.03, 0.02)

@@ -5,7 +5,7 @@ Usage::
     python benchmarks/full_table_fit_study.py DATASET.h5 [-o reports/rd-study/full-table-fit.json]
 
 The encoder fits μ and the basis coefficients together on the mapped L1
-error of the 21 kept φd slices (:func:`brdfcodec.layers.refine.fit_basis_coefficients`),
+error of the 21 kept φd slices (:func:`brdfcodec.codec.refine.fit_basis_coefficients`),
 but the report measures the full table: the 180 φd bins interpolated from
 them. This runs the encoder's own rate control (``--bytes`` 32 and 64,
 float16, effort 1) on the dataset's held-out materials twice — with the
@@ -24,10 +24,10 @@ import numpy as np
 import torch
 from basis_study import held_out_materials, replaced, study_arguments
 
-import brdfcodec.layers.encoding as encoding
+import brdfcodec.codec.encoding as encoding
 from brdfcodec.codec import BrdfEncoder, measure
 from brdfcodec.conventions import MAPPED_MAX, N_KEPT_SLICES, N_PHI_D
-from brdfcodec.layers.refine import fit_basis_coefficients
+from brdfcodec.codec.refine import fit_basis_coefficients
 from brdfcodec.representation import map_values
 from brdfcodec.representation.layout import interpolation_plan
 

@@ -7,8 +7,8 @@ Usage::
 For each material (default: the green materials and the validation split of
 the dataset), with the shipped model: the mapped RelAE of the encoder's code
 (the network alone), of the code refined by gradient descent on the same 8
-parameters (:func:`brdfcodec.edit.refine_code`), and of the fitted graft with
-10 parameters (:func:`brdfcodec.edit.fit_graft`). Prints a Markdown table.
+parameters (:func:`brdfcodec.edit.latent_edits.refine_code`), and of the fitted graft with
+10 parameters (:func:`brdfcodec.edit.latent_edits.fit_graft`). Prints a Markdown table.
 """
 
 from __future__ import annotations
@@ -19,8 +19,8 @@ import time
 from pathlib import Path
 
 from brdfcodec.codec import BrdfDecoder, BrdfEncoder, measure
-from brdfcodec.dataset import BrdfDataset
-from brdfcodec.edit import fit_graft, refine_code
+from brdfcodec.datasets.hdf5 import BrdfDataset
+from brdfcodec.edit.latent_edits import fit_graft, refine_code
 from brdfcodec.training.export import GREEN_MATERIALS
 
 

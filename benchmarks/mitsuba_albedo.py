@@ -14,8 +14,9 @@ import numpy as np
 
 
 def main() -> None:
-    from brdfcodec import mitsuba_bsdf, mitsuba_runtime
-    from brdfcodec.bvae_format import read_header
+    from brdfcodec.render import mitsuba_bsdf
+    from brdfcodec.runtime import mitsuba as mitsuba_runtime
+    from brdfcodec.format.bvae import read_header
     from brdfcodec.examples import example_library
 
     mitsuba_runtime.set_variant("llvm_ad_rgb", fallback=None)

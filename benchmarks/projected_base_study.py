@@ -20,10 +20,10 @@ import time
 import numpy as np
 from basis_study import HeldOut, held_out_materials, replaced, study_arguments
 
-import brdfcodec.layers.encoding as encoding
+import brdfcodec.codec.encoding as encoding
 from brdfcodec.codec import BrdfEncoder
-from brdfcodec.dataset import BrdfDataset
-from brdfcodec.metrics import error_report
+from brdfcodec.datasets.hdf5 import BrdfDataset
+from brdfcodec.representation.metrics import error_report
 
 BUDGETS = (16, 32, 64, 128)
 VECTORS = (0, 25, 50, 75)

@@ -24,7 +24,7 @@ from typing import Any
 
 import numpy as np
 
-from brdfcodec.analytic import ANALYTIC_PRESETS
+from brdfcodec.datasets.analytic import ANALYTIC_PRESETS
 from brdfcodec.codec import BrdfEncoder
 
 

@@ -19,8 +19,8 @@ import json
 
 import numpy as np
 
-from brdfcodec.analytic import ANALYTIC_PRESETS
-from brdfcodec.bvae_format import encode_bvae, parse_bvae
+from brdfcodec.datasets.analytic import ANALYTIC_PRESETS
+from brdfcodec.format.bvae import encode_bvae, parse_bvae
 from brdfcodec.codec import BrdfEncoder, measure
 from brdfcodec.errors import RateTargetError
 

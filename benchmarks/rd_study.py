@@ -29,7 +29,7 @@ import torch
 import zstandard
 
 from brdfcodec.codec import BrdfDecoder, BrdfEncoder
-from brdfcodec.dataset import BrdfDataset
+from brdfcodec.datasets.hdf5 import BrdfDataset
 
 
 def relae(estimate: np.ndarray, target: np.ndarray, mask: np.ndarray) -> np.ndarray:

@@ -8,9 +8,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from brdfcodec.bvae_format import LatentRecord
+from brdfcodec.format.bvae import LatentRecord
 from brdfcodec.codec import BrdfDecoder, BrdfEncoder
-from brdfcodec.merl import read_merl
+from brdfcodec.io.merl import read_merl
 
 
 @pytest.fixture(scope="module")
@@ -138,7 +138,7 @@ _LAYERED_CASES = {
 
 @pytest.fixture(scope="module", params=sorted(_LAYERED_CASES))
 def layered_case(request: pytest.FixtureRequest, merl_file: Path):
-    from brdfcodec.layers.record import LayeredRecord
+    from brdfcodec.format.layered_record import LayeredRecord
 
     options, has_detail = _LAYERED_CASES[request.param]
     record = BrdfEncoder(effort=0, **options).encode(read_merl(merl_file), name=request.param)

@@ -6,9 +6,9 @@ from pathlib import Path
 
 import pytest
 
-from brdfcodec.dataset import build_dataset
-from brdfcodec.nbrdf import iter_nbrdf_zip
-from brdfcodec.sources import nbrdf_zip_sources
+from brdfcodec.datasets.hdf5 import build_dataset
+from brdfcodec.datasets.nbrdf import iter_nbrdf_zip
+from brdfcodec.datasets.sources import nbrdf_zip_sources
 
 MATERIALS = ["green-acrylic", "chrome"]
 

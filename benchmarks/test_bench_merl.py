@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from brdfcodec.merl import read_merl, write_merl
+from brdfcodec.io.merl import read_merl, write_merl
 
 
 def test_read_baseline_numpy_fromfile(benchmark: pytest.FixtureRequest, merl_file: Path) -> None:

@@ -11,7 +11,7 @@ import time
 
 import numpy as np
 
-from brdfcodec.bvae_format import MAX_RECORDS, DecoderReference, LatentRecord, encode_bvae, parse_bvae
+from brdfcodec.format.bvae import MAX_RECORDS, DecoderReference, LatentRecord, encode_bvae, parse_bvae
 
 _DECODER = DecoderReference("ab" * 32, "bench-decoder")
 _ROUNDS = 3

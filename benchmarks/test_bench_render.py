@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from brdfcodec.bvae_format import LatentRecord
+from brdfcodec.format.bvae import LatentRecord
 from brdfcodec.codec import BrdfDecoder, DecodedMaterial
-from brdfcodec.edit import interpolate, traverse
-from brdfcodec.render import render_sphere
+from brdfcodec.edit.latent_edits import interpolate, traverse
+from brdfcodec.render.preview import render_sphere
 
 
 @pytest.fixture(scope="module")

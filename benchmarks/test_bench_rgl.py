@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from brdfcodec.nbrdf import iter_nbrdf_zip
+from brdfcodec.datasets.nbrdf import iter_nbrdf_zip
 
 
 @pytest.fixture(scope="module")
@@ -20,7 +20,7 @@ def rgl_file(nbrdf_zip: Path) -> Path:
     if not path.is_file():
         pytest.skip(f"real RGL measurement not found at {path}")
     pytest.importorskip("mitsuba", reason="Mitsuba 3 is not installed (extra brdfcodec[rgl])")
-    from brdfcodec.mitsuba_runtime import LibLLVMNotFoundError, find_libllvm
+    from brdfcodec.runtime.mitsuba import LibLLVMNotFoundError, find_libllvm
 
     try:
         find_libllvm()
@@ -37,7 +37,7 @@ def test_rgl_baseline_proxy_tabulation(benchmark: pytest.FixtureRequest, nbrdf_z
 
 
 def test_rgl_tabulation(benchmark: pytest.FixtureRequest, rgl_file: Path) -> None:
-    from brdfcodec.rgl import read_rgl_bsdf
+    from brdfcodec.io.rgl import read_rgl_bsdf
 
     benchmark.group = "rgl-tabulate"
     benchmark.extra_info["role"] = "candidate"

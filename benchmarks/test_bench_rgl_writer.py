@@ -11,8 +11,8 @@ from pathlib import Path
 
 import pytest
 
-from brdfcodec.analytic import ANALYTIC_PRESETS
-from brdfcodec.merl import MerlBRDF, write_merl
+from brdfcodec.datasets.analytic import ANALYTIC_PRESETS
+from brdfcodec.io.merl import MerlBRDF, write_merl
 
 
 @pytest.fixture(scope="module")
@@ -28,8 +28,8 @@ def test_rgl_write_baseline_merl(benchmark: pytest.FixtureRequest, gold: MerlBRD
 
 
 def test_rgl_write(benchmark: pytest.FixtureRequest, gold: MerlBRDF, tmp_path: Path) -> None:
-    from brdfcodec.rgl import read_rgl_header
-    from brdfcodec.rgl_writer import write_rgl_bsdf
+    from brdfcodec.io.rgl import read_rgl_header
+    from brdfcodec.io.rgl_writer import write_rgl_bsdf
 
     benchmark.group = "rgl-write"
     benchmark.extra_info["role"] = "candidate"

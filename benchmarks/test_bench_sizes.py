@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from brdfcodec.bvae_format import DecoderReference, LatentRecord, encode_bvae
+from brdfcodec.format.bvae import DecoderReference, LatentRecord, encode_bvae
 
 DECODER = DecoderReference("e1" * 32, "bvae-nbrdf-proxy-small-v1")
 

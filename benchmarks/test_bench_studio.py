@@ -67,8 +67,8 @@ def test_studio_baseline_server_render(benchmark: Any, studio_page: Any) -> None
     from PIL import Image
 
     from brdfcodec.codec import DecodedMaterial
-    from brdfcodec.images import encode_srgb
-    from brdfcodec.render import render_sphere
+    from brdfcodec.render.images import encode_srgb
+    from brdfcodec.render.preview import render_sphere
 
     _, server = studio_page
     record = server.catalogue.record("green-acrylic")

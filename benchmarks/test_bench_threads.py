@@ -20,7 +20,7 @@ import numpy as np
 import pytest
 
 import brdfcodec as bc
-from brdfcodec.analytic import ANALYTIC_PRESETS
+from brdfcodec.datasets.analytic import ANALYTIC_PRESETS
 
 _ROUNDS = 3
 

@@ -26,11 +26,11 @@ import time
 import numpy as np
 from basis_study import study_arguments
 
-from brdfcodec.analytic import ANALYTIC_PRESETS
-from brdfcodec.baselines.pca import fit_pca_colour_orders
-from brdfcodec.dataset import BrdfDataset
+from brdfcodec.datasets.analytic import ANALYTIC_PRESETS
+from brdfcodec.models.pca import fit_pca_colour_orders
+from brdfcodec.datasets.hdf5 import BrdfDataset
 from brdfcodec.report.rd_points import LayeredBvae, PcaPacked
-from brdfcodec.metrics import error_report
+from brdfcodec.representation.metrics import error_report
 from brdfcodec.report.points import Material
 from brdfcodec.representation import network_input_from_table
 

@@ -3,7 +3,7 @@
 The light core is importable from here without torch: MERL I/O, the data
 spine of :mod:`brdfcodec.representation` (stored ↔ reflectance, the log
 mapping, kept slices, table ↔ network), lookup and metrics, and the
-``.bvae`` format. Datasets (:mod:`brdfcodec.dataset`, needs h5py) and
+``.bvae`` format. Datasets (:mod:`brdfcodec.datasets.hdf5`, needs h5py) and
 analytic or proxy sources live in their own modules. The codec
 (:mod:`brdfcodec.codec`, needs torch) is loaded on first use of ``encode``,
 ``decode``, ``compress``, ``decompress``, ``BrdfEncoder``, ``BrdfDecoder``
@@ -17,16 +17,6 @@ headers stays fast.
 
 from typing import Any
 
-from brdfcodec.blas_threads import get_num_threads, set_num_threads
-from brdfcodec.bvae_format import (
-    BvaeReader,
-    DecoderReference,
-    GraftRecord,
-    LatentRecord,
-    read_bvae,
-    read_header,
-    write_bvae,
-)
 from brdfcodec.errors import (
     BrdfcodecError,
     BvaeChecksumError,
@@ -46,11 +36,18 @@ from brdfcodec.errors import (
     UnmeasuredMaterialError,
     UnsupportedVersionError,
 )
-from brdfcodec.genuine import genuine_merl_name
-from brdfcodec.inputs import read_measured
-from brdfcodec.lookup import lookup
-from brdfcodec.merl import MerlBRDF, read_merl, write_merl
-from brdfcodec.metrics import cosine_weighted_rmse, error_report, relae_linear, relae_mapped
+from brdfcodec.format.bvae import (
+    BvaeReader,
+    DecoderReference,
+    GraftRecord,
+    LatentRecord,
+    read_bvae,
+    read_header,
+    write_bvae,
+)
+from brdfcodec.io.genuine import genuine_merl_name
+from brdfcodec.io.inputs import read_measured
+from brdfcodec.io.merl import MerlBRDF, read_merl, write_merl
 from brdfcodec.representation import (
     interpolate_slices,
     map_values,
@@ -61,6 +58,9 @@ from brdfcodec.representation import (
     table_from_network_output,
     unmap_values,
 )
+from brdfcodec.representation.lookup import lookup
+from brdfcodec.representation.metrics import cosine_weighted_rmse, error_report, relae_linear, relae_mapped
+from brdfcodec.runtime.threads import get_num_threads, set_num_threads
 from brdfcodec.version import __version__
 
 _CODEC_NAMES = (

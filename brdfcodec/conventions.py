@@ -32,7 +32,7 @@ __all__ = [
 #: Version of ``spec/conventions.md`` that this module implements.
 CONVENTIONS_VERSION: Final = "1.2"
 
-#: Number of θh bins (non-linear, see :func:`brdfcodec.coords.theta_h_index`).
+#: Number of θh bins (non-linear, see :func:`brdfcodec.representation.coords.theta_h_index`).
 N_THETA_H: Final = 90
 #: Number of θd bins (linear over [0, π/2)).
 N_THETA_D: Final = 90

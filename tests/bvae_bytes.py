@@ -1,5 +1,5 @@
 """The conformance vectors' hand-written ``.bvae`` writer (``spec/vectors/make_vectors.py``), for tests that
-build files byte by byte, independently of ``brdfcodec.bvae_format``."""
+build files byte by byte, independently of ``brdfcodec.format.bvae``."""
 
 from __future__ import annotations
 

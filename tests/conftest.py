@@ -7,8 +7,8 @@ from pathlib import Path
 
 import pytest
 
-from brdfcodec.analytic import ANALYTIC_PRESETS
-from brdfcodec.merl import MerlBRDF, write_merl
+from brdfcodec.datasets.analytic import ANALYTIC_PRESETS
+from brdfcodec.io.merl import MerlBRDF, write_merl
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 
@@ -50,8 +50,8 @@ def red_plastic_file(tmp_path_factory: pytest.TempPathFactory, analytic_tables: 
 @pytest.fixture(scope="session")
 def analytic_training_set(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A dataset of 12 random analytic materials (a fifth held out) for short training runs."""
-    from brdfcodec.dataset import build_dataset
-    from brdfcodec.sources import analytic_sources
+    from brdfcodec.datasets.hdf5 import build_dataset
+    from brdfcodec.datasets.sources import analytic_sources
 
     path = tmp_path_factory.mktemp("analytic-training") / "analytic.h5"
     build_dataset(path, analytic_sources(random_count=12), source_kind="analytic", description="analytic test set",

@@ -20,7 +20,7 @@ import numpy as np
 import pytest
 
 from brdfcodec.cli import main
-from brdfcodec.merl import write_merl
+from brdfcodec.io.merl import write_merl
 from brdfcodec.models.manifest import load_manifest
 from brdfcodec.models.registry import default_model_folder
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from brdfcodec.bvae_format import DecoderReference, LatentRecord, encode_bvae, parse_bvae
+from brdfcodec.format.bvae import DecoderReference, LatentRecord, encode_bvae, parse_bvae
 from brdfcodec.errors import BasisMismatchError, BvaeFormatError
 from brdfcodec.layers.basis import (
     BasisError,
@@ -18,7 +18,7 @@ from brdfcodec.layers.basis import (
     with_colour_permutations,
     write_shared_basis,
 )
-from brdfcodec.layers.record import LayeredRecord, quantise_sigma, sigma_from_codes
+from brdfcodec.format.layered_record import LayeredRecord, quantise_sigma, sigma_from_codes
 
 DECODER = DecoderReference("ab" * 32, "test-decoder")
 SHA = "cd" * 32
@@ -134,7 +134,7 @@ def test_a_compact_mu_step_that_is_not_positive_and_finite_is_malformed(step: fl
 
 
 def test_unknown_mu_and_sigma_storage_are_unsupported() -> None:
-    from brdfcodec.layers.record import layers_length
+    from brdfcodec.format.layered_record import layers_length
 
     for layers, what in (({"mu": "int4", "basis": {"sha256": SHA, "count": 1}}, "mu"),
                          ({"sigma": "log2-u4", "basis": {"sha256": SHA, "count": 1}}, "sigma")):
@@ -398,7 +398,7 @@ def test_the_basis_layer_follows_the_decoder_output_it_was_fitted_on(analytic_ta
     layered_error = measure(record, encoder.decoder, brdf).meta["relae"]["mapped"]
     assert layered_error < 0.9 * base_error
     # The coefficients are fitted to the quantised μ the record stores: refitting them to it gives the same ones.
-    from brdfcodec.layers.refine import fit_basis_coefficients
+    from brdfcodec.codec.refine import fit_basis_coefficients
     from brdfcodec.representation import network_input_from_table
 
     inputs, masks = network_input_from_table(brdf.values, brdf.mask)
@@ -433,7 +433,7 @@ def test_an_error_target_takes_the_smallest_candidate_that_meets_it(analytic_tab
 
 
 def test_an_error_target_tries_candidates_from_small_to_large() -> None:
-    from brdfcodec.layers.rate import DETAIL_BASIS_COUNT, STEP_LADDER, error_target_sequence
+    from brdfcodec.codec.rate import DETAIL_BASIS_COUNT, STEP_LADDER, error_target_sequence
 
     sequence = error_target_sequence(75)
     assert sequence[:5] == [(True, 4, None), (True, 8, None), (True, 16, None), (True, 32, None), (True, 75, None)]
@@ -491,7 +491,7 @@ def test_float16_decoding_of_a_basis_record_stays_close(analytic_tables) -> None
     import torch
 
     from brdfcodec.codec import BrdfDecoder, BrdfEncoder
-    from brdfcodec.metrics import relae_mapped
+    from brdfcodec.representation.metrics import relae_mapped
 
     brdf = analytic_tables["chrome"]  # a hard material: a sharp, bright lobe
     record = BrdfEncoder(effort=0, bytes=128, latent_dtype="float16").encode(brdf, name="chrome")
@@ -520,7 +520,7 @@ def test_coefficients_fitted_to_a_fixed_code_leave_it_and_lower_the_error(analyt
     end above the least-squares start."""
     from brdfcodec.codec import BrdfDecoder, BrdfEncoder
     from brdfcodec.conventions import MAPPED_MAX
-    from brdfcodec.layers.refine import fit_basis_coefficients
+    from brdfcodec.codec.refine import fit_basis_coefficients
     from brdfcodec.representation import network_input_from_table
 
     decoder = BrdfDecoder()
@@ -549,7 +549,7 @@ def test_a_fit_minimises_the_error_it_is_given(analytic_tables) -> None:
 
     from brdfcodec.codec import BrdfDecoder, BrdfEncoder
     from brdfcodec.conventions import MAPPED_MAX
-    from brdfcodec.layers.refine import fit_basis_coefficients
+    from brdfcodec.codec.refine import fit_basis_coefficients
     from brdfcodec.representation import network_input_from_table
 
     decoder = BrdfDecoder()
@@ -579,7 +579,7 @@ def test_a_fit_minimises_the_error_it_is_given(analytic_tables) -> None:
 
 
 def test_a_factorised_basis_file_expands_to_the_dense_basis_it_stands_for(tmp_path) -> None:
-    from brdfcodec.colour_orders_pca import COLOUR_VECTORS
+    from brdfcodec.layers.colour_orders_pca import COLOUR_VECTORS
     from brdfcodec.layers.basis import fit_factorised_basis, write_factorised_basis
 
     x, m = coloured_inputs(4)
@@ -606,7 +606,7 @@ def test_a_factorised_basis_file_expands_to_the_dense_basis_it_stands_for(tmp_pa
     assert path.stat().st_size < 0.5 * dense.nbytes
     from safetensors.numpy import save_file
 
-    from brdfcodec.hashing import sha256_of_file
+    from brdfcodec.io.hashing import sha256_of_file
 
     good = {"factors": factorised.factors, "colours": factorised.colours, "factor_of": factorised.factor_of,
             "colour_entries": factorised.colour_entries}

@@ -15,12 +15,12 @@ from typing import Any
 import numpy as np
 import pytest
 
-from brdfcodec.bvae_format import DecoderReference, LatentRecord, encode_bvae, parse_bvae, record_size
+from brdfcodec.format.bvae import DecoderReference, LatentRecord, encode_bvae, parse_bvae, record_size
 from brdfcodec.conventions import MAPPED_MAX, NETWORK_INPUT_SHAPE
 from brdfcodec.errors import BasisError, BvaeFormatError, NoLatentError, RateTargetError
 from brdfcodec.layers.basis import BasisLayer, quantise_coefficients
 from brdfcodec.layers.detail import encode_detail
-from brdfcodec.layers.record import LayeredRecord
+from brdfcodec.format.layered_record import LayeredRecord
 from bvae_bytes import bytes_writer
 
 DECODER = DecoderReference("ab" * 32, "test-decoder")
@@ -122,7 +122,7 @@ def _linear_path_mean(decoder: Any) -> np.ndarray:
     entry above the horizon, in increasing flat order) widened, 0 below the horizon (spec/model.md §1)."""
     from safetensors.numpy import load_file
 
-    from brdfcodec.mask import kept_slice_horizon_mask
+    from brdfcodec.representation.mask import kept_slice_horizon_mask
     from brdfcodec.representation import to_network_layout
 
     mean = load_file(str(decoder.manifest.folder / "decoder.safetensors"))["basis_mean"].astype(np.float32)
@@ -189,7 +189,7 @@ def _slice_error(mapped: np.ndarray, target: np.ndarray, masks: np.ndarray) -> f
 
 
 def test_rate_control_keeps_the_lower_error_and_a_latent_on_a_tie() -> None:
-    from brdfcodec.layers.rate import encode_layers
+    from brdfcodec.codec.rate import encode_layers
 
     target = np.full(NETWORK_INPUT_SHAPE, 0.5, dtype=np.float32)
     masks = np.ones(NETWORK_INPUT_SHAPE, dtype=np.float32)
@@ -224,7 +224,7 @@ def test_rate_control_keeps_the_lower_error_and_a_latent_on_a_tie() -> None:
 def test_a_larger_budget_is_never_worse_with_records_without_a_latent() -> None:
     """Budget ladder of synthetic fits whose error falls with k, the latent candidates flat (as in
     test_rate_monotone.py): each larger budget returns a record no worse than the smaller one's."""
-    from brdfcodec.layers.rate import encode_layers, layered_mapped
+    from brdfcodec.codec.rate import encode_layers, layered_mapped
 
     target = np.broadcast_to(np.linspace(0.2, 0.8, 90, dtype=np.float32), NETWORK_INPUT_SHAPE).copy()
     masks = np.ones(NETWORK_INPUT_SHAPE, dtype=np.float32)
@@ -258,7 +258,7 @@ def encoder() -> Any:
 
 def _encode(encoder: Any, brdf: Any, **options: Any) -> tuple[Any, float]:
     """One material under the given options (the encoder's model loaded once), and its kept-slice mapped L1."""
-    from brdfcodec.layers.encoding import EncodeOptions
+    from brdfcodec.codec.encoding import EncodeOptions
     from brdfcodec.representation import network_input_from_table
 
     encoder.options = EncodeOptions(effort=1, latent_itemsize=2, **options)
@@ -299,8 +299,7 @@ def test_an_error_target_takes_a_smaller_record_without_a_latent_where_it_meets_
 
 
 def test_every_edit_refuses_a_record_without_a_latent() -> None:
-    from brdfcodec import edit
-
+    from brdfcodec.edit import latent_edits as edit
     record, other = without_latent(), LatentRecord("other", np.zeros(8), np.ones(8))
     for attempt in (lambda: edit.traverse(record, 0, [1.0]), lambda: edit.interpolate(record, other, 0.5),
                     lambda: edit.interpolate(other, record, 0.5), lambda: edit.mix_factors(record, other, [0]),

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from threadpoolctl import threadpool_info, threadpool_limits
 
-from brdfcodec.blas_threads import single_blas_thread
+from brdfcodec.runtime.threads import single_blas_thread
 
 assert np.ones((2, 2)) @ np.ones(2) is not None  # numpy's BLAS is loaded before threadpoolctl looks
 

@@ -13,7 +13,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from brdfcodec.bvae_format import (
+from brdfcodec.format.bvae import (
     FORMAT_MAJOR,
     FORMAT_MINOR,
     MAGIC,
@@ -242,7 +242,7 @@ def test_record_size_is_what_a_record_adds_beyond_its_name() -> None:
     a name of 128 bytes too), so rate control can hold a budget on the file, not the payload."""
     from brdfcodec.layers.basis import BasisLayer
     from brdfcodec.layers.detail import DetailLayer
-    from brdfcodec.layers.record import LayeredRecord
+    from brdfcodec.format.layered_record import LayeredRecord
 
     rng = np.random.default_rng(1)
     frame = _detail_frame()
@@ -283,7 +283,7 @@ def _detail_frame() -> bytes:
 
 def test_a_file_holds_one_shared_basis_and_provenance_only_when_kept() -> None:
     from brdfcodec.layers.basis import BasisLayer
-    from brdfcodec.layers.record import LayeredRecord
+    from brdfcodec.format.layered_record import LayeredRecord
 
     def on(sha: str, name: str) -> LayeredRecord:
         return LayeredRecord(name, np.zeros(8), np.ones(8), {"effort": 1, "relae": {"mapped": 0.1},

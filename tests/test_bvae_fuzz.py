@@ -21,7 +21,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from brdfcodec.bvae_format import (
+from brdfcodec.format.bvae import (
     MAX_HEADER_BYTES,
     MAX_HEADER_CONTAINERS,
     MAX_JSON_INTEGER,
@@ -31,7 +31,7 @@ from brdfcodec.bvae_format import (
     parse_bvae,
 )
 from brdfcodec.errors import BvaeFormatError, LatentDimensionError
-from brdfcodec.material_names import check_material_name, material_file_path, name_collision_key
+from brdfcodec.format.material_names import check_material_name, material_file_path, name_collision_key
 from brdfcodec.models.manifest import load_manifest
 from brdfcodec.models.registry import default_model_folder
 from bvae_bytes import bytes_writer

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from brdfcodec.card_range import FAR_FACTOR, card_range_warning, family_of
+from brdfcodec.models.card_range import FAR_FACTOR, card_range_warning, family_of
 from brdfcodec.models.registry import default_model_folder
 from brdfcodec.models.store import load_manifest
 

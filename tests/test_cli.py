@@ -12,9 +12,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from brdfcodec.analytic import ANALYTIC_PRESETS
+from brdfcodec.datasets.analytic import ANALYTIC_PRESETS
 from brdfcodec.cli import main
-from brdfcodec.merl import read_merl
+from brdfcodec.io.merl import read_merl
 
 
 def run(capsys: pytest.CaptureFixture[str], *argv: str) -> tuple[int, str, str]:

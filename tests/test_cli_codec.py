@@ -8,10 +8,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from brdfcodec.bvae_format import FORMAT_MAJOR, FORMAT_MINOR, read_bvae
+from brdfcodec.format.bvae import FORMAT_MAJOR, FORMAT_MINOR, read_bvae
 from brdfcodec.cli import main
-from brdfcodec.exr import read_exr_rgb
-from brdfcodec.merl import MerlBRDF, read_merl, write_merl
+from brdfcodec.io.exr import read_exr_rgb
+from brdfcodec.io.merl import MerlBRDF, read_merl, write_merl
 
 
 def run(capsys: pytest.CaptureFixture[str], *argv: str) -> tuple[int, str, str]:
@@ -149,7 +149,7 @@ def test_bvae_info_does_not_import_torch(tmp_path: Path) -> None:
     import subprocess
     import sys
 
-    from brdfcodec.bvae_format import DecoderReference, LatentRecord, write_bvae
+    from brdfcodec.format.bvae import DecoderReference, LatentRecord, write_bvae
 
     path = tmp_path / "x.bvae"
     write_bvae(path, [LatentRecord("a", np.zeros(8), np.ones(8))], DecoderReference("c" * 64, "elsewhere"))

@@ -7,9 +7,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from brdfcodec.bvae_format import GraftRecord, read_bvae
+from brdfcodec.format.bvae import GraftRecord, read_bvae
 from brdfcodec.cli import main
-from brdfcodec.merl import MerlBRDF, write_merl
+from brdfcodec.io.merl import MerlBRDF, write_merl
 
 
 def run(capsys: pytest.CaptureFixture[str], *argv: str) -> tuple[int, str, str]:
@@ -70,7 +70,7 @@ def test_render_outputs(capsys, library: Path, tmp_path: Path) -> None:
     code, _, err = run(capsys, "render", str(tmp_path / "gold.binary"), "-o", str(tmp_path / "s.exr"),
                        "--size", "32", "--flat")
     assert code == 0, err
-    from brdfcodec.exr import read_exr_rgb
+    from brdfcodec.io.exr import read_exr_rgb
 
     [flat] = read_exr_rgb(tmp_path / "s.exr").values()
     assert flat.shape == (32, 32, 3) and np.isfinite(flat).all() and flat.max() > 0

@@ -8,10 +8,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from brdfcodec import edit
-from brdfcodec.bvae_format import GraftRecord, LatentRecord, read_bvae
+from brdfcodec.edit import latent_edits as edit
+from brdfcodec.format.bvae import GraftRecord, LatentRecord, read_bvae
 from brdfcodec.cli import main
-from brdfcodec.merl import MerlBRDF, write_merl
+from brdfcodec.io.merl import MerlBRDF, write_merl
 
 
 def run(capsys: pytest.CaptureFixture[str], *argv: str) -> tuple[int, str, str]:

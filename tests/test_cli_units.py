@@ -7,10 +7,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from brdfcodec.bvae_format import read_bvae
+from brdfcodec.format.bvae import read_bvae
 from brdfcodec.cli import main
-from brdfcodec.exr import SLICE_UNITS, read_exr_attributes, read_exr_rgb
-from brdfcodec.merl import MerlBRDF, read_merl, write_merl
+from brdfcodec.io.exr import SLICE_UNITS, read_exr_attributes, read_exr_rgb
+from brdfcodec.io.merl import MerlBRDF, read_merl, write_merl
 
 
 def run(capsys: pytest.CaptureFixture[str], *argv: str) -> tuple[int, str, str]:

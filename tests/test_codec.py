@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 import torch
 
-from brdfcodec.bvae_format import (
+from brdfcodec.format.bvae import (
     MAGIC,
     DecoderReference,
     GraftRecord,
@@ -31,9 +31,9 @@ from brdfcodec.codec import (
 )
 from brdfcodec.conventions import UNMEASURED_VALUE
 from brdfcodec.errors import DecoderMismatchError, DecoderNotFoundError
-from brdfcodec.mask import horizon_mask
-from brdfcodec.merl import MerlBRDF, write_merl
-from brdfcodec.metrics import error_report
+from brdfcodec.representation.mask import horizon_mask
+from brdfcodec.io.merl import MerlBRDF, write_merl
+from brdfcodec.representation.metrics import error_report
 from brdfcodec.models.registry import default_model_folder
 from brdfcodec.representation import (
     map_values,
@@ -125,7 +125,7 @@ def test_eval_matches_the_decoded_table(decoder: BrdfDecoder, tmp_path: Path) ->
     material = MaterialLibrary(path, decoder=decoder)["m000"]
     reflectance = material.reflectance()
     wi, wo = np.array([0.0, 0.0, 1.0]), np.array([np.sin(0.5), 0.0, np.cos(0.5)])
-    from brdfcodec.lookup import lookup
+    from brdfcodec.representation.lookup import lookup
 
     np.testing.assert_allclose(material.eval(wi, wo), lookup(reflectance, wi, wo), rtol=1e-6)
     np.testing.assert_array_equal(material.eval(np.array([0, 0, 1.0]), np.array([1.0, 0, -0.1])), 0.0)

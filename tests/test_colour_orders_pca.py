@@ -1,4 +1,4 @@
-"""PCA of materials in all 6 colour orders, found from colour sums and deviations (brdfcodec.colour_orders_pca)."""
+"""PCA of materials in all 6 colour orders, found from colour sums and deviations (brdfcodec.layers.colour_orders_pca)."""
 
 from __future__ import annotations
 
@@ -7,8 +7,8 @@ import itertools
 import numpy as np
 import pytest
 
-from brdfcodec.baselines.pca import fit_pca, fit_pca_colour_orders
-from brdfcodec.colour_orders_pca import colour_orders_pca
+from brdfcodec.models.pca import fit_pca, fit_pca_colour_orders
+from brdfcodec.layers.colour_orders_pca import colour_orders_pca
 from brdfcodec.layers.basis import with_colour_permutations
 
 

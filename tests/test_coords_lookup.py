@@ -8,7 +8,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from brdfcodec.conventions import TABLE_SHAPE
-from brdfcodec.coords import (
+from brdfcodec.representation.coords import (
     directions_from_half_diff,
     fold_phi_d,
     grid_angles,
@@ -21,9 +21,9 @@ from brdfcodec.coords import (
     theta_h_from_index,
     theta_h_index,
 )
-from brdfcodec.lookup import lookup
-from brdfcodec.mask import horizon_mask
-from brdfcodec.merl import MerlBRDF
+from brdfcodec.representation.lookup import lookup
+from brdfcodec.representation.mask import horizon_mask
+from brdfcodec.io.merl import MerlBRDF
 
 
 def unit(theta: float, phi: float) -> np.ndarray:
@@ -150,7 +150,7 @@ def test_lookup_is_reciprocal(analytic_tables: dict[str, MerlBRDF], mode: str) -
 
 def test_trilinear_is_close_to_the_analytic_brdf(analytic_tables: dict[str, MerlBRDF]) -> None:
     """Off-grid lookups of a smooth material approximate the analytic function it was made from."""
-    from brdfcodec.analytic import ANALYTIC_PRESETS
+    from brdfcodec.datasets.analytic import ANALYTIC_PRESETS
 
     material = ANALYTIC_PRESETS["blue-rubber"]
     rng = np.random.default_rng(3)

@@ -10,12 +10,12 @@ import numpy as np
 import pytest
 
 from brdfcodec.conventions import KEPT_PHI_D_SLICES
-from brdfcodec.dataset import DATASET_FORMAT_VERSION, BrdfDataset, build_dataset
+from brdfcodec.datasets.hdf5 import DATASET_FORMAT_VERSION, BrdfDataset, build_dataset
 from brdfcodec.errors import DatasetError, MerlFormatError, SourceFormatError
-from brdfcodec.merl import MerlBRDF, read_merl, write_merl
+from brdfcodec.io.merl import MerlBRDF, read_merl, write_merl
 from brdfcodec.representation import map_values, network_input_from_table
-from brdfcodec.sources import analytic_sources, merl_folder_sources, nbrdf_zip_sources
-from brdfcodec.split import split_materials
+from brdfcodec.datasets.sources import analytic_sources, merl_folder_sources, nbrdf_zip_sources
+from brdfcodec.datasets.split import split_materials
 
 
 @pytest.fixture(scope="module")

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from brdfcodec.analytic import FACTOR_NAMES, AnalyticBRDF, factor_material, sample_factor_materials
+from brdfcodec.datasets.analytic import FACTOR_NAMES, AnalyticBRDF, factor_material, sample_factor_materials
 from brdfcodec.report.disentanglement import (
     DisentanglementInputError,
     boosted_stumps,

@@ -11,7 +11,7 @@ import pytest
 
 import brdfcodec
 
-_OPTIONAL = {"brdfcodec.mitsuba_bsdf": "mitsuba"}
+_OPTIONAL = {"brdfcodec.render.mitsuba_bsdf": "mitsuba"}
 
 
 def _module_names() -> list[str]:
@@ -36,7 +36,8 @@ def test_docstring_examples(name: str) -> None:
 
 def test_the_public_api_has_examples() -> None:
     """The entry points a newcomer reads first show how they are called."""
-    from brdfcodec import codec, metrics, representation
+    from brdfcodec import codec, representation
+    from brdfcodec.representation import metrics
 
     for obj in (codec.encode, codec.BrdfDecoder, codec.MaterialLibrary, metrics.relae_between_mapped,
                 representation.mapping, representation.units, representation.network_io):

@@ -7,12 +7,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from brdfcodec.bvae_format import GraftRecord, LatentRecord, encode_bvae, parse_bvae
+from brdfcodec.format.bvae import GraftRecord, LatentRecord, encode_bvae, parse_bvae
 from brdfcodec.codec import BrdfDecoder
-from brdfcodec.edit import fit_graft, graft, interpolate, mix_factors, parameter_vector, refine_code, traverse
-from brdfcodec.merl import MerlBRDF
+from brdfcodec.edit.latent_edits import fit_graft, graft, interpolate, mix_factors, parameter_vector, refine_code, traverse
+from brdfcodec.io.merl import MerlBRDF
 from brdfcodec.models.registry import default_model_folder
-from brdfcodec.parameters import colour_dims_of, measure_dimension_effects
+from brdfcodec.models.parameters import colour_dims_of, measure_dimension_effects
 from brdfcodec.representation import network_input_from_table, reflectance_from_stored
 
 

@@ -9,9 +9,9 @@ import pytest
 
 from brdfcodec.codec import BrdfDecoder, MaterialLibrary
 from brdfcodec.examples import example_library
-from brdfcodec.metrics import relae_mapped
-from brdfcodec.render import render_sphere
-from brdfcodec.sources import nbrdf_zip_sources
+from brdfcodec.representation.metrics import relae_mapped
+from brdfcodec.render.preview import render_sphere
+from brdfcodec.datasets.sources import nbrdf_zip_sources
 
 
 def test_every_shipped_material_decodes_and_renders_finite_and_non_negative() -> None:

@@ -7,8 +7,8 @@ from pathlib import Path
 
 import pytest
 
-from brdfcodec.dataset import build_dataset
-from brdfcodec.sources import analytic_sources
+from brdfcodec.datasets.hdf5 import build_dataset
+from brdfcodec.datasets.sources import analytic_sources
 
 
 @pytest.fixture(scope="module")
@@ -33,8 +33,8 @@ def test_rows_per_family_and_split(analytic_dataset: Path) -> None:
     # reproduces those up to the slice interpolation but not the held-out ones, which lift the mean above it.
     import numpy as np
 
-    from brdfcodec.dataset import BrdfDataset
-    from brdfcodec.metrics import relae_mapped
+    from brdfcodec.datasets.hdf5 import BrdfDataset
+    from brdfcodec.representation.metrics import relae_mapped
     from brdfcodec.representation import table_from_network_output
 
     with BrdfDataset(analytic_dataset) as dataset:

@@ -81,9 +81,9 @@ def bvae_seeds() -> list[bytes]:
     written by the library's writer with the shipped decoder and its shared basis."""
     if "seeds" in _STATE:
         return _STATE["seeds"]
-    from brdfcodec.bvae_format import GraftRecord, LatentRecord, encode_bvae
+    from brdfcodec.format.bvae import GraftRecord, LatentRecord, encode_bvae
     from brdfcodec.layers.basis import BasisLayer
-    from brdfcodec.layers.record import LayeredRecord
+    from brdfcodec.format.layered_record import LayeredRecord
 
     decoder = _decoder()
     sha = decoder.shared_basis.sha256
@@ -120,7 +120,7 @@ def bvae_seeds() -> list[bytes]:
 
 def _crc_positions(data: bytes) -> tuple[int, int | None]:
     """(header length, position of the payload CRC-32 in the file, if found): where to recompute CRCs."""
-    from brdfcodec.bvae_format import PREAMBLE_SIZE
+    from brdfcodec.format.bvae import PREAMBLE_SIZE
 
     header_length = struct.unpack_from("<I", data, 16)[0]
     records = PREAMBLE_SIZE + header_length
@@ -131,7 +131,7 @@ def _crc_positions(data: bytes) -> tuple[int, int | None]:
 
 def fix_crcs(data: bytearray, header_length: int, payload_crc_at: int | None) -> None:
     """Recompute the payload CRC-32 (where it was found in the seed) and the header CRC-32 in place."""
-    from brdfcodec.bvae_format import PREAMBLE_SIZE
+    from brdfcodec.format.bvae import PREAMBLE_SIZE
 
     records = PREAMBLE_SIZE + header_length
     if payload_crc_at is not None and payload_crc_at + 4 <= records <= len(data):
@@ -172,7 +172,7 @@ def mutate_bvae(seed: bytes, rng: random.Random) -> tuple[bytes, str]:
 def _structure(path: Path) -> tuple:
     """What decides whether an accepted file decodes, besides its values: kinds, layer forms and numbers, the basis
     step and the detail frames (values are checked finite at read; the decoder clamps whatever they decode to)."""
-    from brdfcodec.bvae_format import read_bvae
+    from brdfcodec.format.bvae import read_bvae
 
     parsed = read_bvae(path)
     return (parsed.header.decoder.sha256, parsed.header.latent_dim, *(
@@ -283,7 +283,7 @@ def _mitsuba():  # type: ignore[no-untyped-def]
 
 
 def check_rgl(data: bytes, path: Path) -> str:
-    from brdfcodec.rgl import check_supported, read_rgl_header
+    from brdfcodec.io.rgl import check_supported, read_rgl_header
 
     path.write_bytes(data)
     try:
@@ -363,10 +363,10 @@ def test_fuzz_detail_frames(extra: bytes, how: str) -> None:
     """A detail layer's bytes that are not exactly one whole frame: a format error naming the record, at read."""
     import zstandard
 
-    from brdfcodec.bvae_format import encode_bvae, parse_bvae
+    from brdfcodec.format.bvae import encode_bvae, parse_bvae
     from brdfcodec.errors import BvaeFormatError
     from brdfcodec.layers.detail import DetailLayer
-    from brdfcodec.layers.record import LayeredRecord
+    from brdfcodec.format.layered_record import LayeredRecord
 
     frame = _detail(3).data
     data = {"append": frame + extra, "prepend": extra + frame, "replace": extra or b"\0",
@@ -386,10 +386,10 @@ def test_fuzz_detail_frames(extra: bytes, how: str) -> None:
 def test_fuzz_basis_fields_against_the_model(count: int, first: int, project: int, unknown: bool) -> None:
     """Any count, first vector and projection a file may declare: opening it for decoding either succeeds and
     decodes, or refuses with a BasisError / BasisMismatchError (both BrdfcodecErrors)."""
-    from brdfcodec.bvae_format import encode_bvae, parse_bvae
+    from brdfcodec.format.bvae import encode_bvae, parse_bvae
     from brdfcodec.errors import BasisError, BasisMismatchError
     from brdfcodec.layers.basis import BasisLayer
-    from brdfcodec.layers.record import LayeredRecord
+    from brdfcodec.format.layered_record import LayeredRecord
 
     decoder = _decoder()
     sha = "00" * 32 if unknown else decoder.shared_basis.sha256
@@ -415,7 +415,7 @@ def test_fuzz_rgl_declared_shapes(field: str, shape: list[int], code: int) -> No
     naming the file, or a file whose every field lies in the file with the plugin's layout."""
     import tempfile
 
-    from brdfcodec.rgl import check_supported, read_rgl_header
+    from brdfcodec.io.rgl import check_supported, read_rgl_header
 
     with tempfile.TemporaryDirectory() as folder:
         path = Path(folder) / "fuzz_rgb.bsdf"
@@ -449,7 +449,7 @@ _bodies = st.fixed_dictionaries({}, optional={
 def _studio_server(tmp_path_factory: pytest.TempPathFactory):  # type: ignore[no-untyped-def]
     if "studio" not in _STATE:
         pytest.importorskip("starlette", reason="the studio needs the studio extra (starlette, uvicorn)")
-        from brdfcodec.bvae_format import LatentRecord, write_bvae
+        from brdfcodec.format.bvae import LatentRecord, write_bvae
         from brdfcodec.studio.catalogue import Catalogue
         from brdfcodec.studio.server import StudioServer
 

@@ -14,9 +14,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from brdfcodec import atomic
-from brdfcodec.atomic import atomic_output
-from brdfcodec.bvae_format import (
+from brdfcodec.io import atomic
+from brdfcodec.io.atomic import atomic_output
+from brdfcodec.format.bvae import (
     MAX_RECORDS,
     DecoderReference,
     GraftRecord,
@@ -27,8 +27,8 @@ from brdfcodec.bvae_format import (
     write_bvae,
 )
 from brdfcodec.errors import BvaeChecksumError, BvaeFormatError, UnmeasuredMaterialError, UnsupportedVersionError
-from brdfcodec.material_names import check_material_name, material_file_path
-from brdfcodec.merl import MerlBRDF
+from brdfcodec.format.material_names import check_material_name, material_file_path
+from brdfcodec.io.merl import MerlBRDF
 from bvae_bytes import bytes_writer
 
 DECODER = DecoderReference("ab" * 32, "test-decoder")
@@ -295,8 +295,7 @@ def test_degenerate_tables_prepare_clearly() -> None:
 
 
 def test_edited_records_carry_provenance_not_stale_measurements() -> None:
-    from brdfcodec import edit
-
+    from brdfcodec.edit import latent_edits as edit
     measured = {"relae": {"mapped": 0.05, "linear": 0.1}, "source_sha256": "cd" * 32, "encoder_sha256": "ef" * 32}
     a = LatentRecord("a", np.zeros(8), np.full(8, 0.1), measured)
     b = LatentRecord("b", np.ones(8), np.full(8, 0.4), measured)
@@ -356,7 +355,7 @@ def test_existing_files_still_read() -> None:
 
 
 def test_spec_states_the_bounds_the_reader_uses() -> None:
-    from brdfcodec.bvae_format import MAX_HEADER_CONTAINERS, MAX_HEADER_DEPTH, MAX_JSON_INTEGER
+    from brdfcodec.format.bvae import MAX_HEADER_CONTAINERS, MAX_HEADER_DEPTH, MAX_JSON_INTEGER
 
     text = (Path(__file__).resolve().parents[1] / "spec" / "bvae-format.md").read_text(encoding="utf-8")
     assert f"at most **{MAX_HEADER_CONTAINERS:,}** objects and arrays" in text
@@ -377,7 +376,7 @@ def test_every_public_name_of_the_package_resolves() -> None:
 
 def test_an_interruption_right_after_the_temporary_file_is_made_leaves_nothing(tmp_path, monkeypatch) -> None:
     """A SIGTERM (an exception in the CLI) can land between creating the temporary file and writing it."""
-    import brdfcodec.atomic as atomic
+    import brdfcodec.io.atomic as atomic
 
     class Interrupted(BaseException):
         pass
@@ -398,7 +397,7 @@ def test_an_interruption_right_after_the_temporary_file_is_made_leaves_nothing(t
 def test_unfinished_outputs_are_removed_when_the_block_is_never_left(tmp_path) -> None:
     """An exception between the context manager's own steps can leave a block without its cleanup running (the
     generator stays suspended): the CLI then removes every unfinished temporary file itself."""
-    from brdfcodec.atomic import atomic_output, remove_unfinished_outputs
+    from brdfcodec.io.atomic import atomic_output, remove_unfinished_outputs
 
     block = atomic_output(tmp_path / "x.bin")
     tmp = block.__enter__()

@@ -20,7 +20,7 @@ from tensor_files import field_shape_position, small_rgl_fields, tensor_file
 
 from brdfcodec.cli import main
 from brdfcodec.errors import BrdfcodecError, SourceFormatError
-from brdfcodec.rgl import check_supported, read_rgl_header
+from brdfcodec.io.rgl import check_supported, read_rgl_header
 
 if TYPE_CHECKING:
     from brdfcodec.codec import BrdfDecoder
@@ -132,8 +132,7 @@ def test_rgl_mitsuba_refusal_is_one_line(tmp_path: Path, monkeypatch: pytest.Mon
     pytest.importorskip("mitsuba", reason="Mitsuba 3 is not installed (extra brdfcodec[rgl])")
     import mitsuba
 
-    from brdfcodec import rgl
-
+    from brdfcodec.io import rgl
     dump = "Invalid file structure: TensorFile[\n" + "\n".join(f"  field {i}" for i in range(60)) + "\n]"
 
     def refuse(*args: object, **kwargs: object) -> None:
@@ -151,8 +150,8 @@ def test_rgl_mitsuba_refusal_is_one_line(tmp_path: Path, monkeypatch: pytest.Mon
 def test_rgl_synthetic_file_is_read_by_mitsuba(tmp_path: Path) -> None:
     """The checks refuse nothing Mitsuba reads: the valid synthetic file is accepted and tabulated."""
     pytest.importorskip("mitsuba", reason="Mitsuba 3 is not installed (extra brdfcodec[rgl])")
-    from brdfcodec.mitsuba_runtime import LibLLVMNotFoundError, find_libllvm
-    from brdfcodec.rgl import read_rgl_bsdf
+    from brdfcodec.runtime.mitsuba import LibLLVMNotFoundError, find_libllvm
+    from brdfcodec.io.rgl import read_rgl_bsdf
 
     try:
         find_libllvm()
@@ -192,8 +191,8 @@ def shipped_decoder() -> BrdfDecoder:
 def _layered_file(tmp_path: Path, decoder: BrdfDecoder, *, detail: DetailLayer | None = None,
                   basis: BasisLayer | None = None, name: str = "gold") -> Path:
     """A one-record ``.bvae`` file written by the library's own writer, so every CRC and length is right."""
-    from brdfcodec.bvae_format import write_bvae
-    from brdfcodec.layers.record import LayeredRecord
+    from brdfcodec.format.bvae import write_bvae
+    from brdfcodec.format.layered_record import LayeredRecord
 
     rng = np.random.default_rng(0)
     record = LayeredRecord(name, rng.normal(size=decoder.latent_dim), np.ones(decoder.latent_dim),
@@ -219,7 +218,7 @@ def test_broken_detail_layer_is_refused_at_read(tmp_path: Path, shipped_decoder:
                                                 capsys: pytest.CaptureFixture[str]) -> None:
     """A detail frame that is corrupt or truncated under a correct record CRC, or followed by anything:
     refused when the record is read (``info`` included), as a format error naming the file and the record."""
-    from brdfcodec.bvae_format import read_bvae
+    from brdfcodec.format.bvae import read_bvae
     from brdfcodec.errors import BvaeFormatError
     from brdfcodec.layers.detail import DetailLayer
 
@@ -267,7 +266,7 @@ def _basis_layer(decoder: BrdfDecoder, *, count: int = 5, first: int = 0, projec
 def test_basis_fields_beyond_the_shared_basis_are_refused_on_open(
         tmp_path: Path, shipped_decoder: BrdfDecoder, fields: dict, what: str,
         capsys: pytest.CaptureFixture[str]) -> None:
-    from brdfcodec.bvae_format import read_bvae
+    from brdfcodec.format.bvae import read_bvae
     from brdfcodec.codec import MaterialLibrary
     from brdfcodec.errors import BasisError
 
@@ -285,7 +284,7 @@ def test_basis_fields_beyond_the_shared_basis_are_refused_on_open(
 @pytest.mark.parametrize("project", [0, 50])
 def test_unknown_basis_hash_is_a_basis_mismatch_for_projected_records_too(tmp_path: Path, shipped_decoder: BrdfDecoder,
                                                                           project: int) -> None:
-    from brdfcodec.bvae_format import read_bvae
+    from brdfcodec.format.bvae import read_bvae
     from brdfcodec.codec import MaterialLibrary
     from brdfcodec.errors import BasisMismatchError
 
@@ -326,7 +325,7 @@ DETAIL = {"transform": "dct3-ycc", "step": 0.5, "dtype": "int16", "length": 100}
 def test_layer_keys_and_values_have_the_spec_error_classes(layers: dict, error: str) -> None:
     """Spec §4.4/§7: a missing key or a value of the wrong JSON type is malformed; an unknown key, or a string
     value this reader does not know, is unsupported."""
-    from brdfcodec.layers.record import UnsupportedLayerError, layers_length
+    from brdfcodec.format.layered_record import UnsupportedLayerError, layers_length
 
     with pytest.raises(ValueError) as caught:
         layers_length(layers, "record 0 (a)", 8)
@@ -344,7 +343,7 @@ def studio(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[str, Path
     from brdfcodec.studio.catalogue import Catalogue
     from brdfcodec.studio.server import StudioServer, create_app
 
-    from brdfcodec.bvae_format import LatentRecord, write_bvae
+    from brdfcodec.format.bvae import LatentRecord, write_bvae
     from brdfcodec.codec import BrdfDecoder
 
     library = tmp_path_factory.mktemp("studio-library") / "lib.bvae"  # its own library: any format version
@@ -450,8 +449,8 @@ def test_bytes_out_of_range_is_a_usage_error_before_the_model_loads(tmp_path: Pa
 def test_bytes_floor_is_the_smallest_record_the_encoder_writes() -> None:
     """The floor checked up front is the one rate control enforces: a one-byte name, a compact base and one
     coefficient, for the shipped model (D = 8, float32)."""
-    from brdfcodec.bvae_format import record_overhead
-    from brdfcodec.layers.rate import smallest_bytes_budget
+    from brdfcodec.format.bvae import record_overhead
+    from brdfcodec.codec.rate import smallest_bytes_budget
 
     assert smallest_bytes_budget(8, 4, basis=True) == 8 + 1 + 2 + 1 + record_overhead("a", basis_count=1)
     assert smallest_bytes_budget(8, 4, basis=False) == 64 + record_overhead("a")

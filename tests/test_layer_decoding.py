@@ -119,7 +119,7 @@ def test_a_bad_detail_layer_is_named_in_the_error() -> None:
 
 def test_a_layered_decode_is_the_base_plus_its_layers_and_a_bad_layer_is_named() -> None:
     from brdfcodec.codec import BrdfDecoder
-    from brdfcodec.layers.record import LayeredRecord
+    from brdfcodec.format.layered_record import LayeredRecord
 
     decoder = BrdfDecoder()
     rng = np.random.default_rng(2)
@@ -133,9 +133,9 @@ def test_a_layered_decode_is_the_base_plus_its_layers_and_a_bad_layer_is_named()
 
 def test_decode_many_gives_each_record_its_own_layers() -> None:
     """A batch mixing base-only, layered and graft records: the batched network, then each record's layers."""
-    from brdfcodec.bvae_format import GraftRecord, LatentRecord
+    from brdfcodec.format.bvae import GraftRecord, LatentRecord
     from brdfcodec.codec import BrdfDecoder
-    from brdfcodec.layers.record import LayeredRecord
+    from brdfcodec.format.layered_record import LayeredRecord
 
     decoder = BrdfDecoder()
     basis = decoder.shared_basis

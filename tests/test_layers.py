@@ -9,7 +9,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from brdfcodec.bvae_format import (
+from brdfcodec.format.bvae import (
     FORMAT_MAJOR,
     FORMAT_MINOR,
     DecoderReference,
@@ -20,7 +20,7 @@ from brdfcodec.bvae_format import (
 from brdfcodec.conventions import NETWORK_INPUT_SHAPE
 from brdfcodec.errors import BvaeFormatError, RateTargetError, UnsupportedVersionError
 from brdfcodec.layers.detail import DetailLayer, decode_detail, encode_detail
-from brdfcodec.layers.record import LayeredRecord
+from brdfcodec.format.layered_record import LayeredRecord
 from bvae_bytes import bytes_writer
 
 DECODER = DecoderReference("ab" * 32, "test-decoder")
@@ -179,7 +179,7 @@ def test_rate_control_meets_budgets_and_targets(analytic_tables) -> None:
 
 def test_refinement_never_worsens_and_edits_keep_the_layers(analytic_tables) -> None:
     from brdfcodec.codec import BrdfEncoder, measure
-    from brdfcodec.edit import interpolate, traverse
+    from brdfcodec.edit.latent_edits import interpolate, traverse
 
     brdf = next(iter(analytic_tables.values()))
     errors = []
@@ -220,7 +220,7 @@ def test_layered_decode_adds_the_layer_and_partial_decode_matches(analytic_table
 
 @pytest.mark.slow
 def test_cli_rate_control_flags(red_plastic_file, tmp_path, capsys) -> None:
-    from brdfcodec.bvae_format import read_bvae
+    from brdfcodec.format.bvae import read_bvae
     from brdfcodec.cli import main
 
     out = tmp_path / "m.bvae"
@@ -245,7 +245,7 @@ def test_refinement_adam_matches_torch_optim() -> None:
     """The hand-written Adam of refine.py (no torch._dynamo import) follows torch.optim.Adam step for step."""
     import torch
 
-    from brdfcodec.layers.refine import _Adam
+    from brdfcodec.codec.refine import _Adam
 
     torch.manual_seed(0)
     start = torch.randn(3, 8)
@@ -276,10 +276,10 @@ def test_cli_bad_flag_values_are_usage_errors(red_plastic_file, tmp_path, capsys
 @pytest.mark.slow
 def test_cli_graft_fit_of_a_layered_record_starts_from_its_base(red_plastic_file, tmp_path, capsys) -> None:
     """`bvae edit graft --fit` compares the fitted graft with the base code it starts from, not the layered decode."""
-    from brdfcodec.bvae_format import read_bvae
+    from brdfcodec.format.bvae import read_bvae
     from brdfcodec.cli import main
     from brdfcodec.codec import BrdfDecoder, measure
-    from brdfcodec.merl import read_merl
+    from brdfcodec.io.merl import read_merl
 
     layered_file, fitted = tmp_path / "m.bvae", tmp_path / "f.bvae"
     assert main(["compress", str(red_plastic_file), "-o", str(layered_file), "--bytes", "3000", "--effort", "0",
@@ -299,11 +299,11 @@ def test_cli_graft_fit_of_a_layered_record_starts_from_its_base(red_plastic_file
 
 
 def test_cli_reference_that_reflects_nothing_is_bad_input(tmp_path, capsys) -> None:
-    from brdfcodec.analytic import AnalyticBRDF
-    from brdfcodec.bvae_format import write_bvae
+    from brdfcodec.datasets.analytic import AnalyticBRDF
+    from brdfcodec.format.bvae import write_bvae
     from brdfcodec.cli import main
     from brdfcodec.codec import BrdfDecoder
-    from brdfcodec.merl import write_merl
+    from brdfcodec.io.merl import write_merl
 
     decoder = BrdfDecoder()
     lib = tmp_path / "one.bvae"
@@ -337,7 +337,7 @@ def test_a_record_with_a_detail_layer_carries_at_most_the_detail_basis_count(bet
     """Under a budget with room for detail, all 75 coefficients are tried without detail and at most 32 with it
     (a bound on every layered record's decode time), and the lower error is kept."""
     from brdfcodec.layers.basis import quantise_coefficients
-    from brdfcodec.layers.rate import DETAIL_BASIS_COUNT, encode_layers
+    from brdfcodec.codec.rate import DETAIL_BASIS_COUNT, encode_layers
 
     rng = np.random.default_rng(5)
     target = rng.uniform(0.0, 1.0, NETWORK_INPUT_SHAPE).astype(np.float32)
@@ -368,7 +368,7 @@ def test_an_error_target_searches_records_without_detail_first(all_coefficients_
     """The detail ladder carries at most 32 coefficients, so its coarse rungs can be worse than all 75 without
     detail: the search keeps to the records without detail when the largest of them meets the target."""
     from brdfcodec.layers.basis import quantise_coefficients
-    from brdfcodec.layers.rate import DETAIL_BASIS_COUNT, encode_layers
+    from brdfcodec.codec.rate import DETAIL_BASIS_COUNT, encode_layers
     from brdfcodec.representation import network_input_from_table
 
     values = np.full((3, 90, 90, 180), 0.05)
@@ -408,7 +408,7 @@ def test_a_budget_too_small_for_every_coefficient_stores_a_compact_base(
     budget: int, itemsize: int, mu_max: float, storage: str | None, count: int
 ) -> None:
     from brdfcodec.layers.basis import quantise_coefficients
-    from brdfcodec.layers.rate import encode_layers
+    from brdfcodec.codec.rate import encode_layers
 
     target = np.full(NETWORK_INPUT_SHAPE, 0.5, dtype=np.float32)
     masks = np.ones(NETWORK_INPUT_SHAPE, dtype=np.float32)
@@ -429,7 +429,7 @@ def test_a_budget_too_small_for_every_coefficient_stores_a_compact_base(
     # One basis size only: beside 32 coefficients none of these budgets has room for a detail layer (49 B at least).
     # Past the compact budgets the compact base's best (all 75 on a compact μ) stays a candidate too, so that rate
     # control stays monotone (issue 39); on a tie the full-precision base is kept.
-    from brdfcodec.layers.rate import compact_mu_storage
+    from brdfcodec.codec.rate import compact_mu_storage
 
     assert set(fitted) == {(count, storage)} | (set() if compact else {(count, compact_mu_storage(base.mu))})
     stored = parse_bvae(encode_bvae([record], DECODER, latent_dtype="float32" if itemsize == 4 else "float16"))

@@ -12,10 +12,10 @@ from pathlib import Path
 
 import pytest
 
-from brdfcodec.analytic import ANALYTIC_PRESETS
-from brdfcodec.bvae_format import PROVENANCE_KEYS, read_bvae
+from brdfcodec.datasets.analytic import ANALYTIC_PRESETS
+from brdfcodec.format.bvae import PROVENANCE_KEYS, read_bvae
 from brdfcodec.cli import main
-from brdfcodec.merl import write_merl
+from brdfcodec.io.merl import write_merl
 
 #: What a file may add beyond its materials' budgets and names: its fixed header (about 100 B) and a form table.
 FILE_OVERHEAD = 1024
@@ -86,8 +86,8 @@ def test_a_hundred_materials_cost_their_budgets_and_names(
 @pytest.fixture(scope="module")
 def hundred_materials(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A dataset (inputs only) of the 7 analytic presets and 93 random analytic materials."""
-    from brdfcodec.dataset import build_dataset
-    from brdfcodec.sources import analytic_sources
+    from brdfcodec.datasets.hdf5 import build_dataset
+    from brdfcodec.datasets.sources import analytic_sources
 
     path = tmp_path_factory.mktemp("hundred") / "hundred.h5"
     build_dataset(path, analytic_sources(random_count=93), source_kind="analytic", description="100 analytic",

@@ -8,9 +8,9 @@ import torch
 from threadpoolctl import threadpool_info
 
 import brdfcodec as bc
-from brdfcodec import blas_threads
-from brdfcodec.analytic import ANALYTIC_PRESETS
-from brdfcodec.bvae_format import LatentRecord
+from brdfcodec.runtime import threads as blas_threads
+from brdfcodec.datasets.analytic import ANALYTIC_PRESETS
+from brdfcodec.format.bvae import LatentRecord
 
 
 @pytest.fixture(autouse=True)
@@ -42,7 +42,7 @@ def _blas() -> set[int]:
 
 
 def test_encode_and_decode_run_torch_on_the_librarys_threads_and_restore_the_callers(monkeypatch) -> None:
-    from brdfcodec.layers import encoding
+    from brdfcodec.codec import encoding
 
     seen: dict[str, tuple[int, set[int]]] = {}
     real = encoding.layer_records

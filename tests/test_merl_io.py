@@ -13,9 +13,9 @@ import pytest
 
 from brdfcodec.conventions import TABLE_SHAPE, UNMEASURED_VALUE
 from brdfcodec.errors import MerlFormatError, NonFiniteValueError
-from brdfcodec.genuine import genuine_merl_checksums, genuine_merl_name
-from brdfcodec.mask import horizon_mask
-from brdfcodec.merl import MERL_FILE_SIZE, MerlBRDF, read_merl, write_merl
+from brdfcodec.io.genuine import genuine_merl_checksums, genuine_merl_name
+from brdfcodec.representation.mask import horizon_mask
+from brdfcodec.io.merl import MERL_FILE_SIZE, MerlBRDF, read_merl, write_merl
 
 N = 90 * 90 * 180
 

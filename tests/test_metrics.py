@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 
 from brdfcodec.conventions import MERL_COLOR_SCALE, TABLE_SHAPE
-from brdfcodec.mask import horizon_mask
-from brdfcodec.merl import MerlBRDF
-from brdfcodec.metrics import (
+from brdfcodec.representation.mask import horizon_mask
+from brdfcodec.io.merl import MerlBRDF
+from brdfcodec.representation.metrics import (
     RelaeAgainst,
     cosine_weighted_rmse,
     error_report,

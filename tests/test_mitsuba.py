@@ -14,15 +14,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from brdfcodec import mitsuba_runtime
-from brdfcodec.analytic import ANALYTIC_PRESETS
-from brdfcodec.bvae_format import LatentRecord, read_header, write_bvae
+from brdfcodec.runtime import mitsuba as mitsuba_runtime
+from brdfcodec.datasets.analytic import ANALYTIC_PRESETS
+from brdfcodec.format.bvae import LatentRecord, read_header, write_bvae
 from brdfcodec.cli import main
 from brdfcodec.codec import BrdfDecoder, MaterialLibrary
 from brdfcodec.examples import example_library
-from brdfcodec.merl import write_merl
-from brdfcodec.mitsuba_runtime import LibLLVMNotFoundError, find_libllvm, llvm_major
-from brdfcodec.render import render_sphere
+from brdfcodec.io.merl import write_merl
+from brdfcodec.runtime.mitsuba import LibLLVMNotFoundError, find_libllvm, llvm_major
+from brdfcodec.render.preview import render_sphere
 
 mi = pytest.importorskip("mitsuba", reason="Mitsuba 3 is an optional extra: pip install 'brdfcodec[mitsuba]'")
 SCENE = Path(__file__).resolve().parents[1] / "brdfcodec" / "data" / "scenes" / "spheres.xml"
@@ -96,8 +96,7 @@ def llvm() -> str:
 
 
 def _use(variant: str) -> None:
-    from brdfcodec import mitsuba_bsdf
-
+    from brdfcodec.render import mitsuba_bsdf
     mi.set_variant(variant)
     mitsuba_bsdf.register()
 
@@ -189,7 +188,7 @@ def _random_pairs(n: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
 
 def test_llvm_plugin_matches_the_scalar_plugin_and_the_library(llvm: str, glossy_bvae: Path) -> None:
     """eval of 2,000 random direction pairs: the vectorised plug-in equals the scalar plug-in and
-    brdfcodec.lookup (nearest) on at least 99.5 % of them (float32 angles may cross a bin edge the float64
+    brdfcodec.representation.lookup (nearest) on at least 99.5 % of them (float32 angles may cross a bin edge the float64
     ones do not), and within 1e-5 relative there."""
     wi, wo = _random_pairs(2000, 5)
     bsdf = {"type": "bvae", "filename": str(glossy_bvae)}
@@ -216,8 +215,8 @@ def test_llvm_plugin_matches_the_scalar_plugin_and_the_library(llvm: str, glossy
 def noise_file(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, object]:
     """A MERL file of random values (unmeasured below the horizon and in 1 % of entries): any mistake in bins,
     corners or weights shows, where a smooth material would hide it."""
-    from brdfcodec.mask import horizon_mask
-    from brdfcodec.merl import MerlBRDF
+    from brdfcodec.representation.mask import horizon_mask
+    from brdfcodec.io.merl import MerlBRDF
 
     rng = np.random.default_rng(11)
     values = rng.uniform(0.0, 1000.0, size=(3, 90, 90, 180))
@@ -231,7 +230,7 @@ def noise_file(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, object]:
 
 @pytest.mark.parametrize("mode", ["nearest", "trilinear"])
 def test_lookup_modes_match_the_library_on_noise(llvm: str, noise_file, mode: str) -> None:
-    """Both lookups in llvm_ad_rgb equal brdfcodec.lookup (with the file's mask) on a random table, on 2,000
+    """Both lookups in llvm_ad_rgb equal brdfcodec.representation.lookup (with the file's mask) on a random table, on 2,000
     random pairs within 1e-3 relative: ≥ 99.9 % for trilinear (continuous, but steep where θh → 0), ≥ 99.5 %
     for nearest (float32 angles can cross a bin edge, which on noise changes the value); the scalar plug-in
     agrees likewise on 200."""
@@ -346,7 +345,7 @@ def test_furnace_albedo_at_most_one_for_plausible_materials(llvm: str, analytic_
 
 
 def test_float16_tables_halve_memory_and_render_the_same(llvm: str, glossy_bvae: Path) -> None:
-    from brdfcodec.mitsuba_bsdf import material_of
+    from brdfcodec.render.mitsuba_bsdf import material_of
 
     _use(llvm)
     size = 24
@@ -361,8 +360,8 @@ def test_float16_tables_halve_memory_and_render_the_same(llvm: str, glossy_bvae:
 
 
 def test_shapes_share_one_decode_and_traverse_shows_the_table(llvm: str, glossy_bvae: Path, tmp_path: Path) -> None:
-    from brdfcodec import mitsuba_tables
-    from brdfcodec.mitsuba_scene import load_scene, material_memory
+    from brdfcodec.render import mitsuba_tables
+    from brdfcodec.render.mitsuba_scene import load_scene, material_memory
 
     other = tmp_path / "two.bvae"
     write_bvae(other, [LatentRecord("a", np.zeros(8), np.ones(8)), LatentRecord("b", np.full(8, 0.3), np.ones(8))],
@@ -392,7 +391,7 @@ def test_bad_material_is_a_clear_error(llvm: str, glossy_bvae: Path) -> None:
 # ---------------------------------------------------------------- scenes and the command line
 
 def test_scene_materials_of_the_example_scene() -> None:
-    from brdfcodec.mitsuba_scene import scene_materials
+    from brdfcodec.render.mitsuba_scene import scene_materials
 
     references = scene_materials(SCENE)
     assert {r.filename for r in references} == {example_library().resolve()}
@@ -402,7 +401,7 @@ def test_scene_materials_of_the_example_scene() -> None:
 
 def test_example_scene_renders(llvm: str) -> None:
     """The shipped XML scene loads (relative library path, $parameters) and renders; its 6 spheres share 5 tables."""
-    from brdfcodec.mitsuba_scene import material_memory, render_scene
+    from brdfcodec.render.mitsuba_scene import material_memory, render_scene
 
     image, scene = render_scene(SCENE, spp=2, width=48, height=27)
     assert image.shape == (27, 48, 3) and np.isfinite(image).all() and image.mean() > 0
@@ -463,8 +462,8 @@ def test_original_and_decoded_material_in_one_scene_match_the_report(llvm: str, 
     The report renders a 64² sphere under a directional light with render_sphere; the same set-up in Mitsuba
     (direct illumination, orthographic) must give the same ΔE ITP within 25 %.
     """
-    from brdfcodec.image_metrics import image_error
-    from brdfcodec.nbrdf import iter_nbrdf_zip
+    from brdfcodec.render.image_metrics import image_error
+    from brdfcodec.datasets.nbrdf import iter_nbrdf_zip
 
     name = "green-acrylic"
     row = next(json.loads(line) for line in (Path(__file__).resolve().parents[1] / "reports" / "nbrdf-proxy"

@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 import torch
 
-from brdfcodec.baselines.pca import fit_pca
+from brdfcodec.models.pca import fit_pca
 from brdfcodec.conventions import MAPPED_MAX, NETWORK_INPUT_SHAPE
-from brdfcodec.mask import kept_slice_horizon_mask
+from brdfcodec.representation.mask import kept_slice_horizon_mask
 from brdfcodec.models.config import PAPER_CONFIG, SMALL_CONFIG, TINY_CONFIG, ModelConfig
 from brdfcodec.models.loss import beta_norm, beta_vae_loss, kl_per_dimension
 from brdfcodec.models.network import BetaVAE, initialise_linear_basis

@@ -57,7 +57,7 @@ def test_the_shipped_model_is_compact_and_small() -> None:
 def test_compact_encoder_gives_the_same_codes(compacted, analytic_tables) -> None:
     import torch
 
-    from brdfcodec.dataset import material_arrays
+    from brdfcodec.datasets.hdf5 import material_arrays
 
     full, small = compacted
     inputs, masks = zip(*(material_arrays(t) for t in analytic_tables.values()), strict=True)

@@ -1,4 +1,4 @@
-"""Plausibility of traversal decodes (brdfcodec.plausibility, ``bvae model plausibility``)."""
+"""Plausibility of traversal decodes (brdfcodec.edit.plausibility, ``bvae model plausibility``)."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import pytest
 
 from brdfcodec.cli import main
 from brdfcodec.conventions import MERL_COLOR_SCALE, NETWORK_INPUT_SHAPE
-from brdfcodec.plausibility import (
+from brdfcodec.edit.plausibility import (
     PlausibilityCriteria,
     decompose_output,
     inverted_cells,
@@ -19,7 +19,7 @@ from brdfcodec.plausibility import (
     specular_deficit,
     white_sky_albedo,
 )
-from brdfcodec.plausibility import _invalid_counts as invalid_counts
+from brdfcodec.edit.plausibility import _invalid_counts as invalid_counts
 from brdfcodec.representation import to_network_layout
 from brdfcodec.representation.mapping import map_values
 
@@ -121,7 +121,7 @@ class PeakDecoder:
 
 class Code:
     def __init__(self, name: str, mu: list[float]) -> None:
-        from brdfcodec.bvae_format import LatentRecord
+        from brdfcodec.format.bvae import LatentRecord
 
         self.record = LatentRecord(name, np.asarray(mu, dtype=np.float32), np.ones(len(mu), dtype=np.float32))
 

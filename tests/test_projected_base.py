@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from brdfcodec.bvae_format import DecoderReference, encode_bvae, parse_bvae
+from brdfcodec.format.bvae import DecoderReference, encode_bvae, parse_bvae
 from brdfcodec.errors import BvaeFormatError
 from brdfcodec.layers.basis import BasisError, BasisLayer, SharedBasis, quantise_coefficients
-from brdfcodec.layers.record import LayeredRecord
+from brdfcodec.format.layered_record import LayeredRecord
 from bvae_bytes import bytes_writer
 
 DECODER = DecoderReference("ab" * 32, "test-decoder")
@@ -127,7 +127,7 @@ def test_the_encoder_projects_where_that_lowers_the_error(analytic_tables, budge
     """``never`` and ``always`` do as they say; ``auto`` (the default) writes whichever of the two has the lower
     kept-slice error on the material."""
     from brdfcodec.codec import BrdfEncoder
-    from brdfcodec.layers.encoding import PROJECTED_BASE_VECTORS, EncodeOptions
+    from brdfcodec.codec.encoding import PROJECTED_BASE_VECTORS, EncodeOptions
     from brdfcodec.representation import network_input_from_table
 
     table = analytic_tables["red-plastic"]
@@ -167,9 +167,9 @@ def test_auto_leaves_records_with_a_detail_layer_unprojected(analytic_tables) ->
 def test_the_encoders_fit_is_the_decode_of_the_record_it_writes(analytic_tables, compact: str | None) -> None:
     """Rate control measures, and the detail layer codes, what the encoder's basis fit returns: it must be what
     the decoder makes of the written record, projection included."""
-    from brdfcodec.bvae_format import LatentRecord
+    from brdfcodec.format.bvae import LatentRecord
     from brdfcodec.codec import BrdfEncoder
-    from brdfcodec.layers.encoding import EncodeOptions, _basis_fit
+    from brdfcodec.codec.encoding import EncodeOptions, _basis_fit
     from brdfcodec.representation import network_input_from_table
 
     encoder = BrdfEncoder()
@@ -211,7 +211,7 @@ def test_cli_project_base(red_plastic_file, tmp_path, capsys) -> None:
 def test_the_joint_fit_codes_the_residual_of_the_projected_base(analytic_tables) -> None:
     """At effort 0 the coefficients are the projection of what the *projected* base leaves (spec §4.5)."""
     from brdfcodec.codec import BrdfEncoder
-    from brdfcodec.layers.refine import fit_basis_coefficients
+    from brdfcodec.codec.refine import fit_basis_coefficients
     from brdfcodec.representation import network_input_from_table
 
     encoder = BrdfEncoder(effort=0)

@@ -7,15 +7,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from brdfcodec.analytic import AnalyticBRDF
-from brdfcodec.bvae_format import LatentRecord, write_bvae
+from brdfcodec.datasets.analytic import AnalyticBRDF
+from brdfcodec.format.bvae import LatentRecord, write_bvae
 from brdfcodec.codec import BrdfDecoder, DecodedMaterial, MaterialLibrary
-from brdfcodec.edit import traverse
-from brdfcodec.exr import read_exr_rgb
-from brdfcodec.image_metrics import compare_images
-from brdfcodec.images import write_image
-from brdfcodec.merl import MerlBRDF
-from brdfcodec.render import Environment, render_flat, render_sphere, render_sphere_environment
+from brdfcodec.edit.latent_edits import traverse
+from brdfcodec.io.exr import read_exr_rgb
+from brdfcodec.render.image_metrics import compare_images
+from brdfcodec.render.images import write_image
+from brdfcodec.io.merl import MerlBRDF
+from brdfcodec.render.preview import Environment, render_flat, render_sphere, render_sphere_environment
 
 
 @pytest.fixture(scope="module")
@@ -91,8 +91,7 @@ def test_compare_images_metrics(lambert: MerlBRDF) -> None:
 def test_mitsuba_plugin_matches_the_builtin_renderer(tmp_path: Path) -> None:
     mi = pytest.importorskip("mitsuba", reason="Mitsuba 3 is an optional extra: pip install 'brdfcodec[mitsuba]'")
     mi.set_variant("scalar_rgb")
-    from brdfcodec import mitsuba_bsdf
-
+    from brdfcodec.render import mitsuba_bsdf
     decoder = BrdfDecoder()
     path = tmp_path / "m.bvae"
     write_bvae(path, [LatentRecord("m", np.linspace(-0.5, 0.5, 8), np.ones(8))], decoder.reference)

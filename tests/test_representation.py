@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from brdfcodec.conventions import MAPPED_MAX, MERL_COLOR_SCALE, NETWORK_INPUT_SHAPE
-from brdfcodec.merl import MerlBRDF
+from brdfcodec.io.merl import MerlBRDF
 from brdfcodec.representation import (
     clamp_mapped,
     from_network_layout,

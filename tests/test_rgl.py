@@ -12,12 +12,12 @@ import pytest
 
 from brdfcodec.cli import main
 from brdfcodec.conventions import MERL_COLOR_SCALE, UNMEASURED_VALUE
-from brdfcodec.coords import directions_from_half_diff, phi_d_from_index, theta_d_from_index, theta_h_from_index
+from brdfcodec.representation.coords import directions_from_half_diff, phi_d_from_index, theta_d_from_index, theta_h_from_index
 from brdfcodec.errors import OptionalDependencyError, SourceFormatError
-from brdfcodec.inputs import read_measured
-from brdfcodec.mask import horizon_mask
-from brdfcodec.merl import read_merl
-from brdfcodec.rgl import (
+from brdfcodec.io.inputs import read_measured
+from brdfcodec.representation.mask import horizon_mask
+from brdfcodec.io.merl import read_merl
+from brdfcodec.io.rgl import (
     RGL_SOURCE_KIND,
     RglField,
     RglHeader,
@@ -41,7 +41,7 @@ def rgl_file(shared_dir: Path) -> Path:
 @pytest.fixture(scope="module")
 def mitsuba_llvm() -> None:
     pytest.importorskip("mitsuba", reason="Mitsuba 3 is not installed (extra brdfcodec[rgl])")
-    from brdfcodec.mitsuba_runtime import LibLLVMNotFoundError, find_libllvm
+    from brdfcodec.runtime.mitsuba import LibLLVMNotFoundError, find_libllvm
 
     try:
         find_libllvm()
@@ -113,7 +113,7 @@ def test_compress_and_decompress_round_trip(rgl_file: Path, mitsuba_llvm: None, 
     bvae = tmp_path / "p.bvae"
     assert main(["compress", str(rgl_file), "-o", str(bvae), "--provenance"]) == 0  # source kind and hash stored
     assert "paper_white" in capsys.readouterr().out
-    from brdfcodec.bvae_format import read_bvae
+    from brdfcodec.format.bvae import read_bvae
 
     record = read_bvae(bvae).records[0]
     assert record.name == "paper_white"

@@ -7,14 +7,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from brdfcodec.codec.rgl_export import export_rgl
 from brdfcodec.conventions import TABLE_SHAPE
 from brdfcodec.errors import BrdfcodecError, SourceFormatError
-from brdfcodec.lookup import lookup
-from brdfcodec.mask import horizon_mask
-from brdfcodec.merl import MerlBRDF, write_merl
-from brdfcodec.representation import reflectance_from_stored
-from brdfcodec.rgl import read_rgl_header
-from brdfcodec.rgl_writer import (
+from brdfcodec.io.merl import MerlBRDF, write_merl
+from brdfcodec.io.rgl import read_rgl_header
+from brdfcodec.io.rgl_writer import (
     LUMINANCE_WEIGHTS,
     RglResolution,
     RglWriteError,
@@ -22,12 +20,14 @@ from brdfcodec.rgl_writer import (
     _projection_kernel,
     _sample_marginal,
     _theta_from_u,
-    export_rgl,
     power_iteration_ndf,
     rgl_fields,
     tensor_file_bytes,
     write_rgl_bsdf,
 )
+from brdfcodec.representation import reflectance_from_stored
+from brdfcodec.representation.lookup import lookup
+from brdfcodec.representation.mask import horizon_mask
 
 SMALL = RglResolution(theta_i=8, ndf=64, vndf=64, luminance=16)
 
@@ -193,7 +193,7 @@ def test_unsupported_rgl_sources_are_refused_before_writing(tmp_path: Path) -> N
 @pytest.fixture(scope="module")
 def mi() -> object:
     mitsuba = pytest.importorskip("mitsuba", reason="Mitsuba 3 is not installed (extra brdfcodec[rgl])")
-    from brdfcodec.mitsuba_runtime import LibLLVMNotFoundError, find_libllvm, set_variant
+    from brdfcodec.runtime.mitsuba import LibLLVMNotFoundError, find_libllvm, set_variant
 
     try:
         find_libllvm()
@@ -294,9 +294,9 @@ def test_real_rgl_file_round_trips(mi: object, shared_dir: Path, tmp_path: Path)
     format's interpolation error into large values of f, so the linear RelAE is bounded away from it, and the
     cosine-weighted and log-mapped errors over every bin.
     """
-    from brdfcodec.coords import grid_direction_cosines
-    from brdfcodec.metrics import relae_linear, relae_mapped
-    from brdfcodec.rgl import read_rgl_bsdf
+    from brdfcodec.io.rgl import read_rgl_bsdf
+    from brdfcodec.representation.coords import grid_direction_cosines
+    from brdfcodec.representation.metrics import relae_linear, relae_mapped
 
     source = shared_dir / "data" / "rgl" / "paper_white_rgb.bsdf"
     if not source.is_file():
@@ -314,7 +314,7 @@ def test_real_rgl_file_round_trips(mi: object, shared_dir: Path, tmp_path: Path)
 
 
 def test_write_table_and_cli_write_bsdf(mi: object, analytic_tables: dict[str, MerlBRDF], tmp_path: Path) -> None:
-    from brdfcodec.table_output import table_format_of, write_table
+    from brdfcodec.io.table_output import table_format_of, write_table
 
     assert table_format_of("x.bsdf") == "bsdf"
     table = analytic_tables["red-plastic"].values

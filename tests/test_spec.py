@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 
 from brdfcodec import conventions
-from brdfcodec.dataset import DATASET_FORMAT, DATASET_FORMAT_VERSION
-from brdfcodec.mask import horizon_mask
-from brdfcodec.merl import MERL_FILE_SIZE
+from brdfcodec.datasets.hdf5 import DATASET_FORMAT, DATASET_FORMAT_VERSION
+from brdfcodec.representation.mask import horizon_mask
+from brdfcodec.io.merl import MERL_FILE_SIZE
 
 SPEC = Path(__file__).resolve().parents[1] / "spec"
 

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from brdfcodec import errors
-from brdfcodec.bvae_format import FLAG_METADATA_ZSTD, FORMAT_MAJOR, FORMAT_MINOR, GraftRecord, parse_bvae
+from brdfcodec.format.bvae import FLAG_METADATA_ZSTD, FORMAT_MAJOR, FORMAT_MINOR, GraftRecord, parse_bvae
 
 VECTORS = Path(__file__).resolve().parents[1] / "spec" / "vectors"
 MANIFEST: dict[str, Any] = json.loads((VECTORS / "manifest.json").read_text(encoding="utf-8"))
@@ -87,7 +87,7 @@ def test_valid_vector_reads_as_listed(vector: dict[str, Any]) -> None:
             assert list(record.graft_dims) == expected["graft_dims"]
             np.testing.assert_array_equal(record.graft_values, np.float32(expected["graft_values"]))
         if record.kind == "layered":
-            from brdfcodec.layers.record import layers_entry
+            from brdfcodec.format.layered_record import layers_entry
 
             assert layers_entry(record) == expected["layers"]  # type: ignore[arg-type]
         else:

@@ -22,7 +22,7 @@ import pytest
 pytest.importorskip("starlette", reason="the studio needs the studio extra (starlette, uvicorn)")
 pytest.importorskip("uvicorn", reason="the studio needs the studio extra (starlette, uvicorn)")
 
-from brdfcodec.bvae_format import GraftRecord, LatentRecord, read_bvae  # noqa: E402
+from brdfcodec.format.bvae import GraftRecord, LatentRecord, read_bvae  # noqa: E402
 from brdfcodec.examples import example_library  # noqa: E402
 from brdfcodec.studio.browser import running_studio  # noqa: E402
 from brdfcodec.studio.catalogue import Catalogue  # noqa: E402
@@ -160,7 +160,7 @@ def test_library_mask_thumbnail_and_environment(studio: str) -> None:
     info = json.loads(payload)
     assert status == 200 and len(info["materials"]) == 90 and info["environments"] == ["sky"]
     status, payload, _ = request(f"{studio}/api/mask")
-    from brdfcodec.mask import horizon_mask
+    from brdfcodec.representation.mask import horizon_mask
 
     bits = np.unpackbits(np.frombuffer(payload, np.uint8), bitorder="little")[: 90 * 90 * 180]
     assert np.array_equal(bits.reshape(90, 90, 180).astype(bool), horizon_mask())
@@ -225,8 +225,8 @@ def test_save_checks_provenance_fields(studio: str) -> None:
 
 
 def test_exports_merl_png_and_exr(studio: str, save_dir: Path, catalogue: Catalogue) -> None:
-    from brdfcodec.exr import read_exr_rgb
-    from brdfcodec.merl import read_merl
+    from brdfcodec.io.exr import read_exr_rgb
+    from brdfcodec.io.merl import read_merl
 
     record = catalogue.record("gold-paint")
     z = [float(v) for v in record.mu]
@@ -373,7 +373,7 @@ def test_front_end_ships_in_the_package_and_loads_nothing_from_outside() -> None
 
 
 def test_user_environment_map_is_offered_by_name_only(tmp_path: Path, catalogue: Catalogue) -> None:
-    from brdfcodec.exr import write_exr_rgb
+    from brdfcodec.io.exr import write_exr_rgb
 
     latlong = np.ones((16, 32, 3), np.float32)
     latlong[:8] *= np.array([0.4, 0.6, 1.0], np.float32)  # blue upper half

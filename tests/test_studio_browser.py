@@ -2,7 +2,7 @@
 
 The page's previews are rendered in the browser from the decoded kept slices;
 these tests check that what is painted matches the library's own render
-(:func:`brdfcodec.render.render_sphere`) of the same latent within
+(:func:`brdfcodec.render.preview.render_sphere`) of the same latent within
 ΔE ITP (mean) < :data:`MAX_DELTA_E_ITP` and 2 levels per 8-bit pixel, that sliders, the light and the map
 cursor change it, that dragging drops stale frames, that two tabs keep their
 own state, and that saving asks before replacing a file. They wait for the
@@ -60,9 +60,9 @@ def page(studio_env: dict[str, Any]) -> Any:
 
 def library_render(catalogue: Any, z: list[float], light: list[float], graft: list[float] | None = None,
                    size: int = 256) -> np.ndarray:
-    from brdfcodec.bvae_format import GraftRecord, LatentRecord
+    from brdfcodec.format.bvae import GraftRecord, LatentRecord
     from brdfcodec.codec import DecodedMaterial
-    from brdfcodec.render import render_sphere
+    from brdfcodec.render.preview import render_sphere
 
     code = np.asarray(z, np.float32)
     record = (LatentRecord("r", code, np.ones(8)) if graft is None
@@ -76,8 +76,8 @@ def painted_error(page: Any, catalogue: Any, preview: str) -> float:
     Also checks the 8-bit pixels: within :data:`MAX_LEVELS` of ``encode_srgb(render_sphere(...))`` on all but
     :data:`MAX_OFF_FRACTION` of them (an off-by-one φd bin already moves 0.1–3 % of them by up to 66 levels).
     """
-    from brdfcodec.image_metrics import image_error
-    from brdfcodec.images import encode_srgb
+    from brdfcodec.render.image_metrics import image_error
+    from brdfcodec.render.images import encode_srgb
     from brdfcodec.studio.browser import canvas_pixels, srgb_to_linear
 
     shown = page.evaluate(f"window.studio.previews.{preview}.shownState")
@@ -226,7 +226,7 @@ def test_two_tabs_keep_their_own_state(studio_env: dict[str, Any]) -> None:
 
 
 def test_saving_asks_before_replacing(page: Any, studio_env: dict[str, Any]) -> None:
-    from brdfcodec.bvae_format import read_bvae
+    from brdfcodec.format.bvae import read_bvae
 
     save_dir: Path = studio_env["save_dir"]
     page.fill("#save-file", "tab-edit.bvae")

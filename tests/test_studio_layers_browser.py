@@ -27,8 +27,8 @@ MAX_DELTA_E_ITP = 0.1
 
 @pytest.fixture(scope="module")
 def studio_env(tmp_path_factory: pytest.TempPathFactory) -> Any:
-    from brdfcodec.analytic import ANALYTIC_PRESETS
-    from brdfcodec.bvae_format import LatentRecord, read_bvae, write_bvae
+    from brdfcodec.datasets.analytic import ANALYTIC_PRESETS
+    from brdfcodec.format.bvae import LatentRecord, read_bvae, write_bvae
     from brdfcodec.codec import compress
     from brdfcodec.studio.browser import chromium_browser, running_studio
     from brdfcodec.studio.catalogue import Catalogue
@@ -62,8 +62,8 @@ def page(studio_env: dict[str, Any]) -> Any:
 def painted_against(page: Any, record: Any, catalogue: Any) -> float:
     """Mean ΔE ITP between the editor's canvas and render_sphere of ``record`` (the page's light and exposure)."""
     from brdfcodec.codec import DecodedMaterial
-    from brdfcodec.image_metrics import image_error
-    from brdfcodec.render import render_sphere
+    from brdfcodec.render.image_metrics import image_error
+    from brdfcodec.render.preview import render_sphere
     from brdfcodec.studio.browser import canvas_pixels, srgb_to_linear
 
     light = page.evaluate("window.studio.previews.editor.light")
@@ -74,8 +74,8 @@ def painted_against(page: Any, record: Any, catalogue: Any) -> float:
 
 
 def test_sliders_edit_a_layered_record_and_keep_its_layers(page: Any, studio_env: dict[str, Any]) -> None:
-    from brdfcodec.bvae_format import LatentRecord
-    from brdfcodec.edit import with_parameters
+    from brdfcodec.format.bvae import LatentRecord
+    from brdfcodec.edit.latent_edits import with_parameters
     from brdfcodec.studio.browser import canvas_pixels, paint_count, set_slider, wait_for_paint_after
 
     catalogue = studio_env["catalogue"]
@@ -104,7 +104,7 @@ def test_sliders_edit_a_layered_record_and_keep_its_layers(page: Any, studio_env
 
 
 def test_a_plain_record_beside_it_still_edits_without_layers(page: Any, studio_env: dict[str, Any]) -> None:
-    from brdfcodec.bvae_format import LatentRecord
+    from brdfcodec.format.bvae import LatentRecord
     from brdfcodec.studio.browser import paint_count, set_slider, wait_for_paint_after
 
     catalogue = studio_env["catalogue"]

@@ -14,10 +14,10 @@ import numpy as np
 import pytest
 import torch
 
-from brdfcodec.dataset import build_dataset
+from brdfcodec.datasets.hdf5 import build_dataset
 from brdfcodec.models.config import TINY_CONFIG
 from brdfcodec.models.network import BetaVAE
-from brdfcodec.sources import analytic_sources
+from brdfcodec.datasets.sources import analytic_sources
 from brdfcodec.training.config import TrainConfig
 from brdfcodec.training.trainer import train
 
@@ -305,8 +305,8 @@ def test_epoch_record_is_the_sample_weighted_mean_of_its_steps(tiny_dataset: Pat
 
 
 def test_folds_and_train_families_choose_the_held_out_materials(tiny_dataset: Path, tmp_path: Path) -> None:
-    from brdfcodec.dataset import BrdfDataset
-    from brdfcodec.split import fold_by_family
+    from brdfcodec.datasets.hdf5 import BrdfDataset
+    from brdfcodec.datasets.split import fold_by_family
 
     with BrdfDataset(tiny_dataset) as dataset:
         names, families = dataset.names, dataset.families

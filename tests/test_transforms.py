@@ -16,7 +16,7 @@ from brdfcodec.conventions import (
     NETWORK_INPUT_SHAPE,
     TABLE_SHAPE,
 )
-from brdfcodec.mask import horizon_mask, kept_slice_horizon_mask
+from brdfcodec.representation.mask import horizon_mask, kept_slice_horizon_mask
 from brdfcodec.representation import (
     from_network_layout,
     interpolate_slices,

@@ -5,8 +5,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from brdfcodec.analytic import ANALYTIC_PRESETS, AnalyticBRDF
-from brdfcodec.merl import write_merl
+from brdfcodec.datasets.analytic import ANALYTIC_PRESETS, AnalyticBRDF
+from brdfcodec.io.merl import write_merl
 
 __all__ = ["register"]
 

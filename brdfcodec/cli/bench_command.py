@@ -79,7 +79,7 @@ def run_rd(args: argparse.Namespace) -> int:
 
 def run_table(args: argparse.Namespace) -> int:
     """Print (and optionally write) the summary table of row files."""
-    from brdfcodec.atomic import atomic_output
+    from brdfcodec.io.atomic import atomic_output
     from brdfcodec.report.rows import rd_plot, read_rows, summary_markdown
 
     rows = [row for path in args.rows for row in read_rows(path)]
@@ -95,10 +95,10 @@ def run_table(args: argparse.Namespace) -> int:
 
 def run_report(args: argparse.Namespace) -> int:
     """Build the data if needed, evaluate, write the report."""
-    from brdfcodec.dataset import build_dataset
+    from brdfcodec.datasets.hdf5 import build_dataset
+    from brdfcodec.datasets.sources import analytic_sources, nbrdf_zip_sources
     from brdfcodec.report.evaluate import evaluate_dataset, summarise
     from brdfcodec.report.output import markdown_table, write_report
-    from brdfcodec.sources import analytic_sources, nbrdf_zip_sources
 
     pca_sizes = [int(v) for v in args.pca.split(",") if v.strip()]
     if any(k < 1 for k in pca_sizes):
@@ -109,7 +109,7 @@ def run_report(args: argparse.Namespace) -> int:
         if dataset is None:
             dataset = Path(scratch) / "data.h5"
             if args.nbrdf_zip is not None:
-                from brdfcodec.nbrdf import NBRDF_SOURCE_KIND
+                from brdfcodec.datasets.nbrdf import NBRDF_SOURCE_KIND
 
                 sources = nbrdf_zip_sources(args.nbrdf_zip)
                 kind, description = NBRDF_SOURCE_KIND, "NBRDF proxy of MERL (90 neural fits on the MERL grid)"

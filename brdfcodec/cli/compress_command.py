@@ -13,12 +13,12 @@ from typing import TYPE_CHECKING
 import numpy as np
 from tqdm import tqdm
 
-from brdfcodec.atomic import check_output_path
-from brdfcodec.bvae_format import Record, without_provenance, write_bvae
 from brdfcodec.cli.legend import RELAE_LEGEND
 from brdfcodec.cli.usage import UsageError
-from brdfcodec.dataset import HDF5_SIGNATURE
-from brdfcodec.inputs import default_material_name, is_measured_file, read_measured
+from brdfcodec.datasets.hdf5 import HDF5_SIGNATURE
+from brdfcodec.format.bvae import Record, without_provenance, write_bvae
+from brdfcodec.io.atomic import check_output_path
+from brdfcodec.io.inputs import default_material_name, is_measured_file, read_measured
 from brdfcodec.representation import network_input_from_table
 
 if TYPE_CHECKING:
@@ -102,7 +102,7 @@ def _measured_item(path: Path) -> _Item:
 
 
 def _dataset_items(path: Path, split: str | None) -> Iterator[_Item]:
-    from brdfcodec.dataset import BrdfDataset
+    from brdfcodec.datasets.hdf5 import BrdfDataset
 
     with BrdfDataset(path) as dataset:
         indices = dataset.indices(split)
@@ -153,7 +153,7 @@ def _check_bytes_floor(budget: int, model: str | None, latent_itemsize: int, bas
                        without_latent: bool = False) -> None:
     """Refuse a ``--bytes`` below the smallest record the model can write (a usage error, exit 2); records
     without a latent (``without_latent``: ``--latent auto``) count where the model has a basis and a linear path."""
-    from brdfcodec.layers.rate import smallest_bytes_budget
+    from brdfcodec.codec.rate import smallest_bytes_budget
     from brdfcodec.models.manifest import load_manifest
     from brdfcodec.models.registry import default_model_folder, find_model
 
@@ -234,7 +234,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"  mean RelAE (mapped) over {len(measured)} materials: {np.mean(measured):.4f}")
         print(f"  {RELAE_LEGEND}")
     if encoder.manifest is not None:
-        from brdfcodec.card_range import card_range_warning
+        from brdfcodec.models.card_range import card_range_warning
 
         for record in records:
             warning = card_range_warning(record.name, record.meta, encoder.manifest.info, encoder.manifest.name)

@@ -7,10 +7,9 @@ import sys
 import time
 from pathlib import Path
 
-from brdfcodec.analytic import ANALYTIC_PRESETS
-from brdfcodec.nbrdf import NBRDF_SOURCE_KIND, list_nbrdf_zip
-from brdfcodec.rgl import RGL_SOURCE_KIND
-from brdfcodec.sources import (
+from brdfcodec.datasets.analytic import ANALYTIC_PRESETS
+from brdfcodec.datasets.nbrdf import NBRDF_SOURCE_KIND, list_nbrdf_zip
+from brdfcodec.datasets.sources import (
     ANALYTIC_SOURCE_KIND,
     MaterialSource,
     analytic_sources,
@@ -18,6 +17,7 @@ from brdfcodec.sources import (
     nbrdf_zip_sources,
     rgl_folder_sources,
 )
+from brdfcodec.io.rgl import RGL_SOURCE_KIND
 
 __all__ = ["register"]
 
@@ -111,7 +111,7 @@ def collect_sources(args: argparse.Namespace) -> list[MaterialSource]:
 
 def run_build(args: argparse.Namespace) -> int:
     """Build the dataset and report its size and time."""
-    from brdfcodec.dataset import MIXED_SOURCE_KIND, build_dataset
+    from brdfcodec.datasets.hdf5 import MIXED_SOURCE_KIND, build_dataset
 
     if not (args.merl or args.rgl or args.nbrdf_zip or args.analytic or args.random):  # a usage error: exit 2
         print("bvae dataset build: error: give at least one source: --merl DIR, --rgl DIR, --nbrdf-zip ZIP, "

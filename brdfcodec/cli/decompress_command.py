@@ -8,16 +8,16 @@ from typing import TYPE_CHECKING
 
 from tqdm import tqdm
 
-from brdfcodec.atomic import check_output_path
 from brdfcodec.cli.legend import RELAE_LEGEND
 from brdfcodec.cli.usage import UsageError
 from brdfcodec.conventions import N_PHI_D
-from brdfcodec.material_names import material_file_path
-from brdfcodec.table_output import TABLE_FORMATS, table_format_of, write_table
+from brdfcodec.format.material_names import material_file_path
+from brdfcodec.io.atomic import check_output_path
+from brdfcodec.io.table_output import TABLE_FORMATS, table_format_of, write_table
 
 if TYPE_CHECKING:
     from brdfcodec.codec import DecodedMaterial
-    from brdfcodec.rgl_writer import RglResolution
+    from brdfcodec.io.rgl_writer import RglResolution
 
 __all__ = ["parse_bins", "register"]
 
@@ -132,7 +132,7 @@ def _check_masked(masked: str | None, kinds: set[str]) -> None:
 
 def _rgl_resolution(args: argparse.Namespace) -> RglResolution:
     """The ``--bsdf-*`` sizes as an RglResolution (a UsageError naming the flag when out of range)."""
-    from brdfcodec.rgl_writer import RglResolution
+    from brdfcodec.io.rgl_writer import RglResolution
 
     for flag, value, upper in (("--bsdf-theta-i", args.bsdf_theta_i, 512), ("--bsdf-grid", args.bsdf_grid, 512),
                                ("--bsdf-vndf", args.bsdf_vndf, 2048)):
@@ -151,7 +151,7 @@ def _stored_error_note(meta: dict) -> str:
 
 def _reference_error(path: Path, material: DecodedMaterial) -> str:
     from brdfcodec.codec import measure
-    from brdfcodec.inputs import read_measured
+    from brdfcodec.io.inputs import read_measured
 
     relae = measure(material.record, material.decoder, read_measured(path)).meta.get("relae")
     if relae is None:

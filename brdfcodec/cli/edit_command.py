@@ -6,9 +6,9 @@ import argparse
 import warnings
 from pathlib import Path
 
-from brdfcodec.bvae_format import LatentRecord, ParsedBvae, Record, read_bvae, write_bvae
 from brdfcodec.cli.usage import UsageError
 from brdfcodec.errors import NoLatentError
+from brdfcodec.format.bvae import LatentRecord, ParsedBvae, Record, read_bvae, write_bvae
 
 __all__ = ["parse_floats", "register"]
 
@@ -100,7 +100,7 @@ def _operand(library: ParsedBvae, path: Path, spec: str) -> tuple[Record, Parsed
 
 
 def _parameter_count(record: Record) -> int:
-    from brdfcodec.edit import parameter_vector
+    from brdfcodec.edit.latent_edits import parameter_vector
 
     return int(parameter_vector(record).size)
 
@@ -115,8 +115,7 @@ def _check_parameters(numbers_from_zero: list[int], record: Record, option: str)
 
 def run(args: argparse.Namespace) -> int:
     """Apply the edit and write the new records."""
-    from brdfcodec import edit
-
+    from brdfcodec.edit import latent_edits as edit
     library = read_bvae(args.input)
     records: list[Record]
     if args.operation == "traverse":
@@ -148,8 +147,8 @@ def run(args: argparse.Namespace) -> int:
             records = [edit.graft(record, args.values, decoder.colour_dims)]
         else:
             from brdfcodec.codec import measure, prepare_source
-            from brdfcodec.dataset import material_arrays
-            from brdfcodec.inputs import read_measured
+            from brdfcodec.datasets.hdf5 import material_arrays
+            from brdfcodec.io.inputs import read_measured
 
             source = prepare_source(read_measured(args.fit))  # MERL or RGL; clamped as for compress
             inputs, mask = material_arrays(source)

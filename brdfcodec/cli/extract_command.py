@@ -6,8 +6,8 @@ import argparse
 import sys
 from pathlib import Path
 
-from brdfcodec.bvae_format import read_bvae, write_bvae
 from brdfcodec.cli.usage import UsageError
+from brdfcodec.format.bvae import read_bvae, write_bvae
 
 __all__ = ["register"]
 
@@ -33,7 +33,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
 def run(args: argparse.Namespace) -> int:
     """Copy the chosen records in the order given."""
     if args.scene is not None:
-        from brdfcodec.mitsuba_scene import scene_selection
+        from brdfcodec.render.mitsuba_scene import scene_selection
 
         args.input, args.material = scene_selection(args.scene, args.input, args.material)
     if args.input is None or not args.material:

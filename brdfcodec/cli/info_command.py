@@ -10,16 +10,16 @@ from typing import Any
 
 import numpy as np
 
-from brdfcodec.bvae_format import FLAG_METADATA_ZSTD, RecordEntry, read_bvae
-from brdfcodec.bvae_format import MAGIC as BVAE_MAGIC
 from brdfcodec.conventions import MERL_SHAPE
-from brdfcodec.dataset import HDF5_SIGNATURE
+from brdfcodec.datasets.hdf5 import HDF5_SIGNATURE
 from brdfcodec.errors import FileFormatError
-from brdfcodec.genuine import genuine_merl_name
-from brdfcodec.mask import horizon_mask
-from brdfcodec.merl import MERL_FILE_SIZE, read_merl
+from brdfcodec.format.bvae import FLAG_METADATA_ZSTD, RecordEntry, read_bvae
+from brdfcodec.format.bvae import MAGIC as BVAE_MAGIC
+from brdfcodec.io.genuine import genuine_merl_name
+from brdfcodec.io.merl import MERL_FILE_SIZE, read_merl
+from brdfcodec.io.rgl import TENSOR_FILE_MAGIC
 from brdfcodec.representation import reflectance_from_stored
-from brdfcodec.rgl import TENSOR_FILE_MAGIC
+from brdfcodec.representation.mask import horizon_mask
 
 __all__ = ["HDF5_SIGNATURE", "describe_file", "register"]
 
@@ -70,7 +70,7 @@ def _merl_summary(path: Path) -> dict[str, Any]:
 
 
 def _dataset_summary(path: Path) -> dict[str, Any]:
-    from brdfcodec.dataset import BrdfDataset
+    from brdfcodec.datasets.hdf5 import BrdfDataset
 
     with BrdfDataset(path) as dataset:
         return {
@@ -169,8 +169,8 @@ def _stored_forms(item: dict[str, Any], latent_dtype: str) -> str:
 
 def _rgl_summary(path: Path) -> dict[str, Any]:
     from brdfcodec.errors import SourceFormatError
-    from brdfcodec.hashing import sha256_of_file
-    from brdfcodec.rgl import check_supported, read_rgl_header
+    from brdfcodec.io.hashing import sha256_of_file
+    from brdfcodec.io.rgl import check_supported, read_rgl_header
 
     header = read_rgl_header(path)
     try:

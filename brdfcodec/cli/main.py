@@ -32,8 +32,6 @@ import sys
 import warnings
 from collections.abc import Iterator, Sequence
 
-from brdfcodec.atomic import remove_unfinished_outputs
-from brdfcodec.blas_threads import MAX_DEFAULT_THREADS, default_thread_count
 from brdfcodec.cli import (
     analytic_command,
     bench_command,
@@ -50,6 +48,8 @@ from brdfcodec.cli import (
 )
 from brdfcodec.cli.usage import UsageError
 from brdfcodec.errors import BrdfcodecError
+from brdfcodec.io.atomic import remove_unfinished_outputs
+from brdfcodec.runtime.threads import MAX_DEFAULT_THREADS, default_thread_count
 from brdfcodec.version import __version__
 
 __all__ = ["MAX_DEFAULT_THREADS", "build_parser", "configure_threads", "default_thread_count", "main"]

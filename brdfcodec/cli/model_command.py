@@ -92,7 +92,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
         "plausibility", help="count implausible decodes over ±3σ traversals of a library",
         description="Traverse every material of a library along every latent dimension (−3…+3 prior σ) and "
         "report, per dimension and step, the fraction of decodes with non-finite or negative values, a new "
-        "inverted specular peak, energy above the library's, or new zeros at the peak (brdfcodec.plausibility).",
+        "inverted specular peak, energy above the library's, or new zeros at the peak (brdfcodec.edit.plausibility).",
     )
     plaus.add_argument("model", nargs="?", help="model folder or decoder SHA-256 (default: the shipped default model)")
     plaus.add_argument("--library", type=Path,
@@ -199,7 +199,7 @@ def run_evaluate(args: argparse.Namespace) -> int:
     else:
         print("\n".join(family_table(rows)))
     if args.store:
-        from brdfcodec.dataset import BrdfDataset
+        from brdfcodec.datasets.hdf5 import BrdfDataset
         from brdfcodec.training.export import store_info
 
         with BrdfDataset(args.dataset) as dataset:
@@ -263,8 +263,8 @@ def _parse_dims(text: str | None, latent_dim: int) -> list[int] | None:
 def run_plausibility(args: argparse.Namespace) -> int:
     """Measure and print the plausibility table (or JSON)."""
     from brdfcodec.codec import BrdfDecoder, MaterialLibrary
+    from brdfcodec.edit.plausibility import PlausibilityCriteria, measure_plausibility
     from brdfcodec.examples import example_library
-    from brdfcodec.plausibility import PlausibilityCriteria, measure_plausibility
 
     criteria = PlausibilityCriteria(args.tolerance, args.energy_margin)
     if args.materials is not None and args.materials < 1:

@@ -10,8 +10,8 @@ from typing import Any
 
 import numpy as np
 
-from brdfcodec.atomic import check_output_path
 from brdfcodec.cli.edit_command import parse_floats
+from brdfcodec.io.atomic import check_output_path
 
 __all__ = ["register"]
 
@@ -61,10 +61,10 @@ def _load(path: Path, material: str | None) -> tuple[Any, Any]:
     """(material to render, (library record, decoder) or None)."""
     with open(path, "rb") as stream:
         head = stream.read(8)
-    from brdfcodec.bvae_format import MAGIC
+    from brdfcodec.format.bvae import MAGIC
 
     if head != MAGIC:
-        from brdfcodec.inputs import read_measured
+        from brdfcodec.io.inputs import read_measured
 
         if material is not None:
             raise ValueError(f"{path}: --material applies to .bvae files only")
@@ -83,11 +83,11 @@ def _load(path: Path, material: str | None) -> tuple[Any, Any]:
 
 
 def _environment(spec: str) -> Any:
-    from brdfcodec.render import Environment, sky_environment
+    from brdfcodec.render.preview import Environment, sky_environment
 
     if spec == "sky":
         return sky_environment()
-    from brdfcodec.exr import read_exr_rgb
+    from brdfcodec.io.exr import read_exr_rgb
 
     parts = read_exr_rgb(spec)
     return Environment.from_latlong(next(iter(parts.values())))
@@ -95,11 +95,11 @@ def _environment(spec: str) -> Any:
 
 def run(args: argparse.Namespace) -> int:
     """Decode (if needed), render and write."""
-    from brdfcodec.images import write_image, write_png
-    from brdfcodec.render import render_flat, render_sphere, render_sphere_environment, traversal_sheet
+    from brdfcodec.render.images import write_image, write_png
+    from brdfcodec.render.preview import render_flat, render_sphere, render_sphere_environment, traversal_sheet
 
     if args.mitsuba is not None:
-        from brdfcodec.mitsuba_scene import render_command
+        from brdfcodec.render.mitsuba_scene import render_command
 
         return render_command(args)
     if args.input is None:
@@ -142,8 +142,8 @@ def run(args: argparse.Namespace) -> int:
     image = view(material)
     render_s = time.perf_counter() - start
     if args.compare is not None:
-        from brdfcodec.image_metrics import compare_images
-        from brdfcodec.inputs import read_measured
+        from brdfcodec.io.inputs import read_measured
+        from brdfcodec.render.image_metrics import compare_images
 
         error = compare_images(view(read_measured(args.compare)), image)
         if args.exposure is None:

@@ -24,7 +24,7 @@ encoder's way) lowers the data basis' error below PCA of the same size with
 least squares.
 
 This module does not import torch (the encoder's joint fit is in
-:mod:`brdfcodec.layers.refine`).
+:mod:`brdfcodec.codec.refine`).
 """
 
 from __future__ import annotations
@@ -40,10 +40,10 @@ from typing import Any, Final
 import numpy as np
 import numpy.typing as npt
 
-from brdfcodec.colour_orders_pca import colour_orders_pca
 from brdfcodec.conventions import N_CHANNELS, N_KEPT_SLICES, NETWORK_INPUT_SHAPE
 from brdfcodec.errors import BasisError, BasisMismatchError
-from brdfcodec.hashing import is_sha256_hex
+from brdfcodec.io.hashing import is_sha256_hex
+from brdfcodec.layers.colour_orders_pca import colour_orders_pca
 
 __all__ = [
     "BASIS_FILE",
@@ -309,7 +309,7 @@ def fit_shared_basis(
     colour_permutations : bool, default False
         Fit on the materials in all 6 orders of their colour channels
         (:func:`with_colour_permutations`) instead of as measured. The 6N
-        materials are not made: :func:`~brdfcodec.colour_orders_pca.colour_orders_pca`
+        materials are not made: :func:`~brdfcodec.layers.colour_orders_pca.colour_orders_pca`
         finds their components from the colour sums and deviations (the same
         components up to rotations within pairs of equal singular values).
 
@@ -338,7 +338,7 @@ class FactorisedBasis:
     """A shared basis fitted on colour-permuted materials, stored as its factors (``spec/model.md`` §5).
 
     Every vector of such a basis is a colour vector times a vector over one colour's entries
-    (:mod:`brdfcodec.colour_orders_pca`), and the two vectors of a chroma pair share the latter, so the
+    (:mod:`brdfcodec.layers.colour_orders_pca`), and the two vectors of a chroma pair share the latter, so the
     factors take about a third of the dense vectors' bytes.
 
     Vector k's value at entry ``c · P + e`` (colour c, column e) is the binary32 product
@@ -352,7 +352,7 @@ class FactorisedBasis:
         Vectors over one colour's entries.
     colours : ndarray of int64, shape (K,)
         Each basis vector's colour vector, a row of
-        :data:`~brdfcodec.colour_orders_pca.COLOUR_VECTORS` (0: (1, 1, 1)/√3, 1: (1, −1, 0)/√2,
+        :data:`~brdfcodec.layers.colour_orders_pca.COLOUR_VECTORS` (0: (1, 1, 1)/√3, 1: (1, −1, 0)/√2,
         2: (1, 1, −2)/√6).
     factor_of : ndarray of int64, shape (K,)
         Each basis vector's row of ``factors``.
@@ -376,7 +376,7 @@ class FactorisedBasis:
     @functools.cached_property
     def _colour_vectors(self) -> npt.NDArray[np.float32]:
         """Each vector's colour vector in binary32, ``(K, 3)``."""
-        from brdfcodec.colour_orders_pca import COLOUR_VECTORS
+        from brdfcodec.layers.colour_orders_pca import COLOUR_VECTORS
 
         return COLOUR_VECTORS.astype(np.float32)[self.colours]
 
@@ -463,7 +463,7 @@ def fit_factorised_basis(inputs: npt.ArrayLike, masks: npt.ArrayLike, count: int
     valid = masks.reshape(n, -1).all(axis=0)
     colour_entries = np.flatnonzero(valid.reshape(N_CHANNELS, -1).all(axis=0)).astype(np.int64)
     values = inputs.reshape(n, N_CHANNELS, -1)[:, :, colour_entries]
-    # The 6 orders' principal components, found without making them (brdfcodec.colour_orders_pca).
+    # The 6 orders' principal components, found without making them (brdfcodec.layers.colour_orders_pca).
     fit = colour_orders_pca(values, count)
     return FactorisedBasis(fit.factors.astype(np.float16), fit.colours, fit.factor_of, colour_entries)
 
@@ -514,8 +514,8 @@ def write_shared_basis(
     """Write a basis file atomically and return its SHA-256 (what records and ``model.json`` name it by)."""
     from safetensors.numpy import save_file
 
-    from brdfcodec.atomic import atomic_output
-    from brdfcodec.hashing import sha256_of_file
+    from brdfcodec.io.atomic import atomic_output
+    from brdfcodec.io.hashing import sha256_of_file
 
     tensors = {
         "components": np.ascontiguousarray(components, dtype=np.float16),
@@ -538,7 +538,7 @@ def load_shared_basis(path: str | os.PathLike[str], expected_sha256: str) -> Sha
     from safetensors import SafetensorError
     from safetensors.numpy import load
 
-    from brdfcodec.hashing import read_with_sha256
+    from brdfcodec.io.hashing import read_with_sha256
 
     data, actual = read_with_sha256(path)
     if actual != expected_sha256:
@@ -592,8 +592,8 @@ def write_factorised_basis(path: str | os.PathLike[str], basis: FactorisedBasis)
     """Write a factorised basis file atomically and return its SHA-256."""
     from safetensors.numpy import save_file
 
-    from brdfcodec.atomic import atomic_output
-    from brdfcodec.hashing import sha256_of_file
+    from brdfcodec.io.atomic import atomic_output
+    from brdfcodec.io.hashing import sha256_of_file
 
     tensors = {
         "factors": np.ascontiguousarray(basis.factors, dtype=np.float16),
@@ -805,7 +805,7 @@ def check_basis_layers(
     Parameters
     ----------
     entries : sequence of RecordEntry
-        A file's index (:attr:`brdfcodec.bvae_format.BvaeHeader.entries`).
+        A file's index (:attr:`brdfcodec.format.bvae.BvaeHeader.entries`).
     basis_named : callable
         The model's shared basis with a SHA-256, or None when the model has none by that hash.
     where : str
@@ -848,8 +848,8 @@ def check_basis_layers(
 def linear_path_entries() -> npt.NDArray[np.int64]:
     """Flat positions, in the ``(63, 90, 90)`` layout, of the entries a ``linear_basis`` decoder's linear path
     covers: those above the horizon (``spec/model.md`` §1), in increasing order (read-only)."""
-    from brdfcodec.mask import kept_slice_horizon_mask
     from brdfcodec.representation.layout import to_network_layout
+    from brdfcodec.representation.mask import kept_slice_horizon_mask
 
     mask = to_network_layout(kept_slice_horizon_mask()[None].repeat(3, axis=0))
     entries = np.flatnonzero(mask.reshape(-1)).astype(np.int64)

@@ -11,11 +11,11 @@ import numpy as np
 import torch
 from torch import nn
 
-from brdfcodec.baselines.pca import fit_pca
 from brdfcodec.conventions import MAPPED_MAX, NETWORK_INPUT_SHAPE
-from brdfcodec.mask import kept_slice_horizon_mask
 from brdfcodec.models.config import ModelConfig
+from brdfcodec.models.pca import fit_pca
 from brdfcodec.representation import to_network_layout
+from brdfcodec.representation.mask import kept_slice_horizon_mask
 
 __all__ = ["BetaVAE", "Decoder", "Encoder", "initialise_linear_basis", "linear_path_trainable", "valid_input_index"]
 
@@ -243,7 +243,7 @@ class BetaVAE(nn.Module):
 
 @torch.no_grad()
 def initialise_linear_basis(model: BetaVAE, train_inputs: torch.Tensor) -> None:
-    """Fit the linear path of a ``linear_basis`` model to training inputs (:func:`~brdfcodec.baselines.pca.fit_pca`
+    """Fit the linear path of a ``linear_basis`` model to training inputs (:func:`~brdfcodec.models.pca.fit_pca`
     over the entries above the horizon).
 
     The encoder projects onto the first ``latent_dim`` principal components

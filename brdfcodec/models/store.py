@@ -22,9 +22,9 @@ from typing import Any
 import torch
 from safetensors.torch import load, save_file
 
-from brdfcodec.atomic import atomic_output
 from brdfcodec.errors import ModelChecksumError
-from brdfcodec.hashing import read_with_sha256, sha256_of_file
+from brdfcodec.io.atomic import atomic_output
+from brdfcodec.io.hashing import read_with_sha256, sha256_of_file
 from brdfcodec.models.manifest import DECODER_FILE, ENCODER_FILE, MANIFEST, ModelManifest, load_manifest
 from brdfcodec.models.network import BetaVAE, Decoder, Encoder
 
@@ -120,7 +120,7 @@ def export_model(
     info : dict
         JSON-serialisable training facts.
     parameters : dict, optional
-        The named parameters (:func:`brdfcodec.parameters.describe_parameters`).
+        The named parameters (:func:`brdfcodec.models.parameters.describe_parameters`).
     """
     identity = write_weights(model, folder, name=name)
     manifest = {key: identity[key] for key in ("name", "config", "decoder_sha256", "encoder_sha256")}

@@ -2,7 +2,7 @@
 
 The benchmark (issue 41, part 1; ``bvae model disentanglement``) draws
 analytic materials whose factors are sampled independently
-(:func:`brdfcodec.analytic.sample_factor_materials`), encodes them, and scores
+(:func:`brdfcodec.datasets.analytic.sample_factor_materials`), encodes them, and scores
 the codes (the encoder's μ, or PCA coefficients) with
 
 * **MIG**, the mutual information gap (Chen et al. 2018, "Isolating sources
@@ -425,9 +425,9 @@ def benchmark_inputs(count: int, seed: int) -> tuple[Any, np.ndarray, np.ndarray
     count : int
         Materials, ≥ 10.
     seed : int
-        Seed of :func:`brdfcodec.analytic.sample_factor_materials`.
+        Seed of :func:`brdfcodec.datasets.analytic.sample_factor_materials`.
     """
-    from brdfcodec.analytic import sample_factor_materials
+    from brdfcodec.datasets.analytic import sample_factor_materials
 
     if count < 10:
         raise DisentanglementInputError(f"the benchmark needs at least 10 materials, got {count}")
@@ -470,11 +470,11 @@ def pca_codes(inputs: np.ndarray, masks: np.ndarray, components: int = 8) -> dic
     """PCA coefficients of ``inputs`` on their own first ``components`` principal components, and the
     reconstruction's error (clamped to the mapped domain) as for :func:`model_codes`.
 
-    The same basis as :func:`brdfcodec.baselines.pca.fit_pca` of the inputs over the entries valid in every
+    The same basis as :func:`brdfcodec.models.pca.fit_pca` of the inputs over the entries valid in every
     input (up to each component's sign), found from the N × N Gram matrix of the centred inputs (float64)
     rather than an SVD of the N × E matrix: a few hundred inputs of 387,000 entries take seconds, not minutes.
     """
-    from brdfcodec.baselines.pca import PcaBasis
+    from brdfcodec.models.pca import PcaBasis
     from brdfcodec.representation import clamp_mapped
 
     n = len(inputs)

@@ -12,13 +12,13 @@ from typing import Any
 import numpy as np
 from tqdm import tqdm
 
-from brdfcodec.dataset import BrdfDataset
-from brdfcodec.image_metrics import compare_images
-from brdfcodec.metrics import relae_between_mapped, relae_linear
-from brdfcodec.render import MaterialTable, render_sphere
+from brdfcodec.datasets.hdf5 import BrdfDataset
+from brdfcodec.render.image_metrics import compare_images
+from brdfcodec.render.preview import MaterialTable, render_sphere
 from brdfcodec.report.points import Material, OperatingPoint, standard_points
 from brdfcodec.report.rd_points import rate_distortion_points
 from brdfcodec.representation import map_values, reflectance_from_stored
+from brdfcodec.representation.metrics import relae_between_mapped, relae_linear
 from brdfcodec.version import __version__
 
 __all__ = ["comparison_render", "environment", "evaluate_dataset", "summarise"]

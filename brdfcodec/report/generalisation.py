@@ -238,10 +238,10 @@ def run_experiment(config: RdConfig, experiment: Experiment,
     ValueError
         The model lists no training materials, or none of its held-out materials is in the dataset.
     """
-    from brdfcodec.baselines.pca import fit_pca, fit_pca_colour_orders
-    from brdfcodec.dataset import BrdfDataset
-    from brdfcodec.metrics import relae_linear, relae_mapped
+    from brdfcodec.datasets.hdf5 import BrdfDataset
+    from brdfcodec.models.pca import fit_pca, fit_pca_colour_orders
     from brdfcodec.models.store import load_manifest
+    from brdfcodec.representation.metrics import relae_linear, relae_mapped
 
     manifest = load_manifest(experiment.model)
     trained = set(manifest.info.get("data", {}).get("train", []))

@@ -8,7 +8,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from brdfcodec.atomic import atomic_output
+from brdfcodec.io.atomic import atomic_output
 from brdfcodec.report.styles import distinct_colour_index
 
 __all__ = ["markdown_table", "write_report"]

@@ -122,7 +122,7 @@ class Pca(OperatingPoint):
     """PCA of the mapped kept slices (the classic data-driven baseline), k float32 coefficients per material."""
 
     def __init__(self, train_inputs: np.ndarray, k: int) -> None:
-        from brdfcodec.baselines.pca import fit_pca
+        from brdfcodec.models.pca import fit_pca
 
         self.basis = fit_pca(train_inputs, k)
         self.k = k
@@ -162,7 +162,7 @@ class BvaeCodec(OperatingPoint):
         return int((self.decoder.manifest.folder / "decoder.safetensors").stat().st_size)
 
     def encode(self, material: Material) -> bytes:
-        from brdfcodec.bvae_format import LatentRecord, encode_bvae
+        from brdfcodec.format.bvae import LatentRecord, encode_bvae
 
         mu, sigma = self.encoder.posterior_from_inputs(material.inputs[None])
         record = LatentRecord(material.name, mu[0], sigma[0])
@@ -174,12 +174,12 @@ class BvaeCodec(OperatingPoint):
         The file's header (decoder reference, index) comes on top: about 11 B per material in a library
         of 100, about 210 B for a file of one (``benchmarks/test_bench_sizes.py``).
         """
-        from brdfcodec.bvae_format import parse_bvae
+        from brdfcodec.format.bvae import parse_bvae
 
         return parse_bvae(payload).header.entries[0].length
 
     def decode(self, payload: bytes) -> np.ndarray:
-        from brdfcodec.bvae_format import parse_bvae
+        from brdfcodec.format.bvae import parse_bvae
 
         record = parse_bvae(payload).records[0]
         return self.decoder.table(record, masked="keep").astype(np.float64)

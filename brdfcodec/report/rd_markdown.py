@@ -6,7 +6,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from brdfcodec.atomic import atomic_output
+from brdfcodec.io.atomic import atomic_output
 from brdfcodec.report.styles import distinct_colour_index, distinct_line_style
 
 __all__ = ["TARGET_SIZES", "rd_markdown", "write_rd_plots"]

@@ -41,12 +41,12 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from brdfcodec.conventions import MAPPED_MAX
-from brdfcodec.merl import MerlBRDF
+from brdfcodec.io.merl import MerlBRDF
 from brdfcodec.report.points import Material, OperatingPoint
 from brdfcodec.representation import table_from_network_output
 
 if TYPE_CHECKING:
-    from brdfcodec.layers.encoding import ProjectBase
+    from brdfcodec.codec.encoding import ProjectBase
 
 __all__ = ["rate_distortion_points"]
 
@@ -101,7 +101,7 @@ class LayeredBvae(OperatingPoint):
         return sum(int((folder / name).stat().st_size) for name in files)
 
     def encode(self, material: Material) -> bytes:
-        from brdfcodec.bvae_format import encode_bvae
+        from brdfcodec.format.bvae import encode_bvae
 
         source = MerlBRDF(np.where(material.mask, material.values, -1.0), name=material.name)
         record = self.encoder.encode_arrays(
@@ -110,12 +110,12 @@ class LayeredBvae(OperatingPoint):
         return encode_bvae([record], self.decoder.reference, latent_dtype="float16")
 
     def payload_bytes(self, payload: bytes) -> int:
-        from brdfcodec.bvae_format import parse_bvae
+        from brdfcodec.format.bvae import parse_bvae
 
         return parse_bvae(payload).header.entries[0].length
 
     def decode(self, payload: bytes) -> np.ndarray:
-        from brdfcodec.bvae_format import parse_bvae
+        from brdfcodec.format.bvae import parse_bvae
 
         return self.decoder.table(parse_bvae(payload).records[0], masked="keep").astype(np.float64)
 
@@ -228,8 +228,8 @@ class DctSlices(OperatingPoint):
 
 def rate_distortion_points(train_inputs: np.ndarray, model: Any = None) -> list[OperatingPoint]:
     """The report's rate–distortion points (held-out materials only)."""
-    from brdfcodec.baselines.pca import fit_pca, fit_pca_colour_orders
     from brdfcodec.layers.basis import shared_basis_rank
+    from brdfcodec.models.pca import fit_pca, fit_pca_colour_orders
 
     points: list[OperatingPoint] = [LayeredBvae(bytes_budget=n, model=model) for n in LAYERED_BUDGETS]
     points.append(LayeredBvae(max_relae=0.02, model=model))

@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from brdfcodec.atomic import atomic_output
+from brdfcodec.io.atomic import atomic_output
 from brdfcodec.version import __version__
 
 __all__ = ["SCHEMA", "current_commit", "rd_plot", "read_rows", "stamp", "summary_markdown", "write_rows"]

@@ -28,7 +28,6 @@ import numpy as np
 import numpy.typing as npt
 
 from brdfcodec.conventions import EPSILON, MERL_COLOR_SCALE, N_CHANNELS, N_KEPT_SLICES, NETWORK_INPUT_SHAPE
-from brdfcodec.mask import validity_mask
 from brdfcodec.representation.layout import (
     from_network_layout,
     interpolation_plan,
@@ -37,6 +36,7 @@ from brdfcodec.representation.layout import (
     validate_phi_d_bins,
 )
 from brdfcodec.representation.mapping import LOG_RANGE, clamp_mapped, map_values
+from brdfcodec.representation.mask import validity_mask
 
 __all__ = ["network_input_from_table", "reflectance_from_mapped", "table_from_mapped", "table_from_network_output"]
 
@@ -51,7 +51,7 @@ def network_input_from_table(
     values : array_like, shape (3, 90, 90, 180)
         Stored MERL values.
     mask : array_like of bool, shape (3, 90, 90, 180), optional
-        Valid entries; :func:`~brdfcodec.mask.validity_mask` of ``values`` by default.
+        Valid entries; :func:`~brdfcodec.representation.mask.validity_mask` of ``values`` by default.
 
     Returns
     -------

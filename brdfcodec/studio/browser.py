@@ -134,6 +134,6 @@ def canvas_pixels(page: Any, canvas_id: str) -> np.ndarray:
 
 def srgb_to_linear(pixels: np.ndarray) -> np.ndarray:
     """8-bit sRGB to linear [0, 1] (colour-science)."""
-    from brdfcodec.images import colour_module
+    from brdfcodec.render.images import colour_module
 
     return np.asarray(colour_module().cctf_decoding(pixels / 255.0, function="sRGB"), dtype=np.float64)

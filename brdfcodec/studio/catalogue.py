@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from brdfcodec.bvae_format import GraftRecord, LatentRecord, Record
+from brdfcodec.format.bvae import GraftRecord, LatentRecord, Record
 from brdfcodec.studio import StudioError
 
 __all__ = ["Catalogue", "StudioMaterial"]
@@ -76,9 +76,9 @@ class Catalogue:
     """
 
     def __init__(self, paths: Sequence[str | os.PathLike[str]] | None = None, *, model: Any = None) -> None:
-        from brdfcodec.bvae_format import read_header
         from brdfcodec.codec import BrdfDecoder, MaterialLibrary
         from brdfcodec.examples import example_library
+        from brdfcodec.format.bvae import read_header
 
         self.paths = [Path(p) for p in (paths or [example_library()])]
         first = read_header(self.paths[0])
@@ -195,10 +195,10 @@ class Catalogue:
         base = self.record(body["base"]) if body.get("base") is not None else None
         sigma = base.sigma if base is not None else np.ones_like(z)
         if graft is None:
-            from brdfcodec.layers.record import LayeredRecord
+            from brdfcodec.format.layered_record import LayeredRecord
 
             if isinstance(base, LayeredRecord):
-                from brdfcodec.edit import with_parameters
+                from brdfcodec.edit.latent_edits import with_parameters
 
                 return with_parameters(base, z, name=name, edit={"op": "studio"}, sigma=sigma)
             return LatentRecord(name, z, sigma)

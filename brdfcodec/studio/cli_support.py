@@ -10,7 +10,7 @@ __all__ = ["run_umap_grid"]
 
 def run_umap_grid(args: argparse.Namespace) -> int:
     """Write the UMAP figure of the library ``args.input`` (every material on the map)."""
-    from brdfcodec.bvae_format import MAGIC
+    from brdfcodec.format.bvae import MAGIC
     from brdfcodec.studio.catalogue import Catalogue
     from brdfcodec.studio.figure import write_umap_figure
 

@@ -52,10 +52,10 @@ def umap_figure(catalogue: Any, n: int, *, tile: int = 64, light: tuple[float, f
     import matplotlib.pyplot as plt
     from PIL import Image
 
-    from brdfcodec.bvae_format import LatentRecord
     from brdfcodec.codec import DecodedMaterial
-    from brdfcodec.images import auto_exposure, compose_sheet, encode_srgb
-    from brdfcodec.render import render_sphere
+    from brdfcodec.format.bvae import LatentRecord
+    from brdfcodec.render.images import auto_exposure, compose_sheet, encode_srgb
+    from brdfcodec.render.preview import render_sphere
     from brdfcodec.studio.manifold import cached_manifold, latent_at
 
     if not 2 <= n <= 12:
@@ -104,7 +104,7 @@ def umap_figure(catalogue: Any, n: int, *, tile: int = 64, light: tuple[float, f
 def write_umap_figure(path: str | os.PathLike[str], catalogue: Any, n: int, *, overwrite: bool = False,
                       tile: int = 64, light: tuple[float, float, float] = (-1.0, 1.0, 1.0)) -> dict[str, Any]:
     """Write :func:`umap_figure` as PNG, atomically; returns its info."""
-    from brdfcodec.images import write_png
+    from brdfcodec.render.images import write_png
 
     if not os.fspath(path).lower().endswith(".png"):
         raise ValueError(f"{path}: the UMAP figure is written as .png")

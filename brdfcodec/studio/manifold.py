@@ -24,7 +24,7 @@ from typing import Any
 
 import numpy as np
 
-from brdfcodec.atomic import atomic_output
+from brdfcodec.io.atomic import atomic_output
 
 __all__ = [
     "ManifoldMap",

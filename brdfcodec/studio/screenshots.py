@@ -14,7 +14,7 @@ import argparse
 import tempfile
 from pathlib import Path
 
-from brdfcodec.atomic import check_output_path
+from brdfcodec.io.atomic import check_output_path
 
 __all__ = ["main"]
 

@@ -6,7 +6,7 @@ Design (see the documentation's studio page, ``docs/studio.md``):
   code to the 21 kept φd slices (63×90×90, sent as uint16: 1 MB) and the page
   renders the 256×256 sphere from them in JavaScript
   (nearest-bin lookup, slice interpolation and unmapping as
-  :func:`brdfcodec.render.render_sphere` does). A server-side render of the
+  :func:`brdfcodec.render.preview.render_sphere` does). A server-side render of the
   same preview (full decode + ``render_sphere``) costs several times the decode before any
   PNG encoding and transfer, and a light drag would need the server again;
   in the browser a light drag costs no request at all.
@@ -92,7 +92,7 @@ class StudioServer:
 
     def __init__(self, catalogue: Catalogue, *, save_dir: str | Path = ".", environment: str | Path | None = None,
                  manifold_cache: str | Path | None = None) -> None:
-        from brdfcodec.render import Environment, sky_environment
+        from brdfcodec.render.preview import Environment, sky_environment
 
         self.catalogue = catalogue
         self.save_dir = Path(save_dir).resolve()  # shown to the user: absolute, never "."
@@ -100,7 +100,7 @@ class StudioServer:
             raise NotADirectoryError(f"{self.save_dir}: the save folder does not exist")
         self.environments: dict[str, Any] = {"sky": sky_environment()}
         if environment is not None:
-            from brdfcodec.exr import read_exr_rgb
+            from brdfcodec.io.exr import read_exr_rgb
 
             parts = read_exr_rgb(environment)
             self.environments["map"] = Environment.from_latlong(next(iter(parts.values())))
@@ -136,8 +136,8 @@ class StudioServer:
 
     def render_environment_png(self, body: dict[str, Any]) -> bytes:
         """The code rendered under an environment ("sky" or "map"), PNG at the client's exposure."""
-        from brdfcodec.images import encode_srgb
-        from brdfcodec.render import render_sphere_environment
+        from brdfcodec.render.images import encode_srgb
+        from brdfcodec.render.preview import render_sphere_environment
 
         name = body.get("env")
         if name not in self.environments:
@@ -150,8 +150,8 @@ class StudioServer:
         """A small sphere render of a library material (PNG, cached; exposure set per material)."""
         if material_id not in self._thumbnails:
             from brdfcodec.codec import DecodedMaterial
-            from brdfcodec.images import auto_exposure, encode_srgb
-            from brdfcodec.render import render_sphere
+            from brdfcodec.render.images import auto_exposure, encode_srgb
+            from brdfcodec.render.preview import render_sphere
 
             record = self.catalogue.record(material_id)
             with self._decode_lock:
@@ -190,7 +190,7 @@ class StudioServer:
 
     def save(self, body: dict[str, Any]) -> dict[str, Any]:
         """Write the edited material: ``.bvae`` (record with provenance), MERL ``.binary``, ``.png`` or ``.exr``."""
-        from brdfcodec.bvae_format import GraftRecord, LatentRecord
+        from brdfcodec.format.bvae import GraftRecord, LatentRecord
 
         file_name = body.get("file")
         if not isinstance(file_name, str) or not _FILE_NAME.fullmatch(file_name):  # fullmatch: "$" allows a "\n"
@@ -199,7 +199,7 @@ class StudioServer:
         name = body.get("name", "studio-edit")
         if not isinstance(name, str) or not _MATERIAL_NAME.fullmatch(name):
             raise StudioError("name must be 1 to 200 characters without control characters or slashes")
-        from brdfcodec.material_names import check_material_name
+        from brdfcodec.format.material_names import check_material_name
 
         for label, value in (("file", file_name), ("name", name)):
             try:  # the file format's rules (spec/bvae-format.md §4.3): "NUL", "CON.bvae", ".x", "a:b" ...
@@ -224,19 +224,19 @@ class StudioServer:
         suffix = target.suffix.lower()
         try:
             if suffix == ".bvae":
-                from brdfcodec.bvae_format import write_bvae
+                from brdfcodec.format.bvae import write_bvae
 
                 write_bvae(target, [record], self.catalogue.decoder.reference, overwrite=overwrite)
             elif suffix == ".binary":
                 from brdfcodec.codec import DecodedMaterial
-                from brdfcodec.merl import write_merl
+                from brdfcodec.io.merl import write_merl
 
                 with self._decode_lock:
                     table = DecodedMaterial(record, self.catalogue.decoder).to_merl()
                 write_merl(target, table, overwrite=overwrite)
             else:
-                from brdfcodec.images import write_image
-                from brdfcodec.render import render_sphere, render_sphere_environment
+                from brdfcodec.render.images import write_image
+                from brdfcodec.render.preview import render_sphere, render_sphere_environment
 
                 material = self.decoded(body)
                 env = body.get("env")
@@ -406,7 +406,7 @@ def create_app(server: StudioServer, *, allowed_hosts: list[str] | None = None) 
         return JSONResponse(info)
 
     async def mask(request: Request) -> Response:
-        from brdfcodec.mask import horizon_mask
+        from brdfcodec.representation.mask import horizon_mask
 
         return Response(np.packbits(horizon_mask(), bitorder="little").tobytes(),
                         media_type="application/octet-stream", headers={"Cache-Control": "max-age=3600"})

@@ -156,12 +156,12 @@ def render_model_card(manifest: dict[str, Any]) -> str:
     active = sum(1 for kl in info["kl_per_dim"] if kl > 0.1)
     lines += ["", f"Active dimensions (KL > 0.1 nat): {active} of {config['latent_dim']}.", ""]
     if manifest.get("parameters"):
-        from brdfcodec.parameters import parameters_markdown
+        from brdfcodec.models.parameters import parameters_markdown
 
         lines += [
             "## Named parameters",
             "",
-            "What each dimension controls, measured by `brdfcodec.parameters` (decoded at z = ∓2 along the "
+            "What each dimension controls, measured by `brdfcodec.models.parameters` (decoded at z = ∓2 along the "
             "dimension, others 0; changes from −2 to +2): colour = Δ(ln R − ln B) in a diffuse region (θh ≈ 50°) "
             "and at the specular peak; level = Δ ln luminance; lobe width = Δ half-maximum θh; grazing = "
             "Δ ln(grazing / near-normal peak luminance). `bvae render MATERIAL.bvae --traversal -o sheet.png` "

@@ -84,7 +84,7 @@ class TrainConfig:
     folds, fold : int
         Cross-validation: with ``folds`` ≥ 2 the dataset's stored split is
         ignored; the materials are dealt into ``folds`` folds stratified by
-        family (:func:`brdfcodec.split.fold_by_family`, seeded by the
+        family (:func:`brdfcodec.datasets.split.fold_by_family`, seeded by the
         dataset's split seed), the run trains on every fold but ``fold`` and
         holds that one out. 0 (the default) uses the stored split.
     train_families : str

@@ -8,11 +8,11 @@ import numpy as np
 import numpy.typing as npt
 import torch
 
-from brdfcodec.dataset import BrdfDataset
+from brdfcodec.datasets.hdf5 import BrdfDataset
 from brdfcodec.errors import DatasetError
-from brdfcodec.metrics import relae_between_mapped
 from brdfcodec.models.network import BetaVAE
 from brdfcodec.representation import from_network_layout, interpolate_slices, map_values
+from brdfcodec.representation.metrics import relae_between_mapped
 
 __all__ = ["MappedReference", "reconstruct_mapped"]
 
@@ -23,7 +23,7 @@ class MappedReference:
     The mapped RelAE of ``spec/conventions.md`` §8 compares mapped values;
     since the inverse mapping is exact on [0, MAPPED_MAX], a decoder's mapped
     output, interpolated to 180 slices, is compared directly with the mapped
-    reference (:func:`~brdfcodec.metrics.relae_between_mapped`, no round trip
+    reference (:func:`~brdfcodec.representation.metrics.relae_between_mapped`, no round trip
     through stored units).
 
     Parameters

@@ -12,13 +12,13 @@ from typing import Any
 import numpy as np
 import torch
 
-from brdfcodec.atomic import atomic_output
 from brdfcodec.codec import BrdfDecoder
-from brdfcodec.dataset import BrdfDataset
+from brdfcodec.datasets.hdf5 import BrdfDataset
+from brdfcodec.models.parameters import describe_parameters
+from brdfcodec.io.atomic import atomic_output
 from brdfcodec.models.config import ModelConfig
 from brdfcodec.models.network import BetaVAE
 from brdfcodec.models.store import DECODER_FILE, MANIFEST, ModelManifest, load_manifest, write_manifest, write_weights
-from brdfcodec.parameters import describe_parameters
 from brdfcodec.training.card import render_model_card
 from brdfcodec.training.measurements import kl_per_dim, measure_model, summarise, traversal_changes
 from brdfcodec.version import __version__

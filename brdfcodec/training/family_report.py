@@ -24,12 +24,12 @@ from typing import Any
 
 import numpy as np
 
-from brdfcodec.baselines.pca import fit_pca
-from brdfcodec.dataset import BrdfDataset
-from brdfcodec.image_metrics import compare_images
-from brdfcodec.metrics import error_report
+from brdfcodec.datasets.hdf5 import BrdfDataset
+from brdfcodec.models.pca import fit_pca
+from brdfcodec.render.image_metrics import compare_images
 from brdfcodec.report.evaluate import comparison_render
 from brdfcodec.representation import table_from_network_output
+from brdfcodec.representation.metrics import error_report
 
 __all__ = ["FamilyRow", "evaluate_by_family", "family_table"]
 

@@ -13,14 +13,14 @@ from dataclasses import asdict, dataclass
 import numpy as np
 import torch
 
-from brdfcodec.baselines.pca import fit_pca
 from brdfcodec.codec import BrdfDecoder, BrdfEncoder
-from brdfcodec.dataset import BrdfDataset
-from brdfcodec.merl import MerlBRDF
-from brdfcodec.metrics import relae_linear, relae_mapped
+from brdfcodec.datasets.hdf5 import BrdfDataset
+from brdfcodec.io.merl import MerlBRDF
 from brdfcodec.models.loss import kl_per_dimension
 from brdfcodec.models.network import Decoder, Encoder
+from brdfcodec.models.pca import fit_pca
 from brdfcodec.representation import table_from_mapped, table_from_network_output
+from brdfcodec.representation.metrics import relae_linear, relae_mapped
 
 __all__ = [
     "MaterialErrors",

@@ -32,9 +32,9 @@ from torch.nn.parallel import DistributedDataParallel
 from torch.optim.swa_utils import AveragedModel
 from tqdm.auto import tqdm
 
-from brdfcodec.atomic import atomic_output
-from brdfcodec.dataset import BrdfDataset
-from brdfcodec.split import VALIDATION, fold_by_family
+from brdfcodec.datasets.hdf5 import BrdfDataset
+from brdfcodec.datasets.split import VALIDATION, fold_by_family
+from brdfcodec.io.atomic import atomic_output
 from brdfcodec.models.config import ModelConfig
 from brdfcodec.models.loss import beta_vae_loss, kl_per_dimension
 from brdfcodec.models.network import BetaVAE, initialise_linear_basis, linear_path_trainable

@@ -1,7 +1,7 @@
 """A training penalty that keeps latent traversals plausible (issue 12, item 5).
 
 The shipped model's traversals invert specular peaks, dig black holes into
-highlights and inflate energy (``brdfcodec.plausibility``; model card,
+highlights and inflate energy (``brdfcodec.edit.plausibility``; model card,
 "Plausibility of traversals"), mostly through its linear path. This penalty
 decodes a traversed code ``z' = μ + t·e_d`` (d uniform over the latent
 dimensions, t uniform in ``[−range, range]`` prior σ) for every material of
@@ -13,7 +13,7 @@ that it weighs like the reconstruction, which is a sum over valid entries:
     Σ over cells (colour, kept φd slot, θd bin; all five θh entries above the
     horizon) of ``relu(D(max(u', 0)) − max(D(x), 0) − margin)``, where ``D`` is the
     specular deficit ``max(m[θh 4–6]) − max(m[θh 0–1])`` of
-    :func:`brdfcodec.plausibility.specular_deficit` and ``x`` the material the
+    :func:`brdfcodec.edit.plausibility.specular_deficit` and ``x`` the material the
     batch shows (after augmentation): a traversal may not open a deficit that
     the material lacks.
 ``holes``
@@ -24,7 +24,7 @@ that it weighs like the reconstruction, which is a sum over valid entries:
     goes black as a whole is not penalised).
 ``energy``
     ``ENERGY_SCALE`` · Σ over colours of ``relu(log A_c(u') − log A_max)``:
-    the white-sky albedo (:func:`brdfcodec.plausibility.white_sky_albedo`, of
+    the white-sky albedo (:func:`brdfcodec.edit.plausibility.white_sky_albedo`, of
     the output clamped to ``[0, ENERGY_CEILING]``, twice the mapped domain, so
     that saturated peaks keep a gradient) may not exceed ``A_max``, the
     largest channel albedo of the training materials times
@@ -53,7 +53,7 @@ import numpy as np
 import torch
 
 from brdfcodec.conventions import EPSILON, MAPPED_MAX, N_CHANNELS, N_KEPT_SLICES, N_THETA_D, N_THETA_H
-from brdfcodec.plausibility import (
+from brdfcodec.edit.plausibility import (
     NEAR_THETA_H_BINS,
     OFF_THETA_H_BINS,
     albedo_weights,

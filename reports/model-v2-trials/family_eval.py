@@ -14,7 +14,7 @@ import sys
 
 import torch
 
-from brdfcodec.dataset import BrdfDataset
+from brdfcodec.datasets.hdf5 import BrdfDataset
 from brdfcodec.models.config import ModelConfig
 from brdfcodec.models.network import BetaVAE
 from brdfcodec.training.evaluation import MappedReference, reconstruct_mapped

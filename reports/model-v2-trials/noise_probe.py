@@ -18,7 +18,7 @@ import argparse
 
 import torch
 
-from brdfcodec.dataset import BrdfDataset
+from brdfcodec.datasets.hdf5 import BrdfDataset
 from brdfcodec.models.store import load_model
 
 NOISE_SCALES = (0.0, 0.01, 0.03, 0.1, 0.3, 1.0)

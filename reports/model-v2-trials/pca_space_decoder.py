@@ -25,10 +25,10 @@ import time
 import numpy as np
 import torch
 
-from brdfcodec.baselines.pca import fit_pca
+from brdfcodec.models.pca import fit_pca
 from brdfcodec.codec import BrdfEncoder
-from brdfcodec.dataset import BrdfDataset
-from brdfcodec.layers.refine import refine_latent
+from brdfcodec.datasets.hdf5 import BrdfDataset
+from brdfcodec.codec.refine import refine_latent
 
 COMPONENTS = 96
 TRIALS = ((0.0, 0.0), (0.0, 0.1), (1e-2, 0.1), (0.0, 0.3))  # (weight decay, latent noise σ)

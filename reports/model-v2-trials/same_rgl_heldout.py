@@ -12,8 +12,8 @@ import argparse
 import numpy as np
 
 from brdfcodec.codec import BrdfEncoder
-from brdfcodec.dataset import BrdfDataset
-from brdfcodec.metrics import error_report
+from brdfcodec.datasets.hdf5 import BrdfDataset
+from brdfcodec.representation.metrics import error_report
 
 
 def main() -> None:

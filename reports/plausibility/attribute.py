@@ -37,7 +37,7 @@ import torch
 from brdfcodec.codec import BrdfDecoder, MaterialLibrary
 from brdfcodec.conventions import MAPPED_MAX
 from brdfcodec.examples import example_library
-from brdfcodec.plausibility import DEFAULT_STEPS, decompose_output, inverted_cells, new_holes
+from brdfcodec.edit.plausibility import DEFAULT_STEPS, decompose_output, inverted_cells, new_holes
 from brdfcodec.representation.mapping import LOG_RANGE
 
 

@@ -24,7 +24,7 @@ from typing import Any
 
 import numpy as np
 
-from brdfcodec.bvae_format import DecoderReference, GraftRecord, LatentRecord, encode_bvae
+from brdfcodec.format.bvae import DecoderReference, GraftRecord, LatentRecord, encode_bvae
 from brdfcodec.models.manifest import load_manifest
 from brdfcodec.models.registry import default_model_folder
 
@@ -385,7 +385,7 @@ def detail_frame(head: list[int], total: int) -> bytes:
 def layered_record(name: str, mu: np.ndarray, sigma: np.ndarray) -> LatentRecord:
     """A layered record (§4.4) whose detail layer has three non-zero DCT coefficients (step 0.125)."""
     from brdfcodec.layers.detail import N_DETAIL_VALUES, DetailLayer
-    from brdfcodec.layers.record import LayeredRecord
+    from brdfcodec.format.layered_record import LayeredRecord
 
     layer = DetailLayer(0.125, "int16", detail_frame([8, -4, 2], N_DETAIL_VALUES))
     return LayeredRecord(name, mu, sigma, {"effort": 1, "rate": {"payload_bytes": 64 + len(layer.data),
@@ -401,7 +401,7 @@ def basis_record(name: str, mu: np.ndarray, sigma: np.ndarray, sha256: str, *, d
     many basis vectors (since 1.6)."""
     from brdfcodec.layers.basis import BasisLayer
     from brdfcodec.layers.detail import N_DETAIL_VALUES, DetailLayer
-    from brdfcodec.layers.record import LayeredRecord
+    from brdfcodec.format.layered_record import LayeredRecord
 
     layer = DetailLayer(0.125, "int16", detail_frame([8, -4, 2], N_DETAIL_VALUES)) if detail else None
     basis = BasisLayer(sha256, 0.5, np.array([12, -7, 3, 0, -1], dtype=np.int8), first, project)
@@ -414,7 +414,7 @@ def basis_only_record(name: str, sha256: str, *, detail: bool = False) -> Latent
     """A record without a latent (§4.6, since 2.1): 5 coefficients from vector 0 (and a detail layer)."""
     from brdfcodec.layers.basis import BasisLayer
     from brdfcodec.layers.detail import N_DETAIL_VALUES, DetailLayer
-    from brdfcodec.layers.record import LayeredRecord
+    from brdfcodec.format.layered_record import LayeredRecord
 
     layer = DetailLayer(0.125, "int16", detail_frame([8, -4, 2], N_DETAIL_VALUES)) if detail else None
     basis = BasisLayer(sha256, 0.5, np.array([24, -7, 3, 0, -1], dtype=np.int8))
@@ -492,7 +492,7 @@ def describe(record: LatentRecord | GraftRecord) -> dict[str, Any]:
         item["graft_dims"] = list(record.graft_dims)
         item["graft_values"] = record.graft_values.tolist()
     if record.kind == "layered":
-        from brdfcodec.layers.record import layers_entry
+        from brdfcodec.format.layered_record import layers_entry
 
         item["layers"] = layers_entry(record)  # type: ignore[arg-type]
     return item

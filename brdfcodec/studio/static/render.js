@@ -1,4 +1,4 @@
-// Sphere preview from decoded kept slices: the browser side of brdfcodec.render.render_sphere.
+// Sphere preview from decoded kept slices: the browser side of brdfcodec.render.preview.render_sphere.
 //
 // Follows spec/conventions.md as brdfcodec does: nearest MERL bin of the
 // Rusinkiewicz angles (coords.py), linear interpolation between the 21 kept

@@ -1,1 +1,0 @@
-"""Classical baselines the β-VAE is measured against."""

@@ -1,0 +1,311 @@
+"""Encoding with effort and rate control: what :class:`~brdfcodec.codec.BrdfEncoder` runs per batch."""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any, Literal, Protocol, get_args
+
+import numpy as np
+
+from brdfcodec.codec.rate import BasisFit, BasisOnlyFit, Metric, MuStorage, encode_layers
+from brdfcodec.codec.refine import (
+    EFFORT_STEPS,
+    POLISH_PASSES,
+    fit_basis_coefficients,
+    fit_basis_only_coefficients,
+    polish_quantised_coefficients,
+    refine_latent,
+)
+from brdfcodec.conventions import MAPPED_MAX
+from brdfcodec.format.bvae import LatentRecord, descriptor_size
+from brdfcodec.format.layered_record import MU_INT8_FIXED, LayeredRecord, compact_mu_values
+from brdfcodec.layers.basis import (
+    BasisError,
+    BasisLayer,
+    SharedBasis,
+    basis_offset,
+    quantise_coefficients,
+)
+
+if TYPE_CHECKING:
+    from brdfcodec.io.merl import MerlBRDF
+    from brdfcodec.models.network import Decoder
+
+
+class LayerDecoder(Protocol):
+    """What layer encoding needs of a decoder (:class:`brdfcodec.codec.BrdfDecoder` is one): its network, base
+    decodes in the mapped domain, its shared basis and the projected base of ``spec/bvae-format.md`` §4.5."""
+
+    network: Decoder
+
+    @property
+    def shared_basis(self) -> SharedBasis | None: ...
+
+    @property
+    def projection_centre(self) -> np.ndarray: ...
+
+    def decode_mapped(self, codes: np.ndarray) -> np.ndarray: ...
+
+    def project_base(self, record: LayeredRecord, mapped: np.ndarray) -> None: ...
+
+__all__ = [
+    "PROJECTED_BASE_VECTORS", "EncodeOptions", "LatentChoice", "ProjectBase", "layer_records", "projected_base_vectors",
+]
+
+#: Basis vectors a writer projects a layered record's base decode on (``layers.basis.project``, format 1.6) when
+#: asked to (``EncodeOptions.project_base``). The decoder's output carries what its 8 numbers say about a material
+#: in the leading principal components; past them it adds its own errors, larger on new materials than the mean's.
+#: Measured on the held-out NBRDF proxy of MERL (``benchmarks/projected_base_study.py``,
+#: ``reports/rd-study/projected-base.json``): 50 and 75 vectors gain alike at 16 to 128 B. The projection runs
+#: after the network and needs a pass over the vectors, taken on the factors of a factorised basis (about 1.8 ms
+#: for the shipped basis on the 2-core development machine, ``benchmarks/basis_sum_study.py``; a 64 B record decodes
+#: in about 1.4× a base-only one, benchmark ``decode-layered-64B-projected``).
+PROJECTED_BASE_VECTORS = 50
+
+#: When a writer projects a layered record's base (:class:`EncodeOptions`): ``"auto"`` fits the basis layer both
+#: ways and keeps, per material and size, the one with the lower kept-slice error (records without a detail layer
+#: only); ``"always"``; ``"never"``.
+ProjectBase = Literal["auto", "always", "never"]
+_PROJECT_BASE_CHOICES: tuple[str, ...] = get_args(ProjectBase)
+
+#: Whether rate control may write records without a latent (format 2.1, :class:`EncodeOptions`): ``"auto"`` makes
+#: them candidates beside the latent ones wherever the model has a shared basis and a linear path covering it,
+#: and keeps whichever has the lower error (a latent on a tie); ``"always"`` writes a latent in every record, so
+#: every record can be edited.
+LatentChoice = Literal["auto", "always"]
+_LATENT_CHOICES: tuple[str, ...] = get_args(LatentChoice)
+
+
+def projected_base_vectors(decoder: LayerDecoder, basis: SharedBasis) -> int:
+    """How many vectors brdfcodec's writer projects a layered base on: :data:`PROJECTED_BASE_VECTORS` (at most
+    the basis' size), or 0 when the decoder has no linear-path mean over the basis' entries to centre it on."""
+    try:
+        _ = decoder.projection_centre
+    except BasisError:
+        return 0
+    return min(PROJECTED_BASE_VECTORS, basis.count)
+
+
+@dataclass(frozen=True)
+class EncodeOptions:
+    """How hard to encode and what to aim for.
+
+    Attributes
+    ----------
+    effort : int
+        0 to 3: Adam steps of latent refinement (0: the encoder's μ).
+    bytes_budget : int, optional
+        Largest record payload per material (base + detail layer).
+    max_relae : float, optional
+        Largest RelAE of the decoded table against its source.
+    metric : {"mapped", "linear"}
+        RelAE used by ``max_relae``.
+    detail_step : float, optional
+        A fixed detail quantisation step (mapped units) instead of a target.
+    latent_itemsize : int
+        Bytes per stored latent value (4 for float32 files, 2 for float16).
+    basis : bool
+        Whether layered records may use the model's shared basis (when it has one).
+    project_base : {"auto", "always", "never"}
+        Whether a record with a basis layer projects its base decode on the basis (format 1.6,
+        :data:`PROJECTED_BASE_VECTORS`; :data:`ProjectBase`). On held-out materials of the NBRDF proxy
+        projecting lowers the mean error at 16 to 128 B, but not on every material
+        (``reports/rd-study/projected-base.json``), so ``"auto"`` (the default) fits both on each material
+        and keeps the lower error, in records without a detail layer (with one, a projected record decodes
+        past the 1.5× decode-time target of the ``decode-layered`` benchmark);
+        it doubles the basis layer's fitting time. ``True`` and ``False`` mean ``"always"`` and ``"never"``.
+    latent : {"auto", "always"}
+        ``"auto"`` (the default): a size budget or an error target may pick a record without a latent (format
+        2.1: the decoder's linear-path mean plus basis coefficients from the first vector), where its error is
+        lower (:data:`LatentChoice`); such a record decodes but cannot be edited. ``"always"``: every record
+        keeps a latent code. Nothing changes without a target, or without a shared basis.
+    """
+
+    effort: int = 1
+    bytes_budget: int | None = None
+    max_relae: float | None = None
+    metric: Metric = "mapped"
+    detail_step: float | None = None
+    latent_itemsize: int = 4
+    basis: bool = True
+    project_base: ProjectBase = "auto"
+    latent: LatentChoice = "auto"
+
+    def __post_init__(self) -> None:
+        if self.latent not in _LATENT_CHOICES:
+            raise ValueError(f"latent must be one of {list(_LATENT_CHOICES)}, got {self.latent!r}")
+        if isinstance(self.project_base, bool):
+            object.__setattr__(self, "project_base", "always" if self.project_base else "never")
+        if self.project_base not in _PROJECT_BASE_CHOICES:
+            raise ValueError(f"project_base must be one of {list(_PROJECT_BASE_CHOICES)}, got {self.project_base!r}")
+        if self.effort not in EFFORT_STEPS:
+            raise ValueError(f"effort must be one of {sorted(EFFORT_STEPS)}, got {self.effort!r}")
+        targets = [x for x in (self.bytes_budget, self.max_relae, self.detail_step) if x is not None]
+        if len(targets) > 1:
+            raise ValueError("give at most one of bytes (size budget), max_relae (error target) or detail_step")
+        if self.bytes_budget is not None and self.bytes_budget < 1:
+            raise ValueError(f"the size budget must be a positive number of bytes, got {self.bytes_budget}")
+        if self.max_relae is not None and not (np.isfinite(self.max_relae) and self.max_relae > 0):
+            raise ValueError(f"max_relae must be a positive number, got {self.max_relae}")
+        if self.metric not in ("mapped", "linear"):
+            raise ValueError(f"metric must be 'mapped' or 'linear', got {self.metric!r}")
+
+    @property
+    def layered(self) -> bool:
+        """Whether records get a detail layer (a target or a step is set)."""
+        return any(x is not None for x in (self.bytes_budget, self.max_relae, self.detail_step))
+
+
+def layer_records(
+    records: Sequence[LatentRecord],
+    decoder: LayerDecoder,
+    inputs: np.ndarray,
+    masks: np.ndarray,
+    sources: Sequence[MerlBRDF | None],
+    options: EncodeOptions,
+) -> list[LatentRecord]:
+    """Refine the base codes of records, then add detail layers as the options ask.
+
+    A refined record's ``mu`` is the refined code and its ``sigma`` the
+    encoder's; ``meta["effort"]`` says how it was made and, with a target,
+    ``meta["rate"]`` what rate control chose.
+    """
+    mu = np.stack([r.mu for r in records])
+    codes = _as_stored(refine_latent(decoder.network, mu, inputs, masks, options.effort), options.latent_itemsize)
+    out: list[LatentRecord] = []
+    base_mapped = decoder.decode_mapped(codes) if options.layered else None
+    basis = decoder.shared_basis if options.layered and options.basis else None
+    for i, record in enumerate(records):
+        meta: dict[str, Any] = {**record.meta, "effort": options.effort}
+        base = LatentRecord(record.name, codes[i], record.sigma, meta)
+        if base_mapped is None:
+            out.append(base)
+            continue
+        source = sources[i]
+        if options.max_relae is not None and source is None:
+            raise ValueError(f"{record.name}: --max-relae needs the source table to measure the error")
+        result = encode_layers(
+            base, base_mapped[i], inputs[i], masks[i],
+            values=None if source is None else source.values,
+            mask=None if source is None else source.mask,
+            bytes_budget=options.bytes_budget, max_relae=options.max_relae, metric=options.metric,
+            step=options.detail_step, latent_itemsize=options.latent_itemsize,
+            basis_fit=None if basis is None else _basis_fit(decoder, basis, base, inputs[i], masks[i], options),
+            basis_count=0 if basis is None else basis.count,
+            basis_only_fit=None if basis is None else _basis_only_fit(decoder, basis, inputs[i], masks[i], options),
+        )
+        chosen = result.record
+        # record_bytes: what the budget caps (payload and index descriptor); payload_bytes: the payload alone
+        rate = {"payload_bytes": result.payload_bytes - descriptor_size(chosen), "record_bytes": result.payload_bytes,
+                "candidates_tried": len(result.tried)}
+        if options.bytes_budget is not None:
+            rate["bytes_budget"] = options.bytes_budget
+        if options.max_relae is not None:
+            rate["max_relae"] = options.max_relae
+            rate["metric"] = options.metric
+        new_meta = {**chosen.meta, "rate": rate}
+        out.append(dataclasses.replace(chosen, meta=new_meta))
+    return out
+
+
+def _as_stored(codes: np.ndarray, itemsize: int) -> np.ndarray:
+    """Codes rounded as the file will store them (layers code what the stored code decodes to)."""
+    return codes.astype(np.float16).astype(np.float32) if itemsize == 2 else codes.astype(np.float32)
+
+
+def _basis_only_fit(
+    decoder: LayerDecoder, basis: SharedBasis, inputs: np.ndarray, masks: np.ndarray, options: EncodeOptions
+) -> BasisOnlyFit | None:
+    """The fit of one material's records without a latent (format 2.1) for
+    :func:`~brdfcodec.codec.rate.encode_layers`, or None where they are off (``latent="always"``) or the
+    decoder has no linear-path mean over the basis' entries to start from.
+
+    k coefficients on the vectors 0 … k − 1: least squares, then Adam on the mapped L1 error
+    (:func:`~brdfcodec.codec.refine.fit_basis_only_coefficients`), quantised as every basis layer (s = max |c| /
+    127 in float16), then the integers polished on the same error
+    (:func:`~brdfcodec.codec.refine.polish_quantised_coefficients`).
+    """
+    if options.latent != "auto":
+        return None
+    try:
+        centre = decoder.projection_centre
+    except BasisError:
+        return None
+    on_basis = basis.entry_mask
+    target = np.asarray(inputs, dtype=np.float32).reshape(-1)[on_basis]
+    weights = np.asarray(masks, dtype=np.float32).reshape(-1)[on_basis]
+
+    def fit(k: int) -> tuple[BasisLayer, np.ndarray]:
+        components = basis.vectors(0, k)
+        coefficients = fit_basis_only_coefficients(target, weights, centre, components, options.effort)
+        layer = quantise_coefficients(basis.sha256, coefficients)
+        if POLISH_PASSES[options.effort]:
+            q = polish_quantised_coefficients(layer.step, layer.q, target, weights, centre, components,
+                                              POLISH_PASSES[options.effort])
+            layer = BasisLayer(basis.sha256, layer.step, q)
+        return layer, basis.on_grid(centre + basis.weighted_sum(layer.coefficients()))
+
+    return fit
+
+
+def _basis_fit(
+    decoder: LayerDecoder, basis: SharedBasis, base: LatentRecord, inputs: np.ndarray, masks: np.ndarray,
+    options: EncodeOptions,
+) -> BasisFit:
+    """The basis fit of one material for :func:`~brdfcodec.codec.rate.encode_layers`."""
+
+    config = decoder.network.config
+    linear_rank = config.latent_dim if config.linear_basis else 0
+
+    joint: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]] = {}
+    project = projected_base_vectors(decoder, basis) if options.project_base != "never" else 0
+    ways = [project] if options.project_base == "always" or not project else [0, project]
+    target, weights = np.asarray(inputs, dtype=np.float32), np.asarray(masks, dtype=np.float32)
+    made: dict[tuple[int, MuStorage, int], tuple[LatentRecord, BasisLayer, np.ndarray]] = {}
+
+    def fit_one(k: int, mu_storage: MuStorage, p: int) -> tuple[LatentRecord, BasisLayer, np.ndarray]:
+        first = basis_offset(linear_rank, basis.count, k)
+        components = basis.vectors(first, k)
+        projection = None if not p else (basis.vectors(0, p), decoder.projection_centre)
+        if (k, p) not in joint:
+            joint[k, p] = fit_basis_coefficients(
+                decoder.network, base.mu[None], inputs[None], masks[None], components, basis.entries, options.effort,
+                projection=projection,
+            )
+        codes, coefficients = joint[k, p]
+        if mu_storage is not None:
+            # μ as a compact record stores it (int8 on the fixed grid or with a step), then the coefficients
+            # refitted to that code.
+            code = compact_mu_values(codes[0], mu_storage == MU_INT8_FIXED, f"{base.name}: mu")
+            _, coefficients = fit_basis_coefficients(
+                decoder.network, code[None], inputs[None], masks[None], components, basis.entries, options.effort,
+                fit_latent=False, projection=projection,
+            )
+        else:
+            code = _as_stored(codes, options.latent_itemsize)[0]
+        layer = quantise_coefficients(basis.sha256, coefficients[0], first, p)
+        record = LatentRecord(base.name, code, base.sigma, base.meta)
+        mapped = decoder.decode_mapped(code)
+        decoder.project_base(LayeredRecord(base.name, code, base.sigma, base.meta, basis=layer), mapped)
+        mapped += basis.residual(layer.coefficients(), first)
+        return record, layer, mapped
+
+    def kept_slice_error(mapped: np.ndarray) -> float:
+        """What rate control ranks candidates by: the clamped decode's L1 error over valid kept-slice entries."""
+        return float((np.abs(np.clip(mapped, 0.0, MAPPED_MAX) - target) * weights).sum())
+
+    def fit(k: int, mu_storage: MuStorage, under_detail: bool) -> tuple[LatentRecord, BasisLayer, np.ndarray]:
+        # "auto" projects only records without a detail layer: with one, the projection's pass over the vectors
+        # and the detail layer's inverse DCT both follow the network, and the decode took 1.7-1.8x a base-only
+        # one (benchmark decode-layered, 16 KB), past the 1.5x a layered decode may take.
+        chosen = [0] if under_detail and options.project_base == "auto" else ways
+        fits = []
+        for p in chosen:
+            if (k, mu_storage, p) not in made:
+                made[k, mu_storage, p] = fit_one(k, mu_storage, p)
+            fits.append(made[k, mu_storage, p])
+        return min(fits, key=lambda candidate: kept_slice_error(candidate[2]))
+
+    return fit

@@ -1,0 +1,1 @@
+"""Training data: HDF5 datasets, splits and folds, and where materials come from (files, proxies, analytic)."""

@@ -1,0 +1,1 @@
+"""Editing in the latent: traversal, interpolation, grafting, the named parameters, plausibility."""
