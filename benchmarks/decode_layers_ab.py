@@ -30,7 +30,8 @@ import torch
 
 from brdfcodec.datasets.analytic import ANALYTIC_PRESETS
 from brdfcodec.runtime.threads import single_blas_thread
-from brdfcodec.codec import BrdfDecoder, BrdfEncoder, _apply_mask
+from brdfcodec.codec import BrdfDecoder, BrdfEncoder
+from brdfcodec.codec.prepare import _apply_mask
 from brdfcodec.layers.detail import decode_detail
 from brdfcodec.representation import clamp_mapped, table_from_mapped
 

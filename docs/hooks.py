@@ -19,7 +19,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 #: Repository folders and files copied into the site under the same relative path.
 EXTRA_TREES = ("spec", "reports")
-EXTRA_FILES = ("benchmarks/README.md", "brdfcodec/data/models/default/MODEL_CARD.md")
+EXTRA_FILES = ("benchmarks/README.md", "benchmarks/rd/README.md", "brdfcodec/data/models/default/MODEL_CARD.md")
 EXTRA_SUFFIXES = {".md", ".png", ".json", ".jsonl", ".txt", ".csv", ".svg", ".py", ".sh"}
 
 

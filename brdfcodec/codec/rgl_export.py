@@ -10,7 +10,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-from brdfcodec.codec.api import MaterialLibrary
+from brdfcodec.codec.library import MaterialLibrary
 from brdfcodec.format.material_names import material_file_path
 from brdfcodec.io.atomic import check_output_path
 from brdfcodec.io.inputs import read_measured

@@ -1,0 +1,517 @@
+"""The decoder: latent codes and layered records to tables (spec/bvae-format.md §6).
+
+Part of :mod:`brdfcodec.codec`, which re-exports the public names.
+"""
+
+from __future__ import annotations
+
+import functools
+import os
+from collections.abc import Iterator, Sequence
+from typing import TYPE_CHECKING
+
+import numpy as np
+import numpy.typing as npt
+import torch
+
+from brdfcodec.conventions import N_KEPT_SLICES, NETWORK_INPUT_SHAPE
+from brdfcodec.errors import (
+    BasisMismatchError,
+    DecoderMismatchError,
+    LatentDimensionError,
+)
+from brdfcodec.format.bvae import (
+    BvaeHeader,
+    DecoderReference,
+    GraftRecord,
+    LatentRecord,
+    Record,
+)
+from brdfcodec.models.registry import find_model
+from brdfcodec.models.store import ModelManifest, load_model
+from brdfcodec.representation import (
+    GREEN_BLOCK,
+    RED_BLOCK,
+    clamp_mapped,
+    kept_slots_for_bins,
+    network_channels_for_slots,
+    table_from_mapped,
+    validate_phi_d_bins,
+)
+from brdfcodec.runtime.threads import codec_threads
+
+if TYPE_CHECKING:
+    from brdfcodec.format.layered_record import LayeredRecord
+    from brdfcodec.layers.basis import SharedBasis
+
+from brdfcodec.codec.prepare import MaskedEntries, ModelSpec, _apply_mask, resolve_model
+from brdfcodec.codec.projection import _has_latent, _projected_vectors, _ProjectionPlan
+
+__all__ = ["BrdfDecoder"]
+
+
+class _EvalMode:
+    """Puts a module in evaluation mode for a ``with`` block and restores its mode after."""
+
+    def __init__(self, module: torch.nn.Module) -> None:
+        self.module = module
+
+    def __enter__(self) -> None:
+        self.was_training = self.module.training
+        self.module.eval()
+
+    def __exit__(self, *exc: object) -> None:
+        self.module.train(self.was_training)
+
+
+class BrdfDecoder:
+    """A loaded decoder: latent codes to mapped slices and tables.
+
+    Parameters
+    ----------
+    model : str, os.PathLike, ModelManifest or None
+        Model folder, decoder SHA-256 (looked up in the registry), or None for
+        the shipped default model.
+    device : str or torch.device, default "cpu"
+    dtype : torch.dtype, default torch.float32
+        Computation dtype (``torch.float16`` or ``torch.bfloat16`` where the
+        device supports them). Outputs are float32 either way.
+
+    Examples
+    --------
+    >>> import brdfcodec as bc
+    >>> decoder = bc.BrdfDecoder()                     # the shipped default model
+    >>> record = bc.LatentRecord("centre", [0.0] * decoder.latent_dim, [1.0] * decoder.latent_dim)
+    >>> decoder.decode(record, phi_d_bins=[0]).shape   # stored MERL units, one φd bin
+    (3, 90, 90, 1)
+    """
+
+    manifest: ModelManifest | None
+    reference: DecoderReference | None
+
+    def __init__(
+        self, model: ModelSpec = None, *, device: str | torch.device = "cpu", dtype: torch.dtype = torch.float32
+    ) -> None:
+        manifest = resolve_model(model)
+        _, network, loaded = load_model(manifest.folder, parts=("decoder",), device=str(device))
+        if network is None:  # load_model returns the parts asked for
+            raise RuntimeError(f"{manifest.folder}: the decoder did not load")
+        self._setup(network.to(dtype), device, dtype, loaded)
+
+    def _setup(
+        self, network: torch.nn.Module, device: str | torch.device, dtype: torch.dtype, manifest: ModelManifest | None
+    ) -> None:
+        self.network = network
+        self.device = torch.device(device)
+        self.dtype = dtype
+        self.manifest = manifest
+        self.reference = None if manifest is None else DecoderReference(manifest.decoder_sha256, manifest.name)
+        self._latent_dim = int(network.config.latent_dim)
+
+    @classmethod
+    def from_network(
+        cls, network: torch.nn.Module, *, device: str | torch.device = "cpu", dtype: torch.dtype = torch.float32
+    ) -> BrdfDecoder:
+        """Wrap a decoder network held in memory (training, export): no manifest, no file reference.
+
+        The network is not copied or converted (its parameters keep their dtypes); it is put in evaluation
+        mode while it runs and given back in the mode it had. ``dtype`` is the dtype of the codes fed to it.
+        """
+        decoder = cls.__new__(cls)
+        decoder._setup(network, device, dtype, None)
+        return decoder
+
+    @classmethod
+    def for_header(
+        cls, header: BvaeHeader, *, device: str | torch.device = "cpu", dtype: torch.dtype = torch.float32
+    ) -> BrdfDecoder:
+        """The decoder a file refers to, found by its SHA-256 in the registry."""
+        return cls(find_model(header.decoder.sha256), device=device, dtype=dtype)
+
+    @property
+    def latent_dim(self) -> int:
+        """Length of the latent code."""
+        return self._latent_dim
+
+    @functools.cached_property
+    def colour_dims(self) -> tuple[int, ...]:
+        """Latent dimensions that control colour: from the manifest, else measured now by traversal."""
+        stored = self.manifest.parameters.get("colour_dims") if self.manifest is not None else None
+        if stored:
+            return tuple(int(d) for d in stored)
+        from brdfcodec.models.parameters import colour_dims_of, measure_dimension_effects
+
+        return colour_dims_of(measure_dimension_effects(self))
+
+    def check(self, header: BvaeHeader, path: str | os.PathLike[str] = "") -> None:
+        """Refuse to decode a file made for another decoder.
+
+        Raises
+        ------
+        DecoderMismatchError
+            Names both hashes and says how to get the right model.
+        LatentDimensionError
+            The file's ``latent_dim`` is not the decoder's.
+        BasisMismatchError, BasisError
+            A record's basis layer names a shared basis this model does not have, or vectors beyond it
+            (``spec/bvae-format.md`` §4.5): refused on opening, before any record is decoded.
+        """
+        mine = self.reference
+        if mine is None or header.decoder.sha256 != mine.sha256:
+            where = f"{os.fspath(path)}: " if path else ""
+            own = "a decoder held in memory" if mine is None else f"{mine.sha256} ({mine.name})"
+            raise DecoderMismatchError(
+                f"{where}the file needs decoder {header.decoder.sha256} ({header.decoder.name}), but this decoder is "
+                f"{own}; open it with BrdfDecoder.for_header, or register the model folder that made it"
+            )
+        if header.latent_dim != self.latent_dim:
+            raise LatentDimensionError(
+                path or "<bvae>",
+                f"declares latent_dim {header.latent_dim}, but its decoder {header.decoder.name} "
+                f"({header.decoder.sha256[:12]}…) has {self.latent_dim}: the file is inconsistent",
+            )
+        from brdfcodec.layers.basis import check_basis_layers
+
+        own = self.manifest.basis_sha256 if self.manifest is not None else None
+        where = os.fspath(path) or "<bvae>"
+        check_basis_layers(header.entries, self.basis_named, where, own)
+        for entry in header.entries:  # records without a latent start from the linear-path mean (format 2.1)
+            layers = entry.layers or {}
+            if layers.get("mu") == "none":
+                basis = self.basis_named(str(layers["basis"]["sha256"]))
+                assert basis is not None  # checked just above
+                self._centre_for(entry.name, basis, where)
+
+    def _codes(self, codes: npt.ArrayLike) -> tuple[np.ndarray, bool]:
+        array = np.asarray(codes, dtype=np.float32)
+        single = array.ndim == 1
+        batch = np.array(array.reshape(-1, array.shape[-1]) if array.ndim else array.reshape(1, 1))
+        if batch.shape[-1] != self.latent_dim:
+            raise ValueError(f"codes must have {self.latent_dim} values each, got shape {array.shape}")
+        if not np.isfinite(batch).all():
+            raise ValueError("latent codes must be finite")
+        return batch, single
+
+    def _run(self, batch: np.ndarray, channels: tuple[int, ...] | None, batch_size: int) -> np.ndarray:
+        """The batched network loop: clamped mapped output (:func:`~brdfcodec.representation.clamp_mapped`)."""
+        if batch_size < 1:
+            raise ValueError(f"batch_size must be at least 1, got {batch_size}")
+        outputs = []
+        with codec_threads(), torch.inference_mode(), _EvalMode(self.network):
+            for start in range(0, len(batch), batch_size):
+                z = torch.from_numpy(batch[start : start + batch_size]).to(self.device, self.dtype)
+                out = self.network(z) if channels is None else self.network.forward_channels(z, channels)
+                outputs.append(out.float().cpu().numpy())
+        out = np.concatenate(outputs) if len(outputs) > 1 else outputs[0]
+        return clamp_mapped(out, out=out)
+
+    def decode_mapped(self, codes: npt.ArrayLike, *, batch_size: int = 16) -> npt.NDArray[np.float32]:
+        """Mapped slices of latent codes.
+
+        Parameters
+        ----------
+        codes : array_like, shape (B, latent_dim) or (latent_dim,)
+            Latent codes (any finite values; the output is clamped).
+        batch_size : int, default 16
+            Codes run through the network at once.
+
+        Returns
+        -------
+        ndarray of float32, shape (B, 63, 90, 90) or (63, 90, 90)
+            Mapped values in [0, MAPPED_MAX], network layout.
+        """
+        batch, single = self._codes(codes)
+        out = self._run(batch, None, batch_size)
+        return out[0] if single else out
+
+    def decode_channels(self, code: npt.ArrayLike, channels: Sequence[int]) -> npt.NDArray[np.float32]:
+        """Only some mapped channels of one latent code, shape (len(channels), 90, 90)."""
+        batch, _ = self._codes(np.asarray(code, dtype=np.float32).reshape(-1))
+        return self._run(batch, tuple(channels), 1)[0]
+
+    def mapped_for_bins(self, record: Record, phi_d_bins: Sequence[int]) -> npt.NDArray[np.float32]:
+        """Mapped slices (63, 90, 90) with only the kept slices that ``phi_d_bins`` need filled (others 0)."""
+        slots = kept_slots_for_bins(phi_d_bins)
+        if len(slots) > N_KEPT_SLICES // 2 or _projected_vectors(record):  # a projection needs every entry
+            return self.mapped_record(record)
+        out = np.zeros(NETWORK_INPUT_SHAPE, dtype=np.float32)
+        if not _has_latent(record):  # no network at all: the mean's channels, then the layers' for those slots
+            channels = network_channels_for_slots(slots)
+            out[channels] = self._with_layers(record, self._mean_base(record)[channels], slots)
+        elif isinstance(record, GraftRecord):
+            own = network_channels_for_slots(slots, colours=(0, 2))
+            out[own] = self.decode_channels(record.mu, own)
+            green = network_channels_for_slots(slots, colours=(1,))
+            out[green] = self.decode_channels(record.second_code(), network_channels_for_slots(slots, colours=(0,)))
+        else:
+            channels = network_channels_for_slots(slots)
+            out[channels] = self._with_layers(record, self.decode_channels(record.mu, channels), slots)
+        return out
+
+    @functools.cached_property
+    def shared_basis(self) -> SharedBasis | None:
+        """The model's shared basis (``basis.safetensors``, checked against ``model.json``), or None."""
+        if self.manifest is None or not self.manifest.basis_sha256:
+            return None
+        from brdfcodec.layers.basis import BASIS_FILE, load_shared_basis
+
+        return load_shared_basis(self.manifest.folder / BASIS_FILE, self.manifest.basis_sha256)
+
+    def basis_named(self, sha256: str) -> SharedBasis | None:
+        """The model's shared basis (:attr:`shared_basis`) if it has this SHA-256, else None: a model ships one
+        basis, and a file's basis layers decode with the model whose basis they name (``spec/bvae-format.md``
+        §4.5)."""
+        basis = self.shared_basis
+        return basis if basis is not None and basis.sha256 == sha256 else None
+
+    @property
+    def projection_centre(self) -> npt.NDArray[np.float32]:
+        """The centre of a projected base (``spec/bvae-format.md`` §4.5) over the current shared basis' entries:
+        the decoder's linear-path mean (``basis_mean``, float16 widened) there, shape (E,).
+
+        Raises
+        ------
+        BasisError
+            The model has no shared basis, its decoder no linear path, or the linear path does not cover
+            every entry of the basis.
+        """
+        from brdfcodec.layers.basis import BasisError
+
+        basis = self.shared_basis
+        if basis is None:
+            raise BasisError("a projected base needs the model's shared basis; this model has none")
+        return self._centre_on(basis)
+
+    def _centre_on(self, basis: SharedBasis) -> npt.NDArray[np.float32]:
+        from brdfcodec.layers.basis import BasisError
+
+        cache = self.__dict__.setdefault("_centres", {})
+        if basis.sha256 not in cache:
+            mean, index = getattr(self.network, "basis_mean", None), getattr(self.network, "valid_index", None)
+            if mean is None or index is None:
+                raise BasisError("a projected base is centred on the decoder's linear-path mean, and a record without "
+                                 "a latent starts from it; this decoder has no linear path")
+            index_np = index.cpu().numpy()
+            position = np.minimum(np.searchsorted(index_np, basis.entries), len(index_np) - 1)
+            if not np.array_equal(index_np[position], basis.entries):
+                raise BasisError("the decoder's linear path does not cover every entry of the shared basis")
+            cache[basis.sha256] = mean.float().cpu().numpy()[position]
+        return cache[basis.sha256]
+
+    def _centre_for(self, name: str, basis: SharedBasis, where: str = "") -> npt.NDArray[np.float32]:
+        """:meth:`_centre_on` for a record without a latent; its :class:`BasisError` names the file and the
+        record."""
+        from brdfcodec.layers.basis import BasisError
+
+        try:
+            return self._centre_on(basis)
+        except BasisError as error:
+            place = f"{where}: " if where else ""
+            raise BasisError(f"{place}record {name!r} has no latent (format 2.1) and decodes from the decoder's "
+                             f"linear-path mean: {error}") from None
+
+    def _mean_base(self, record: Record) -> npt.NDArray[np.float32]:
+        """The base of a record without a latent (``spec/bvae-format.md`` §4.6): the decoder's linear-path mean m
+        at the shared basis' entries and 0 elsewhere, shape (63, 90, 90), a new array. No network runs."""
+        layer = record.basis  # type: ignore[union-attr]  # a record without a latent has a basis layer
+        basis = self._basis_of(record, layer.sha256)
+        return basis.on_grid(self._centre_for(record.name, basis))
+
+    def _projection_plan(self, basis: SharedBasis) -> _ProjectionPlan:
+        """What a fast projected decode needs for every vector of ``basis``, computed once per decoder and basis
+        (records that project on fewer vectors use its first rows)."""
+        cache = self.__dict__.setdefault("_projection_plans", {})
+        if basis.sha256 not in cache:
+            cache[basis.sha256] = _ProjectionPlan.build(self.network, basis, self._centre_on(basis))
+        return cache[basis.sha256]
+
+    def _projected_mapped(self, record: LayeredRecord) -> npt.NDArray[np.float32]:
+        """The mapped slices of a record whose basis layer projects its base (format 1.6), all 63 channels.
+
+        The same sum as :meth:`project_base` followed by the layers (``spec/bvae-format.md`` §4.5), taken
+        the fast way: the projection's dot products ``(y − m) · v_j`` go through the network's last layer,
+        ``G h`` with ``G`` its adjoint applied to the vectors (:class:`_ProjectionPlan`), plus the linear
+        path's ``z · (C vⱼ)``, the last layer's bias, and the entries the clamp moved; then one pass over the
+        vectors adds the projection and the basis layer together; then the detail layer, if any.
+        """
+        layer = record.basis
+        assert layer is not None
+        basis = self._basis_of(record, layer.sha256)
+        if layer.project > basis.count:
+            from brdfcodec.layers.basis import BasisError
+
+            raise BasisError(f"{record.name}: the record projects its base on {layer.project} basis vectors, but "
+                             f"this model's shared basis holds {basis.count}")
+        count, c, first = layer.project, layer.coefficients(), layer.first
+        if first + len(c) > basis.count:
+            basis.check_vectors(first, len(c))  # refused with the sizes (BasisError)
+        plan = self._projection_plan(basis)
+        from brdfcodec.layers.detail import decode_detail
+
+        batch, _ = self._codes(record.mu)
+        with torch.inference_mode(), _EvalMode(self.network):
+            z = torch.from_numpy(batch).to(self.device, self.dtype)
+            hidden, unbounded = self.network.hidden_and_unbounded(z)
+            h = hidden.float().cpu().numpy().reshape(-1)
+            u = unbounded.float().cpu().numpy()[0]
+        mapped = clamp_mapped(u)  # a new array: u is still needed
+        on_basis = basis.entry_mask  # boolean: gathers and scatters faster than the index array
+        unclamped = u.reshape(-1)[on_basis]
+        moved = mapped.reshape(-1)[on_basis] - unclamped  # the clamp's change (0 almost everywhere)
+        if not np.isfinite(moved).all():  # a non-finite network output: the direct sum
+            self.project_base(record, mapped)
+            mapped.reshape(-1)[on_basis] += basis.weighted_sum(c, first)
+        else:
+            weights = np.zeros(max(count, first + len(c)), dtype=np.float32)
+            weights[:count] = plan.dot_products(count, h, batch[0], moved)
+            weights[first : first + len(c)] += c
+            mapped.reshape(-1)[on_basis] = plan.reconstruct(weights)
+        if record.detail is not None:
+            mapped += decode_detail(record.detail).reshape(mapped.shape)
+        return clamp_mapped(mapped, out=mapped)
+
+    def project_base(self, record: Record, mapped: np.ndarray) -> None:
+        """Replace, in place, a clamped base decode ``mapped`` (63, 90, 90) by its projection when the record's
+        basis layer asks for one (``layers.basis.project``, format 1.6); nothing otherwise."""
+        count = _projected_vectors(record)
+        if not count:
+            return
+        basis = self._basis_of(record, record.basis.sha256)  # type: ignore[union-attr]
+        if count > basis.count:
+            from brdfcodec.layers.basis import BasisError
+
+            raise BasisError(f"{record.name}: the record projects its base on {count} basis vectors, but this "
+                             f"model's shared basis holds {basis.count}")
+        flat = mapped.reshape(-1)
+        flat[basis.entries] = basis.project(flat[basis.entries], self._centre_on(basis), count)
+
+    def _basis_of(self, record: Record, sha256: str) -> SharedBasis:
+        """The shared basis a record's basis layer names; :class:`BasisMismatchError` naming both hashes when
+        this decoder's model has no basis by that hash (projected records included)."""
+        basis = self.basis_named(sha256)
+        if basis is None:
+            own = self.manifest.basis_sha256 if self.manifest is not None else None
+            raise BasisMismatchError(
+                f"{record.name}: the record's basis layer needs shared basis {sha256}, but this "
+                f"decoder's model has {own or 'none'}; decode it with the model that wrote it"
+            )
+        return basis
+
+    def _layer_residuals(self, record: Record, slots: Sequence[int] | None = None) -> list[np.ndarray]:
+        """A record's layers decoded to mapped residuals, in the order they are added (basis, then detail).
+
+        Empty for a base-only record. A full decode gets one ``(63, 90, 90)`` residual, both layers summed
+        (:func:`~brdfcodec.layers.layer_sum.layered_residual`). A partial decode gets each layer's channels of
+        the kept ``slots`` only, in :func:`~brdfcodec.representation.network_channels_for_slots` order.
+        """
+        basis_layer, detail = getattr(record, "basis", None), getattr(record, "detail", None)
+        if basis_layer is None and detail is None:
+            return []
+        basis = None if basis_layer is None else self._basis_of(record, basis_layer.sha256)
+        if slots is None:
+            from brdfcodec.layers.layer_sum import layered_residual
+
+            residual = layered_residual(basis, basis_layer, detail)
+            return [] if residual is None else [residual]
+        residuals = []
+        if basis_layer is not None and basis is not None:
+            channels = network_channels_for_slots(slots)
+            residuals.append(basis.residual_channels(basis_layer.coefficients(), channels, basis_layer.first))
+        if detail is not None:
+            from brdfcodec.layers.detail import decode_detail
+
+            residuals.append(decode_detail(detail, slots).reshape(-1, *NETWORK_INPUT_SHAPE[1:]))
+        return residuals
+
+    def _with_layers(self, record: Record, mapped: np.ndarray, slots: Sequence[int] | None = None) -> np.ndarray:
+        """A layered record's decode: base + basis layer + detail layer, then the one clamp (spec §4.4, §6).
+
+        ``mapped`` is the clamped base decode of all 63 channels, or (partial decoding) of the channels of
+        the kept ``slots`` only. The layers are decoded after the network, on the calling thread: beside the
+        network, on a thread of their own, they made a decode slower on 2 cores, not faster
+        (``benchmarks/README.md``).
+        """
+        residuals = self._layer_residuals(record, slots)
+        if not residuals:
+            return mapped
+        for residual in residuals:
+            mapped += residual
+        return clamp_mapped(mapped, out=mapped)
+
+    def mapped_record(self, record: Record) -> npt.NDArray[np.float32]:
+        """Mapped slices of a record; a graft record's green block is the second code's red block; a record
+        without a latent (format 2.1) is the linear-path mean plus its layers, clamped."""
+        with codec_threads():
+            if not _has_latent(record):
+                return self._with_layers(record, self._mean_base(record))
+            if isinstance(record, GraftRecord):
+                # One code at a time, so M1 is bit-identical to decoding V1 as a plain record.
+                out = self.decode_mapped(record.mu)
+                out[GREEN_BLOCK] = self.decode_mapped(record.second_code())[RED_BLOCK]
+                return out
+            if _projected_vectors(record):
+                return self._projected_mapped(record)  # type: ignore[arg-type]
+            return self._with_layers(record, self.decode_mapped(record.mu))
+
+    def decode(
+        self,
+        record: Record,
+        *,
+        phi_d_bins: Sequence[int] | None = None,
+        masked: MaskedEntries = "unmeasured",
+    ) -> npt.NDArray[np.float32]:
+        """Decoded table of a record in stored MERL units.
+
+        Parameters
+        ----------
+        record : LatentRecord or GraftRecord
+        phi_d_bins : sequence of int, optional
+            Only these φd bins (each in [0, 180)); all by default.
+        masked : {"unmeasured", "zero", "keep"}, default "unmeasured"
+            Below-horizon bins: ``-1`` (MERL's unmeasured marker), ``0``, or
+            the network's value.
+
+        Returns
+        -------
+        ndarray of float32, shape (3, 90, 90, K)
+        """
+        self._check_record(record)
+        with codec_threads():
+            if phi_d_bins is None:
+                return _apply_mask(table_from_mapped(self.mapped_record(record)), None, masked)
+            bins = validate_phi_d_bins(phi_d_bins)
+            table = table_from_mapped(self.mapped_for_bins(record, bins), phi_d_bins=bins)
+            return _apply_mask(table, bins, masked)
+
+    #: Former name of :meth:`decode`.
+    table = decode
+
+    def decode_many(
+        self, records: Sequence[Record], *, masked: MaskedEntries = "unmeasured", batch_size: int = 16
+    ) -> Iterator[npt.NDArray[np.float32]]:
+        """Full tables of many records, decoded ``batch_size`` at a time (a generator: one table built at a time)."""
+        for record in records:
+            self._check_record(record)
+        for start in range(0, len(records), batch_size):
+            chunk = records[start : start + batch_size]
+            # Projected records decode on their own (their network pass also yields the projection's terms), and
+            # records without a latent run no network (format 2.1).
+            latent = [r for r in chunk if isinstance(r, LatentRecord) and not _projected_vectors(r)
+                      and _has_latent(r)]
+            batch: Iterator[np.ndarray] = iter(())
+            if latent:
+                batch = iter(self.decode_mapped(np.stack([record.mu for record in latent]), batch_size=batch_size))
+            for record in chunk:  # grafts need two codes each: decoded on their own
+                with codec_threads():
+                    if isinstance(record, LatentRecord) and not _projected_vectors(record) and _has_latent(record):
+                        mapped = self._with_layers(record, next(batch))
+                    else:
+                        mapped = self.mapped_record(record)
+                    table = _apply_mask(table_from_mapped(mapped), None, masked)
+                yield table
+
+    def _check_record(self, record: Record) -> None:
+        if record.latent_dim != self.latent_dim:
+            raise ValueError(f"{record.name}: latent dimension {record.latent_dim}, decoder needs {self.latent_dim}")
+
+

@@ -1,0 +1,255 @@
+"""The one-shot functions: encode, decode, compress and decompress.
+
+Part of :mod:`brdfcodec.codec`, which re-exports the public names.
+"""
+
+from __future__ import annotations
+
+import itertools
+import os
+from collections.abc import Callable, Iterable, Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING, Literal
+
+import numpy as np
+import numpy.typing as npt
+
+from brdfcodec.format.bvae import (
+    LatentDtype,
+    Record,
+    encode_bvae,
+    without_provenance,
+)
+from brdfcodec.io.atomic import atomic_output, check_output_path
+from brdfcodec.io.inputs import read_measured
+from brdfcodec.io.merl import MerlBRDF
+from brdfcodec.representation import (
+    network_input_from_table,
+)
+
+if TYPE_CHECKING:
+    from brdfcodec.codec.encoding import LatentChoice
+
+from brdfcodec.codec.decoder import BrdfDecoder
+from brdfcodec.codec.encoder import BrdfEncoder, MaterialInput, measure
+from brdfcodec.codec.library import MaterialLibrary
+from brdfcodec.codec.prepare import MaskedEntries, ModelSpec, prepare_source
+
+__all__ = ["compress", "decode", "decompress", "encode", "encode_records"]
+
+
+EncodeSource = MerlBRDF | MaterialInput | str | os.PathLike[str]
+
+
+def _as_input(source: EncodeSource, index: int, name: str | None) -> MaterialInput:
+    if isinstance(source, MaterialInput):
+        return source if name is None else MaterialInput(name, source.inputs, source.source, source.mask)
+    brdf = prepare_source(source if isinstance(source, MerlBRDF) else read_measured(source))
+    label = name or brdf.name or f"material-{index}"
+    inputs, mask = network_input_from_table(brdf.values, brdf.mask)
+    return MaterialInput(label, inputs, brdf, mask)
+
+
+def encode_records(
+    sources: Iterable[EncodeSource],
+    *,
+    names: Sequence[str] | None = None,
+    encoder: BrdfEncoder | None = None,
+    decoder: BrdfDecoder | None = None,
+    measure_error: bool = True,
+    batch_size: int = 8,
+    on_batch: Callable[[list[Record]], None] | None = None,
+) -> list[Record]:
+    """Encode materials into records, ``batch_size`` at a time (sources are read as they are needed).
+
+    Parameters
+    ----------
+    sources : iterable of MerlBRDF, MaterialInput or MERL file path
+        Consumed lazily, so a generator that loads one table at a time keeps
+        at most ``batch_size`` tables in memory.
+    names : sequence of str, optional
+        Record names; by default each source's name (file stem, ``MerlBRDF.name``).
+    encoder : BrdfEncoder, optional
+        The shipped default model's encoder when absent.
+    decoder : BrdfDecoder, optional
+        For measuring; loaded from the encoder's model when needed.
+    measure_error : bool, default True
+        Decode each record and store its RelAE against its source table in
+        ``meta["relae"]`` (skipped for a :class:`MaterialInput` without table).
+    batch_size : int, default 8
+    on_batch : callable, optional
+        Called with the records of each batch as it is done (progress).
+
+    Returns
+    -------
+    list of LatentRecord
+    """
+    if batch_size < 1:
+        raise ValueError(f"batch_size must be at least 1, got {batch_size}")
+    encoder = encoder if encoder is not None else BrdfEncoder()
+    if measure_error and decoder is None:
+        decoder = encoder.decoder
+    labels = iter(names) if names is not None else itertools.repeat(None)
+    records: list[Record] = []
+    numbered = enumerate(sources)
+    while chunk := list(itertools.islice(numbered, batch_size)):
+        items = [_as_input(source, index, next(labels)) for index, source in chunk]
+        sources_of = [item.source for item in items]
+        batch: list[Record] = list(encoder.encode_arrays(
+            [item.name for item in items],
+            np.stack([item.inputs for item in items]),
+            np.stack([item.input_mask() for item in items]),
+            sources_of,
+        ))
+        if measure_error and decoder is not None:
+            batch = [r if s is None else measure(r, decoder, s) for r, s in zip(batch, sources_of, strict=True)]
+        records += batch
+        if on_batch is not None:
+            on_batch(batch)
+    return records
+
+
+def encode(
+    sources: EncodeSource | Iterable[EncodeSource],
+    *,
+    names: Sequence[str] | None = None,
+    model: ModelSpec = None,
+    latent_dtype: LatentDtype = "float32",
+    measure_error: bool = True,
+    batch_size: int = 8,
+    effort: int = 1,
+    bytes: int | None = None,  # noqa: A002 - the CLI's --bytes
+    max_relae: float | None = None,
+    metric: Literal["mapped", "linear"] = "mapped",
+    provenance: bool = False,
+    latent: LatentChoice = "auto",
+) -> bytes:
+    """Encode MERL tables into the bytes of one ``.bvae`` file (one material, or a library of many).
+
+    The inverse of :func:`decode`: ``decode(encode([brdf]))[brdf.name]`` is the
+    material as the model reconstructs it.
+
+    Parameters
+    ----------
+    sources : MerlBRDF, MaterialInput, MERL file path, or an iterable of them
+    names : sequence of str, optional
+        Material names (by default the sources' names).
+    model : model folder, decoder SHA-256, or None for the default
+    latent_dtype : {"float32", "float16"}
+    measure_error : bool, default True
+        Measure each record's RelAE against its source (``meta["relae"]``; stored with ``provenance``).
+    batch_size : int, default 8
+    effort, bytes, max_relae, metric
+        Encode-time refinement and rate control, as for :class:`BrdfEncoder`.
+    provenance : bool, default False
+        Store each record's provenance in the file (``spec/bvae-format.md`` §5: source SHA-256 and kind,
+        RelAE, encoder, effort, rate control). By default the file holds names and records only.
+    latent : {"auto", "always"}, default "auto"
+        Whether rate control may write records without a latent, as for :class:`BrdfEncoder`.
+
+    Returns
+    -------
+    bytes
+        A complete ``.bvae`` file (``spec/bvae-format.md``).
+
+    Examples
+    --------
+    >>> import brdfcodec as bc
+    >>> from brdfcodec.datasets.analytic import ANALYTIC_PRESETS
+    >>> data = bc.encode([ANALYTIC_PRESETS["gold"].to_merl()], measure_error=False)
+    >>> data[1:5], len(data)   # one material: a header naming the decoder, then 64 bytes of latents
+    (b'BVAE', 136)
+    >>> bc.decode(data)["gold"].table(phi_d_bins=[0]).shape
+    (3, 90, 90, 1)
+    """
+    items = [sources] if isinstance(sources, MerlBRDF | MaterialInput | str | os.PathLike) else sources
+    encoder = BrdfEncoder(
+        model, effort=effort, bytes=bytes, max_relae=max_relae, metric=metric, latent_dtype=latent_dtype,
+        latent=latent,
+    )
+    records = encode_records(items, names=names, encoder=encoder, measure_error=measure_error, batch_size=batch_size)
+    if encoder.reference is None:  # loaded from a model folder, so it has one
+        raise RuntimeError("the encoder has no decoder reference")
+    if not provenance:
+        records = without_provenance(records)
+    return encode_bvae(records, encoder.reference, latent_dtype=latent_dtype)
+
+
+def decode(data: bytes, *, decoder: BrdfDecoder | None = None) -> MaterialLibrary:
+    """The materials of a ``.bvae`` file's bytes: the inverse of :func:`encode`.
+
+    Parameters
+    ----------
+    data : bytes
+        A complete ``.bvae`` file.
+    decoder : BrdfDecoder, optional
+        Reuse a loaded decoder; by default the one the file names is found by its SHA-256.
+
+    Returns
+    -------
+    MaterialLibrary
+        Name → :class:`DecodedMaterial`; each decoded when first used.
+
+    Raises
+    ------
+    BvaeFormatError, DecoderNotFoundError, DecoderMismatchError
+    """
+    return MaterialLibrary.from_bytes(data, decoder=decoder)
+
+
+def compress(
+    sources: EncodeSource | Iterable[EncodeSource],
+    output: str | os.PathLike[str],
+    *,
+    names: Sequence[str] | None = None,
+    model: ModelSpec = None,
+    latent_dtype: LatentDtype = "float32",
+    measure_error: bool = True,
+    overwrite: bool = False,
+    effort: int = 1,
+    bytes: int | None = None,  # noqa: A002 - the CLI's --bytes
+    max_relae: float | None = None,
+    metric: Literal["mapped", "linear"] = "mapped",
+    provenance: bool = False,
+    latent: LatentChoice = "auto",
+) -> int:
+    """Write :func:`encode` of the sources to a ``.bvae`` file, atomically (options as for :func:`encode`).
+
+    Returns
+    -------
+    int
+        Bytes written.
+    """
+    check_output_path(output, overwrite=overwrite)  # before the work, not after
+    data = encode(
+        sources, names=names, model=model, latent_dtype=latent_dtype, measure_error=measure_error,
+        effort=effort, bytes=bytes, max_relae=max_relae, metric=metric, provenance=provenance, latent=latent,
+    )
+    with atomic_output(output, overwrite=overwrite) as tmp:
+        Path(tmp).write_bytes(data)
+    return len(data)
+
+
+def decompress(
+    path: str | os.PathLike[str],
+    material: str | None = None,
+    *,
+    phi_d_bins: Sequence[int] | None = None,
+    masked: MaskedEntries = "unmeasured",
+) -> npt.NDArray[np.float32]:
+    """Decode one material of a ``.bvae`` file (the only one, or the one named).
+
+    Returns
+    -------
+    ndarray of float32, shape (3, 90, 90, K)
+        Stored MERL units; see :meth:`BrdfDecoder.decode`.
+    """
+    with MaterialLibrary(path) as library:
+        if material is None:
+            if len(library) != 1:
+                raise ValueError(
+                    f"{path}: holds {len(library)} materials; name one ({', '.join(library.names[:10])}"
+                    f"{', …' if len(library) > 10 else ''})"
+                )
+            material = library.names[0]
+        return library[material].table(phi_d_bins=phi_d_bins, masked=masked)
