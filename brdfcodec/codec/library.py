@@ -95,7 +95,10 @@ class DecodedMaterial:
     def eval(
         self, wi: npt.ArrayLike, wo: npt.ArrayLike, *, mode: Literal["nearest", "trilinear"] = "nearest"
     ) -> npt.NDArray[np.float64]:
-        """Reflectance (1/sr, linear RGB) at direction pairs, shape (..., 3); see :func:`brdfcodec.representation.lookup.lookup`."""
+        """Reflectance (1/sr, linear RGB) at direction pairs, shape (..., 3)
+
+        See :func:`brdfcodec.representation.lookup.lookup`.
+        """
         from brdfcodec.representation.lookup import lookup
 
         mask = np.broadcast_to(horizon_mask(), (3, *horizon_mask().shape))

@@ -242,7 +242,7 @@ def _vector_class(mi: Any, default_kind: str) -> type:
         return mi.UInt32(i_h), mi.UInt32(i_d), mi.UInt32(i_p), h
 
     def corners(u: Any, n: int, periodic: bool) -> tuple[Any, Any, Any]:
-        """Lower and upper neighbouring bins of bin coordinate u and the upper one's weight (brdfcodec.representation.lookup)."""
+        """Lower and upper neighbouring bins of bin coordinate u and the upper one's weight (as lookup)."""
         if periodic:
             lower = dr.floor(u)
             frac = u - lower
@@ -300,7 +300,7 @@ def _vector_class(mi: Any, default_kind: str) -> type:
             return dr.select(active, dr.maximum(rgb, 0.0) * self.m_scale, 0.0)
 
         def _trilinear(self, wi: Any, wo: Any, active: Any) -> Any:
-            """Interpolation between the 8 neighbouring bins, invalid entries left out (brdfcodec.representation.lookup)."""
+            """Interpolation between the 8 neighbouring bins, invalid entries left out (as lookup)."""
             theta_h, theta_d, phi_d, _ = coordinates(wi, wo)
             axes = (corners(N_THETA_H * dr.sqrt(dr.maximum(theta_h, 0.0) / half_pi), N_THETA_H, False),
                     corners(N_THETA_D * theta_d / half_pi, N_THETA_D, False),
@@ -409,7 +409,7 @@ def register() -> None:
 
 
 def material_of(bsdf: Any) -> MaterialTables | None:
-    """The :class:`~brdfcodec.render.mitsuba_tables.MaterialTables` behind a loaded ``bvae``/``merl`` BSDF (else None)."""
+    """The :class:`MaterialTables` behind a loaded ``bvae``/``merl`` BSDF (else None)."""
     return getattr(bsdf, "tables", None)
 
 

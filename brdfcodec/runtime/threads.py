@@ -151,7 +151,7 @@ def _release_openblas_control() -> None:
     threadpoolctl ≥ 3.6 lets only one "controlling" Python thread change a
     process-wide OpenBLAS pool (others are silently ignored), and a limit not
     used as a ``with`` block keeps that control. Our sets and restores are
-    serialised by :class:`~brdfcodec.runtime.shared_limit.SharedLimit`'s lock, so control is released around each of them.
+    serialised by :class:`SharedLimit`'s lock, so control is released around each of them.
     """
     import threadpoolctl
 

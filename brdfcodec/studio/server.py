@@ -337,7 +337,7 @@ def _exact_int(text: str) -> int:
 def _parse_json(data: bytes) -> Any:
     """JSON as I-JSON (RFC 7493) has it: finite numbers, integers exact in binary64, at most
     :data:`MAX_JSON_DEPTH` levels of nesting (checked before parsing, so a deep body cannot exhaust the stack)."""
-    depth = deepest = 0
+    depth = 0
     in_string = escaped = False
     for byte in data:  # counting brackets outside strings is exact for valid JSON
         if in_string:

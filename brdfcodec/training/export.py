@@ -14,10 +14,10 @@ import torch
 
 from brdfcodec.codec import BrdfDecoder
 from brdfcodec.datasets.hdf5 import BrdfDataset
-from brdfcodec.models.parameters import describe_parameters
 from brdfcodec.io.atomic import atomic_output
 from brdfcodec.models.config import ModelConfig
 from brdfcodec.models.network import BetaVAE
+from brdfcodec.models.parameters import describe_parameters
 from brdfcodec.models.store import DECODER_FILE, MANIFEST, ModelManifest, load_manifest, write_manifest, write_weights
 from brdfcodec.training.card import render_model_card
 from brdfcodec.training.measurements import kl_per_dim, measure_model, summarise, traversal_changes

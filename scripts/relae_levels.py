@@ -8,7 +8,7 @@ renders the source and the decode as spheres under one directional light
 (same exposure). Writes ``levels.png`` (one row per material and level:
 source left, decode right) and ``levels.json`` into the output folder.
 
-    python benchmarks/relae_levels.py ../shared/data/merl-nbrdf-90.zip \
+    python scripts/relae_levels.py ../shared/data/merl-nbrdf-90.zip \
         --rgl-zip ../shared/data/rgl-nbrdf-30.zip -o reports/relae-levels
 """
 
@@ -73,7 +73,7 @@ def main() -> None:
     (args.output / "levels.json").write_text(json.dumps({
         "data": "NBRDF proxy of MERL (merl-nbrdf-90.zip)" + (", NBRDF proxy of RGL (rgl-nbrdf-30.zip)" if args.rgl_zip
                                                                 else ""),
-        "command": "python benchmarks/relae_levels.py ../shared/data/merl-nbrdf-90.zip --rgl-zip "
+        "command": "python scripts/relae_levels.py ../shared/data/merl-nbrdf-90.zip --rgl-zip "
         "../shared/data/rgl-nbrdf-30.zip -o reports/relae-levels", "size": args.size, "rows": results}, indent=1)
         + "\n")
 

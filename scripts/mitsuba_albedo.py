@@ -1,6 +1,6 @@
 """White-furnace check of the example library: directional albedo of every material with the Mitsuba plug-in.
 
-    python benchmarks/mitsuba_albedo.py            # prints the materials whose albedo exceeds 1
+    python scripts/mitsuba_albedo.py            # prints the materials whose albedo exceeds 1
 
 Albedo(θi) = ∫ f(ωi, ωo) cos θo dωo, estimated with the plug-in's own importance sampling (200,000 samples,
 θi = 0°, 45°, 75°) in ``llvm_ad_rgb`` on the shipped example library (NBRDF proxy of MERL, default model).

@@ -9,7 +9,7 @@ source table where there is one, the edit's distance from "edited base +
 original layers" (zero by ``spec/bvae-format.md`` §4.4, "Edits"), and the
 undo check::
 
-    python benchmarks/edit_layers_figure.py docs/edit-layers.png
+    python scripts/edit_layers_figure.py docs/edit-layers.png
 """
 
 from __future__ import annotations

@@ -1,9 +1,9 @@
 """Checks of written RGL ``.bsdf`` files against Mitsuba 3's own ``measured`` BSDF (issue 38).
 
-    python benchmarks/rgl_export_study.py                  # the five materials of the example scene
-    python benchmarks/rgl_export_study.py --grid 64        # a finer RGB/luminance grid
-    python benchmarks/rgl_export_study.py --no-render      # skip the scene renders
-    python benchmarks/rgl_export_study.py --all --no-render  # also every material of the example library
+    python scripts/rgl_export_study.py                  # the five materials of the example scene
+    python scripts/rgl_export_study.py --grid 64        # a finer RGB/luminance grid
+    python scripts/rgl_export_study.py --no-render      # skip the scene renders
+    python scripts/rgl_export_study.py --all --no-render  # also every material of the example library
 
 For each material of the example scene (shipped example library: NBRDF proxy of MERL, default model), the
 decoded table is written with :func:`brdfcodec.io.rgl_writer.write_rgl_bsdf` and loaded by ``measured``

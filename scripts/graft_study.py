@@ -2,7 +2,7 @@
 
 Usage::
 
-    python benchmarks/graft_study.py DATASET.h5 [-o graft-study.json] [--materials NAME ...]
+    python scripts/graft_study.py DATASET.h5 [-o graft-study.json] [--materials NAME ...]
 
 For each material (default: the green materials and the validation split of
 the dataset), with the shipped model: the mapped RelAE of the encoder's code

@@ -1,0 +1,209 @@
+"""The basis layer of a record: quantised coefficients on the shared basis, checked against it, and their bytes.
+
+Part of :mod:`brdfcodec.layers.basis`, which gathers the names of its parts.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from brdfcodec.errors import BasisError, BasisMismatchError
+from brdfcodec.io.hashing import is_sha256_hex
+from brdfcodec.layers.quantise import (
+    MAX_BASIS_COUNT,
+    STEP_BYTES,
+    dequantise_int8,
+    int8_from_step_bytes,
+    int8_step_bytes,
+    int8_with_step,
+)
+from brdfcodec.layers.shared_basis import SharedBasis, linear_path_entries
+
+__all__ = [
+    "BasisLayer",
+    "basis_layer_from_bytes",
+    "check_basis_layers",
+    "check_records_without_latent",
+    "quantise_coefficients",
+]
+
+
+@dataclass(frozen=True)
+class BasisLayer:
+    """A record's coefficients on its model's shared basis.
+
+    Attributes
+    ----------
+    sha256 : str
+        The shared basis' SHA-256 (64 lower-case hex digits).
+    step : float
+        Quantisation step s (a positive, finite float16 value), mapped units.
+    q : ndarray of int8, shape (k,)
+        Quantised coefficients; the coefficients are ``s · q``.
+    first : int, default 0
+        Index of the basis vector of the first coefficient: the layer codes
+        ``Σᵢ s·qᵢ · b_(first+i)`` (format 1.3; 0 in older files). An encoder
+        skips the leading vectors that its decoder's linear path already
+        spans (:func:`basis_offset`).
+    project : int, default 0
+        P > 0: the base decode is projected on the basis' first P vectors
+        around the decoder's linear-path mean before the layer is added
+        (format 1.6, :meth:`SharedBasis.project`); 0: it is not.
+    """
+
+    sha256: str
+    step: float
+    q: npt.NDArray[np.int8]
+    first: int = 0
+    project: int = 0
+
+    def __post_init__(self) -> None:
+        if not is_sha256_hex(self.sha256):
+            raise ValueError(f"basis sha256 must be 64 lower-case hex digits, got {self.sha256!r}")
+        step = np.float16(self.step)
+        if not (np.isfinite(step) and step > 0 and float(step) == float(self.step)):
+            raise ValueError(f"basis step must be a positive finite float16 value, got {self.step!r}")
+        q = np.asarray(self.q)
+        if q.dtype != np.int8 or q.ndim != 1 or not 1 <= len(q) <= MAX_BASIS_COUNT:
+            raise ValueError(f"basis coefficients must be 1 to {MAX_BASIS_COUNT} int8 values")
+        if isinstance(self.first, bool) or not isinstance(self.first, int | np.integer) or not (
+            0 <= self.first and self.first + len(q) <= MAX_BASIS_COUNT
+        ):
+            raise ValueError(f"basis first vector must be an integer with first + count ≤ {MAX_BASIS_COUNT}, "
+                             f"got {self.first!r}")
+        if isinstance(self.project, bool) or not isinstance(self.project, int | np.integer) or not (
+            0 <= self.project <= MAX_BASIS_COUNT
+        ):
+            raise ValueError(f"basis projection must be an integer in [0, {MAX_BASIS_COUNT}], got {self.project!r}")
+
+    @property
+    def count(self) -> int:
+        """Number of coefficients k."""
+        return len(self.q)
+
+    @property
+    def nbytes(self) -> int:
+        """Stored size: the float16 step and k bytes."""
+        return STEP_BYTES + self.count
+
+    @property
+    def data(self) -> bytes:
+        """Payload bytes: the step as little-endian float16, then the k int8 coefficients."""
+        return int8_step_bytes(self.step, self.q)
+
+    def coefficients(self) -> npt.NDArray[np.float32]:
+        """``s · q`` as float32."""
+        return dequantise_int8(self.step, self.q)
+
+    def entry(self) -> dict[str, object]:
+        """The ``layers.basis`` object of the record's index entry (``first`` and ``project`` only when not 0)."""
+        entry: dict[str, object] = {"sha256": self.sha256, "count": self.count}
+        if self.first:
+            entry["first"] = int(self.first)
+        if self.project:
+            entry["project"] = int(self.project)
+        return entry
+
+def quantise_coefficients(sha256: str, coefficients: npt.ArrayLike, first: int = 0, project: int = 0) -> BasisLayer:
+    """A basis layer holding ``coefficients`` (of vectors ``first``, ``first + 1``, …) quantised to int8
+    with one float16 step (max |c| / 127, :func:`int8_with_step`), over a base projected on ``project``
+    vectors (0: not projected)."""
+    step, q = int8_with_step(coefficients, "basis coefficients")
+    return BasisLayer(sha256, step, q, int(first), int(project))
+
+def check_basis_layers(
+    entries: Sequence[Any], basis_named: Callable[[str], SharedBasis | None], where: str, own: str | None
+) -> None:
+    """Refuse, when a file is opened for decoding, a record whose basis layer its model cannot decode.
+
+    Parameters
+    ----------
+    entries : sequence of RecordEntry
+        A file's index (:attr:`brdfcodec.format.bvae.BvaeHeader.entries`).
+    basis_named : callable
+        The model's shared basis with a SHA-256, or None when the model has none by that hash.
+    where : str
+        The file, for the messages.
+    own : str or None
+        SHA-256 of the model's current shared basis (None: it has none), for the messages.
+
+    Raises
+    ------
+    BasisMismatchError
+        A record names a shared basis the model does not have (naming both hashes).
+    BasisError
+        A record's ``first + count`` or ``project`` exceeds the vectors its shared basis holds.
+    """
+    for entry in entries:
+        layer = (entry.layers or {}).get("basis")
+        if layer is None:
+            continue
+        sha = str(layer["sha256"])
+        basis = basis_named(sha)
+        if basis is None:
+            raise BasisMismatchError(
+                f"{where}: record {entry.name!r}: its basis layer needs shared basis {sha}, but the decoder's model "
+                f"has {own or 'none'}; decode it with the model that wrote it"
+            )
+        count, first, project = int(layer["count"]), int(layer.get("first", 0)), int(layer.get("project", 0))
+        if first + count > basis.count:
+            raise BasisError(
+                f"{where}: record {entry.name!r}: its basis layer uses vectors {first + 1} to {first + count}, but "
+                f"shared basis {sha[:12]}… holds {basis.count}"
+            )
+        if project > basis.count:
+            raise BasisError(
+                f"{where}: record {entry.name!r}: its base is projected on {project} basis vectors, but shared "
+                f"basis {sha[:12]}… holds {basis.count}"
+            )
+
+def check_records_without_latent(
+    entries: Sequence[Any], basis_named: Callable[[str], SharedBasis | None], where: str, linear_path: bool
+) -> None:
+    """Refuse, when a file is opened for decoding, a record without a latent (format 2.1) whose decoder cannot
+    give its base: the decoder's linear-path mean must cover every entry of the shared basis
+    (``spec/bvae-format.md`` §4.6). Torch-free (``bvae info``); the decoder itself checks its own network.
+
+    Parameters
+    ----------
+    entries : sequence of RecordEntry
+        A file's index, its basis layers already checked (:func:`check_basis_layers`).
+    basis_named : callable
+        As for :func:`check_basis_layers`.
+    where : str
+        The file, for the messages.
+    linear_path : bool
+        Whether the decoder has a linear path (``ModelConfig.linear_basis``).
+
+    Raises
+    ------
+    BasisError
+        Naming the file and the record.
+    """
+    for entry in entries:
+        layers = entry.layers or {}
+        if layers.get("mu") != "none":
+            continue
+        problem = None
+        if not linear_path:
+            problem = "the decoder has no linear path"
+        else:
+            basis = basis_named(str(layers["basis"]["sha256"]))
+            if basis is not None and not np.isin(basis.entries, linear_path_entries()).all():
+                problem = "the decoder's linear path does not cover every entry of the shared basis"
+        if problem is not None:
+            raise BasisError(f"{where}: record {entry.name!r} has no latent (format 2.1) and decodes from the "
+                             f"decoder's linear-path mean, but {problem}")
+
+def basis_layer_from_bytes(entry: Mapping[str, Any], data: bytes) -> BasisLayer:
+    """A basis layer from its validated index entry and its payload bytes."""
+    count = int(entry["count"])
+    if len(data) != STEP_BYTES + count:
+        raise ValueError(f"basis layer holds {len(data)} bytes, expected {STEP_BYTES + count}")
+    step, q = int8_from_step_bytes(data, "basis step")
+    return BasisLayer(str(entry["sha256"]), step, q, int(entry.get("first", 0)), int(entry.get("project", 0)))

@@ -1,0 +1,130 @@
+"""Shared bases on disk: safetensors files named by their SHA-256, checked when loaded, cached per file.
+
+Part of :mod:`brdfcodec.layers.basis`, which gathers the names of its parts.
+"""
+
+from __future__ import annotations
+
+import functools
+import os
+from collections.abc import Callable, Mapping
+from pathlib import Path
+
+import numpy as np
+import numpy.typing as npt
+
+from brdfcodec.errors import BasisError
+from brdfcodec.layers.quantise import _N_ENTRIES, BASIS_FILE, MAX_BASIS_COUNT
+from brdfcodec.layers.shared_basis import FactorisedBasis, SharedBasis, _factorised
+
+__all__ = [
+    "load_shared_basis",
+    "model_basis_lookup",
+    "write_factorised_basis",
+    "write_shared_basis",
+]
+
+
+def write_shared_basis(
+    path: str | os.PathLike[str], components: npt.ArrayLike, entries: npt.ArrayLike
+) -> str:
+    """Write a basis file atomically and return its SHA-256 (what records and ``model.json`` name it by)."""
+    from safetensors.numpy import save_file
+
+    from brdfcodec.io.atomic import atomic_output
+    from brdfcodec.io.hashing import sha256_of_file
+
+    tensors = {
+        "components": np.ascontiguousarray(components, dtype=np.float16),
+        "entries": np.ascontiguousarray(entries, dtype=np.int64),
+    }
+    _validate(tensors["components"], tensors["entries"], str(path))
+    with atomic_output(Path(path), overwrite=True) as tmp:
+        save_file(tensors, str(tmp))
+    return sha256_of_file(path)
+
+def load_shared_basis(path: str | os.PathLike[str], expected_sha256: str) -> SharedBasis:
+    """Read a basis file after checking its SHA-256.
+
+    Raises
+    ------
+    BasisError
+        The file's hash is not ``expected_sha256``, or its tensors are malformed.
+    """
+    from safetensors import SafetensorError
+    from safetensors.numpy import load
+
+    from brdfcodec.io.hashing import read_with_sha256
+
+    data, actual = read_with_sha256(path)
+    if actual != expected_sha256:
+        raise BasisError(f"{path}: SHA-256 {actual} is not the {expected_sha256} its model.json names")
+    try:
+        tensors = load(data)
+    except SafetensorError as error:
+        raise BasisError(f"{path}: not a readable safetensors file ({error})") from None
+    if "factors" in tensors:
+        factorised = _factorised(tensors, str(path))
+        return SharedBasis(None, factorised.entries(), actual, factorised)
+    components, entries = tensors.get("components"), tensors.get("entries")
+    if components is None or entries is None:
+        raise BasisError(f"{path}: a basis file needs the tensors 'components' and 'entries', or 'factors', "
+                         "'colours', 'factor_of' and 'colour_entries'")
+    _validate(components, entries, str(path))
+    return SharedBasis(components, entries.astype(np.int64), actual)
+
+def write_factorised_basis(path: str | os.PathLike[str], basis: FactorisedBasis) -> str:
+    """Write a factorised basis file atomically and return its SHA-256."""
+    from safetensors.numpy import save_file
+
+    from brdfcodec.io.atomic import atomic_output
+    from brdfcodec.io.hashing import sha256_of_file
+
+    tensors = {
+        "factors": np.ascontiguousarray(basis.factors, dtype=np.float16),
+        "colours": np.ascontiguousarray(basis.colours, dtype=np.int64),
+        "factor_of": np.ascontiguousarray(basis.factor_of, dtype=np.int64),
+        "colour_entries": np.ascontiguousarray(basis.colour_entries, dtype=np.int64),
+    }
+    _factorised(tensors, str(path))
+    with atomic_output(Path(path), overwrite=True) as tmp:
+        save_file(tensors, str(tmp))
+    return sha256_of_file(path)
+
+def _validate(components: np.ndarray, entries: np.ndarray, where: str) -> None:
+    if components.dtype != np.float16 or components.ndim != 2:
+        raise BasisError(
+            f"{where}: 'components' must be a 2-D float16 tensor, got {components.dtype} {components.shape}"
+        )
+    if not 1 <= components.shape[0] <= MAX_BASIS_COUNT:
+        raise BasisError(f"{where}: a basis holds 1 to {MAX_BASIS_COUNT} vectors, got {components.shape[0]}")
+    if entries.ndim != 1 or entries.shape[0] != components.shape[1] or entries.shape[0] == 0:
+        raise BasisError(f"{where}: 'entries' must be 1-D with one position per component column")
+    if entries.min() < 0 or entries.max() >= _N_ENTRIES or np.any(np.diff(entries) <= 0):
+        raise BasisError(f"{where}: 'entries' must be strictly increasing positions in [0, {_N_ENTRIES})")
+    if not np.isfinite(components).all():
+        raise BasisError(f"{where}: 'components' holds non-finite values")
+
+def model_basis_lookup(folder: str | os.PathLike[str], current: str | None,
+                       previous: Mapping[str, str]) -> Callable[[str], SharedBasis | None]:
+    """``basis_named`` for :func:`check_basis_layers` from a model folder (no torch): its current basis
+    (``basis.safetensors``, hash ``current``) or a previous one (``previous``: hash → file name), each read and
+    checked against its hash once."""
+    def basis_named(sha256: str) -> SharedBasis | None:
+        if sha256 == current:
+            return _load_checked(Path(folder) / BASIS_FILE, sha256)
+        if sha256 in previous:
+            return _load_checked(Path(folder) / previous[sha256], sha256)
+        return None
+
+    return basis_named
+
+def _load_checked(path: Path, sha256: str) -> SharedBasis:
+    """:func:`load_shared_basis`, kept for the file's size and modification time (``bvae info`` of many files
+    reads and hashes a basis once)."""
+    stat = path.stat()
+    return _load_cached(path, sha256, stat.st_size, stat.st_mtime_ns)
+
+@functools.lru_cache(maxsize=2)
+def _load_cached(path: Path, sha256: str, size: int, mtime_ns: int) -> SharedBasis:
+    return load_shared_basis(path, sha256)
