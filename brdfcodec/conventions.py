@@ -30,7 +30,7 @@ __all__ = [
 ]
 
 #: Version of ``spec/conventions.md`` that this module implements.
-CONVENTIONS_VERSION: Final = "1.2"
+CONVENTIONS_VERSION: Final = "1.3"
 
 #: Number of θh bins (non-linear, see :func:`brdfcodec.representation.coords.theta_h_index`).
 N_THETA_H: Final = 90

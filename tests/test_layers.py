@@ -204,18 +204,18 @@ def test_layered_decode_adds_the_layer_and_partial_decode_matches(analytic_table
     encoder = BrdfEncoder(effort=0, bytes=20000)
     record = encoder.encode(brdf, name="m")
     decoder = encoder.decoder
-    full = decoder.table(record, masked="zero")
-    base = decoder.table(record.base(), masked="zero")
+    full = decoder.decode(record, masked="zero")
+    base = decoder.decode(record.base(), masked="zero")
     assert not np.allclose(full, base)
-    part = decoder.table(record, phi_d_bins=[4, 100], masked="zero")
+    part = decoder.decode(record, phi_d_bins=[4, 100], masked="zero")
     np.testing.assert_allclose(part, full[..., [4, 100]], rtol=1e-4, atol=1e-4)
     batched = next(decoder.decode_many([record], masked="zero"))
     np.testing.assert_allclose(batched, full, rtol=1e-5, atol=1e-5)
     # The detail layer is decoded on a second thread beside the basis sum: its errors reach the caller.
     broken = dataclasses.replace(record, detail=DetailLayer(0.05, "int16", b"not zstd at all"))
     with pytest.raises(ValueError, match="cannot be decompressed"):
-        decoder.table(broken)
-    np.testing.assert_array_equal(decoder.table(record, masked="zero"), full)
+        decoder.decode(broken)
+    np.testing.assert_array_equal(decoder.decode(record, masked="zero"), full)
 
 
 @pytest.mark.slow

@@ -128,7 +128,7 @@ class Code:
 
 def test_measure_plausibility_on_a_constructed_decoder() -> None:
     records = [Code("a", [0.0, 0.0]).record, Code("b", [-0.9, 0.0]).record]
-    report = measure_plausibility(PeakDecoder(), records)
+    report = measure_plausibility(PeakDecoder(), records, energy_bound=False)  # the raw decodes
     # dim 0: peak 1 − z0. a (peak 1): +1σ → 0 (inverted by 0.5, a hole), +2σ, +3σ likewise; −σ brighter.
     # b (peak 1.9): +1σ → 0.9 fine, +2σ → 0 inverted, +3σ inverted.
     assert report.fractions["inverted"][0].tolist() == [0, 0, 0, 0.5, 1, 1]
@@ -156,12 +156,16 @@ def test_inversions_the_source_already_has_do_not_count() -> None:
 def test_plausible_range_stops_before_the_first_implausible_step() -> None:
     decoder = PeakDecoder()
     # b, peak 1.9 − t: +1σ fine, +2σ inverted (0 under a flank of 0.5); −2σ (peak 3.9) has an albedo > 1
-    assert plausible_range(decoder, Code("b", [-0.9, 0.0]).record, 0) == (-1.0, 1.0)
+    raw = {"energy_bound": False}  # judged as the network decodes them
+    assert plausible_range(decoder, Code("b", [-0.9, 0.0]).record, 0, **raw) == (-1.0, 1.0)
     # a, peak 1 − t: +1σ inverted; −3σ (peak 4) has an albedo > 1
-    assert plausible_range(decoder, Code("a", [0.0, 0.0]).record, 0) == (-2.0, 0.0)
+    assert plausible_range(decoder, Code("a", [0.0, 0.0]).record, 0, **raw) == (-2.0, 0.0)
     limit = float(white_sky_albedo(peaked(2.0))[0]) * 1.1  # energy: a at −1σ (peak 2) fine, −2σ (peak 3) not
-    assert plausible_range(decoder, Code("a", [0.0, 0.0]).record, 0, albedo_limit=limit) == (-1.0, 0.0)
-    assert plausible_range(decoder, Code("a", [0.0, 0.0]).record, 1) == (-3.0, 3.0)
+    assert plausible_range(decoder, Code("a", [0.0, 0.0]).record, 0, albedo_limit=limit, **raw) == (-1.0, 0.0)
+    assert plausible_range(decoder, Code("a", [0.0, 0.0]).record, 1, **raw) == (-3.0, 3.0)
+    # as edits decode (the energy bound scales a decode down to albedo 1), energy no longer ends a range
+    assert plausible_range(decoder, Code("b", [-0.9, 0.0]).record, 0) == (-3.0, 1.0)
+    assert plausible_range(decoder, Code("a", [0.0, 0.0]).record, 0) == (-3.0, 0.0)
 
 
 class NotchDecoder(PeakDecoder):

@@ -35,7 +35,7 @@ def test_extreme_latents_give_finite_non_negative_tables(decoder: BrdfDecoder, s
     rng = np.random.default_rng(int(scale))
     codes = np.concatenate([rng.uniform(-scale, scale, size=(3, 8)), np.eye(8)[:2] * scale, -np.eye(8)[:2] * scale])
     for code in codes:
-        table = decoder.table(LatentRecord("x", code, np.ones(8)), masked="zero")
+        table = decoder.decode(LatentRecord("x", code, np.ones(8)), masked="zero")
         assert np.isfinite(table).all() and (table >= 0).all()
         assert table.max() <= np.expm1(MAPPED_MAX * np.log1p(100.0)) * 0.01 / MERL_COLOR_SCALE.min() * 1.0001
 
@@ -51,7 +51,7 @@ def test_decoder_outputs_beyond_the_domain_are_clamped(decoder: BrdfDecoder, mon
         return torch.full((z.shape[0], 63, 90, 90), 1e38, dtype=z.dtype)
 
     monkeypatch.setattr(decoder.network, "forward", huge)
-    table = decoder.table(LatentRecord("x", np.zeros(8), np.ones(8)), masked="zero")
+    table = decoder.decode(LatentRecord("x", np.zeros(8), np.ones(8)), masked="zero")
     assert np.isfinite(table).all()
     np.testing.assert_allclose(map_values(table).max(), MAPPED_MAX, rtol=1e-5)
 
@@ -60,13 +60,13 @@ def test_decoder_outputs_beyond_the_domain_are_clamped(decoder: BrdfDecoder, mon
 def test_reduced_precision_decoding_stays_close_to_float32(decoder: BrdfDecoder, dtype: torch.dtype) -> None:
     try:
         reduced = BrdfDecoder(dtype=dtype)
-        reduced.table(LatentRecord("probe", np.zeros(8), np.ones(8)))
+        reduced.decode(LatentRecord("probe", np.zeros(8), np.ones(8)))
     except RuntimeError as error:  # a CPU build without kernels for this dtype
         pytest.skip(f"{dtype} decoding unsupported here: {error}")
     rng = np.random.default_rng(1)
     for code in [*rng.normal(size=(4, 8)) * 1.5, np.full(8, 20.0)]:
         record = LatentRecord("x", code, np.ones(8))
-        full, low = decoder.table(record, masked="zero"), reduced.table(record, masked="zero")
+        full, low = decoder.decode(record, masked="zero"), reduced.decode(record, masked="zero")
         assert np.isfinite(low).all() and (low >= 0).all()
         assert mapped_relae(full, low) <= REDUCED_PRECISION_BOUND
 
@@ -76,7 +76,7 @@ def test_float16_latents_stay_close_to_float32(decoder: BrdfDecoder) -> None:
     records = [LatentRecord(f"m{i}", rng.normal(size=8) * 2, np.exp(rng.normal(size=8) - 3)) for i in range(5)]
     half = parse_bvae(encode_bvae(records, DecoderReference("a" * 64, "x"), latent_dtype="float16")).records
     for a, b in zip(records, half, strict=True):
-        assert mapped_relae(decoder.table(a, masked="zero"), decoder.table(b, masked="zero")) <= FLOAT16_LATENT_BOUND
+        assert mapped_relae(decoder.decode(a, masked="zero"), decoder.decode(b, masked="zero")) <= FLOAT16_LATENT_BOUND
 
 
 HARD_MATERIALS = {
@@ -95,13 +95,13 @@ def test_hardest_materials_round_trip_with_bounded_error(decoder: BrdfDecoder, n
     assert np.isfinite(record.mu).all() and (record.sigma > 0).all()
     measured = measure(record, decoder, brdf)
     assert measured.meta["relae"]["mapped"] < 0.35, measured.meta["relae"]
-    table = decoder.table(record)
+    table = decoder.decode(record)
     assert np.isfinite(table).all()
 
 
 def test_interpolation_is_continuous_across_slice_boundaries_and_phi_d_wrap(decoder: BrdfDecoder) -> None:
     record = LatentRecord("x", np.linspace(-1, 1, 8), np.ones(8))
-    mapped = map_values(decoder.table(record, masked="keep"))
+    mapped = map_values(decoder.decode(record, masked="keep"))
     steps = np.abs(np.diff(mapped, axis=-1))
     kept = list(KEPT_PHI_D_SLICES)
     for a, b in zip(kept[:-1], kept[1:], strict=True):
@@ -110,7 +110,7 @@ def test_interpolation_is_continuous_across_slice_boundaries_and_phi_d_wrap(deco
         expected = np.abs(mapped[..., b] - mapped[..., a]) / (b - a)
         np.testing.assert_allclose(segment, np.broadcast_to(expected[..., None], segment.shape), atol=2e-5)
     # φd = π wraps to φd = 0: a trilinear lookup on either side of the wrap changes by no more than one bin step
-    physical = decoder.table(record, masked="zero") * MERL_COLOR_SCALE[:, None, None, None]
+    physical = decoder.decode(record, masked="zero") * MERL_COLOR_SCALE[:, None, None, None]
     theta = 0.6
     wo = np.array([np.sin(theta), 0.0, np.cos(theta)])
     values = []

@@ -22,8 +22,9 @@ import pytest
 pytest.importorskip("starlette", reason="the studio needs the studio extra (starlette, uvicorn)")
 pytest.importorskip("uvicorn", reason="the studio needs the studio extra (starlette, uvicorn)")
 
-from brdfcodec.format.bvae import GraftRecord, LatentRecord, read_bvae  # noqa: E402
 from brdfcodec.examples import example_library  # noqa: E402
+from brdfcodec.format.bvae import GraftRecord, LatentRecord, read_bvae  # noqa: E402
+from brdfcodec.models.parameters import distinct_labels  # noqa: E402
 from brdfcodec.studio.browser import running_studio  # noqa: E402
 from brdfcodec.studio.catalogue import Catalogue  # noqa: E402
 from brdfcodec.studio.server import MAX_BODY_BYTES, SLICE_STEP, StudioServer, create_app  # noqa: E402
@@ -78,7 +79,11 @@ def test_catalogue_describes_the_example_library(catalogue: Catalogue) -> None:
     info = catalogue.describe()
     assert len(info["materials"]) == 90 and info["latent_dim"] == 8
     manifest = catalogue.decoder.manifest.parameters
-    assert info["labels"] == [d["label"] for d in sorted(manifest["dimensions"], key=lambda d: d["dim"])]
+    rows = sorted(manifest["dimensions"], key=lambda d: d["dim"])
+    assert info["labels"] == distinct_labels(rows)
+    assert len(set(info["labels"])) == 8  # one name per slider (issue 41): the stored labels repeat
+    assert len({d["label"] for d in rows}) < 8
+    assert all(label.startswith(d["label"]) for label, d in zip(info["labels"], rows, strict=True))
     assert info["colour_dims"] == list(catalogue.decoder.colour_dims)
     assert info["slider_range"] >= 3.0
     assert all(abs(v) <= info["slider_range"] for m in info["materials"] for v in m["mu"])
@@ -234,7 +239,7 @@ def test_exports_merl_png_and_exr(studio: str, save_dir: Path, catalogue: Catalo
         status, payload, _ = request(f"{studio}/api/save", save_body(file=name, z=z))
         assert status == 200, payload
     merl = read_merl(save_dir / "gold.binary")
-    expected = catalogue.decoder.table(LatentRecord("g", record.mu, record.sigma))
+    expected = catalogue.decoder.decode(LatentRecord("g", record.mu, record.sigma))
     assert np.allclose(merl.values, expected, rtol=1e-5, atol=1e-6)
     from PIL import Image
 

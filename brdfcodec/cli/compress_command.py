@@ -77,9 +77,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
                         default=None, metavar="WHEN",
                         help="with --bytes/--max-relae: project the base decode on the shared basis in records with "
                         "a basis layer (format 1.6): auto (default: per material, where it lowers the error, in "
-                        "records without a detail layer), always (the flag alone) or never; projecting lowers the "
-                        "error by 4-11 %% at 16-128 B on held-out materials and takes about 2-3 ms more to decode "
-                        "per material")
+                        "records without a detail layer), always (the flag alone) or never; projecting usually lowers "
+                        "the error on materials the model was not trained on, at some decode time")
     parser.add_argument("--latent", choices=("auto", "always"), default=None,
                         help="with --bytes/--max-relae: auto (default) may write a record without a latent code "
                         "where that is better (format 2.1: the model's mean plus basis coefficients; from 6 B): it "

@@ -104,8 +104,22 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
                        help="inversion tolerance τ, mapped units (default 0.1)")
     plaus.add_argument("--energy-margin", type=float, default=0.1,
                        help="relative margin over the library's largest albedo (default 0.1)")
+    plaus.add_argument("--raw", action="store_true",
+                       help="judge the network's raw decodes, without the energy bound that edits decode with")
     plaus.add_argument("--json", action="store_true", help="print one JSON object")
     plaus.set_defaults(handler=run_plausibility)
+    sig = actions.add_parser(
+        "sigma", help="whether the posterior width σ follows the encoding error (per material and group)",
+        description="Encode every material of a dataset, decode at μ, and compare the posterior width σ with the "
+        "error (mapped L1 per valid entry): per material, per family and stored split, and the Spearman rank "
+        "correlation with a permutation p-value (brdfcodec.report.posterior).",
+    )
+    sig.add_argument("dataset", type=Path, help="HDF5 dataset (bvae dataset build)")
+    sig.add_argument("--model", help="model folder or decoder SHA-256 (default: the shipped default model)")
+    sig.add_argument("-o", "--output", type=Path, metavar="ROWS.jsonl",
+                     help="also write the rows (brdfcodec.report.rows, study 'posterior-width')")
+    sig.add_argument("--force", action="store_true", help="replace an existing output file")
+    sig.set_defaults(handler=run_sigma)
     dis = actions.add_parser(
         "disentanglement", help="MIG and DCI of models' codes (and PCA-8) on materials with known factors",
         description="Draw analytic materials whose factors (albedo level and hue, specular level, roughness, "
@@ -276,7 +290,7 @@ def run_plausibility(args: argparse.Namespace) -> int:
         everything = [library.record(name) for name in library.names]
     records = everything[: args.materials]
     report = measure_plausibility(decoder, records, dims=_parse_dims(args.dims, decoder.latent_dim),
-                                  criteria=criteria, reference=everything)
+                                  criteria=criteria, reference=everything, energy_bound=not args.raw)
     if args.json:
         summary = {"model": decoder.manifest.name if decoder.manifest else None,
                    "decoder_sha256": decoder.reference.sha256 if decoder.reference else None,
@@ -291,6 +305,25 @@ def run_plausibility(args: argparse.Namespace) -> int:
         for o in report.worst:
             where = f" at (colour, φd bin, θd bin) {o.where}" if o.where else ""
             print(f"  {o.kind:<9} {o.material} z{o.dim + 1}{o.step:+g}σ: {o.score:.4g}{where}")
+    return 0
+
+
+def run_sigma(args: argparse.Namespace) -> int:
+    """Measure σ against the encoding error on a dataset, print the table, write the rows."""
+    from brdfcodec.report.posterior import format_table, posterior_width_rows
+    from brdfcodec.report.rows import stamp, write_rows
+
+    if not args.dataset.is_file():
+        raise FileNotFoundError(f"{args.dataset}: no such dataset file")
+    if args.output is not None and args.output.exists() and not args.force:
+        raise FileExistsError(f"{args.output}: exists; use --force to replace it")
+    rows = posterior_width_rows(args.model, args.dataset)
+    print(format_table(rows))
+    if args.output is not None:
+        model = ["--model", args.model] if args.model else []
+        command = "bvae model sigma " + shlex.join([str(args.dataset), *model])
+        write_rows(args.output, stamp(rows, study="posterior-width", command=command))
+        print(f"wrote {args.output}: {len(rows)} rows")
     return 0
 
 

@@ -38,6 +38,7 @@ from brdfcodec.representation import (
     table_from_mapped,
     validate_phi_d_bins,
 )
+from brdfcodec.representation.energy import energy_bound_scale_mapped, scale_mapped
 from brdfcodec.runtime.threads import codec_threads
 
 if TYPE_CHECKING:
@@ -48,6 +49,11 @@ from brdfcodec.codec.prepare import MaskedEntries, ModelSpec, _apply_mask, resol
 from brdfcodec.codec.projection import _has_latent, _projected_vectors, _ProjectionPlan
 
 __all__ = ["BrdfDecoder"]
+
+
+def is_edited(record: Record) -> bool:
+    """Whether a record is an edit (its metadata holds ``edit``, ``spec/bvae-format.md`` §5): its decode is bounded."""
+    return "edit" in record.meta
 
 
 class _EvalMode:
@@ -233,7 +239,7 @@ class BrdfDecoder:
         """Mapped slices (63, 90, 90) with only the kept slices that ``phi_d_bins`` need filled (others 0)."""
         slots = kept_slots_for_bins(phi_d_bins)
         if len(slots) > N_KEPT_SLICES // 2 or _projected_vectors(record):  # a projection needs every entry
-            return self.mapped_record(record)
+            return self._mapped_record(record)
         out = np.zeros(NETWORK_INPUT_SHAPE, dtype=np.float32)
         if not _has_latent(record):  # no network at all: the mean's channels, then the layers' for those slots
             channels = network_channels_for_slots(slots)
@@ -438,9 +444,32 @@ class BrdfDecoder:
             mapped += residual
         return clamp_mapped(mapped, out=mapped)
 
-    def mapped_record(self, record: Record) -> npt.NDArray[np.float32]:
-        """Mapped slices of a record; a graft record's green block is the second code's red block; a record
-        without a latent (format 2.1) is the linear-path mean plus its layers, clamped."""
+    def mapped_record(self, record: Record, *, energy_bound: bool | None = None) -> npt.NDArray[np.float32]:
+        """Mapped slices of a record (network layout, shape (63, 90, 90)).
+
+        A graft record's green block is the second code's red block; a record without a latent (format 2.1)
+        is the linear-path mean plus its layers, clamped.
+
+        Parameters
+        ----------
+        record : Record
+        energy_bound : bool, optional
+            Apply the energy bound (:meth:`energy_scale`, ``spec/bvae-format.md`` §6.3) in the mapped domain.
+            By default, exactly for edited records (:func:`is_edited`).
+        """
+        mapped = self._mapped_record(record)
+        if energy_bound if energy_bound is not None else is_edited(record):
+            mapped = scale_mapped(mapped, energy_bound_scale_mapped(mapped)).astype(np.float32, copy=False)
+        return mapped
+
+    def energy_scale(self, record: Record) -> float:
+        """The energy bound's factor for a record: ``min(1, 1 / max a)`` over its decode's directional albedo.
+
+        See :mod:`brdfcodec.representation.energy`; 1 when the decode conserves energy.
+        """
+        return energy_bound_scale_mapped(self._mapped_record(record))
+
+    def _mapped_record(self, record: Record) -> npt.NDArray[np.float32]:
         with codec_threads():
             if not _has_latent(record):
                 return self._with_layers(record, self._mean_base(record))
@@ -459,6 +488,7 @@ class BrdfDecoder:
         *,
         phi_d_bins: Sequence[int] | None = None,
         masked: MaskedEntries = "unmeasured",
+        energy_bound: bool | None = None,
     ) -> npt.NDArray[np.float32]:
         """Decoded table of a record in stored MERL units.
 
@@ -470,21 +500,32 @@ class BrdfDecoder:
         masked : {"unmeasured", "zero", "keep"}, default "unmeasured"
             Below-horizon bins: ``-1`` (MERL's unmeasured marker), ``0``, or
             the network's value.
+        energy_bound : bool, optional
+            Multiply the table by ``min(1, 1 / max a)``, a its directional albedo
+            (``spec/bvae-format.md`` §6.3), so that it reflects at most the light it
+            receives. By default, exactly for edited records (:func:`is_edited`): an
+            encoded material decodes as measured, an edit never creates energy.
 
         Returns
         -------
         ndarray of float32, shape (3, 90, 90, K)
         """
         self._check_record(record)
+        bound = energy_bound if energy_bound is not None else is_edited(record)
         with codec_threads():
+            if bound:
+                mapped = self._mapped_record(record)
+                scale = energy_bound_scale_mapped(mapped)
+                bins = None if phi_d_bins is None else validate_phi_d_bins(phi_d_bins)
+                table = table_from_mapped(mapped, phi_d_bins=bins)
+                if scale != 1.0:
+                    table *= np.float32(scale)
+                return _apply_mask(table, bins, masked)
             if phi_d_bins is None:
-                return _apply_mask(table_from_mapped(self.mapped_record(record)), None, masked)
+                return _apply_mask(table_from_mapped(self._mapped_record(record)), None, masked)
             bins = validate_phi_d_bins(phi_d_bins)
             table = table_from_mapped(self.mapped_for_bins(record, bins), phi_d_bins=bins)
             return _apply_mask(table, bins, masked)
-
-    #: Former name of :meth:`decode`.
-    table = decode
 
     def decode_many(
         self, records: Sequence[Record], *, masked: MaskedEntries = "unmeasured", batch_size: int = 16
@@ -506,8 +547,11 @@ class BrdfDecoder:
                     if isinstance(record, LatentRecord) and not _projected_vectors(record) and _has_latent(record):
                         mapped = self._with_layers(record, next(batch))
                     else:
-                        mapped = self.mapped_record(record)
-                    table = _apply_mask(table_from_mapped(mapped), None, masked)
+                        mapped = self._mapped_record(record)
+                    table = table_from_mapped(mapped)
+                    if is_edited(record) and (scale := energy_bound_scale_mapped(mapped)) != 1.0:
+                        table *= np.float32(scale)
+                    table = _apply_mask(table, None, masked)
                 yield table
 
     def _check_record(self, record: Record) -> None:

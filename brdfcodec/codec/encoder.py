@@ -86,7 +86,7 @@ class BrdfEncoder:
     effort : int, default 1
         Latent refinement at encode time, 0 to 3 (0: the encoder's μ; see
         :mod:`brdfcodec.codec.refine`). Each level costs encode time
-        (``benchmarks/effort_study.py``; docs: Layers and rate control).
+        (documentation: Layers and rate control).
     bytes : int, optional
         Rate control: the largest record payload per material (base + detail layer).
     max_relae : float, optional
@@ -103,7 +103,7 @@ class BrdfEncoder:
     project_base : {"auto", "always", "never"} or bool, default "auto"
         Whether records with a basis layer project their base decode on the shared basis (format 1.6,
         ``layers.basis.project``, :data:`~brdfcodec.codec.encoding.PROJECTED_BASE_VECTORS` vectors): lower
-        error at equal size on most materials, a slower decode (``reports/rd-study/projection-cost.json``).
+        error at equal size on most materials, a slower decode (documentation: Layers and rate control).
         ``"auto"`` fits both and keeps
         the better per material; ``True``/``False`` mean ``"always"``/``"never"``. Ignored where the model's
         decoder has no linear path to centre the projection on.

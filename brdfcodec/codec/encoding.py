@@ -57,11 +57,9 @@ __all__ = [
 #: Basis vectors a writer projects a layered record's base decode on (``layers.basis.project``, format 1.6) when
 #: asked to (``EncodeOptions.project_base``). The decoder's output carries what its 8 numbers say about a material
 #: in the leading principal components; past them it adds its own errors, larger on new materials than the mean's.
-#: Measured on the held-out NBRDF proxy of MERL (``benchmarks/projected_base_study.py``,
-#: ``reports/rd-study/projected-base.json``): 50 and 75 vectors gain alike at 16 to 128 B. The projection runs
-#: after the network and needs a pass over the vectors, taken on the factors of a factorised basis (about 1.8 ms
-#: for the shipped basis on the 2-core development machine, ``benchmarks/basis_sum_study.py``; a 64 B record decodes
-#: in about 1.4× a base-only one, benchmark ``decode-layered-64B-projected``).
+#: On materials the model was not trained on, projecting on more vectors than these gains no more at small budgets,
+#: and every vector costs decode time: the projection runs after the network and needs a pass over the vectors,
+#: taken on the factors of a factorised basis (documentation: Layers and rate control).
 PROJECTED_BASE_VECTORS = 50
 
 #: When a writer projects a layered record's base (:class:`EncodeOptions`): ``"auto"`` fits the basis layer both
@@ -110,9 +108,9 @@ class EncodeOptions:
         Whether layered records may use the model's shared basis (when it has one).
     project_base : {"auto", "always", "never"}
         Whether a record with a basis layer projects its base decode on the basis (format 1.6,
-        :data:`PROJECTED_BASE_VECTORS`; :data:`ProjectBase`). On held-out materials of the NBRDF proxy
-        projecting lowers the mean error at 16 to 128 B, but not on every material
-        (``reports/rd-study/projected-base.json``), so ``"auto"`` (the default) fits both on each material
+        :data:`PROJECTED_BASE_VECTORS`; :data:`ProjectBase`). On materials the model was not trained on,
+        projecting lowers the mean error at small budgets, but not on every material (documentation: Layers and
+        rate control), so ``"auto"`` (the default) fits both on each material
         and keeps the lower error, in records without a detail layer (with one, a projected record decodes
         past the 1.5× decode-time target of the ``decode-layered`` benchmark);
         it doubles the basis layer's fitting time. ``True`` and ``False`` mean ``"always"`` and ``"never"``.
@@ -298,8 +296,8 @@ def _basis_fit(
 
     def fit(k: int, mu_storage: MuStorage, under_detail: bool) -> tuple[LatentRecord, BasisLayer, np.ndarray]:
         # "auto" projects only records without a detail layer: with one, the projection's pass over the vectors
-        # and the detail layer's inverse DCT both follow the network, and the decode took 1.7-1.8x a base-only
-        # one (benchmark decode-layered, 16 KB), past the 1.5x a layered decode may take.
+        # and the detail layer's inverse DCT both follow the network, and together they take the decode past the
+        # 1.5x a base-only one that a layered decode may take (benchmark decode-layered).
         chosen = [0] if under_detail and options.project_base == "auto" else ways
         fits = []
         for p in chosen:

@@ -21,7 +21,7 @@ halving every two rungs):
   every layered record's
   decode time; where a detail layer has room, the bytes of coefficients past
   the first few dozen buy more as detail anyway
-  (``reports/rd-study/basis-cap.json``);
+  (documentation: Layers and rate control);
 - ``max_relae=X``: the first of 4, 8, 16, 32 and K basis coefficients on a
   compact base, then (if K misses X) min(K, :data:`DETAIL_BASIS_COUNT`)
   coefficients plus each rung from coarse to fine, whose decoded table has
@@ -124,10 +124,10 @@ _Candidate = tuple[bool, int, float | None]
 #: budget to skip the compact base's best (how the two store μ moves the error by a fraction of that).
 _COMPACT_MARGIN: Final = 0.02
 #: The most basis coefficients a record with a detail layer carries, so that decoding any layered record stays
-#: within 1.5 times its base-only decode (the basis sum reads every factor its coefficients use; 32 coefficients
-#: use 28 of the 64 factors, 75 all of them). Measured on the held-out materials of the NBRDF proxy
-#: (``benchmarks/basis_cap_study.py``): at most 32 under a detail layer costs 0.5 % of mapped RelAE at 1 KB and
-#: nothing measurable at 4 KB and 16 KB against also trying all 75.
+#: within 1.5 times its base-only decode (the basis sum reads every factor its coefficients use: the leading
+#: coefficients use fewer of them than all K do). Where a detail layer has room, the bytes of further coefficients
+#: buy more as detail, so the cap costs little error against also trying all K (documentation: Layers and rate
+#: control).
 DETAIL_BASIS_COUNT: Final = 32
 
 
@@ -315,7 +315,7 @@ def encode_layers(
         # Past the budgets that store the base compact, their best record (the compact base with all K coefficients)
         # stays a candidate wherever nothing beats all K on the full base by more than what μ's storage can change
         # (_COMPACT_MARGIN), so that one byte more never loses what the compact base gave (a refit of the
-        # coefficients to the compact μ; a 16 KB budget, whose detail layer wins by far, does not pay it).
+        # coefficients to the compact μ; a large budget, whose detail layer wins by far, does not pay it).
         full_plain = (False, full, None)
         if full and not compact and full_plain in errors and (
                 min(errors.values()) > (1 - _COMPACT_MARGIN) * errors[full_plain]):
@@ -458,8 +458,7 @@ def compact_base_pays(bytes_budget: int, latent_dim: int, latent_itemsize: int, 
 
     A compact base (μ as int8 on the fixed grid or with a float16 step, one shared σ byte: 9 or 11 bytes for
     D = 8 instead of 24 in float16 or 40 in float32) frees 13 to 31 bytes for coefficients, at a cost in error
-    that the measurement found negligible beside them (``benchmarks/compact_base_study.py``,
-    ``reports/rd-study/compact-base.json``).
+    that is small beside what those coefficients gain (documentation: Layers and rate control).
     Above that, the bytes would go to the detail layer, where they buy little.
     """
     full_base = _layered_base_bytes(latent_dim, latent_itemsize, None)
@@ -470,10 +469,9 @@ def compact_mu_storage(mu: npt.ArrayLike) -> str:
     """How a compact base stores μ: on the fixed grid (D bytes) where every value is within its ±3.97, else
     with its own float16 step (2 + D bytes).
 
-    The 2 bytes saved go to basis coefficients. On the held-out NBRDF proxy of MERL (full-table mapped RelAE,
-    effort 1, float16 latents, ``benchmarks/compact_mu_study.py``, ``reports/rd-study/compact-mu.json``)
-    that lowered the error at the smallest budgets; at 64 B the coarser μ costs about as much as 2 more
-    coefficients gain.
+    The 2 bytes saved go to basis coefficients: on materials the model was not trained on, that lowers the
+    error at the smallest budgets, while at larger ones the coarser μ costs about as much as the 2 more
+    coefficients gain (documentation: Layers and rate control).
     """
     return MU_INT8_FIXED if fits_fixed_mu_grid(mu) else MU_INT8
 

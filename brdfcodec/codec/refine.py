@@ -4,9 +4,9 @@ basis coefficients of a record without a latent (format 2.1).
 The encoder's μ is a fast guess. Refinement starts from it and takes a few
 Adam steps on the mapped-domain L1 error of the decoded kept slices over the
 valid entries — the numerator of the mapped RelAE — and keeps the best code
-seen (never worse than μ on the material). L1 was chosen by measurement
-(``benchmarks/rd_study.py``): on the NBRDF proxy of MERL, refinement lowers
-the held-out kept-slice mapped RelAE more with L1 than with L2.
+seen (never worse than μ on the material). L1 was chosen over L2 because,
+on materials the encoder was not trained on, refinement lowers the mapped
+RelAE more with it (documentation: Layers and rate control).
 """
 
 from __future__ import annotations
@@ -201,7 +201,7 @@ def fit_basis_coefficients(
     error : callable, optional
         ``error(decoded, target, weight)`` → per-material error ``(B,)`` to minimise, all three ``(B, 63·90·90)``
         tensors (mapped kept slices; validity as 0/1); the mapped L1 error over valid entries by default.
-        For studies of other objectives (``benchmarks/full_table_fit_study.py``).
+        For trying other objectives; the encoder uses the default.
     projection : (vectors, centre), optional
         Project the clamped base decode at ``entries`` on ``vectors`` ``(P, E)`` (the shared basis' first P)
         around ``centre`` ``(E,)`` before the coefficients are added: a projected base (format 1.6,

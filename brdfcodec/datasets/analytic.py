@@ -131,7 +131,8 @@ class AnalyticBRDF:
 
         Equal (up to float rounding) to
         :func:`~brdfcodec.representation.network_input_from_table` of
-        :meth:`to_merl`, about 9 times faster; the grid's geometry is computed once per process.
+        :meth:`to_merl`, and much faster, since it evaluates only the kept slices; the grid's geometry is
+        computed once per process.
         """
         from brdfcodec.representation import to_network_layout
         from brdfcodec.representation.mapping import map_values

@@ -28,8 +28,14 @@ source decode at μ and against the library:
     exceeds the largest over the library's μ decodes by more than the
     relative margin (default 10 %).
 ``unphysical``
-    The decode's white-sky albedo exceeds 1 in some channel: it reflects more
-    energy than it receives (energy conservation requires ≤ 1).
+    The decode's directional albedo (:func:`brdfcodec.representation.energy.directional_albedo_mapped`)
+    exceeds 1 (by more than 1e-4) at some incident elevation and channel: lit
+    from that direction it reflects more light than it receives.
+By default the traversal decodes are judged as an editor shows them: with the
+energy bound of ``spec/bvae-format.md`` §6.3 (a decode whose directional
+albedo exceeds 1 is scaled down to 1), so ``unphysical`` checks that the bound
+holds; ``energy_bound=False`` judges the network's raw decodes.
+
 ``holes``
     Some near-specular entry (θh bins 0–1, above the horizon) decodes to
     exactly 0 (the decoder's output was clamped at the floor of the mapped
@@ -69,6 +75,7 @@ from brdfcodec.conventions import (
     N_THETA_H,
     NETWORK_INPUT_SHAPE,
 )
+from brdfcodec.representation.energy import directional_albedo_mapped, scale_mapped
 from brdfcodec.representation.mapping import LOG_RANGE
 
 __all__ = [
@@ -79,7 +86,9 @@ __all__ = [
     "Offender",
     "PlausibilityCriteria",
     "PlausibilityReport",
+    "UNPHYSICAL_TOLERANCE",
     "albedo_weights",
+    "bounded",
     "cell_valid_mask",
     "decompose_output",
     "entry_valid_mask",
@@ -97,6 +106,8 @@ DEFAULT_STEPS: tuple[float, ...] = (-3.0, -2.0, -1.0, 1.0, 2.0, 3.0)
 NEAR_THETA_H_BINS: tuple[int, ...] = (0, 1)
 #: θh bins of the off-specular flank (they span θh 0.18–0.54°).
 OFF_THETA_H_BINS: tuple[int, ...] = (4, 5, 6)
+#: How far above 1 a directional albedo may be before ``unphysical`` flags it (float32 rounding of the bound).
+UNPHYSICAL_TOLERANCE = 1e-4
 #: The kinds of implausibility, in report order.
 KINDS: tuple[str, ...] = ("invalid", "inverted", "energetic", "unphysical", "holes")
 
@@ -289,8 +300,8 @@ class Offender:
 
     ``score`` depends on ``kind``: ``inverted``, the largest specular deficit
     (mapped units) among new inversions, at ``where`` = (colour, φd bin, θd bin);
-    ``holes``, the number of new zero entries near the peak; ``energetic`` and
-    ``unphysical``, the largest channel's white-sky albedo; ``invalid``, the number of bad values.
+    ``holes``, the number of new zero entries near the peak; ``energetic``, the largest channel's
+    white-sky albedo; ``unphysical``, the largest directional albedo; ``invalid``, the number of bad values.
     """
 
     material: str
@@ -323,6 +334,8 @@ class PlausibilityReport:
     worst : tuple of Offender
         The worst decodes of each kind (largest score first).
     criteria : PlausibilityCriteria
+    energy_bound : bool
+        Whether the decodes were judged with the energy bound applied.
     """
 
     materials: tuple[str, ...]
@@ -334,6 +347,7 @@ class PlausibilityReport:
     library_albedo_max: float
     worst: tuple[Offender, ...]
     criteria: PlausibilityCriteria = field(default_factory=PlausibilityCriteria)
+    energy_bound: bool = True
 
     def to_dict(self) -> dict[str, Any]:
         """A JSON-ready summary (dims 1-based, as on the command line)."""
@@ -345,6 +359,7 @@ class PlausibilityReport:
             "source_inverted": self.source_inverted,
             "albedo_limit": self.albedo_limit,
             "library_albedo_max": self.library_albedo_max,
+            "energy_bound": self.energy_bound,
             "criteria": {"inversion_tolerance": self.criteria.inversion_tolerance,
                          "energy_margin": self.criteria.energy_margin},
             "worst": [{"material": o.material, "dim": o.dim + 1, "step": o.step, "kind": o.kind, "score": o.score,
@@ -363,29 +378,58 @@ class PlausibilityReport:
         lines.append("")
         lines.append(f"All {len(self.materials)} materials × {len(self.dims)} dims × {len(self.steps)} steps: {totals}")
         lines.append(f"μ decodes with an inverted cell already: {self.source_inverted:.3f}; albedo limit "
-                     f"{self.albedo_limit:.3f} (library max {self.library_albedo_max:.3f})")
+                     f"{self.albedo_limit:.3f} (library max {self.library_albedo_max:.3f}); decodes judged "
+                     + ("with the energy bound (as edits decode)" if self.energy_bound else "raw (no energy bound)"))
         return "\n".join(lines)
 
 
+def bounded(mapped: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Decodes (..., 63, 90, 90) with the energy bound applied, as edits decode (spec §6.3).
+
+    Returns
+    -------
+    scaled : ndarray, same shape
+        The kept slices of each bounded decode (exact at the kept φd bins).
+    albedo : ndarray of float64, shape (...)
+        Each bounded decode's largest directional albedo: ``s · max a`` of the raw decode, s its factor.
+    """
+    flat = np.asarray(mapped).reshape(-1, *NETWORK_INPUT_SHAPE)
+    largest = directional_albedo_mapped(flat).max(axis=(-2, -1))
+    scales = np.where(largest > 1.0, 1.0 / np.maximum(largest, 1.0), 1.0)
+    out = flat.copy()  # decodes within the bound stay as they are (non-finite values too, for ``invalid``)
+    for i in np.flatnonzero(scales < 1.0):
+        out[i] = scale_mapped(flat[i], float(scales[i]))
+    lead = np.shape(mapped)[:-3]
+    return out.reshape(np.shape(mapped)), (largest * scales).reshape(lead)
+
+
 def _judge(
-    source: np.ndarray, source_inv: np.ndarray, mapped: np.ndarray, limit: float, tol: float
+    source: np.ndarray, source_inv: np.ndarray, mapped: np.ndarray, limit: float, tol: float,
+    directional: np.ndarray | None = None,
 ) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray], np.ndarray]:
-    """Flags and scores of each kind for edited decodes ``mapped`` (..., 63, 90, 90) of one source."""
+    """Flags and scores of each kind for edited decodes ``mapped`` (..., 63, 90, 90) of one source.
+
+    ``directional``: each decode's largest directional albedo when known (a bounded decode's, from
+    :func:`bounded`); computed from ``mapped`` otherwise.
+    """
     lead = mapped.shape[:-3]
     bad = _invalid_counts(mapped.reshape(-1, *NETWORK_INPUT_SHAPE)).reshape(lead)
     new_inv = inverted_cells(mapped, tol) & ~source_inv
     deficit = np.where(new_inv, specular_deficit(mapped), -np.inf)
     holes = new_holes(source, mapped).reshape(*lead, -1).sum(axis=-1)
     albedo = white_sky_albedo(mapped).max(axis=-1)
+    if directional is None:
+        directional = directional_albedo_mapped(mapped.reshape(-1, *NETWORK_INPUT_SHAPE)).max(axis=(-2, -1))
+        directional = directional.reshape(lead)
     flags = {
         "invalid": bad > 0,
         "inverted": new_inv.reshape(*lead, -1).any(axis=-1),
         "energetic": albedo > limit,
-        "unphysical": albedo > 1,
+        "unphysical": directional > 1 + UNPHYSICAL_TOLERANCE,
         "holes": holes > 0,
     }
     scores = {"invalid": bad, "inverted": deficit.reshape(*lead, -1).max(axis=-1), "energetic": albedo,
-              "unphysical": albedo, "holes": holes}
+              "unphysical": directional, "holes": holes}
     return flags, scores, deficit
 
 
@@ -397,6 +441,7 @@ def plausible_range(
     steps: Sequence[float] = DEFAULT_STEPS,
     albedo_limit: float | None = None,
     criteria: PlausibilityCriteria | None = None,
+    energy_bound: bool = True,
 ) -> tuple[float, float]:
     """How far a traversal of ``record`` along ``dim`` stays plausible, on each side.
 
@@ -411,6 +456,8 @@ def plausible_range(
     albedo_limit : float, optional
         Energy limit (:attr:`PlausibilityReport.albedo_limit`); without it energy is not checked.
     criteria : PlausibilityCriteria, optional
+    energy_bound : bool, default True
+        Judge the decodes with the energy bound applied, as edits decode.
 
     Returns
     -------
@@ -426,9 +473,11 @@ def plausible_range(
     steps = tuple(sorted(float(s) for s in steps if s != 0))
     source = decoder.decode_mapped(np.asarray(record.mu, dtype=np.float32)[None])
     codes = np.stack([np.asarray(e.mu, dtype=np.float32) for e in traverse(record, dim, steps)])
-    mapped = decoder.decode_mapped(codes)
+    mapped, directional = decoder.decode_mapped(codes), None
+    if energy_bound:
+        mapped, directional = bounded(mapped)
     flags, _, _ = _judge(source[0], inverted_cells(source[0], tol), mapped, np.inf if albedo_limit is None
-                         else albedo_limit, tol)
+                         else albedo_limit, tol, directional)
     bad = np.logical_or.reduce(list(flags.values()))
     low = high = 0.0
     for step, implausible in sorted(((s, b) for s, b in zip(steps, bad, strict=True) if s > 0)):
@@ -452,6 +501,7 @@ def measure_plausibility(
     reference: Sequence[Any] | None = None,
     batch_size: int = 16,
     n_worst: int = 5,
+    energy_bound: bool = True,
 ) -> PlausibilityReport:
     """Traverse every record along every dimension and count implausible decodes.
 
@@ -473,6 +523,9 @@ def measure_plausibility(
         Codes per network call.
     n_worst : int, default 5
         Offenders kept per kind.
+    energy_bound : bool, default True
+        Judge the traversal decodes with the energy bound applied (``spec/bvae-format.md`` §6.3), as
+        :func:`~brdfcodec.edit.latent_edits.traverse`'s records decode; False judges the raw decodes.
 
     Returns
     -------
@@ -510,7 +563,10 @@ def measure_plausibility(
         edits = [e for d in dims for e in traverse(record, d, steps)]
         codes = np.stack([np.asarray(e.mu, dtype=np.float32) for e in edits])
         mapped = decoder.decode_mapped(codes, batch_size=batch_size).reshape(*shape, *NETWORK_INPUT_SHAPE)
-        flags, scores, deficit = _judge(sources[m], source_inv[m], mapped, limit, tol)
+        directional = None
+        if energy_bound:
+            mapped, directional = bounded(mapped)
+        flags, scores, deficit = _judge(sources[m], source_inv[m], mapped, limit, tol, directional)
         for kind, flag in flags.items():
             counts[kind] += flag
             for i, j in zip(*np.nonzero(flag), strict=True):
@@ -527,6 +583,7 @@ def measure_plausibility(
         materials=names, dims=dims, steps=steps, fractions=fractions,
         source_inverted=float(source_inv.reshape(len(records), -1).any(axis=1).mean()),
         albedo_limit=limit, library_albedo_max=library_max, worst=worst, criteria=criteria,
+        energy_bound=energy_bound,
     )
 
 

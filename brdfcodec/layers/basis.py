@@ -12,16 +12,14 @@ interpolation).
 
 This is the low-rate enhancement: between the 8-D latent (32 B as float16)
 and the per-material detail layer (hundreds of bytes and up), each extra
-byte buys one more coefficient. Which basis was measured, not guessed
-(``python benchmarks/basis_study.py DATASET``, ``reports/rd-study/basis.json``;
-held-out NBRDF proxy of MERL, kept-slice mapped RelAE, base refined at
-effort 3, least-squares coefficients): the principal components of the
-training *data* beat those of the training *residuals* (what the decoder
-leaves on the materials it was trained on, which it fits far better than
-new ones) from 16 coefficients on, while the residual basis is better with
-fewer. Fitting μ and the coefficients together on the L1 error (the
-encoder's way) lowers the data basis' error below PCA of the same size with
-least squares.
+byte buys one more coefficient. Which basis was chosen by measurement on
+materials the model was not trained on, not guessed (documentation: Layers
+and rate control): the principal components of the training *data* beat
+those of the training *residuals* (what the decoder leaves on the materials
+it was trained on, which it fits far better than new ones) at all but the
+smallest coefficient counts. Fitting μ and the coefficients together on the
+L1 error (the encoder's way) lowers the data basis' error below PCA of the
+same size with least squares.
 
 This module does not import torch (the encoder's joint fit is in
 :mod:`brdfcodec.codec.refine`).

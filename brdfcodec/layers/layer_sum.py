@@ -5,8 +5,9 @@ sum on the shared basis' factors (bound by memory bandwidth: each factor its
 coefficients use is read once), placed on the grid, then the detail layer's
 residual added (its inverse DCT, bound by compute, only over the blocks that
 hold nonzero coefficients: :func:`~brdfcodec.layers.detail.decode_detail`).
-Beside the network, on a thread of its own, it made a 2-core decode slower,
-not faster (``benchmarks/README.md``).
+Run beside the network on a thread of its own, it would compete with
+torch's threads for the cores and make a decode on a machine with few cores
+slower, not faster (documentation: Development).
 
 This module does not import torch.
 """

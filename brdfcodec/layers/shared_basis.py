@@ -477,11 +477,10 @@ def basis_offset(linear_rank: int, basis_count: int, k: int) -> int:
     A decoder with a linear path over the first ``linear_rank`` principal
     components (``ModelConfig.linear_basis``: the latent's own) already
     spans the shared basis' leading vectors, which are the same components,
-    so coefficients buy more on the vectors after them. On the held-out NBRDF
-    proxy of MERL (kept-slice mapped RelAE, effort 1, ``benchmarks/basis_offset_study.py``)
-    skipping the first 8 lowered the error at small and medium counts and
-    matched it at the largest (``reports/rd-study/basis-offset.json``). The
-    offset shrinks where k would run past the basis' end.
+    so coefficients buy more on the vectors after them: on materials the
+    model was not trained on, skipping those vectors lowers the error at small
+    and medium counts and matches it at the largest (documentation: Layers and
+    rate control). The offset shrinks where k would run past the basis' end.
     """
     return max(0, min(linear_rank, basis_count - k))
 

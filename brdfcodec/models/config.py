@@ -102,7 +102,7 @@ PAPER_CONFIG = ModelConfig(
     norm="batch",
 )
 
-#: Default: the paper's layout at small widths plus the linear basis; a decoder of 9.7 MB.
+#: Default: the paper's layout at small widths plus the linear basis; a decoder a fraction of the paper's size.
 SMALL_CONFIG = ModelConfig(decoder_channels=(32, 32, 32), decoder_fc=(128,), linear_basis=True)
 
 #: For tests: seconds to build and run.

@@ -10,7 +10,9 @@ fixed) and a few appearance statistics of the decoded table are compared:
 - lobe width: change of the half-maximum θh of the specular lobe, degrees;
 - grazing: change of ln(grazing / near-normal luminance) at the peak.
 
-The largest normalised change names the dimension. The *colour dimensions*
+The largest normalised change names the dimension (:func:`distinct_labels`:
+where several dimensions share their largest effect, each is told apart by its
+next largest, and only dimensions alike in both get a letter). The *colour dimensions*
 (used by green-channel grafting) are the ones whose decode changes the
 red–blue balance most; they are found here, never hard-coded, and stored in
 the model's manifest (``parameters``) by :func:`describe_parameters`.
@@ -26,7 +28,7 @@ import numpy as np
 from brdfcodec.representation import reflectance_from_stored
 from brdfcodec.representation.coords import theta_h_from_index
 
-__all__ = ["DimensionEffect", "colour_dims_of", "describe_parameters", "measure_dimension_effects"]
+__all__ = ["DimensionEffect", "colour_dims_of", "describe_parameters", "distinct_labels", "measure_dimension_effects"]
 
 _PHI_D_BIN = 90
 _THETA_D = slice(5, 16)  # θd ≈ 5–16°
@@ -94,23 +96,76 @@ def _statistics(reflectance: np.ndarray) -> dict[str, float]:
     }
 
 
+#: The statistics that name a dimension, with the scale that makes their changes comparable (lobe width in
+#: degrees is divided by 10), the words for an increase and a decrease, and their field in DimensionEffect.
+_NAMED_STATISTICS = (
+    ("diffuse colour", "diffuse_colour", 1.0, "redder diffuse colour", "bluer diffuse colour"),
+    ("specular colour", "specular_colour", 1.0, "redder specular colour", "bluer specular colour"),
+    ("diffuse level", "diffuse_level", 1.0, "brighter diffuse", "darker diffuse"),
+    ("specular level", "specular_level", 1.0, "brighter highlight", "darker highlight"),
+    ("lobe width (haziness)", "lobe_width_deg", 0.1, "wider lobe", "narrower lobe"),
+    ("grazing reflection", "grazing", 1.0, "more grazing reflection", "less grazing reflection"),
+)
+
+
+def _ranked(change: dict[str, float]) -> list[tuple[str, str, float]]:
+    """(statistic, field, normalised |change|), largest first."""
+    scores = [(name, key, abs(float(change[key])) * scale) for name, key, scale, _, _ in _NAMED_STATISTICS]
+    return sorted(scores, key=lambda item: -item[2])
+
+
+def _phrase(name: str, key: str, change: dict[str, float]) -> str:
+    """The long form: ``diffuse colour (red→blue)``, ``specular level, lower with +z``."""
+    value = float(change[key])
+    if name.endswith("colour"):
+        return f"{name} ({_CHROMA_NAMES[value > 0]})"
+    if key == "lobe_width_deg":
+        return f"{name}, {'wider' if value > 0 else 'narrower'} with +z"
+    return f"{name}, {'higher' if value > 0 else 'lower'} with +z"
+
+
+def _short(key: str, change: dict[str, float]) -> str:
+    _, _, _, up, down = next(s for s in _NAMED_STATISTICS if s[1] == key)
+    return up if float(change[key]) > 0 else down
+
+
 def _label(change: dict[str, float]) -> str:
-    scores = {
-        "diffuse colour": abs(change["diffuse_colour"]),
-        "specular colour": abs(change["specular_colour"]),
-        "diffuse level": abs(change["diffuse_level"]),
-        "specular level": abs(change["specular_level"]),
-        "lobe width (haziness)": abs(change["lobe_width_deg"]) / 10.0,
-        "grazing reflection": abs(change["grazing"]),
-    }
-    best = max(scores, key=scores.__getitem__)
-    if best.endswith("colour"):
-        key = "diffuse_colour" if best.startswith("diffuse") else "specular_colour"
-        return f"{best} ({_CHROMA_NAMES[change[key] > 0]})"
-    if best.startswith("lobe"):
-        return f"{best}, {'wider' if change['lobe_width_deg'] > 0 else 'narrower'} with +z"
-    key = {"diffuse level": "diffuse_level", "specular level": "specular_level", "grazing reflection": "grazing"}[best]
-    return f"{best}, {'higher' if change[key] > 0 else 'lower'} with +z"
+    name, key, _ = _ranked(change)[0]
+    return _phrase(name, key, change)
+
+
+def distinct_labels(dimensions: list[dict[str, Any]]) -> list[str]:
+    """One name per dimension, no two alike, from the measured statistics (a manifest's ``dimensions``).
+
+    A dimension is named by its largest normalised effect (as ``label``). Where several dimensions share that
+    statistic, each name adds the dimension's next largest effect (``"diffuse level, lower with +z; also
+    darker highlight"``); dimensions alike in both get a letter, ``(a)``, ``(b)``, in dimension order.
+
+    Parameters
+    ----------
+    dimensions : list of dict
+        Entries with ``dim`` and the statistics of :class:`DimensionEffect`.
+
+    Returns
+    -------
+    list of str
+        Indexed by dimension (0-based).
+    """
+    rows = sorted(dimensions, key=lambda row: int(row["dim"]))
+    primary = [_ranked(row)[0] for row in rows]
+    labels = []
+    for row, (name, key, _) in zip(rows, primary, strict=True):
+        label = _phrase(name, key, row)
+        if sum(1 for other in primary if other[0] == name) > 1:
+            _, second, _ = _ranked(row)[1]
+            label = f"{label}; also {_short(second, row)}"
+        labels.append(label)
+    for label in set(labels):
+        same = [i for i, other in enumerate(labels) if other == label]
+        if len(same) > 1:
+            for letter, i in zip("abcdefghijklmnopqrstuvwxyz", same, strict=False):
+                labels[i] = f"{label} ({letter})"
+    return labels
 
 
 def measure_dimension_effects(
@@ -136,7 +191,7 @@ def measure_dimension_effects(
         for sign in (-1.0, 1.0):
             code = centre.copy()
             code[d] += sign * span
-            table = decoder.table(LatentRecord("probe", code, np.ones(dim)), phi_d_bins=[_PHI_D_BIN], masked="zero")
+            table = decoder.decode(LatentRecord("probe", code, np.ones(dim)), phi_d_bins=[_PHI_D_BIN], masked="zero")
             stats.append(_statistics(reflectance_from_stored(table[..., 0])))
         change = {k: stats[1][k] - stats[0][k] for k in stats[0]}
         effects.append(DimensionEffect(dim=d, label=_label(change), **change))
@@ -152,10 +207,13 @@ def colour_dims_of(effects: list[DimensionEffect], count: int = 2) -> tuple[int,
 def describe_parameters(decoder: Any, *, span: float = 2.0) -> dict[str, Any]:
     """The ``parameters`` entry of a model manifest: colour dimensions and each dimension's effects."""
     effects = measure_dimension_effects(decoder, span=span)
+    dimensions = [asdict(e) for e in effects]
+    for row, label in zip(dimensions, distinct_labels(dimensions), strict=True):
+        row["label"] = label
     return {
         "method": f"traversal of ±{span:g} prior σ around z = 0; spec/model.md §named parameters",
         "colour_dims": list(colour_dims_of(effects)),
-        "dimensions": [asdict(e) for e in effects],
+        "dimensions": dimensions,
     }
 
 
@@ -166,9 +224,10 @@ def parameters_markdown(parameters: dict[str, Any]) -> str:
         "| lobe width (°) | grazing |",
         "|---|---|---|---|---|---|---|---|",
     ]
-    for row in parameters["dimensions"]:
+    rows = sorted(parameters["dimensions"], key=lambda row: int(row["dim"]))
+    for row, label in zip(rows, distinct_labels(rows), strict=True):
         lines.append(
-            f"| {row['dim'] + 1} | {row['label']} | {row['diffuse_colour']:+.2f} | {row['specular_colour']:+.2f} | "
+            f"| {row['dim'] + 1} | {label} | {row['diffuse_colour']:+.2f} | {row['specular_colour']:+.2f} | "
             f"{row['diffuse_level']:+.2f} | {row['specular_level']:+.2f} | {row['lobe_width_deg']:+.1f} | "
             f"{row['grazing']:+.2f} |"
         )

@@ -276,21 +276,24 @@ def traversal_sheet(
     """
     from brdfcodec.codec import DecodedMaterial
     from brdfcodec.edit.latent_edits import parameter_vector, traverse
+    from brdfcodec.models.parameters import distinct_labels
     from brdfcodec.render.images import auto_exposure, compose_sheet, encode_srgb
 
     record, decoder = material.record, material.decoder
     steps = [float(s) for s in steps]
     manifest = decoder.manifest
     effects = manifest.parameters.get("dimensions", []) if manifest is not None else []
+    names = distinct_labels(effects) if len(effects) == decoder.latent_dim else [e.get("label", "") for e in effects]
     rows, labels = [], []
     for dim in range(parameter_vector(record).size):
         edited = traverse(record, dim, steps)
         rows.append([render_sphere(DecodedMaterial(r, decoder), size=size, light=tuple(light)) for r in edited])
-        label = effects[dim]["label"] if dim < len(effects) else "grafted green"
+        label = names[dim] if dim < len(names) else "grafted green"
         labels.append(f"z{dim + 1}: {label}")
     middle = len(steps) // 2
     exposure = auto_exposure(np.concatenate([row[middle] for row in rows]))
     tiles = [[encode_srgb(img, exposure=exposure) for img in row] for row in rows]
     name = manifest.name if manifest is not None else "decoder in memory"
     return compose_sheet(tiles, row_labels=labels, column_labels=[f"{s:+g}σ" for s in steps],
-                         title=f"{record.name}: latent traversal ({name})")
+                         title=f"{record.name}: latent traversal ({name})",
+                         label_width=max(260, 6 * max(len(text) for text in labels) + 16))

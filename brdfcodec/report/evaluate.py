@@ -142,7 +142,8 @@ def _stats(values: list[float]) -> dict[str, float]:
 def summarise(
     points: Sequence[OperatingPoint], rows: Sequence[dict[str, Any]], data: dict[str, Any]
 ) -> list[dict[str, Any]]:
-    """One JSON-ready record per operating point (``spec`` of the report in ``benchmarks/README.md``)."""
+    """One JSON-ready record per operating point: what it is, its sizes, median times and errors per split
+    (documentation: Results)."""
     env = environment()
     records = []
     for point in points:

@@ -171,8 +171,8 @@ class BvaeCodec(OperatingPoint):
     def payload_bytes(self, payload: bytes) -> int:
         """The record's payload (64 B for 8 float32 μ and σ): what a material adds to a library.
 
-        The file's header (decoder reference, index) comes on top: about 11 B per material in a library
-        of 100, about 210 B for a file of one (``benchmarks/test_bench_sizes.py``).
+        The file's header (decoder reference, index) comes on top: shared by every material of a library, so
+        it weighs far more on a file of one (documentation: The .bvae format, Sizes).
         """
         from brdfcodec.format.bvae import parse_bvae
 
@@ -182,7 +182,7 @@ class BvaeCodec(OperatingPoint):
         from brdfcodec.format.bvae import parse_bvae
 
         record = parse_bvae(payload).records[0]
-        return self.decoder.table(record, masked="keep").astype(np.float64)
+        return self.decoder.decode(record, masked="keep").astype(np.float64)
 
 
 def standard_points(

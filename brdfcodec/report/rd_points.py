@@ -25,8 +25,8 @@ which codec is better on materials it has not seen". Points of one family
 - ``pca-perm-k-float16`` / ``pca-perm-k-int8``: the same PCA fitted on the
   training materials in all 6 orders of their colour channels (up to its
   rank, 5N − 1 coefficients: 379 for 76 materials), a stronger baseline than
-  PCA of the materials as measured
-  (``reports/rd-study/colour-permutations.json``);
+  PCA of the materials as measured, since it spans colours the training
+  set lacks (documentation: Results);
 - ``zstd-slices@Δ``: the mapped kept slices quantised at step Δ, int16,
   zstandard level 19 (the plain "quantise and zip" codec);
 - ``dct-slices@Δ``: the detail layer's own coder (colour decorrelation, 3-D
@@ -117,7 +117,7 @@ class LayeredBvae(OperatingPoint):
     def decode(self, payload: bytes) -> np.ndarray:
         from brdfcodec.format.bvae import parse_bvae
 
-        return self.decoder.table(parse_bvae(payload).records[0], masked="keep").astype(np.float64)
+        return self.decoder.decode(parse_bvae(payload).records[0], masked="keep").astype(np.float64)
 
 
 def _input_mask(material: Material) -> np.ndarray:

@@ -4,8 +4,9 @@ A row is a flat JSON object. :func:`stamp` adds what makes it traceable:
 ``schema``, ``study``, ``commit`` (the git commit of the checkout that
 measured it, or ``$BRDFCODEC_COMMIT``, or ``"unknown"`` outside a checkout),
 ``brdfcodec_version`` and ``created`` (UTC). Rows are stored one per line
-(JSON Lines) under ``reports/results/``; the tables in the documentation are
-generated from them by :func:`summary_markdown` (``bvae bench table``).
+(JSON Lines); the tables in the documentation are generated from the
+project's rows by :func:`summary_markdown` (``bvae bench table``;
+documentation: Results).
 """
 
 from __future__ import annotations

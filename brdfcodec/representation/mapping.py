@@ -73,7 +73,7 @@ def clamp_mapped(mapped: npt.ArrayLike, *, out: np.ndarray | None = None) -> Flo
     array = np.asarray(mapped)
     dtype = _working_dtype(array)
     array = array.astype(dtype, copy=False)
-    # Bounds of the array's own type: numpy's vectorised clip (Python floats took it off that path, 8× slower).
+    # Bounds of the array's own type keep numpy's vectorised clip (Python floats take it off that path, far slower).
     clipped = np.clip(array, dtype.type(0.0), dtype.type(MAPPED_MAX), out=out)
     # The clip keeps NaN and puts everything else in [0, MAPPED_MAX], so the sum is NaN exactly when a NaN is left.
     if np.isnan(np.sum(clipped)):

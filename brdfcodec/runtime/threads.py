@@ -13,17 +13,17 @@ workers that meet at a barrier after every operation and spin while they
 wait. Refinement and the basis fit run thousands of small operations on one
 material; beside other CPU-bound processes (a renderer's own threads, a
 training job) a worker that is descheduled holds every barrier up while the
-others spin on the cores the work needs, and a 16 KB encode on 2 cores took
-several times as long with 2 torch threads as with 1 (benchmark
-``encode-16KB-busy``, ``benchmarks/test_bench_threads.py``).
+others spin on the cores the work needs, so that on a busy machine with few
+cores an encode with more torch threads can take far longer than with one
+(the benchmark suite's ``encode-16KB-busy`` group; documentation: Development).
 
 **BLAS.** Decoding and encoding run torch and numpy's BLAS
 (basis sum, inverse DCT of the detail layer, slice interpolation) one after
 the other. OpenBLAS' worker threads keep spinning for a while after each
 call, so on a machine with few cores they take the cores torch's threads
-need next: on 2 cores a layered decode was markedly slower with BLAS
-threaded than with BLAS on one thread, a base-only decode was not
-(``python -m pytest benchmarks/test_bench_codec.py -k layered``). The limit
+need next: with few cores a layered decode is slower with BLAS threaded
+than with BLAS on one thread, while a base-only decode is not (the benchmark
+suite's ``decode-layered`` groups; documentation: Development). The limit
 is set for the duration of a call only, through threadpoolctl, and the
 caller's own BLAS setting is restored afterwards; decodes that overlap on
 several threads share one limit (:class:`~brdfcodec.runtime.shared_limit.SharedLimit`).
@@ -138,7 +138,7 @@ def codec_threads() -> Iterator[None]:
 
 
 def _controller() -> Any:
-    """The BLAS libraries loaded now (about 1 ms to scan): one loaded since the last call (scipy's own OpenBLAS,
+    """The BLAS libraries loaded now (a quick scan): one loaded since the last call (scipy's own OpenBLAS,
     say) is limited too."""
     from threadpoolctl import ThreadpoolController
 

@@ -128,13 +128,18 @@ class Catalogue:
         return np.stack([m.record.mu for m in self.materials.values()]).astype(np.float32)
 
     def parameter_labels(self) -> list[str]:
-        """One label per latent dimension, from the model's measured parameters (``model.json``)."""
-        effects = self.decoder.manifest.parameters.get("dimensions", [])
-        labels = []
-        for dim in range(self.latent_dim):
-            text = next((str(e.get("label", "")) for e in effects if e.get("dim") == dim), "")
-            labels.append(text or "unnamed")
-        return labels
+        """One name per latent dimension, no two alike, from the model's measured parameters (``model.json``).
+
+        Named from the stored statistics by :func:`brdfcodec.models.parameters.distinct_labels`; "unnamed" where a
+        manifest has none.
+        """
+        from brdfcodec.models.parameters import distinct_labels
+
+        effects = self.decoder.manifest.parameters.get("dimensions", []) if self.decoder.manifest else []
+        by_dim = {int(e["dim"]): e for e in effects if "dim" in e}
+        if sorted(by_dim) != list(range(self.latent_dim)):
+            return [str(by_dim.get(d, {}).get("label") or "unnamed") for d in range(self.latent_dim)]
+        return distinct_labels([by_dim[d] for d in range(self.latent_dim)])
 
     def slider_range(self) -> float:
         """Half-width of every latent slider: 3 prior σ, widened to hold every material's μ."""
@@ -194,13 +199,19 @@ class Catalogue:
         graft = body.get("graft")
         base = self.record(body["base"]) if body.get("base") is not None else None
         sigma = base.sigma if base is not None else np.ones_like(z)
+        # A code other than the base material's own is an edit: its decode is energy-bounded (spec §6.3).
+        edited = base is None or graft is not None or not np.array_equal(z, np.asarray(base.mu, dtype=z.dtype))
+        meta = {"edit": {"op": "studio"}} if edited else {}
         if graft is None:
             from brdfcodec.format.layered_record import LayeredRecord
 
             if isinstance(base, LayeredRecord):
+                from dataclasses import replace
+
                 from brdfcodec.edit.latent_edits import with_parameters
 
-                return with_parameters(base, z, name=name, edit={"op": "studio"}, sigma=sigma)
-            return LatentRecord(name, z, sigma)
+                layered = with_parameters(base, z, name=name, edit={"op": "studio"}, sigma=sigma)
+                return layered if edited else replace(layered, meta={})
+            return LatentRecord(name, z, sigma, meta)
         values = self.parse_code(graft, what="graft", length=len(self.colour_dims))
-        return GraftRecord(name, z, sigma, self.colour_dims, values)
+        return GraftRecord(name, z, sigma, self.colour_dims, values, meta)

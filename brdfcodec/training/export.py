@@ -27,8 +27,8 @@ __all__ = ["CARD", "DEFAULT_BASIS_COUNT", "add_shared_basis", "export_run", "sto
 
 CARD = "MODEL_CARD.md"
 #: Vectors of the shared basis that ``bvae model export`` fits (at most the rank of the fitted data,
-#: :func:`~brdfcodec.layers.basis.shared_basis_rank`; 75 float16 vectors over the 387,378 valid entries:
-#: 61.2 MB dense, 17.6 MB as factors).
+#: :func:`~brdfcodec.layers.basis.shared_basis_rank`; float16 vectors over the 387,378 valid entries, stored
+#: as factors in a fraction of their dense size).
 DEFAULT_BASIS_COUNT = 75
 
 _LIMITS = [
@@ -76,8 +76,8 @@ def export_run(
     basis_colour_permutations : bool, default True
         Fit that basis on the training materials in all 6 orders of their colour channels (at most
         5N − 1 vectors, :func:`~brdfcodec.layers.basis.shared_basis_rank`), not as measured only: it spans
-        new materials better (held-out NBRDF proxy of MERL, ``bvae compress --bytes``;
-        ``reports/rd-study/colour-permutations.json``).
+        materials the model was not trained on better, since a permuted material is a valid one with other
+        colours (documentation: Layers and rate control).
     """
     run = Path(run_dir)
     run_info = json.loads((run / "run.json").read_text())

@@ -176,8 +176,8 @@ def _resident(data: _TrainingData, device: torch.device) -> None:
     """Keep the training inputs and masks on the training device, so that each step's augmentation (reflectance
     blend, colour permutation) runs there instead of on the host and crossing to the device.
 
-    On a GPU the host-side augmentation was most of a step's time (``reports/model-v2-trials``, GPU sweep);
-    the inputs and masks of a hundred materials fit in a small share of a GPU's memory.
+    On a GPU, augmenting on the host and copying each batch across takes most of a step's time (documentation:
+    Results, model v2 trials); the inputs and masks of a hundred materials fit in a small share of a GPU's memory.
     """
     data.inputs = data.inputs.to(device)
     data.masks = data.masks.to(device)

@@ -1,0 +1,227 @@
+"""Directional albedo of a MERL-layout table, and the energy bound (``spec/conventions.md`` §9).
+
+The directional albedo of a BRDF ρ lit from direction ωi is
+
+.. math::
+
+    a(ω_i) = \\int_{H^2} ρ(ω_i, ω_o) \\cos θ_o \\, dω_o ,
+
+the fraction of the light arriving from ωi that leaves the surface; energy
+conservation requires ``a ≤ 1`` for every ωi and colour channel. On the MERL
+grid it is evaluated by quadrature over the half vector (``ωo`` is ``ωi``
+reflected about ``ωh``, ``dωo = 4 cos θd dωh``): the θh nodes are the
+table's own non-linear θh samples with trapezoid weights of
+``f(θh) sin θh``, so a mirror-like peak is integrated at the table's
+resolution; φh is uniform. Each node reads the table's θd and φd bin as a
+MERL lookup does; entries below the horizon or unmeasured count as 0.
+
+:func:`energy_bound_scale` is the factor that brings a table's largest
+directional albedo (over the incident elevations of :data:`ALBEDO_THETA_I_DEG`
+and the three channels) down to 1: ``min(1, 1 / max a)``. The decoder
+multiplies an edited material by it (``spec/bvae-format.md`` §6.3): a uniform
+factor keeps the material's colour and the shape of its lobes and makes it
+conserve energy. :func:`directional_albedo_mapped` and
+:func:`energy_bound_scale_mapped` compute the same from the 21 kept slices in
+the mapped domain, reading each φd bin as the decoder's interpolation makes it
+(``spec/conventions.md`` §7); :func:`scale_mapped` applies a factor there.
+
+Examples
+--------
+A Lambertian table of albedo 0.5 has directional albedo 0.5 at every angle:
+
+>>> import numpy as np
+>>> from brdfcodec.representation import stored_from_reflectance
+>>> table = stored_from_reflectance(np.full((3, 90, 90, 180), 0.5 / np.pi))
+>>> albedo = directional_albedo(table)
+>>> albedo.shape, bool(np.allclose(albedo, 0.5, atol=0.01))
+((13, 3), True)
+>>> float(energy_bound_scale(table))
+1.0
+"""
+
+from __future__ import annotations
+
+import functools
+
+import numpy as np
+import numpy.typing as npt
+
+from brdfcodec.conventions import EPSILON, MAPPED_MAX, N_CHANNELS, N_KEPT_SLICES, N_PHI_D, N_THETA_D, N_THETA_H
+from brdfcodec.representation.coords import half_diff_from_directions, phi_d_index, theta_d_index
+from brdfcodec.representation.layout import interpolation_plan
+from brdfcodec.representation.mapping import LOG_RANGE
+from brdfcodec.representation.mask import horizon_mask
+from brdfcodec.representation.units import reflectance_from_stored
+
+__all__ = [
+    "ALBEDO_THETA_I_DEG",
+    "directional_albedo",
+    "directional_albedo_mapped",
+    "energy_bound_scale",
+    "energy_bound_scale_mapped",
+    "scale_mapped",
+]
+
+#: Incident elevations (degrees) at which the bound is evaluated: 0° to 80° in steps of 10°, then 82.5–87.5°.
+#: Beyond 87.5° the MERL grid's θd bins are too coarse for a reliable integral.
+ALBEDO_THETA_I_DEG = (0.0, 10.0, 20.0, 30.0, 40.0, 50.0, 60.0, 70.0, 75.0, 80.0, 82.5, 85.0, 87.5)
+
+_N_PHI_H = 96
+
+
+@functools.cache
+def _quadrature() -> tuple[np.ndarray, ...]:
+    """The quadrature's nodes, built once (read-only arrays of equal length n).
+
+    Returns
+    -------
+    h, d, p : ndarray of intp
+        θh, θd and φd bins each node reads (nodes in bins below the horizon are left out).
+    weight : ndarray of float64
+        ``cos θo · 4 cos θd · w(θh) · Δφh`` of the node, w the trapezoid weight of ``f(θh) sin θh``.
+    row : ndarray of intp
+        Which entry of :data:`ALBEDO_THETA_I_DEG` the node integrates for.
+    """
+    # Nodes at the table's own θh samples, (i/90)²·π/2 (spec/conventions.md §3); trapezoid weights of
+    # ∫ f(θh) sin θh dθh on that non-uniform grid, the last interval closed at π/2 with the last sample.
+    nodes = (np.arange(N_THETA_H) / N_THETA_H) ** 2 * (np.pi / 2)
+    grid = np.append(nodes, np.pi / 2)
+    left = np.diff(grid, prepend=grid[0])[:-1]  # θ_i − θ_(i−1), 0 for the first
+    right = np.diff(grid)  # θ_(i+1) − θ_i, the last up to π/2
+    w_h = 0.5 * (left + right) * np.sin(nodes)
+    w_h[-1] += 0.5 * right[-1]  # the closing node at π/2 (sin = 1) reads the last sample
+    phi_h = (np.arange(_N_PHI_H) + 0.5) * (2 * np.pi / _N_PHI_H)
+    theta_i = np.radians(np.asarray(ALBEDO_THETA_I_DEG))
+    ti, th, ph = np.meshgrid(theta_i, nodes, phi_h, indexing="ij")
+    wi = np.stack([np.sin(ti), np.zeros_like(ti), np.cos(ti)], axis=-1)
+    half = np.stack([np.sin(th) * np.cos(ph), np.sin(th) * np.sin(ph), np.cos(th)], axis=-1)
+    cos_d = np.sum(wi * half, axis=-1)
+    wo = 2.0 * cos_d[..., None] * half - wi
+    _, theta_d, phi_d, _ = half_diff_from_directions(wi, wo)
+    h = np.broadcast_to(np.arange(N_THETA_H)[None, :, None], ti.shape)
+    d, p = theta_d_index(theta_d), phi_d_index(phi_d)
+    keep = (cos_d > 0) & (wo[..., 2] > 0)
+    keep &= horizon_mask()[h, d, p]
+    weight = wo[..., 2] * 4.0 * cos_d * w_h[None, :, None] * (2 * np.pi / _N_PHI_H)
+    row = np.broadcast_to(np.arange(len(theta_i))[:, None, None], ti.shape)
+    out = tuple(np.ascontiguousarray(a[keep]) for a in (h, d, p, weight, row))
+    for array in out:
+        array.setflags(write=False)
+    return out
+
+
+def _sum_rows(values: np.ndarray) -> np.ndarray:
+    """Node values (N, 3, n) summed per θi row with the quadrature weights: (N, 13, 3)."""
+    *_, weight, row = _quadrature()
+    rows = len(ALBEDO_THETA_I_DEG)
+    out = np.zeros((values.shape[0], N_CHANNELS, rows))
+    for n in range(values.shape[0]):
+        for c in range(N_CHANNELS):
+            out[n, c] = np.bincount(row, weights=values[n, c] * weight, minlength=rows)
+    return np.moveaxis(out, 1, 2)
+
+
+def directional_albedo(table: npt.ArrayLike) -> np.ndarray:
+    """Directional albedo per incident elevation and channel, from a full table.
+
+    Parameters
+    ----------
+    table : array_like, shape (3, 90, 90, 180) or (N, 3, 90, 90, 180)
+        Stored MERL values (``spec/conventions.md`` §2); negative entries
+        (unmeasured) and non-finite ones count as 0, as do bins below the horizon.
+
+    Returns
+    -------
+    ndarray of float64, shape (13, 3) or (N, 13, 3)
+        ``a(θi)`` at :data:`ALBEDO_THETA_I_DEG` (dimensionless), per channel.
+    """
+    values = np.asarray(table)
+    single = values.ndim == 4
+    stack = values[None] if single else values
+    if stack.shape[1:] != (N_CHANNELS, N_THETA_H, N_THETA_D, N_PHI_D):
+        raise ValueError(f"expected tables of shape (3, 90, 90, 180), got {values.shape}")
+    h, d, p, _, _ = _quadrature()
+    picked = stack[:, :, h, d, p].astype(np.float64)  # (N, 3, n)
+    picked = np.where(np.isfinite(picked) & (picked > 0), picked, 0.0)
+    out = _sum_rows(reflectance_from_stored(picked, channel_axis=1))
+    return out[0] if single else out
+
+
+def directional_albedo_mapped(mapped: npt.ArrayLike) -> np.ndarray:
+    """Directional albedo from the 21 kept slices in the mapped domain (network layout).
+
+    Each node reads its φd bin as the decoder makes it: linear interpolation
+    of the clamped mapped values between the neighbouring kept slices, then the
+    inverse mapping (``spec/conventions.md`` §4, §7). Equal, up to rounding, to
+    :func:`directional_albedo` of the decoded table.
+
+    Parameters
+    ----------
+    mapped : array_like, shape (63, 90, 90) or (N, 63, 90, 90)
+        Mapped kept slices, channel-major (``spec/conventions.md`` §6).
+
+    Returns
+    -------
+    ndarray of float64, shape (13, 3) or (N, 13, 3)
+    """
+    values = np.asarray(mapped)
+    single = values.ndim == 3
+    stack = values[None] if single else values
+    if stack.shape[1:] != (N_CHANNELS * N_KEPT_SLICES, N_THETA_H, N_THETA_D):
+        raise ValueError(f"expected mapped slices of shape (63, 90, 90), got {values.shape}")
+    blocks = stack.reshape(stack.shape[0], N_CHANNELS, N_KEPT_SLICES, N_THETA_H, N_THETA_D)
+    h, d, p, _, _ = _quadrature()
+    left, right, t = interpolation_plan()
+    low = np.clip(np.nan_to_num(blocks[:, :, left[p], h, d].astype(np.float64)), 0.0, MAPPED_MAX)
+    high = np.clip(np.nan_to_num(blocks[:, :, right[p], h, d].astype(np.float64)), 0.0, MAPPED_MAX)
+    value = (1.0 - t[p]) * low + t[p] * high
+    out = _sum_rows(EPSILON * np.expm1(value * LOG_RANGE))
+    return out[0] if single else out
+
+
+def _scale_of(largest: float) -> float:
+    return 1.0 if not largest > 1.0 else 1.0 / largest
+
+
+def energy_bound_scale(table: npt.ArrayLike) -> float:
+    """The factor ``min(1, 1 / max a)`` that makes a full table conserve energy.
+
+    Parameters
+    ----------
+    table : array_like, shape (3, 90, 90, 180)
+        Stored MERL values.
+
+    Returns
+    -------
+    float
+        In (0, 1]; 1 when the table's largest directional albedo is at most 1.
+    """
+    return _scale_of(float(np.max(directional_albedo(table))))
+
+
+def energy_bound_scale_mapped(mapped: npt.ArrayLike) -> float:
+    """:func:`energy_bound_scale` of the table that mapped kept slices (63, 90, 90) decode to."""
+    return _scale_of(float(np.max(directional_albedo_mapped(mapped))))
+
+
+def scale_mapped(mapped: npt.ArrayLike, scale: float) -> np.ndarray:
+    """Mapped values of the reflectance multiplied by ``scale``: ``log1p(s · expm1(m · L)) / L``.
+
+    Parameters
+    ----------
+    mapped : array_like
+        Mapped values (clamped to the mapped domain here).
+    scale : float
+        Factor on reflectance, in (0, 1].
+
+    Returns
+    -------
+    ndarray
+        Same shape; float32 for float32 input, else float64. ``scale == 1`` returns the clamped input.
+    """
+    values = np.clip(np.nan_to_num(np.asarray(mapped)), 0.0, MAPPED_MAX)
+    if scale == 1.0:
+        return values
+    dtype = values.dtype if values.dtype == np.float32 else np.float64
+    out = np.log1p(scale * np.expm1(values.astype(np.float64) * LOG_RANGE)) / LOG_RANGE
+    return out.astype(dtype)
