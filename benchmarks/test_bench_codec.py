@@ -36,21 +36,21 @@ def test_full_table_decode(benchmark, decoder: BrdfDecoder, record: LatentRecord
     """Decoder, interpolation to 180 slices, inverse mapping, mask: one full table."""
     benchmark.group = "decode-full"
     benchmark.extra_info["role"] = "candidate"
-    table = benchmark(decoder.table, record)
+    table = benchmark(decoder.decode, record)
     assert table.shape == (3, 90, 90, 180)
 
 
 def test_slice_baseline_full_decode(benchmark, decoder: BrdfDecoder, record: LatentRecord) -> None:
     benchmark.group = "decode-slice"
     benchmark.extra_info["role"] = "baseline"
-    benchmark(decoder.table, record)
+    benchmark(decoder.decode, record)
 
 
 def test_slice_decode(benchmark, decoder: BrdfDecoder, record: LatentRecord) -> None:
     """One φd bin (between two kept slices): only 6 of 63 channels are computed."""
     benchmark.group = "decode-slice"
     benchmark.extra_info["role"] = "candidate"
-    table = benchmark(decoder.table, record, phi_d_bins=[85])
+    table = benchmark(decoder.decode, record, phi_d_bins=[85])
     assert table.shape == (3, 90, 90, 1)
 
 
@@ -173,7 +173,7 @@ def test_layered_decode(benchmark, decoder: BrdfDecoder, layered_case) -> None:
         decoder.decode(base)
         base_seconds.append(time.perf_counter() - start)
 
-    table = benchmark.pedantic(decoder.table, args=(record,), setup=decode_base_timed,
+    table = benchmark.pedantic(decoder.decode, args=(record,), setup=decode_base_timed,
                                rounds=_PAIRED_ROUNDS, warmup_rounds=2, iterations=1)
     assert table.shape == (3, 90, 90, 180)
     if benchmark.disabled:

@@ -84,8 +84,6 @@ def _file(form: bytes, payload: bytes, *, count: int | None = 3, basis: str | No
 
 
 @pytest.mark.parametrize(("form", "why"), [
-    (bytes_writer.layered_form(0, 3, basis=(0, 0)), "no sigma but a mu"),  # sigma "none" beside a float mu
-    (bytes_writer.layered_form(1, 3, basis=(0, 0)), "no sigma but a mu"),
     (bytes_writer.layered_form(3, 1, basis=(0, 0)), "no mu but a sigma"),  # mu "none" beside sigma bytes
     (bytes_writer.layered_form(3, 3, detail=0), "no basis layer"),  # mu "none" needs a basis layer
     (bytes_writer.layered_form(3, 3, basis=(0, 50)), "project"),  # and an unprojected one

@@ -71,7 +71,7 @@ def test_an_edit_is_the_edited_base_plus_the_original_layers(layered: dict[str, 
     assert isinstance(edited, LayeredRecord)
     assert edited.basis == record.basis and edited.detail == record.detail
     assert edited.mu[dim] == pytest.approx(record.mu[dim] + step)
-    got = decoder.mapped_record(edited)
+    got = decoder.mapped_record(edited, energy_bound=False)  # the layers' rule (§4.4); the bound comes after (§6)
     residual = layers_sum(decoder, record)
     want = clamp_mapped(base_decode(decoder, record, edited.mu) + residual)
     np.testing.assert_allclose(got, want, rtol=0, atol=1e-6)
@@ -208,6 +208,6 @@ def test_a_projected_compact_record_edits_by_the_same_rule(layered: dict[str, An
         assert isinstance(edited, LayeredRecord) and edited.basis == record.basis
         assert edited.compact_mu is stays_compact
         want = clamp_mapped(base_decode(decoder, record, edited.mu) + layers_sum(decoder, record))
-        np.testing.assert_allclose(decoder.mapped_record(edited), want, rtol=0, atol=1e-5)
+        np.testing.assert_allclose(decoder.mapped_record(edited, energy_bound=False), want, rtol=0, atol=1e-5)
         back = traverse(edited, dim, [-step])[0]
         assert np.abs(decoder.mapped_record(back) - original).max() < UNDO_TOLERANCE

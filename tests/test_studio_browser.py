@@ -65,8 +65,9 @@ def library_render(catalogue: Any, z: list[float], light: list[float], graft: li
     from brdfcodec.render.preview import render_sphere
 
     code = np.asarray(z, np.float32)
-    record = (LatentRecord("r", code, np.ones(8)) if graft is None
-              else GraftRecord("r", code, np.ones(8), catalogue.colour_dims, np.asarray(graft, np.float32)))
+    edit = {"edit": {"op": "studio"}}  # as the studio decodes a code: with the energy bound (spec §6 step 5)
+    record = (LatentRecord("r", code, np.ones(8), edit) if graft is None
+              else GraftRecord("r", code, np.ones(8), catalogue.colour_dims, np.asarray(graft, np.float32), edit))
     return render_sphere(DecodedMaterial(record, catalogue.decoder), size=size, light=light)
 
 

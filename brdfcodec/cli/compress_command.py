@@ -84,6 +84,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
                         "where that is better (format 2.1: the model's mean plus basis coefficients; from 6 B): it "
                         "decodes like any other, but cannot be edited; always keeps a latent code in every record, "
                         "so that every record can be edited")
+    parser.add_argument("--sigma", action="store_true",
+                        help="also store the posterior width σ in records without --bytes/--max-relae (by default "
+                        "a record stores μ alone, format 2.2, and reads back with σ = 1: the shipped model's σ "
+                        "carries no information, see its model card)")
     parser.set_defaults(handler=run)
 
 
@@ -201,7 +205,7 @@ def run(args: argparse.Namespace) -> int:
     encoder = BrdfEncoder(
         args.model, effort=args.effort, bytes=args.bytes, max_relae=args.max_relae, metric=args.metric or "mapped",
         basis=not args.no_basis, project_base=args.project_base or "auto",
-        latent_dtype=dtype, latent=latent,
+        latent_dtype=dtype, latent=latent, store_sigma=args.sigma,
     )
     with tqdm(total=len(items), desc="compress", unit="material", disable=len(items) < 2 or None) as bar:
         records: list[Record] = encode_records(

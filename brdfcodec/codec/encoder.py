@@ -25,6 +25,7 @@ from brdfcodec.format.bvae import (
     LatentRecord,
     Record,
 )
+from brdfcodec.format.layered_record import LayeredRecord
 from brdfcodec.io.merl import MerlBRDF, source_digest
 from brdfcodec.models.store import ModelManifest, load_model
 from brdfcodec.representation import (
@@ -111,6 +112,11 @@ class BrdfEncoder:
         With ``bytes`` or ``max_relae``: ``"auto"`` lets rate control pick a record without a latent (format 2.1,
         the decoder's linear-path mean plus basis coefficients) where its error is lower; it decodes like any
         other but cannot be edited. ``"always"``: every record keeps a latent code that edits can move.
+    store_sigma : bool, default False
+        Store the posterior width σ in records without rate control. By default a record stores μ alone (format
+        2.2, ``layers.sigma = "none"``: half the payload) and reads back with σ = 1: the shipped model's σ says
+        nothing about how certain an encoding is (its model card, "The posterior width σ"). Rate-controlled
+        records keep their compact σ (one byte, or one per dimension).
     """
 
     manifest: ModelManifest | None
@@ -129,13 +135,14 @@ class BrdfEncoder:
         basis: bool = True,
         project_base: ProjectBase | bool = "auto",
         latent: LatentChoice = "auto",
+        store_sigma: bool = False,
     ) -> None:
         from brdfcodec.codec.encoding import EncodeOptions
 
         self.options = EncodeOptions(
             effort=effort, bytes_budget=bytes, max_relae=max_relae, metric=metric, detail_step=detail_step,
             latent_itemsize=2 if latent_dtype == "float16" else 4, basis=basis, project_base=project_base,
-            latent=latent,
+            latent=latent, store_sigma=store_sigma,
         )
         manifest = resolve_model(model)
         network, _, loaded = load_model(manifest.folder, parts=("encoder",), device=str(device))
@@ -185,12 +192,15 @@ class BrdfEncoder:
         """
         mu, sigma = self.posterior_from_inputs(inputs, batch_size=max(len(inputs), 1))
         records = self.make_records(names, mu, sigma, sources, source_digests)
-        if self.options.effort == 0 and not self.options.layered:
-            return records
-        from brdfcodec.codec.encoding import layer_records
+        if self.options.effort != 0 or self.options.layered:
+            from brdfcodec.codec.encoding import layer_records
 
-        with codec_threads():  # refinement and rate control: thousands of small torch operations
-            return layer_records(records, self.decoder, inputs, masks, sources, self.options)
+            with codec_threads():  # refinement and rate control: thousands of small torch operations
+                records = layer_records(records, self.decoder, inputs, masks, sources, self.options)
+        if self.options.store_sigma:
+            return records
+        # σ left out (format 2.2) where it would fill half of a plain record; rate-controlled records keep theirs.
+        return [LayeredRecord.code_only(r) if type(r) is LatentRecord else r for r in records]
 
     def posterior_from_inputs(
         self, inputs: npt.ArrayLike, *, batch_size: int = 8, log_variance: bool = False

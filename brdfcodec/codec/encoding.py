@@ -119,6 +119,8 @@ class EncodeOptions:
         2.1: the decoder's linear-path mean plus basis coefficients from the first vector), where its error is
         lower (:data:`LatentChoice`); such a record decodes but cannot be edited. ``"always"``: every record
         keeps a latent code. Nothing changes without a target, or without a shared basis.
+    store_sigma : bool
+        Keep σ in records that rate control leaves plain (False, the default: μ alone, format 2.2).
     """
 
     effort: int = 1
@@ -130,6 +132,7 @@ class EncodeOptions:
     basis: bool = True
     project_base: ProjectBase = "auto"
     latent: LatentChoice = "auto"
+    store_sigma: bool = False
 
     def __post_init__(self) -> None:
         if self.latent not in _LATENT_CHOICES:

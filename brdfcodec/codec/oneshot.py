@@ -157,8 +157,8 @@ def encode(
     >>> import brdfcodec as bc
     >>> from brdfcodec.datasets.analytic import ANALYTIC_PRESETS
     >>> data = bc.encode([ANALYTIC_PRESETS["gold"].to_merl()], measure_error=False)
-    >>> data[1:5], len(data)   # one material: a header naming the decoder, then 64 bytes of latents
-    (b'BVAE', 136)
+    >>> data[1:5], len(data)   # one material: a header naming the decoder, then the 32 bytes of μ
+    (b'BVAE', 107)
     >>> bc.decode(data)["gold"].table(phi_d_bins=[0]).shape
     (3, 90, 90, 1)
     """

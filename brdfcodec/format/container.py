@@ -41,7 +41,9 @@ MAGIC = b"\x89BVAE\r\n\x1a"
 FORMAT_MAJOR = 2
 #: Minor version written; readers accept any minor version of their major version.
 #: 2.1: basis-only layered records (``layers.mu`` and ``layers.sigma`` ``"none"``: no latent, spec §4.6).
-FORMAT_MINOR = 1
+#: 2.2: a latent without σ (``layers.sigma`` ``"none"`` beside a stored μ), which may hold no layer (spec §4.4).
+#: A writer states the lowest minor version a file needs (2.1 unless a record leaves σ out).
+FORMAT_MINOR = 2
 #: Largest stored header (binary index and stored metadata block), in bytes.
 MAX_HEADER_BYTES = 1 << 24
 #: Largest metadata block, decompressed, in bytes.

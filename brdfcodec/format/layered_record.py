@@ -137,6 +137,10 @@ class LayeredRecord(LatentRecord):
     fixed_mu_grid : bool
         With ``compact_mu``: store μ as one signed byte per dimension on the fixed grid μ = q / 32
         (``layers.mu = "int8-fixed"``: D bytes, no step; values past ±3.97 are stored as the grid's end).
+    store_sigma : bool
+        False: σ is not stored (``layers.sigma = "none"`` with a latent, format 2.2); ``sigma`` then holds 1 in
+        every dimension, the prior's width: nothing is claimed about the posterior. Such a record may hold no
+        layer at all: it is then the base alone, μ in the form's storage (``spec/bvae-format.md`` §4.4).
     has_latent : bool
         False: a basis-only record (format 2.1, ``layers.mu = layers.sigma = "none"``; make one with
         :meth:`without_latent`). It stores neither μ nor σ; its base is the decoder's linear-path mean
@@ -153,6 +157,7 @@ class LayeredRecord(LatentRecord):
     compact_mu: bool = False
     fixed_mu_grid: bool = False
     has_latent: bool = True
+    store_sigma: bool = True
 
     @classmethod
     def without_latent(
@@ -192,8 +197,13 @@ class LayeredRecord(LatentRecord):
                 raise ValueError(f"{self.name}: a record without a latent stores no mu or sigma, compact or not")
             self._hold("mu", np.full(self.mu.size, np.nan))
             self._hold("sigma", np.full(self.sigma.size, np.nan))
-        if self.detail is None and self.basis is None:
-            raise ValueError(f"{self.name}: a layered record needs a basis layer, a detail layer or both")
+        if not self.store_sigma and self.has_latent:
+            if self.compact_sigma or self.shared_sigma:
+                raise ValueError(f"{self.name}: sigma is either not stored or stored compactly, not both")
+            self._hold("sigma", np.ones(self.sigma.size))
+        if self.detail is None and self.basis is None and self.store_sigma:
+            raise ValueError(f"{self.name}: a layered record needs a basis layer, a detail layer or both (or, "
+                             "without a stored sigma, none: the base alone)")
         if self.detail is not None and not isinstance(self.detail, DetailLayer):
             raise ValueError(f"{self.name}: detail must be a DetailLayer, got {type(self.detail).__name__}")
         if self.basis is not None and not isinstance(self.basis, BasisLayer):
@@ -225,6 +235,11 @@ class LayeredRecord(LatentRecord):
         return self.compact_sigma or self.shared_sigma
 
     @property
+    def sigma_in_values(self) -> bool:
+        """Whether σ is among the values stored in the latent dtype (not compact, not omitted)."""
+        return self.has_latent and self.store_sigma and not self.sigma_bytes_stored
+
+    @property
     def mu_storage(self) -> str | None:
         """How μ is stored (``layers.mu``): None in the file's latent dtype, :data:`MU_INT8`, :data:`MU_INT8_FIXED`,
         or :data:`MU_NONE` (no latent)."""
@@ -239,7 +254,7 @@ class LayeredRecord(LatentRecord):
         (none for a record without a latent)."""
         if not self.has_latent:
             return np.zeros(0, dtype=np.float32)
-        parts = ([] if self.compact_mu else [self.mu]) + ([] if self.sigma_bytes_stored else [self.sigma])
+        parts = ([] if self.compact_mu else [self.mu]) + ([self.sigma] if self.sigma_in_values else [])
         return np.concatenate(parts) if parts else np.zeros(0, dtype=np.float32)
 
     def base(self) -> LatentRecord:
@@ -256,6 +271,16 @@ class LayeredRecord(LatentRecord):
 
             raise NoLatentError(self.name)
         return LatentRecord(self.name, self.mu, self.sigma, self.meta)
+
+    @classmethod
+    def code_only(cls, record: LatentRecord) -> LayeredRecord:
+        """A latent record without its σ (format 2.2): μ in the file's latent dtype and no layer."""
+        return cls(record.name, record.mu, record.sigma, record.meta, store_sigma=False)
+
+    @property
+    def has_layers(self) -> bool:
+        """Whether the record holds a basis or a detail layer (a σ-less base alone holds none)."""
+        return self.basis is not None or self.detail is not None
 
     def layer_bytes(self) -> bytes:
         """The bytes that follow the latent values: compact μ, compact σ, the basis layer's, then the detail
@@ -275,6 +300,8 @@ def layers_entry(record: LayeredRecord) -> dict[str, Any]:
     entry: dict[str, Any] = {}
     if not record.has_latent:
         entry["mu"], entry["sigma"] = MU_NONE, SIGMA_NONE
+    elif not record.store_sigma:
+        entry["sigma"] = SIGMA_NONE
     if record.compact_mu:
         entry["mu"] = MU_INT8_FIXED if record.fixed_mu_grid else MU_INT8
     if record.compact_sigma:
@@ -309,16 +336,19 @@ def layers_length(layers: object, where: str, latent_dim: int = 0) -> int:
     unknown = sorted(set(layers) - {"basis", "detail", "sigma", "mu"})
     if unknown:
         raise UnsupportedLayerError(f"{where} has layers {unknown}, unknown to this reader; upgrade brdfcodec")
-    if "basis" not in layers and "detail" not in layers:
-        raise ValueError(f"{where} layers hold neither 'basis' nor 'detail'")
+    if "basis" not in layers and "detail" not in layers and not (
+        layers.get("sigma") == SIGMA_NONE and layers.get("mu") != MU_NONE
+    ):
+        raise ValueError(f"{where} layers hold neither 'basis' nor 'detail' (only a record without a stored sigma "
+                         "may be its base alone)")
     length = 0
     for key in ("mu", "sigma"):
         if key in layers and not isinstance(layers[key], str):
             raise ValueError(f"{where} layers.{key} is not a string")
     no_latent = layers.get("mu") == MU_NONE
-    if no_latent != (layers.get("sigma") == SIGMA_NONE):
-        raise ValueError(f"{where} stores no {'mu' if no_latent else 'sigma'} but a "
-                         f"{'sigma' if no_latent else 'mu'}: only a record without a latent stores neither")
+    if no_latent and layers.get("sigma") != SIGMA_NONE:
+        raise ValueError(f"{where} stores no mu but a sigma: a record without a latent stores neither")
+    no_sigma = layers.get("sigma") == SIGMA_NONE  # with a latent: σ not stored (2.2)
     if no_latent:
         if "basis" not in layers:
             raise ValueError(f"{where} stores no latent and no basis layer (a record without a latent needs one)")
@@ -331,7 +361,7 @@ def layers_length(layers: object, where: str, latent_dim: int = 0) -> int:
                 "upgrade brdfcodec"
             )
         length += latent_dim + (STEP_BYTES if layers["mu"] == MU_INT8 else 0)
-    if "sigma" in layers and not no_latent:
+    if "sigma" in layers and not no_latent and not no_sigma:
         if layers["sigma"] not in _SIGMA_MODES:
             raise UnsupportedLayerError(
                 f"{where} stores sigma as {layers['sigma']!r}, unknown to this reader "
@@ -429,7 +459,10 @@ def layered_from_payload(
         mu, values = values[:d], values[d:]
     compact = layers.get("sigma") == SIGMA_LOG2_U8
     shared = layers.get("sigma") == SIGMA_LOG2_U8_SHARED
-    if compact:
+    store_sigma = layers.get("sigma") != SIGMA_NONE
+    if not store_sigma:
+        sigma = np.ones(d, dtype=np.float32)
+    elif compact:
         sigma = sigma_from_codes(np.frombuffer(tail[:d], dtype=np.uint8))
         tail = tail[d:]
     elif shared:
@@ -438,7 +471,7 @@ def layered_from_payload(
     else:
         sigma = values[:d]
     flags = {"compact_sigma": compact, "shared_sigma": shared, "compact_mu": compact_mu,
-             "fixed_mu_grid": fixed_mu_grid}
+             "fixed_mu_grid": fixed_mu_grid, "store_sigma": store_sigma}
     basis = None
     if "basis" in layers:
         size = STEP_BYTES + int(layers["basis"]["count"])

@@ -162,12 +162,14 @@ def _parse_form(path: str, cursor: _Cursor, i: int, latent_dim: int, basis_sha: 
         raise UnsupportedVersionError(
             path, f"{where} stores mu, sigma or layers in a way unknown to this reader (codes {mu_code}, {sigma_code}, "
             f"{layer_bits}); upgrade brdfcodec")
-    if not layer_bits:
-        raise _fail(path, f"{where}: a layered form holds neither a basis nor a detail layer")
-    # A record without a latent (2.1, spec §4.6) stores neither mu nor sigma, and needs a basis layer.
-    if (mus[mu_code] == "none") != (sigmas[sigma_code] == "none"):
-        raise _fail(path, f"{where} stores {'no mu but a sigma' if mus[mu_code] == 'none' else 'no sigma but a mu'}: "
-                    "only a record without a latent (mu and sigma 'none') stores neither")
+    # A record without a latent (2.1, spec §4.6) stores neither mu nor sigma, and needs a basis layer; a record
+    # with a latent may leave sigma out (2.2), and is then allowed to be its base alone (no layer).
+    if mus[mu_code] == "none" and sigmas[sigma_code] != "none":
+        raise _fail(path, f"{where} stores no mu but a sigma: a record without a latent (mu and sigma 'none') "
+                    "stores neither")
+    if not layer_bits and not (sigmas[sigma_code] == "none" and mus[mu_code] != "none"):
+        raise _fail(path, f"{where}: a layered form holds neither a basis nor a detail layer (only a record "
+                    "without a stored sigma may be its base alone)")
     if mus[mu_code] == "none" and not layer_bits & _LAYER_BASIS:
         raise _fail(path, f"{where} stores no latent and no basis layer: a record without a latent needs one")
     layers: dict[str, Any] = {}

@@ -154,6 +154,12 @@ def _form_bytes(form: tuple[Any, ...]) -> bytes:
     return out
 
 
+def _minor_needed(records: Sequence[Record]) -> int:
+    """The lowest minor version that holds these records (§2): 2 once a record stores a latent without σ."""
+    without_sigma = any(getattr(r, "has_latent", False) and not getattr(r, "store_sigma", True) for r in records)
+    return FORMAT_MINOR if without_sigma else FORMAT_MINOR - 1
+
+
 def encode_bvae(
     records: Sequence[Record],
     decoder: DecoderReference,
@@ -161,7 +167,8 @@ def encode_bvae(
     latent_dtype: LatentDtype = "float32",
     compress_header: bool | None = None,
 ) -> bytes:
-    """Serialise records to the bytes of a ``.bvae`` file (format 2.1).
+    """Serialise records to the bytes of a ``.bvae`` file (format 2.2; the preamble states the lowest minor version
+    the file needs: 2 with a record that stores a latent without σ, else 1).
 
     Parameters
     ----------
@@ -255,7 +262,7 @@ def encode_bvae(
         header += stored
     if len(header) > MAX_HEADER_BYTES:
         raise ValueError(f"stored header of {len(header)} bytes exceeds {MAX_HEADER_BYTES}; split the library")
-    head = _PREAMBLE.pack(MAGIC, FORMAT_MAJOR, FORMAT_MINOR, flags, len(header), 0)[:_CRC_COVERED_PREAMBLE]
+    head = _PREAMBLE.pack(MAGIC, FORMAT_MAJOR, _minor_needed(records), flags, len(header), 0)[:_CRC_COVERED_PREAMBLE]
     crc = zlib.crc32(header, zlib.crc32(head))
     return head + struct.pack("<I", crc) + bytes(header) + data
 

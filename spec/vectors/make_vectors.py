@@ -307,7 +307,9 @@ def invalid_vectors() -> dict[str, tuple[bytes, str, str]]:
     # base is not projected; the payload is the basis layer's bytes (then a detail layer's).
     only = f16(0.25) + bytes([3, 253, 0])
     add("basis-only-sigma-with-mu", basis_file(layered_form(0, 3, basis=(0, 0))), "malformed",
-        "sigma 'none' (code 3) beside a mu stored in the latent dtype")
+        "sigma 'none' (code 3) beside a mu stored in the latent dtype (valid since 2.2), but the payload lacks "
+        "the mu's values (truncated)")
+
     add("basis-only-mu-with-sigma", basis_file(layered_form(3, 2, basis=(0, 0)), bytes([160]) + only), "malformed",
         "mu 'none' (code 3) beside a shared sigma byte")
     add("basis-only-no-basis", one("l", detail, layered_form(3, 3, detail=0), step=0.1, detail_length=len(detail)),
@@ -421,6 +423,21 @@ def basis_only_record(name: str, sha256: str, *, detail: bool = False) -> Latent
     return LayeredRecord.without_latent(name, 8, basis, detail=layer)
 
 
+def no_sigma_records() -> tuple[list, DecoderReference, str, bool | None]:
+    """Records that store a latent without sigma (since 2.2): the base alone, and one with a basis layer, beside a
+    plain latent record (written as 2.2: the preamble states the lowest version that holds the file)."""
+    from brdfcodec.format.layered_record import LayeredRecord
+    from brdfcodec.layers.basis import BasisLayer
+
+    rng = np.random.default_rng(2028)  # its own draws: the other vectors keep their values
+    mu = lambda: (np.round(rng.normal(size=8) * 8) / 8).astype(np.float32)  # noqa: E731 - exact in float16
+    sigma = (2.0 ** -rng.integers(1, 6, size=8)).astype(np.float32)
+    basis = BasisLayer("cd" * 32, 0.5, np.array([12, -7, 3], dtype=np.int8))
+    return ([LayeredRecord.code_only(LatentRecord("gold.no-sigma", mu(), sigma)),
+             LayeredRecord("gold.no-sigma-basis", mu(), sigma, {"effort": 1}, basis=basis, store_sigma=False),
+             LatentRecord("gold", mu(), sigma)], TEST_DECODER, "float32", False)
+
+
 def valid_records() -> dict[str, tuple[list, DecoderReference, str, bool | None]]:
     """name -> (records, decoder, latent dtype, compress header)."""
     rng = np.random.default_rng(2026)
@@ -481,6 +498,7 @@ def valid_records() -> dict[str, tuple[list, DecoderReference, str, bool | None]
                      basis_record("gold.basis-projected", halves16(8), np.full(8, 0.125), "cd" * 32, first=8,
                                   compact_base=True, fixed_grid=True, project=50)],
                     TEST_DECODER, "float32", False),
+        "no-sigma": no_sigma_records(),
     }
 
 
@@ -506,7 +524,7 @@ def reference_values(records: list) -> dict[str, list[float]]:
     assert decoder.reference == SHIPPED_DECODER, "the shipped model changed: regenerate and review the vectors"
     values = {}
     for record in records:
-        table = decoder.table(record)
+        table = decoder.decode(record)
         values[record.name] = [float(table[tuple(e)]) for e in REFERENCE_ENTRIES]
     return values
 
@@ -516,7 +534,7 @@ def generate(folder: Path, *, with_reference: bool = True) -> dict[str, Any]:
     (folder / "valid").mkdir(parents=True, exist_ok=True)
     (folder / "invalid").mkdir(parents=True, exist_ok=True)
     manifest: dict[str, Any] = {
-        "format_version": "2.1",
+        "format_version": "2.2",
         "error_classes": {
             "malformed": "BvaeFormatError",
             "checksum": "BvaeChecksumError",
@@ -531,8 +549,10 @@ def generate(folder: Path, *, with_reference: bool = True) -> dict[str, Any]:
         path = folder / "valid" / f"{name}.bvae"
         path.write_bytes(encode_bvae(records, decoder, latent_dtype=dtype, compress_header=compress))
         bases = sorted({r.basis.sha256 for r in records if getattr(r, "basis", None) is not None})
+        data = path.read_bytes()
         manifest["valid"].append({
-            "file": f"valid/{name}.bvae", "decoder_sha256": decoder.sha256, "basis_sha256": (bases or [None])[0],
+            "file": f"valid/{name}.bvae", "format_version": f"{data[8]}.{data[10]}",  # the preamble's (§2)
+            "decoder_sha256": decoder.sha256, "basis_sha256": (bases or [None])[0],
             "latent_dtype": dtype, "header_compressed": bool(compress) and any(r.meta for r in records),
             "records": [describe(r) for r in records],
         })
@@ -553,7 +573,7 @@ def generate(folder: Path, *, with_reference: bool = True) -> dict[str, Any]:
     (folder / "valid" / "metadata-empty.bvae").write_bytes(assemble(header(
         [latent_form()], [descriptor("a", 0)], empty, metadata=canonical({"records": {"a": {}}})), empty))
     manifest["valid"].append({
-        "file": "valid/metadata-empty.bvae", "decoder_sha256": TEST_DECODER.sha256, "basis_sha256": None,
+        "file": "valid/metadata-empty.bvae", "format_version": "2.1", "decoder_sha256": TEST_DECODER.sha256, "basis_sha256": None,
         "latent_dtype": "float32", "header_compressed": False,
         "records": [{"name": "a", "kind": "latent", "mu": [0.5, -1.0], "sigma": [0.25, 0.5], "meta": {}}],
     })
