@@ -8,8 +8,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from brdfcodec.format.bvae import LatentRecord
 from brdfcodec.codec import BrdfDecoder, BrdfEncoder
+from brdfcodec.format.bvae import LatentRecord
 from brdfcodec.io.merl import read_merl
 
 

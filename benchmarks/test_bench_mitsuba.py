@@ -20,9 +20,9 @@ import time
 import numpy as np
 import pytest
 
+from brdfcodec.examples import example_library
 from brdfcodec.render import mitsuba_bsdf
 from brdfcodec.runtime import mitsuba as mitsuba_runtime
-from brdfcodec.examples import example_library
 
 mi = pytest.importorskip("mitsuba", reason="Mitsuba 3 is an optional extra: pip install 'brdfcodec[mitsuba]'")
 

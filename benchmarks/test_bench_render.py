@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from brdfcodec.format.bvae import LatentRecord
 from brdfcodec.codec import BrdfDecoder, DecodedMaterial
 from brdfcodec.edit.latent_edits import interpolate, traverse
+from brdfcodec.format.bvae import LatentRecord
 from brdfcodec.render.preview import render_sphere
 
 

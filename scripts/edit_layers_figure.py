@@ -20,14 +20,14 @@ from pathlib import Path
 
 import numpy as np
 
-from brdfcodec.datasets.analytic import ANALYTIC_PRESETS
-from brdfcodec.format.bvae import LatentRecord, read_bvae
 from brdfcodec.codec import BrdfDecoder, DecodedMaterial, compress
+from brdfcodec.datasets.analytic import ANALYTIC_PRESETS
 from brdfcodec.edit.latent_edits import traverse
-from brdfcodec.render.images import auto_exposure, encode_srgb
+from brdfcodec.format.bvae import LatentRecord, read_bvae
 from brdfcodec.layers.layer_sum import layered_residual
-from brdfcodec.representation.metrics import relae_mapped
+from brdfcodec.render.images import auto_exposure, encode_srgb
 from brdfcodec.representation import clamp_mapped
+from brdfcodec.representation.metrics import relae_mapped
 
 DIM, STEP, LIGHT = 0, -1.5, (-1.0, 1.0, 1.0)
 

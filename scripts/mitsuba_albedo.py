@@ -14,10 +14,10 @@ import numpy as np
 
 
 def main() -> None:
+    from brdfcodec.examples import example_library
+    from brdfcodec.format.bvae import read_header
     from brdfcodec.render import mitsuba_bsdf
     from brdfcodec.runtime import mitsuba as mitsuba_runtime
-    from brdfcodec.format.bvae import read_header
-    from brdfcodec.examples import example_library
 
     mitsuba_runtime.set_variant("llvm_ad_rgb", fallback=None)
     import drjit as dr

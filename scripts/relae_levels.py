@@ -22,9 +22,9 @@ import numpy as np
 
 import brdfcodec as bc
 from brdfcodec.codec import DecodedMaterial, measure
+from brdfcodec.datasets.nbrdf import iter_nbrdf_zip
 from brdfcodec.render.image_metrics import compare_images
 from brdfcodec.render.images import auto_exposure, compose_sheet, encode_srgb, write_png
-from brdfcodec.datasets.nbrdf import iter_nbrdf_zip
 from brdfcodec.render.preview import render_sphere
 
 #: (label, encoder options)

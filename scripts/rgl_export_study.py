@@ -111,9 +111,9 @@ def main() -> None:
 
     from brdfcodec.codec import MaterialLibrary
     from brdfcodec.examples import example_library
+    from brdfcodec.io.rgl_writer import RglResolution, write_rgl_bsdf
     from brdfcodec.representation.lookup import lookup
     from brdfcodec.runtime.mitsuba import set_variant
-    from brdfcodec.io.rgl_writer import RglResolution, write_rgl_bsdf
 
     variant = set_variant(("llvm_ad_rgb",), fallback="scalar_rgb", warn=True)
     import mitsuba as mi
@@ -148,9 +148,9 @@ def main() -> None:
 
     source = args.shared / "data" / "rgl" / "paper_white_rgb.bsdf"
     if source.is_file():
+        from brdfcodec.io.rgl import read_rgl_bsdf
         from brdfcodec.representation.coords import grid_direction_cosines
         from brdfcodec.representation.metrics import relae_linear, relae_mapped
-        from brdfcodec.io.rgl import read_rgl_bsdf
 
         first = read_rgl_bsdf(source)
         path = write_rgl_bsdf(folder / "paper_white_rgb.bsdf", first.values, name="paper_white",
@@ -176,8 +176,8 @@ def main() -> None:
 def _every_material(mi, folder: Path, resolution) -> None:  # noqa: ANN001
     from brdfcodec.codec import MaterialLibrary
     from brdfcodec.examples import example_library
-    from brdfcodec.representation.lookup import lookup
     from brdfcodec.io.rgl_writer import write_rgl_bsdf
+    from brdfcodec.representation.lookup import lookup
 
     rng = np.random.default_rng(1)
     wi, wo = _hemisphere(rng, 50_000), _hemisphere(rng, 50_000)

@@ -5,8 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from brdfcodec.format.bvae import DecoderReference, LatentRecord, encode_bvae, parse_bvae
 from brdfcodec.errors import BasisMismatchError, BvaeFormatError
+from brdfcodec.format.bvae import DecoderReference, LatentRecord, encode_bvae, parse_bvae
+from brdfcodec.format.layered_record import LayeredRecord, quantise_sigma, sigma_from_codes
 from brdfcodec.layers.basis import (
     BasisError,
     BasisLayer,
@@ -18,7 +19,6 @@ from brdfcodec.layers.basis import (
     with_colour_permutations,
     write_shared_basis,
 )
-from brdfcodec.format.layered_record import LayeredRecord, quantise_sigma, sigma_from_codes
 
 DECODER = DecoderReference("ab" * 32, "test-decoder")
 SHA = "cd" * 32
@@ -386,11 +386,12 @@ def test_the_basis_layer_follows_the_decoder_output_it_was_fitted_on(analytic_ta
     encoder = BrdfEncoder(effort=1, bytes=64, latent_dtype="float16", project_base="never", latent="always")
     record = encoder.encode(brdf, name="m")
     # 64 B cannot hold all 75 coefficients beside a float16 μ, so the base is compact: 8 bytes of μ on the fixed
-    # grid (its μ fits ±3.97), 1 of σ.
-    assert isinstance(record, LayeredRecord) and record.compact_mu and record.shared_sigma and record.detail is None
+    # grid (its μ fits ±3.97), and no σ (format 2.2: the encoder leaves it out unless asked).
+    assert isinstance(record, LayeredRecord) and record.compact_mu and not record.store_sigma
+    assert record.detail is None and not record.shared_sigma
     assert record.fixed_mu_grid and np.abs(record.mu).max() <= 127 / 32
     assert np.array_equal(record.mu * 32, np.rint(record.mu * 32))  # on the grid
-    assert record.basis is not None and record.basis.count == 64 - 9 - 2 - 3  # and 3 bytes of index entry
+    assert record.basis is not None and record.basis.count == 64 - 8 - 2 - 3  # μ 8 bytes, the step 2, the index entry 3
     assert record.basis.first == 8  # the shipped decoder's linear path spans the basis' first 8 vectors
     entry = parse_bvae(encode_bvae([record], encoder.reference, latent_dtype="float16")).header.entries[0]
     assert entry.length == record.meta["rate"]["payload_bytes"] == 61
@@ -404,11 +405,12 @@ def test_the_basis_layer_follows_the_decoder_output_it_was_fitted_on(analytic_ta
     inputs, masks = network_input_from_table(brdf.values, brdf.mask)
     basis = encoder.decoder.shared_basis
     _, refitted = fit_basis_coefficients(encoder.decoder.network, record.mu[None], inputs[None], masks[None],
-                                         basis.vectors(8, 50), basis.entries, 1, fit_latent=False)
+                                         basis.vectors(8, record.basis.count), basis.entries, 1,
+                                         fit_latent=False)
     assert quantise_coefficients(basis.sha256, refitted[0], 8).q.tolist() == record.basis.q.tolist()
-    tiny = BrdfEncoder(effort=1, bytes=15).encode(brdf, name="t")  # the smallest record: compact base, 1 coefficient
-    assert tiny.basis.count == 1 and tiny.meta["rate"]["payload_bytes"] == 12
-    assert tiny.meta["rate"]["record_bytes"] == 15  # with its index entry: name length, form, count
+    tiny = BrdfEncoder(effort=1, bytes=14).encode(brdf, name="t")  # the smallest record: compact base, 1 coefficient
+    assert tiny.basis.count == 1 and tiny.meta["rate"]["payload_bytes"] == 11
+    assert tiny.meta["rate"]["record_bytes"] == 14  # with its index entry: name length, form, count
     no_basis = BrdfEncoder(effort=1, bytes=64, latent_dtype="float16", basis=False).encode(brdf, name="m")
     assert getattr(no_basis, "basis", None) is None
 
@@ -426,10 +428,10 @@ def test_an_error_target_takes_the_smallest_candidate_that_meets_it(analytic_tab
     assert measure(chosen, encoder.decoder, brdf).meta["relae"]["mapped"] <= reached * 1.05
     assert isinstance(chosen, LayeredRecord) and chosen.basis is not None and chosen.detail is None
     # a record without a detail layer stores its base compact, as a size budget does: at most 32 coefficients
-    assert chosen.compact_mu and chosen.shared_sigma and chosen.fixed_mu_grid
-    assert chosen.meta["rate"]["payload_bytes"] == 8 + 1 + 2 + chosen.basis.count <= 43
+    assert chosen.compact_mu and not chosen.store_sigma and chosen.fixed_mu_grid
+    assert chosen.meta["rate"]["payload_bytes"] == 8 + 2 + chosen.basis.count <= 42
     loose = BrdfEncoder(effort=0, max_relae=1.0, latent_dtype="float16", latent="always").encode(brdf, name="m")
-    assert loose.compact_mu and loose.basis.count == 4 and loose.meta["rate"]["payload_bytes"] == 15
+    assert loose.compact_mu and loose.basis.count == 4 and loose.meta["rate"]["payload_bytes"] == 14
 
 
 def test_an_error_target_tries_candidates_from_small_to_large() -> None:
@@ -451,25 +453,25 @@ def test_cli_bytes_writes_the_basis_layer(red_plastic_file, tmp_path, capsys) ->
                  "--provenance", "--latent", "always"]) == 0  # records without a latent: test_basis_only.py
     entry = parse_bvae(out.read_bytes()).header.entries[0]
     # 64 B beyond the name: 61 B of payload (9 of compact base, 2 of step, 50 coefficients) and 3 of index entry
-    assert entry.kind == "layered" and entry.length == 61 and entry.layers["basis"]["count"] == 50
+    assert entry.kind == "layered" and entry.length == 61 and entry.layers["basis"]["count"] == 51
     assert entry.length + entry.descriptor_bytes == 64
     assert entry.meta["relae"]["mapped"] > 0  # measured on the record that was written
     capsys.readouterr()
     assert main(["info", str(out)]) == 0
     shown = capsys.readouterr().out
-    assert "μ int8 grid, σ shared u8, basis 50 (vectors 9–58)" in shown
+    assert "μ int8 grid, σ none, basis 51 (vectors 9–59)" in shown
     assert "61 B payload, 64 B with its index entry" in shown
     projected = entry.layers["basis"].get("project") == 50  # auto: chosen per material
     assert ("base projected on 50" in shown) == projected
     smallest = tmp_path / "s.bvae"
-    assert main(["compress", str(red_plastic_file), "-o", str(smallest), "--bytes", "15", "--latent", "always"]) == 0
+    assert main(["compress", str(red_plastic_file), "-o", str(smallest), "--bytes", "14", "--latent", "always"]) == 0
     capsys.readouterr()
     assert main(["info", str(smallest)]) == 0
     shown = capsys.readouterr().out
-    assert "μ int8 grid, σ shared u8, basis 1 (vector 9)" in shown and "12 B payload, 15 B with its index" in shown
-    assert main(["compress", str(red_plastic_file), "-o", str(tmp_path / "t.bvae"), "--bytes", "14",
+    assert "μ int8 grid, σ none, basis 1 (vector 9)" in shown and "11 B payload, 14 B with its index" in shown
+    assert main(["compress", str(red_plastic_file), "-o", str(tmp_path / "t.bvae"), "--bytes", "13",
                  "--latent", "always"]) != 0
-    assert "--bytes 14 is below the smallest record" in capsys.readouterr().err
+    assert "--bytes 13 is below the smallest record" in capsys.readouterr().err
     assert not (tmp_path / "t.bvae").exists()
 
 
@@ -519,8 +521,8 @@ def test_coefficients_fitted_to_a_fixed_code_leave_it_and_lower_the_error(analyt
     """``fit_latent=False`` (a compact μ): the code is kept as given, and the Adam steps on the coefficients never
     end above the least-squares start."""
     from brdfcodec.codec import BrdfDecoder, BrdfEncoder
-    from brdfcodec.conventions import MAPPED_MAX
     from brdfcodec.codec.refine import fit_basis_coefficients
+    from brdfcodec.conventions import MAPPED_MAX
     from brdfcodec.representation import network_input_from_table
 
     decoder = BrdfDecoder()
@@ -548,8 +550,8 @@ def test_a_fit_minimises_the_error_it_is_given(analytic_tables) -> None:
     import torch
 
     from brdfcodec.codec import BrdfDecoder, BrdfEncoder
-    from brdfcodec.conventions import MAPPED_MAX
     from brdfcodec.codec.refine import fit_basis_coefficients
+    from brdfcodec.conventions import MAPPED_MAX
     from brdfcodec.representation import network_input_from_table
 
     decoder = BrdfDecoder()
@@ -579,8 +581,8 @@ def test_a_fit_minimises_the_error_it_is_given(analytic_tables) -> None:
 
 
 def test_a_factorised_basis_file_expands_to_the_dense_basis_it_stands_for(tmp_path) -> None:
-    from brdfcodec.layers.colour_orders_pca import COLOUR_VECTORS
     from brdfcodec.layers.basis import fit_factorised_basis, write_factorised_basis
+    from brdfcodec.layers.colour_orders_pca import COLOUR_VECTORS
 
     x, m = coloured_inputs(4)
     factorised = fit_factorised_basis(x, m, 12)

@@ -14,14 +14,14 @@ from typing import Any
 
 import numpy as np
 import pytest
+from bvae_bytes import bytes_writer
 
-from brdfcodec.format.bvae import DecoderReference, LatentRecord, encode_bvae, parse_bvae, record_size
 from brdfcodec.conventions import MAPPED_MAX, NETWORK_INPUT_SHAPE
 from brdfcodec.errors import BasisError, BvaeFormatError, NoLatentError, RateTargetError
+from brdfcodec.format.bvae import DecoderReference, LatentRecord, encode_bvae, parse_bvae, record_size
+from brdfcodec.format.layered_record import LayeredRecord
 from brdfcodec.layers.basis import BasisLayer, quantise_coefficients
 from brdfcodec.layers.detail import encode_detail
-from brdfcodec.format.layered_record import LayeredRecord
-from bvae_bytes import bytes_writer
 
 DECODER = DecoderReference("ab" * 32, "test-decoder")
 SHA = "cd" * 32
@@ -120,8 +120,8 @@ def _linear_path_mean(decoder: Any) -> np.ndarray:
     entry above the horizon, in increasing flat order) widened, 0 below the horizon (spec/model.md §1)."""
     from safetensors.numpy import load_file
 
-    from brdfcodec.representation.mask import kept_slice_horizon_mask
     from brdfcodec.representation import to_network_layout
+    from brdfcodec.representation.mask import kept_slice_horizon_mask
 
     mean = load_file(str(decoder.manifest.folder / "decoder.safetensors"))["basis_mean"].astype(np.float32)
     above = to_network_layout(kept_slice_horizon_mask()[None].repeat(3, axis=0)).reshape(-1)

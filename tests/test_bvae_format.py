@@ -13,6 +13,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from brdfcodec.errors import BvaeChecksumError, BvaeFormatError, UnsupportedVersionError
 from brdfcodec.format.bvae import (
     FORMAT_MAJOR,
     FORMAT_MINOR,
@@ -34,7 +35,6 @@ from brdfcodec.format.bvae import (
     without_provenance,
     write_bvae,
 )
-from brdfcodec.errors import BvaeChecksumError, BvaeFormatError, UnsupportedVersionError
 
 SPEC = Path(__file__).resolve().parents[1] / "spec" / "bvae-format.md"
 DECODER = DecoderReference("ab" * 32, "test-decoder")
@@ -240,9 +240,9 @@ def test_a_default_file_is_names_descriptors_and_payloads() -> None:
 def test_record_size_is_what_a_record_adds_beyond_its_name() -> None:
     """:func:`record_size` is exact for every kind, form and number size (a count of 128 takes a 2-byte varint,
     a name of 128 bytes too), so rate control can hold a budget on the file, not the payload."""
+    from brdfcodec.format.layered_record import LayeredRecord
     from brdfcodec.layers.basis import BasisLayer
     from brdfcodec.layers.detail import DetailLayer
-    from brdfcodec.format.layered_record import LayeredRecord
 
     rng = np.random.default_rng(1)
     frame = _detail_frame()
@@ -282,8 +282,8 @@ def _detail_frame() -> bytes:
 
 
 def test_a_file_holds_one_shared_basis_and_provenance_only_when_kept() -> None:
-    from brdfcodec.layers.basis import BasisLayer
     from brdfcodec.format.layered_record import LayeredRecord
+    from brdfcodec.layers.basis import BasisLayer
 
     def on(sha: str, name: str) -> LayeredRecord:
         return LayeredRecord(name, np.zeros(8), np.ones(8), {"effort": 1, "relae": {"mapped": 0.1},

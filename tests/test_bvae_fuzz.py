@@ -18,9 +18,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from bvae_bytes import bytes_writer
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from brdfcodec.errors import BvaeFormatError, LatentDimensionError
 from brdfcodec.format.bvae import (
     MAX_HEADER_BYTES,
     MAX_HEADER_CONTAINERS,
@@ -30,11 +32,9 @@ from brdfcodec.format.bvae import (
     encode_bvae,
     parse_bvae,
 )
-from brdfcodec.errors import BvaeFormatError, LatentDimensionError
 from brdfcodec.format.material_names import check_material_name, material_file_path, name_collision_key
 from brdfcodec.models.manifest import load_manifest
 from brdfcodec.models.registry import default_model_folder
-from bvae_bytes import bytes_writer
 
 DECODER = DecoderReference("ab" * 32, "fuzz-decoder")
 SHIPPED = DecoderReference(load_manifest(default_model_folder()).decoder_sha256, "shipped")

@@ -12,8 +12,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from brdfcodec.datasets.analytic import ANALYTIC_PRESETS
 from brdfcodec.cli import main
+from brdfcodec.datasets.analytic import ANALYTIC_PRESETS
 from brdfcodec.io.merl import read_merl
 
 

@@ -8,8 +8,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from brdfcodec.format.bvae import FORMAT_MAJOR, FORMAT_MINOR, read_bvae
 from brdfcodec.cli import main
+from brdfcodec.format.bvae import FORMAT_MAJOR, FORMAT_MINOR, read_bvae
 from brdfcodec.io.exr import read_exr_rgb
 from brdfcodec.io.merl import MerlBRDF, read_merl, write_merl
 

@@ -7,8 +7,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from brdfcodec.format.bvae import GraftRecord, read_bvae
 from brdfcodec.cli import main
+from brdfcodec.format.bvae import GraftRecord, read_bvae
 from brdfcodec.io.merl import MerlBRDF, write_merl
 
 

@@ -8,9 +8,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from brdfcodec.cli import main
 from brdfcodec.edit import latent_edits as edit
 from brdfcodec.format.bvae import GraftRecord, LatentRecord, read_bvae
-from brdfcodec.cli import main
 from brdfcodec.io.merl import MerlBRDF, write_merl
 
 

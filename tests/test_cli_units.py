@@ -7,8 +7,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from brdfcodec.format.bvae import read_bvae
 from brdfcodec.cli import main
+from brdfcodec.format.bvae import read_bvae
 from brdfcodec.io.exr import SLICE_UNITS, read_exr_attributes, read_exr_rgb
 from brdfcodec.io.merl import MerlBRDF, read_merl, write_merl
 

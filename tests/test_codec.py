@@ -9,15 +9,6 @@ import numpy as np
 import pytest
 import torch
 
-from brdfcodec.format.bvae import (
-    MAGIC,
-    DecoderReference,
-    GraftRecord,
-    LatentRecord,
-    parse_bvae,
-    read_bvae,
-    write_bvae,
-)
 from brdfcodec.codec import (
     BrdfDecoder,
     BrdfEncoder,
@@ -31,9 +22,16 @@ from brdfcodec.codec import (
 )
 from brdfcodec.conventions import UNMEASURED_VALUE
 from brdfcodec.errors import DecoderMismatchError, DecoderNotFoundError
-from brdfcodec.representation.mask import horizon_mask
+from brdfcodec.format.bvae import (
+    MAGIC,
+    DecoderReference,
+    GraftRecord,
+    LatentRecord,
+    parse_bvae,
+    read_bvae,
+    write_bvae,
+)
 from brdfcodec.io.merl import MerlBRDF, write_merl
-from brdfcodec.representation.metrics import error_report
 from brdfcodec.models.registry import default_model_folder
 from brdfcodec.representation import (
     map_values,
@@ -41,6 +39,8 @@ from brdfcodec.representation import (
     reflectance_from_stored,
     table_from_network_output,
 )
+from brdfcodec.representation.mask import horizon_mask
+from brdfcodec.representation.metrics import error_report
 
 
 @pytest.fixture(scope="module")

@@ -7,9 +7,9 @@ import itertools
 import numpy as np
 import pytest
 
-from brdfcodec.models.pca import fit_pca, fit_pca_colour_orders
-from brdfcodec.layers.colour_orders_pca import colour_orders_pca
 from brdfcodec.layers.basis import with_colour_permutations
+from brdfcodec.layers.colour_orders_pca import colour_orders_pca
+from brdfcodec.models.pca import fit_pca, fit_pca_colour_orders
 
 
 def _permuted(x: np.ndarray) -> np.ndarray:

@@ -8,6 +8,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from brdfcodec.conventions import TABLE_SHAPE
+from brdfcodec.io.merl import MerlBRDF
 from brdfcodec.representation.coords import (
     directions_from_half_diff,
     fold_phi_d,
@@ -23,7 +24,6 @@ from brdfcodec.representation.coords import (
 )
 from brdfcodec.representation.lookup import lookup
 from brdfcodec.representation.mask import horizon_mask
-from brdfcodec.io.merl import MerlBRDF
 
 
 def unit(theta: float, phi: float) -> np.ndarray:

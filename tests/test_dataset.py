@@ -11,11 +11,11 @@ import pytest
 
 from brdfcodec.conventions import KEPT_PHI_D_SLICES
 from brdfcodec.datasets.hdf5 import DATASET_FORMAT_VERSION, BrdfDataset, build_dataset
+from brdfcodec.datasets.sources import analytic_sources, merl_folder_sources, nbrdf_zip_sources
+from brdfcodec.datasets.split import split_materials
 from brdfcodec.errors import DatasetError, MerlFormatError, SourceFormatError
 from brdfcodec.io.merl import MerlBRDF, read_merl, write_merl
 from brdfcodec.representation import map_values, network_input_from_table
-from brdfcodec.datasets.sources import analytic_sources, merl_folder_sources, nbrdf_zip_sources
-from brdfcodec.datasets.split import split_materials
 
 
 @pytest.fixture(scope="module")

@@ -10,10 +10,10 @@ import pytest
 
 from brdfcodec.cli import main
 from brdfcodec.datasets.hdf5 import MIXED_SOURCE_KIND, BrdfDataset, build_dataset
-from brdfcodec.io.merl import write_merl
 from brdfcodec.datasets.nbrdf import nbrdf_zip_family
 from brdfcodec.datasets.sources import analytic_sources, merl_folder_sources
 from brdfcodec.datasets.split import TRAIN, VALIDATION, split_by_family, split_materials
+from brdfcodec.io.merl import write_merl
 
 
 def test_split_by_family_holds_out_each_family() -> None:
@@ -123,9 +123,9 @@ def test_records_encoded_from_a_dataset_keep_the_sources_provenance(tmp_path: Pa
     """A dataset row of an RGL measurement encodes (with --provenance) to the same source_kind and source_sha256 as its file would."""
     from dataclasses import replace
 
+    from brdfcodec.datasets.sources import LoadedMaterial, MaterialSource
     from brdfcodec.format.bvae import read_bvae
     from brdfcodec.io.rgl import RGL_SOURCE_KIND
-    from brdfcodec.datasets.sources import LoadedMaterial, MaterialSource
 
     (gold,) = analytic_sources(["gold"])
     (chrome,) = analytic_sources(["chrome"])

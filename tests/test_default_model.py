@@ -10,11 +10,11 @@ import torch
 
 from brdfcodec.codec import BrdfDecoder, BrdfEncoder
 from brdfcodec.conventions import MAPPED_MAX
-from brdfcodec.representation.metrics import relae_mapped
+from brdfcodec.datasets.sources import nbrdf_zip_sources
 from brdfcodec.models.registry import default_model_folder, find_model
 from brdfcodec.models.store import load_model
 from brdfcodec.representation import table_from_network_output
-from brdfcodec.datasets.sources import nbrdf_zip_sources
+from brdfcodec.representation.metrics import relae_mapped
 from brdfcodec.training.measurements import traversal_changes
 
 

@@ -15,11 +15,11 @@ from typing import Any
 import numpy as np
 import pytest
 
-from brdfcodec.format.bvae import GraftRecord, LatentRecord, read_bvae, write_bvae
 from brdfcodec.codec import BrdfDecoder
 from brdfcodec.edit.latent_edits import graft, interpolate, mix_factors, traverse, with_parameters
-from brdfcodec.layers.layer_sum import layered_residual
+from brdfcodec.format.bvae import GraftRecord, LatentRecord, read_bvae, write_bvae
 from brdfcodec.format.layered_record import LayeredRecord
+from brdfcodec.layers.layer_sum import layered_residual
 from brdfcodec.representation import clamp_mapped
 
 pytestmark = pytest.mark.slow  # the 16 KB record takes rate control (about 15 s on 2 busy cores)
@@ -31,8 +31,8 @@ UNDO_TOLERANCE = 1e-5
 
 @pytest.fixture(scope="module")
 def layered(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
-    from brdfcodec.datasets.analytic import ANALYTIC_PRESETS
     from brdfcodec.codec import compress
+    from brdfcodec.datasets.analytic import ANALYTIC_PRESETS
 
     folder = tmp_path_factory.mktemp("edit-layers")
     path = folder / "rp16k.bvae"
@@ -190,8 +190,8 @@ def test_the_studio_edits_a_layered_record_with_its_layers(layered: dict[str, An
 
 def test_a_projected_compact_record_edits_by_the_same_rule(layered: dict[str, Any]) -> None:
     """A 64 B record: μ on the fixed int8 grid, a basis layer only, the base projected on the shared basis."""
-    from brdfcodec.datasets.analytic import ANALYTIC_PRESETS
     from brdfcodec.cli.main import main
+    from brdfcodec.datasets.analytic import ANALYTIC_PRESETS
     from brdfcodec.io.merl import write_merl
 
     folder, decoder = layered["folder"], layered["decoder"]

@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 
 from brdfcodec.codec import BrdfDecoder, MaterialLibrary
-from brdfcodec.examples import example_library
-from brdfcodec.representation.metrics import relae_mapped
-from brdfcodec.render.preview import render_sphere
 from brdfcodec.datasets.sources import nbrdf_zip_sources
+from brdfcodec.examples import example_library
+from brdfcodec.render.preview import render_sphere
+from brdfcodec.representation.metrics import relae_mapped
 
 
 def test_every_shipped_material_decodes_and_renders_finite_and_non_negative() -> None:

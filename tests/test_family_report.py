@@ -34,8 +34,8 @@ def test_rows_per_family_and_split(analytic_dataset: Path) -> None:
     import numpy as np
 
     from brdfcodec.datasets.hdf5 import BrdfDataset
-    from brdfcodec.representation.metrics import relae_mapped
     from brdfcodec.representation import table_from_network_output
+    from brdfcodec.representation.metrics import relae_mapped
 
     with BrdfDataset(analytic_dataset) as dataset:
         assert len(dataset.indices("validation")) >= 1

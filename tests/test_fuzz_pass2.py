@@ -82,8 +82,8 @@ def bvae_seeds() -> list[bytes]:
     if "seeds" in _STATE:
         return _STATE["seeds"]
     from brdfcodec.format.bvae import GraftRecord, LatentRecord, encode_bvae
-    from brdfcodec.layers.basis import BasisLayer
     from brdfcodec.format.layered_record import LayeredRecord
+    from brdfcodec.layers.basis import BasisLayer
 
     decoder = _decoder()
     sha = decoder.shared_basis.sha256
@@ -363,10 +363,10 @@ def test_fuzz_detail_frames(extra: bytes, how: str) -> None:
     """A detail layer's bytes that are not exactly one whole frame: a format error naming the record, at read."""
     import zstandard
 
-    from brdfcodec.format.bvae import encode_bvae, parse_bvae
     from brdfcodec.errors import BvaeFormatError
-    from brdfcodec.layers.detail import DetailLayer
+    from brdfcodec.format.bvae import encode_bvae, parse_bvae
     from brdfcodec.format.layered_record import LayeredRecord
+    from brdfcodec.layers.detail import DetailLayer
 
     frame = _detail(3).data
     data = {"append": frame + extra, "prepend": extra + frame, "replace": extra or b"\0",
@@ -386,10 +386,10 @@ def test_fuzz_detail_frames(extra: bytes, how: str) -> None:
 def test_fuzz_basis_fields_against_the_model(count: int, first: int, project: int, unknown: bool) -> None:
     """Any count, first vector and projection a file may declare: opening it for decoding either succeeds and
     decodes, or refuses with a BasisError / BasisMismatchError (both BrdfcodecErrors)."""
-    from brdfcodec.format.bvae import encode_bvae, parse_bvae
     from brdfcodec.errors import BasisError, BasisMismatchError
-    from brdfcodec.layers.basis import BasisLayer
+    from brdfcodec.format.bvae import encode_bvae, parse_bvae
     from brdfcodec.format.layered_record import LayeredRecord
+    from brdfcodec.layers.basis import BasisLayer
 
     decoder = _decoder()
     sha = "00" * 32 if unknown else decoder.shared_basis.sha256

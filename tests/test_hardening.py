@@ -13,9 +13,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from bvae_bytes import bytes_writer
 
-from brdfcodec.io import atomic
-from brdfcodec.io.atomic import atomic_output
+from brdfcodec.errors import BvaeChecksumError, BvaeFormatError, UnmeasuredMaterialError, UnsupportedVersionError
 from brdfcodec.format.bvae import (
     MAX_RECORDS,
     DecoderReference,
@@ -26,10 +26,10 @@ from brdfcodec.format.bvae import (
     parse_bvae,
     write_bvae,
 )
-from brdfcodec.errors import BvaeChecksumError, BvaeFormatError, UnmeasuredMaterialError, UnsupportedVersionError
 from brdfcodec.format.material_names import check_material_name, material_file_path
+from brdfcodec.io import atomic
+from brdfcodec.io.atomic import atomic_output
 from brdfcodec.io.merl import MerlBRDF
-from bvae_bytes import bytes_writer
 
 DECODER = DecoderReference("ab" * 32, "test-decoder")
 VECTORS = Path(__file__).resolve().parents[1] / "spec" / "vectors"

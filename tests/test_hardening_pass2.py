@@ -150,8 +150,8 @@ def test_rgl_mitsuba_refusal_is_one_line(tmp_path: Path, monkeypatch: pytest.Mon
 def test_rgl_synthetic_file_is_read_by_mitsuba(tmp_path: Path) -> None:
     """The checks refuse nothing Mitsuba reads: the valid synthetic file is accepted and tabulated."""
     pytest.importorskip("mitsuba", reason="Mitsuba 3 is not installed (extra brdfcodec[rgl])")
-    from brdfcodec.runtime.mitsuba import LibLLVMNotFoundError, find_libllvm
     from brdfcodec.io.rgl import read_rgl_bsdf
+    from brdfcodec.runtime.mitsuba import LibLLVMNotFoundError, find_libllvm
 
     try:
         find_libllvm()
@@ -218,8 +218,8 @@ def test_broken_detail_layer_is_refused_at_read(tmp_path: Path, shipped_decoder:
                                                 capsys: pytest.CaptureFixture[str]) -> None:
     """A detail frame that is corrupt or truncated under a correct record CRC, or followed by anything:
     refused when the record is read (``info`` included), as a format error naming the file and the record."""
-    from brdfcodec.format.bvae import read_bvae
     from brdfcodec.errors import BvaeFormatError
+    from brdfcodec.format.bvae import read_bvae
     from brdfcodec.layers.detail import DetailLayer
 
     frame, dtype = _detail_frame()
@@ -266,9 +266,9 @@ def _basis_layer(decoder: BrdfDecoder, *, count: int = 5, first: int = 0, projec
 def test_basis_fields_beyond_the_shared_basis_are_refused_on_open(
         tmp_path: Path, shipped_decoder: BrdfDecoder, fields: dict, what: str,
         capsys: pytest.CaptureFixture[str]) -> None:
-    from brdfcodec.format.bvae import read_bvae
     from brdfcodec.codec import MaterialLibrary
     from brdfcodec.errors import BasisError
+    from brdfcodec.format.bvae import read_bvae
 
     path = _layered_file(tmp_path, shipped_decoder, basis=_basis_layer(shipped_decoder, **fields))
     with pytest.raises(BasisError, match=what) as caught:
@@ -284,9 +284,9 @@ def test_basis_fields_beyond_the_shared_basis_are_refused_on_open(
 @pytest.mark.parametrize("project", [0, 50])
 def test_unknown_basis_hash_is_a_basis_mismatch_for_projected_records_too(tmp_path: Path, shipped_decoder: BrdfDecoder,
                                                                           project: int) -> None:
-    from brdfcodec.format.bvae import read_bvae
     from brdfcodec.codec import MaterialLibrary
     from brdfcodec.errors import BasisMismatchError
+    from brdfcodec.format.bvae import read_bvae
 
     layer = _basis_layer(shipped_decoder, count=5, first=8, project=project, sha="00" * 32)
     path = _layered_file(tmp_path, shipped_decoder, basis=layer)
@@ -339,12 +339,11 @@ def test_layer_keys_and_values_have_the_spec_error_classes(layers: dict, error: 
 def studio(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[str, Path]]:
     pytest.importorskip("starlette", reason="the studio needs the studio extra (starlette, uvicorn)")
     pytest.importorskip("uvicorn", reason="the studio needs the studio extra (starlette, uvicorn)")
+    from brdfcodec.codec import BrdfDecoder
+    from brdfcodec.format.bvae import LatentRecord, write_bvae
     from brdfcodec.studio.browser import running_studio
     from brdfcodec.studio.catalogue import Catalogue
     from brdfcodec.studio.server import StudioServer, create_app
-
-    from brdfcodec.format.bvae import LatentRecord, write_bvae
-    from brdfcodec.codec import BrdfDecoder
 
     library = tmp_path_factory.mktemp("studio-library") / "lib.bvae"  # its own library: any format version
     write_bvae(library, [LatentRecord(f"m{i}", np.full(8, 0.1 * i), np.ones(8)) for i in range(3)],
@@ -428,7 +427,7 @@ def test_studio_saves_a_good_body(studio: tuple[str, Path]) -> None:
 # --------------------------------------------------------------------------- 5. flags
 
 
-@pytest.mark.parametrize("budget", ["1", "11", "14", "99999999999999999999", str(2**30 + 1)])
+@pytest.mark.parametrize("budget", ["1", "11", "13", "99999999999999999999", str(2**30 + 1)])
 def test_bytes_out_of_range_is_a_usage_error_before_the_model_loads(tmp_path: Path, red_plastic_file: Path,
                                                                      budget: str, monkeypatch: pytest.MonkeyPatch,
                                                                      capsys: pytest.CaptureFixture[str]) -> None:
@@ -449,8 +448,11 @@ def test_bytes_out_of_range_is_a_usage_error_before_the_model_loads(tmp_path: Pa
 def test_bytes_floor_is_the_smallest_record_the_encoder_writes() -> None:
     """The floor checked up front is the one rate control enforces: a one-byte name, a compact base and one
     coefficient, for the shipped model (D = 8, float32)."""
-    from brdfcodec.format.bvae import record_overhead
     from brdfcodec.codec.rate import smallest_bytes_budget
+    from brdfcodec.format.bvae import record_overhead
 
     assert smallest_bytes_budget(8, 4, basis=True) == 8 + 1 + 2 + 1 + record_overhead("a", basis_count=1)
     assert smallest_bytes_budget(8, 4, basis=False) == 64 + record_overhead("a")
+    # without σ (format 2.2, what bvae compress writes unless --sigma): one byte less, half a plain record
+    assert smallest_bytes_budget(8, 4, basis=True, store_sigma=False) == 8 + 2 + 1 + record_overhead("a", basis_count=1)
+    assert smallest_bytes_budget(8, 4, basis=False, store_sigma=False) == 32 + record_overhead("a")

@@ -133,8 +133,8 @@ def test_a_layered_decode_is_the_base_plus_its_layers_and_a_bad_layer_is_named()
 
 def test_decode_many_gives_each_record_its_own_layers() -> None:
     """A batch mixing base-only, layered and graft records: the batched network, then each record's layers."""
-    from brdfcodec.format.bvae import GraftRecord, LatentRecord
     from brdfcodec.codec import BrdfDecoder
+    from brdfcodec.format.bvae import GraftRecord, LatentRecord
     from brdfcodec.format.layered_record import LayeredRecord
 
     decoder = BrdfDecoder()

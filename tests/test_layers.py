@@ -6,9 +6,12 @@ import dataclasses
 
 import numpy as np
 import pytest
+from bvae_bytes import bytes_writer
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from brdfcodec.conventions import NETWORK_INPUT_SHAPE
+from brdfcodec.errors import BvaeFormatError, RateTargetError, UnsupportedVersionError
 from brdfcodec.format.bvae import (
     FORMAT_MAJOR,
     FORMAT_MINOR,
@@ -17,11 +20,8 @@ from brdfcodec.format.bvae import (
     encode_bvae,
     parse_bvae,
 )
-from brdfcodec.conventions import NETWORK_INPUT_SHAPE
-from brdfcodec.errors import BvaeFormatError, RateTargetError, UnsupportedVersionError
-from brdfcodec.layers.detail import DetailLayer, decode_detail, encode_detail
 from brdfcodec.format.layered_record import LayeredRecord
-from bvae_bytes import bytes_writer
+from brdfcodec.layers.detail import DetailLayer, decode_detail, encode_detail
 
 DECODER = DecoderReference("ab" * 32, "test-decoder")
 
@@ -220,8 +220,8 @@ def test_layered_decode_adds_the_layer_and_partial_decode_matches(analytic_table
 
 @pytest.mark.slow
 def test_cli_rate_control_flags(red_plastic_file, tmp_path, capsys) -> None:
-    from brdfcodec.format.bvae import read_bvae
     from brdfcodec.cli import main
+    from brdfcodec.format.bvae import read_bvae
 
     out = tmp_path / "m.bvae"
     assert main(["compress", str(red_plastic_file), "-o", str(out), "--bytes", "3000", "--float16",
@@ -276,9 +276,9 @@ def test_cli_bad_flag_values_are_usage_errors(red_plastic_file, tmp_path, capsys
 @pytest.mark.slow
 def test_cli_graft_fit_of_a_layered_record_starts_from_its_base(red_plastic_file, tmp_path, capsys) -> None:
     """`bvae edit graft --fit` compares the fitted graft with the base code it starts from, not the layered decode."""
-    from brdfcodec.format.bvae import read_bvae
     from brdfcodec.cli import main
     from brdfcodec.codec import BrdfDecoder, measure
+    from brdfcodec.format.bvae import read_bvae
     from brdfcodec.io.merl import read_merl
 
     layered_file, fitted = tmp_path / "m.bvae", tmp_path / "f.bvae"
@@ -299,10 +299,10 @@ def test_cli_graft_fit_of_a_layered_record_starts_from_its_base(red_plastic_file
 
 
 def test_cli_reference_that_reflects_nothing_is_bad_input(tmp_path, capsys) -> None:
-    from brdfcodec.datasets.analytic import AnalyticBRDF
-    from brdfcodec.format.bvae import write_bvae
     from brdfcodec.cli import main
     from brdfcodec.codec import BrdfDecoder
+    from brdfcodec.datasets.analytic import AnalyticBRDF
+    from brdfcodec.format.bvae import write_bvae
     from brdfcodec.io.merl import write_merl
 
     decoder = BrdfDecoder()
@@ -336,8 +336,8 @@ def test_measure_sets_the_provenance_of_the_source_it_measured_against(analytic_
 def test_a_record_with_a_detail_layer_carries_at_most_the_detail_basis_count(better: int) -> None:
     """Under a budget with room for detail, all 75 coefficients are tried without detail and at most 32 with it
     (a bound on every layered record's decode time), and the lower error is kept."""
-    from brdfcodec.layers.basis import quantise_coefficients
     from brdfcodec.codec.rate import DETAIL_BASIS_COUNT, encode_layers
+    from brdfcodec.layers.basis import quantise_coefficients
 
     rng = np.random.default_rng(5)
     target = rng.uniform(0.0, 1.0, NETWORK_INPUT_SHAPE).astype(np.float32)
@@ -367,8 +367,8 @@ def test_a_record_with_a_detail_layer_carries_at_most_the_detail_basis_count(bet
 def test_an_error_target_searches_records_without_detail_first(all_coefficients_meet_it: bool) -> None:
     """The detail ladder carries at most 32 coefficients, so its coarse rungs can be worse than all 75 without
     detail: the search keeps to the records without detail when the largest of them meets the target."""
-    from brdfcodec.layers.basis import quantise_coefficients
     from brdfcodec.codec.rate import DETAIL_BASIS_COUNT, encode_layers
+    from brdfcodec.layers.basis import quantise_coefficients
     from brdfcodec.representation import network_input_from_table
 
     values = np.full((3, 90, 90, 180), 0.05)
@@ -407,8 +407,8 @@ def test_an_error_target_searches_records_without_detail_first(all_coefficients_
 def test_a_budget_too_small_for_every_coefficient_stores_a_compact_base(
     budget: int, itemsize: int, mu_max: float, storage: str | None, count: int
 ) -> None:
-    from brdfcodec.layers.basis import quantise_coefficients
     from brdfcodec.codec.rate import encode_layers
+    from brdfcodec.layers.basis import quantise_coefficients
 
     target = np.full(NETWORK_INPUT_SHAPE, 0.5, dtype=np.float32)
     masks = np.ones(NETWORK_INPUT_SHAPE, dtype=np.float32)

@@ -12,9 +12,9 @@ from pathlib import Path
 
 import pytest
 
+from brdfcodec.cli import main
 from brdfcodec.datasets.analytic import ANALYTIC_PRESETS
 from brdfcodec.format.bvae import PROVENANCE_KEYS, read_bvae
-from brdfcodec.cli import main
 from brdfcodec.io.merl import write_merl
 
 #: What a file may add beyond its materials' budgets and names: its fixed header (about 100 B) and a form table.
@@ -63,11 +63,10 @@ def test_every_material_of_a_library_keeps_within_its_budget(
     assert read_bvae(out).header.basis_sha256 is not None  # stated once, in the header
     assert main(["info", "--json", str(out)]) == 0
     summary = json.loads(capsys.readouterr().out)
-    assert summary["format_version"] == "2.1" and summary["metadata"] is False
+    assert summary["format_version"] == "2.2" and summary["metadata"] is False
     for item in summary["materials"]:
-        # a compact base, or (format 2.1) no latent at all where that was better
-        assert (item["mu"], item["sigma"]) in {("int8-fixed", "log2-u8-shared"), ("int8", "log2-u8-shared"),
-                                               ("none", "none")}
+        # a compact base without σ (format 2.2), or (format 2.1) no latent at all where that was better
+        assert (item["mu"], item["sigma"]) in {("int8-fixed", "none"), ("int8", "none"), ("none", "none")}
         assert item["basis"]["count"] >= 45 and item["record_bytes"] <= 64 and "source_kind" not in item
 
 

@@ -8,9 +8,9 @@ import torch
 from threadpoolctl import threadpool_info
 
 import brdfcodec as bc
-from brdfcodec.runtime import threads as blas_threads
 from brdfcodec.datasets.analytic import ANALYTIC_PRESETS
 from brdfcodec.format.bvae import LatentRecord
+from brdfcodec.runtime import threads as blas_threads
 
 
 @pytest.fixture(autouse=True)

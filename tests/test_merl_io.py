@@ -14,8 +14,8 @@ import pytest
 from brdfcodec.conventions import TABLE_SHAPE, UNMEASURED_VALUE
 from brdfcodec.errors import MerlFormatError, NonFiniteValueError
 from brdfcodec.io.genuine import genuine_merl_checksums, genuine_merl_name
-from brdfcodec.representation.mask import horizon_mask
 from brdfcodec.io.merl import MERL_FILE_SIZE, MerlBRDF, read_merl, write_merl
+from brdfcodec.representation.mask import horizon_mask
 
 N = 90 * 90 * 180
 

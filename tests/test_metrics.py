@@ -6,8 +6,9 @@ import numpy as np
 import pytest
 
 from brdfcodec.conventions import MERL_COLOR_SCALE, TABLE_SHAPE
-from brdfcodec.representation.mask import horizon_mask
 from brdfcodec.io.merl import MerlBRDF
+from brdfcodec.representation import interpolate_slices, select_kept_slices
+from brdfcodec.representation.mask import horizon_mask
 from brdfcodec.representation.metrics import (
     RelaeAgainst,
     cosine_weighted_rmse,
@@ -16,7 +17,6 @@ from brdfcodec.representation.metrics import (
     relae_linear,
     relae_mapped,
 )
-from brdfcodec.representation import interpolate_slices, select_kept_slices
 
 
 def test_identical_tables_have_zero_error(analytic_tables: dict[str, MerlBRDF]) -> None:

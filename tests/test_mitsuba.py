@@ -14,15 +14,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from brdfcodec.runtime import mitsuba as mitsuba_runtime
-from brdfcodec.datasets.analytic import ANALYTIC_PRESETS
-from brdfcodec.format.bvae import LatentRecord, read_header, write_bvae
 from brdfcodec.cli import main
 from brdfcodec.codec import BrdfDecoder, MaterialLibrary
+from brdfcodec.datasets.analytic import ANALYTIC_PRESETS
 from brdfcodec.examples import example_library
+from brdfcodec.format.bvae import LatentRecord, read_header, write_bvae
 from brdfcodec.io.merl import write_merl
-from brdfcodec.runtime.mitsuba import LibLLVMNotFoundError, find_libllvm, llvm_major
 from brdfcodec.render.preview import render_sphere
+from brdfcodec.runtime import mitsuba as mitsuba_runtime
+from brdfcodec.runtime.mitsuba import LibLLVMNotFoundError, find_libllvm, llvm_major
 
 mi = pytest.importorskip("mitsuba", reason="Mitsuba 3 is an optional extra: pip install 'brdfcodec[mitsuba]'")
 SCENE = Path(__file__).resolve().parents[1] / "brdfcodec" / "data" / "scenes" / "spheres.xml"
@@ -215,8 +215,8 @@ def test_llvm_plugin_matches_the_scalar_plugin_and_the_library(llvm: str, glossy
 def noise_file(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, object]:
     """A MERL file of random values (unmeasured below the horizon and in 1 % of entries): any mistake in bins,
     corners or weights shows, where a smooth material would hide it."""
-    from brdfcodec.representation.mask import horizon_mask
     from brdfcodec.io.merl import MerlBRDF
+    from brdfcodec.representation.mask import horizon_mask
 
     rng = np.random.default_rng(11)
     values = rng.uniform(0.0, 1000.0, size=(3, 90, 90, 180))
@@ -462,8 +462,8 @@ def test_original_and_decoded_material_in_one_scene_match_the_report(llvm: str, 
     The report renders a 64² sphere under a directional light with render_sphere; the same set-up in Mitsuba
     (direct illumination, orthographic) must give the same ΔE ITP within 25 %.
     """
-    from brdfcodec.render.image_metrics import image_error
     from brdfcodec.datasets.nbrdf import iter_nbrdf_zip
+    from brdfcodec.render.image_metrics import image_error
 
     name = "green-acrylic"
     row = next(json.loads(line) for line in (Path(__file__).resolve().parents[1] / "reports" / "nbrdf-proxy"

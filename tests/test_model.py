@@ -9,14 +9,14 @@ import numpy as np
 import pytest
 import torch
 
-from brdfcodec.models.pca import fit_pca
 from brdfcodec.conventions import MAPPED_MAX, NETWORK_INPUT_SHAPE
-from brdfcodec.representation.mask import kept_slice_horizon_mask
 from brdfcodec.models.config import PAPER_CONFIG, SMALL_CONFIG, TINY_CONFIG, ModelConfig
 from brdfcodec.models.loss import beta_norm, beta_vae_loss, kl_per_dimension
 from brdfcodec.models.network import BetaVAE, initialise_linear_basis
+from brdfcodec.models.pca import fit_pca
 from brdfcodec.representation import clamp_mapped, map_values, select_kept_slices
 from brdfcodec.representation import to_network_layout as network_input
+from brdfcodec.representation.mask import kept_slice_horizon_mask
 from brdfcodec.training.augment import COLOUR_PERMUTATIONS, mix_physical, permute_colours
 
 

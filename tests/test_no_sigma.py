@@ -67,9 +67,12 @@ def test_compress_leaves_sigma_out_by_default_and_decodes_the_same(gold_binary: 
     assert not read_bvae(edited).records[0].store_sigma
 
 
-def test_the_encoder_keeps_sigma_when_asked_and_in_rate_controlled_records(analytic_tables) -> None:
+def test_under_a_size_budget_sigma_bytes_go_to_the_basis_layer(analytic_tables) -> None:
     brdf = analytic_tables["gold"]
     assert BrdfEncoder(effort=0, store_sigma=True).encode(brdf).kind == "latent"
     assert not BrdfEncoder(effort=0).encode(brdf).store_sigma
-    budgeted = BrdfEncoder(effort=0, bytes=64, latent="always").encode(brdf)
-    assert budgeted.kind == "layered" and budgeted.store_sigma and budgeted.has_layers
+    lean = BrdfEncoder(effort=0, bytes=64, latent="always", project_base="never").encode(brdf)
+    kept = BrdfEncoder(effort=0, bytes=64, latent="always", project_base="never", store_sigma=True).encode(brdf)
+    assert lean.kind == kept.kind == "layered" and lean.compact_mu and kept.compact_mu
+    assert not lean.store_sigma and kept.shared_sigma  # one byte of σ ...
+    assert lean.basis.count == kept.basis.count + 1  # ... is one more coefficient

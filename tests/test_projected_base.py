@@ -4,12 +4,12 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
-from brdfcodec.format.bvae import DecoderReference, encode_bvae, parse_bvae
-from brdfcodec.errors import BvaeFormatError
-from brdfcodec.layers.basis import BasisError, BasisLayer, SharedBasis, quantise_coefficients
-from brdfcodec.format.layered_record import LayeredRecord
 from bvae_bytes import bytes_writer
+
+from brdfcodec.errors import BvaeFormatError
+from brdfcodec.format.bvae import DecoderReference, encode_bvae, parse_bvae
+from brdfcodec.format.layered_record import LayeredRecord
+from brdfcodec.layers.basis import BasisError, BasisLayer, SharedBasis, quantise_coefficients
 
 DECODER = DecoderReference("ab" * 32, "test-decoder")
 SHA = "cd" * 32
@@ -167,9 +167,9 @@ def test_auto_leaves_records_with_a_detail_layer_unprojected(analytic_tables) ->
 def test_the_encoders_fit_is_the_decode_of_the_record_it_writes(analytic_tables, compact: str | None) -> None:
     """Rate control measures, and the detail layer codes, what the encoder's basis fit returns: it must be what
     the decoder makes of the written record, projection included."""
-    from brdfcodec.format.bvae import LatentRecord
     from brdfcodec.codec import BrdfEncoder
     from brdfcodec.codec.encoding import EncodeOptions, _basis_fit
+    from brdfcodec.format.bvae import LatentRecord
     from brdfcodec.representation import network_input_from_table
 
     encoder = BrdfEncoder()

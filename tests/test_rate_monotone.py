@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from brdfcodec.format.bvae import LatentRecord
-from brdfcodec.conventions import NETWORK_INPUT_SHAPE
-from brdfcodec.layers.basis import quantise_coefficients
 from brdfcodec.codec.rate import encode_layers, layered_mapped
+from brdfcodec.conventions import NETWORK_INPUT_SHAPE
+from brdfcodec.format.bvae import LatentRecord
+from brdfcodec.layers.basis import quantise_coefficients
 
 _BASIS_COUNT = 75
 

@@ -9,8 +9,8 @@ from pathlib import Path
 import pytest
 
 from brdfcodec.datasets.hdf5 import build_dataset
-from brdfcodec.models.config import TINY_CONFIG
 from brdfcodec.datasets.sources import analytic_sources
+from brdfcodec.models.config import TINY_CONFIG
 from brdfcodec.training.config import TrainConfig
 from brdfcodec.training.export import export_run
 from brdfcodec.training.trainer import train

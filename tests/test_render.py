@@ -7,14 +7,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from brdfcodec.datasets.analytic import AnalyticBRDF
-from brdfcodec.format.bvae import LatentRecord, write_bvae
 from brdfcodec.codec import BrdfDecoder, DecodedMaterial, MaterialLibrary
+from brdfcodec.datasets.analytic import AnalyticBRDF
 from brdfcodec.edit.latent_edits import traverse
+from brdfcodec.format.bvae import LatentRecord, write_bvae
 from brdfcodec.io.exr import read_exr_rgb
+from brdfcodec.io.merl import MerlBRDF
 from brdfcodec.render.image_metrics import compare_images
 from brdfcodec.render.images import write_image
-from brdfcodec.io.merl import MerlBRDF
 from brdfcodec.render.preview import Environment, render_flat, render_sphere, render_sphere_environment
 
 

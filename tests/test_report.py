@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 
 from brdfcodec.datasets.hdf5 import build_dataset
+from brdfcodec.datasets.sources import analytic_sources
 from brdfcodec.report.evaluate import evaluate_dataset, summarise
 from brdfcodec.report.output import write_report
 from brdfcodec.report.points import BvaeCodec, KeptSlices, Pca, RawTable, ZstdTable
-from brdfcodec.datasets.sources import analytic_sources
 
 
 @pytest.fixture(scope="module")
@@ -59,8 +59,8 @@ def test_report_records_and_files(small_dataset: Path, tmp_path: Path) -> None:
 
 
 def test_rate_distortion_points_are_held_out_only_and_meet_their_budgets(small_dataset: Path, tmp_path: Path) -> None:
-    from brdfcodec.models.pca import fit_pca
     from brdfcodec.datasets.hdf5 import BrdfDataset
+    from brdfcodec.models.pca import fit_pca
     from brdfcodec.report.rd_markdown import rd_markdown
     from brdfcodec.report.rd_points import DctSlices, LayeredBvae, PcaPacked, ZstdSlices
 
@@ -83,8 +83,8 @@ def test_rate_distortion_points_are_held_out_only_and_meet_their_budgets(small_d
 
 
 def test_the_report_compares_with_pca_of_colour_permuted_training_materials() -> None:
-    from brdfcodec.models.pca import fit_pca
     from brdfcodec.layers.basis import with_colour_permutations
+    from brdfcodec.models.pca import fit_pca
     from brdfcodec.report.points import Material
     from brdfcodec.report.rd_points import PcaPacked, rate_distortion_points
     from brdfcodec.representation import table_from_network_output

@@ -12,10 +12,8 @@ import pytest
 
 from brdfcodec.cli import main
 from brdfcodec.conventions import MERL_COLOR_SCALE, UNMEASURED_VALUE
-from brdfcodec.representation.coords import directions_from_half_diff, phi_d_from_index, theta_d_from_index, theta_h_from_index
 from brdfcodec.errors import OptionalDependencyError, SourceFormatError
 from brdfcodec.io.inputs import read_measured
-from brdfcodec.representation.mask import horizon_mask
 from brdfcodec.io.merl import read_merl
 from brdfcodec.io.rgl import (
     RGL_SOURCE_KIND,
@@ -26,6 +24,13 @@ from brdfcodec.io.rgl import (
     read_rgl_bsdf,
     read_rgl_header,
 )
+from brdfcodec.representation.coords import (
+    directions_from_half_diff,
+    phi_d_from_index,
+    theta_d_from_index,
+    theta_h_from_index,
+)
+from brdfcodec.representation.mask import horizon_mask
 
 PAPER_WHITE_SHA256 = "9d641fbb56358275509b2b1053d1002313e2dabc7b3ec202eb5c5a6943f7b70e"
 

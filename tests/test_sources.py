@@ -10,14 +10,14 @@ import h5py
 import numpy as np
 import pytest
 
-from brdfcodec.datasets.analytic import ANALYTIC_PRESETS, AnalyticBRDF, random_analytic_materials
 from brdfcodec.conventions import MERL_COLOR_SCALE, UNMEASURED_VALUE
-from brdfcodec.representation.coords import directions_from_half_diff
-from brdfcodec.errors import SourceFormatError
-from brdfcodec.representation.mask import horizon_mask
-from brdfcodec.io.merl import MerlBRDF
+from brdfcodec.datasets.analytic import ANALYTIC_PRESETS, AnalyticBRDF, random_analytic_materials
 from brdfcodec.datasets.nbrdf import iter_nbrdf_zip, list_nbrdf_zip, read_nbrdf_fit
+from brdfcodec.errors import SourceFormatError
+from brdfcodec.io.merl import MerlBRDF
 from brdfcodec.representation import map_values
+from brdfcodec.representation.coords import directions_from_half_diff
+from brdfcodec.representation.mask import horizon_mask
 
 
 def test_presets_are_finite_valid_and_span_extremes(analytic_tables: dict[str, MerlBRDF]) -> None:

@@ -10,8 +10,8 @@ import pytest
 
 from brdfcodec import conventions
 from brdfcodec.datasets.hdf5 import DATASET_FORMAT, DATASET_FORMAT_VERSION
-from brdfcodec.representation.mask import horizon_mask
 from brdfcodec.io.merl import MERL_FILE_SIZE
+from brdfcodec.representation.mask import horizon_mask
 
 SPEC = Path(__file__).resolve().parents[1] / "spec"
 

@@ -7,13 +7,13 @@ import numpy as np
 import pytest
 import torch
 
-from brdfcodec.datasets.analytic import AnalyticBRDF
-from brdfcodec.format.bvae import DecoderReference, LatentRecord, encode_bvae, parse_bvae
 from brdfcodec.codec import BrdfDecoder, BrdfEncoder, measure
 from brdfcodec.conventions import KEPT_PHI_D_SLICES, MAPPED_MAX, MERL_COLOR_SCALE
-from brdfcodec.representation.lookup import lookup
+from brdfcodec.datasets.analytic import AnalyticBRDF
+from brdfcodec.format.bvae import DecoderReference, LatentRecord, encode_bvae, parse_bvae
 from brdfcodec.io.merl import MerlBRDF
 from brdfcodec.representation import map_values, table_from_network_output
+from brdfcodec.representation.lookup import lookup
 
 #: Stated bounds (spec/bvae-format.md §6): mapped RelAE of a reduced-precision decode against float32.
 REDUCED_PRECISION_BOUND = 0.01

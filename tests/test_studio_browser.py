@@ -60,8 +60,8 @@ def page(studio_env: dict[str, Any]) -> Any:
 
 def library_render(catalogue: Any, z: list[float], light: list[float], graft: list[float] | None = None,
                    size: int = 256) -> np.ndarray:
-    from brdfcodec.format.bvae import GraftRecord, LatentRecord
     from brdfcodec.codec import DecodedMaterial
+    from brdfcodec.format.bvae import GraftRecord, LatentRecord
     from brdfcodec.render.preview import render_sphere
 
     code = np.asarray(z, np.float32)

@@ -27,9 +27,9 @@ MAX_DELTA_E_ITP = 0.1
 
 @pytest.fixture(scope="module")
 def studio_env(tmp_path_factory: pytest.TempPathFactory) -> Any:
+    from brdfcodec.codec import compress
     from brdfcodec.datasets.analytic import ANALYTIC_PRESETS
     from brdfcodec.format.bvae import LatentRecord, read_bvae, write_bvae
-    from brdfcodec.codec import compress
     from brdfcodec.studio.browser import chromium_browser, running_studio
     from brdfcodec.studio.catalogue import Catalogue
     from brdfcodec.studio.server import StudioServer, create_app
@@ -74,8 +74,8 @@ def painted_against(page: Any, record: Any, catalogue: Any) -> float:
 
 
 def test_sliders_edit_a_layered_record_and_keep_its_layers(page: Any, studio_env: dict[str, Any]) -> None:
-    from brdfcodec.format.bvae import LatentRecord
     from brdfcodec.edit.latent_edits import with_parameters
+    from brdfcodec.format.bvae import LatentRecord
     from brdfcodec.studio.browser import canvas_pixels, paint_count, set_slider, wait_for_paint_after
 
     catalogue = studio_env["catalogue"]

@@ -15,9 +15,9 @@ import pytest
 import torch
 
 from brdfcodec.datasets.hdf5 import build_dataset
+from brdfcodec.datasets.sources import analytic_sources
 from brdfcodec.models.config import TINY_CONFIG
 from brdfcodec.models.network import BetaVAE
-from brdfcodec.datasets.sources import analytic_sources
 from brdfcodec.training.config import TrainConfig
 from brdfcodec.training.trainer import train
 

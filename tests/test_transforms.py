@@ -16,7 +16,6 @@ from brdfcodec.conventions import (
     NETWORK_INPUT_SHAPE,
     TABLE_SHAPE,
 )
-from brdfcodec.representation.mask import horizon_mask, kept_slice_horizon_mask
 from brdfcodec.representation import (
     from_network_layout,
     interpolate_slices,
@@ -25,6 +24,7 @@ from brdfcodec.representation import (
     to_network_layout,
     unmap_values,
 )
+from brdfcodec.representation.mask import horizon_mask, kept_slice_horizon_mask
 
 
 def paper_mapping(rho: np.ndarray, scale: float) -> np.ndarray:

@@ -10,10 +10,10 @@ import pytest
 import torch
 
 from brdfcodec.datasets.hdf5 import build_dataset
+from brdfcodec.datasets.sources import analytic_sources
+from brdfcodec.edit.plausibility import inverted_cells, new_holes, white_sky_albedo
 from brdfcodec.models.config import TINY_CONFIG
 from brdfcodec.models.loss import beta_norm
-from brdfcodec.edit.plausibility import inverted_cells, new_holes, white_sky_albedo
-from brdfcodec.datasets.sources import analytic_sources
 from brdfcodec.training.config import TrainConfig
 from brdfcodec.training.trainer import _global_batches, train
 from brdfcodec.training.traversal import ENERGY_SCALE, TraversalPenalty, traversed_codes

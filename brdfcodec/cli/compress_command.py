@@ -85,9 +85,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
                         "decodes like any other, but cannot be edited; always keeps a latent code in every record, "
                         "so that every record can be edited")
     parser.add_argument("--sigma", action="store_true",
-                        help="also store the posterior width σ in records without --bytes/--max-relae (by default "
-                        "a record stores μ alone, format 2.2, and reads back with σ = 1: the shipped model's σ "
-                        "carries no information, see its model card)")
+                        help="also store the posterior width σ (by default a record stores μ alone, format 2.2, and "
+                        "reads back with σ = 1; under --bytes σ's bytes go to the layers instead): the shipped "
+                        "model's σ carries no information, see its model card")
     parser.set_defaults(handler=run)
 
 
@@ -153,7 +153,7 @@ MAX_BYTES_BUDGET = 1 << 30
 
 
 def _check_bytes_floor(budget: int, model: str | None, latent_itemsize: int, basis: bool,
-                       without_latent: bool = False) -> None:
+                       without_latent: bool = False, store_sigma: bool = False) -> None:
     """Refuse a ``--bytes`` below the smallest record the model can write (a usage error, exit 2); records
     without a latent (``without_latent``: ``--latent auto``) count where the model has a basis and a linear path."""
     from brdfcodec.codec.rate import smallest_bytes_budget
@@ -170,7 +170,8 @@ def _check_bytes_floor(budget: int, model: str | None, latent_itemsize: int, bas
         manifest = load_manifest(text)
     has_basis = basis and manifest.basis_sha256 is not None
     floor = smallest_bytes_budget(manifest.config.latent_dim, latent_itemsize, has_basis,
-                                  without_latent=has_basis and without_latent and bool(manifest.config.linear_basis))
+                                  without_latent=has_basis and without_latent and bool(manifest.config.linear_basis),
+                                  store_sigma=store_sigma)
     if budget < floor:
         raise UsageError(f"--bytes {budget} is below the smallest record model {manifest.name} can write "
                          f"({floor} bytes per material)")
@@ -197,7 +198,8 @@ def run(args: argparse.Namespace) -> int:
     latent = args.latent or "auto"
     dtype = "float16" if args.float16 else "float32"
     if args.bytes is not None:  # the floor, from the model's manifest: before loading the model or any input
-        _check_bytes_floor(args.bytes, args.model, 2 if args.float16 else 4, not args.no_basis, latent == "auto")
+        _check_bytes_floor(args.bytes, args.model, 2 if args.float16 else 4, not args.no_basis, latent == "auto",
+                           args.sigma)
     check_output_path(args.output, overwrite=args.force)
     if args.output.suffix != ".bvae":
         raise ValueError(f"{args.output}: the output must end in .bvae")

@@ -113,10 +113,10 @@ class BrdfEncoder:
         the decoder's linear-path mean plus basis coefficients) where its error is lower; it decodes like any
         other but cannot be edited. ``"always"``: every record keeps a latent code that edits can move.
     store_sigma : bool, default False
-        Store the posterior width σ in records without rate control. By default a record stores μ alone (format
-        2.2, ``layers.sigma = "none"``: half the payload) and reads back with σ = 1: the shipped model's σ says
-        nothing about how certain an encoding is (its model card, "The posterior width σ"). Rate-controlled
-        records keep their compact σ (one byte, or one per dimension).
+        Store the posterior width σ. By default a record stores μ alone (format 2.2, ``layers.sigma = "none"``:
+        half a plain record's payload; under a size budget its bytes go to the layers) and reads back with
+        σ = 1: the shipped model's σ says nothing about how certain an encoding is (its model card, "The
+        posterior width σ").
     """
 
     manifest: ModelManifest | None
@@ -199,7 +199,7 @@ class BrdfEncoder:
                 records = layer_records(records, self.decoder, inputs, masks, sources, self.options)
         if self.options.store_sigma:
             return records
-        # σ left out (format 2.2) where it would fill half of a plain record; rate-controlled records keep theirs.
+        # σ left out (format 2.2): a plain record becomes μ alone (rate control already left σ out of its own).
         return [LayeredRecord.code_only(r) if type(r) is LatentRecord else r for r in records]
 
     def posterior_from_inputs(

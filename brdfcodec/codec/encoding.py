@@ -120,7 +120,7 @@ class EncodeOptions:
         lower (:data:`LatentChoice`); such a record decodes but cannot be edited. ``"always"``: every record
         keeps a latent code. Nothing changes without a target, or without a shared basis.
     store_sigma : bool
-        Keep σ in records that rate control leaves plain (False, the default: μ alone, format 2.2).
+        Store σ (False, the default: μ alone, format 2.2; rate control gives σ's bytes to the layers).
     """
 
     effort: int = 1
@@ -196,6 +196,7 @@ def layer_records(
             basis_fit=None if basis is None else _basis_fit(decoder, basis, base, inputs[i], masks[i], options),
             basis_count=0 if basis is None else basis.count,
             basis_only_fit=None if basis is None else _basis_only_fit(decoder, basis, inputs[i], masks[i], options),
+            store_sigma=options.store_sigma,
         )
         chosen = result.record
         # record_bytes: what the budget caps (payload and index descriptor); payload_bytes: the payload alone

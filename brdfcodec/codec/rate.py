@@ -143,13 +143,14 @@ class _Candidates:
 
     def __init__(self, base: LatentRecord, base_mapped: np.ndarray, inputs: np.ndarray, masks: np.ndarray,
                  latent_itemsize: int, basis_fit: BasisFit | None, compact: bool = False,
-                 fixed_grid: bool = False) -> None:
+                 fixed_grid: bool = False, store_sigma: bool = True) -> None:
         self.base, self.inputs, self.masks = base, inputs, masks
+        self.store_sigma = store_sigma
         d = base.latent_dim
-        # a latent record: μ and σ in the latent dtype, and its descriptor
-        self.plain_bytes = 2 * d * latent_itemsize + record_overhead(base.name)
+        # the base alone: μ (and σ, when stored) in the latent dtype, and its descriptor
+        self.plain_bytes = (2 if store_sigma else 1) * d * latent_itemsize + record_overhead(base.name)
         self.mu_storage = (MU_INT8_FIXED if fixed_grid else compact_mu_storage(base.mu)) if compact else None
-        self.layered_bytes = _layered_base_bytes(d, latent_itemsize, self.mu_storage)
+        self.layered_bytes = _layered_base_bytes(d, latent_itemsize, self.mu_storage, store_sigma)
         self.basis_fit = basis_fit
         self.stages: dict[tuple[int, bool], tuple[LatentRecord, BasisLayer | None, np.ndarray]] = {
             (0, False): (base, None, base_mapped), (0, True): (base, None, base_mapped)}
@@ -173,9 +174,10 @@ class _Candidates:
         if basis is None and s is None:
             return base
         detail = None if s is None else self.detail(k, s)
-        storage: dict[str, bool] = {"compact_sigma": True}
+        storage: dict[str, bool] = {"compact_sigma": True} if self.store_sigma else {"store_sigma": False}
         if self.mu_storage is not None:
-            storage = {"compact_mu": True, "shared_sigma": True, "fixed_mu_grid": self.mu_storage == MU_INT8_FIXED}
+            storage = {"compact_mu": True, "fixed_mu_grid": self.mu_storage == MU_INT8_FIXED,
+                       **({"shared_sigma": True} if self.store_sigma else {"store_sigma": False})}
         return LayeredRecord(base.name, base.mu, base.sigma, base.meta, detail=detail, basis=basis, **storage)
 
     def size(self, k: int, s: float | None) -> int:
@@ -220,6 +222,7 @@ def encode_layers(
     basis_fit: BasisFit | None = None,
     basis_count: int = 0,
     basis_only_fit: BasisOnlyFit | None = None,
+    store_sigma: bool = True,
 ) -> RateResult:
     """A base record, layered to a size budget, an error target or a fixed step.
 
@@ -251,6 +254,9 @@ def encode_layers(
     basis_only_fit : callable, optional
         Fits k coefficients of a record without a latent (format 2.1); with it, such records are candidates of a
         size budget or an error target too (not of a fixed ``step``). Needs ``basis_count``.
+    store_sigma : bool, default True
+        Store σ in the records (compact: one byte per dimension, or one shared byte beside a compact μ); False
+        leaves it out (format 2.2) and gives its bytes to the layers.
 
     Raises
     ------
@@ -266,12 +272,13 @@ def encode_layers(
     weights = np.asarray(masks, dtype=np.float32)
     d = base.latent_dim
     compact = bytes_budget is not None and compact_base_pays(
-        bytes_budget - record_overhead(base.name, basis_count=max(full, 1)), d, latent_itemsize, full)
-    cands = _Candidates(base, base_mapped, target, weights, latent_itemsize, basis_fit, compact)
+        bytes_budget - record_overhead(base.name, basis_count=max(full, 1)), d, latent_itemsize, full, store_sigma)
+    candidates = functools.partial(_Candidates, store_sigma=store_sigma)
+    cands = candidates(base, base_mapped, target, weights, latent_itemsize, basis_fit, compact)
     if cands.mu_storage == MU_INT8 and bytes_budget is not None and not _smallest_layered_fits(cands, bytes_budget):
         # μ past the fixed grid's ±3.97 with its own step does not fit beside its descriptor: the grid's end holds it
         # (spec §4.5; the coefficients are fitted to the clipped code), so every material fits the smallest budgets.
-        cands = _Candidates(base, base_mapped, target, weights, latent_itemsize, basis_fit, compact, fixed_grid=True)
+        cands = candidates(base, base_mapped, target, weights, latent_itemsize, basis_fit, compact, fixed_grid=True)
     base_bytes = cands.plain_bytes
     if full:
         base_bytes = min(base_bytes, cands.layered_bytes + STEP_BYTES + 1 + cands.overhead(1))
@@ -319,7 +326,7 @@ def encode_layers(
         full_plain = (False, full, None)
         if full and not compact and full_plain in errors and (
                 min(errors.values()) > (1 - _COMPACT_MARGIN) * errors[full_plain]):
-            pools[True] = _Candidates(base, base_mapped, target, weights, latent_itemsize, basis_fit, compact=True)
+            pools[True] = candidates(base, base_mapped, target, weights, latent_itemsize, basis_fit, compact=True)
             if pools[True].size(full, None) <= bytes_budget:
                 errors[True, full, None] = slice_error((True, full, None))
         chosen = min(errors, key=lambda c: (errors[c], c[1], c[0]))
@@ -332,7 +339,7 @@ def encode_layers(
     if not max_relae > 0:
         raise ValueError(f"max_relae must be > 0, got {max_relae}")
     # An error target's candidates: (compact base?, k coefficients, detail step or None).
-    pools = {False: cands, True: _Candidates(base, base_mapped, target, weights, latent_itemsize, basis_fit,
+    pools = {False: cands, True: candidates(base, base_mapped, target, weights, latent_itemsize, basis_fit,
                                              compact=True)}
     errors: dict[_Candidate, float] = {}
     relae = RelaeAgainst(values, mask, metric)  # the source mapped and summed once for all candidates
@@ -452,7 +459,8 @@ def error_target_sequence(basis_count: int) -> list[_Candidate]:
     return [*((True, n, None) for n in counts), *((False, under_detail, s) for s in STEP_LADDER)]
 
 
-def compact_base_pays(bytes_budget: int, latent_dim: int, latent_itemsize: int, basis_count: int) -> bool:
+def compact_base_pays(bytes_budget: int, latent_dim: int, latent_itemsize: int, basis_count: int,
+                      store_sigma: bool = True) -> bool:
     """Whether a size budget stores the base compact: when it cannot hold all K basis coefficients beside μ in
     the latent dtype (and σ as one byte each).
 
@@ -461,7 +469,7 @@ def compact_base_pays(bytes_budget: int, latent_dim: int, latent_itemsize: int, 
     that is small beside what those coefficients gain (documentation: Layers and rate control).
     Above that, the bytes would go to the detail layer, where they buy little.
     """
-    full_base = _layered_base_bytes(latent_dim, latent_itemsize, None)
+    full_base = _layered_base_bytes(latent_dim, latent_itemsize, None, store_sigma)
     return basis_count > 0 and bytes_budget < full_base + STEP_BYTES + basis_count
 
 
@@ -482,12 +490,13 @@ def _smallest_layered_fits(cands: _Candidates, bytes_budget: int) -> bool:
     return cands.layered_bytes + STEP_BYTES + 1 + cands.overhead(1) <= bytes_budget
 
 
-def _layered_base_bytes(latent_dim: int, latent_itemsize: int, mu_storage: MuStorage) -> int:
+def _layered_base_bytes(latent_dim: int, latent_itemsize: int, mu_storage: MuStorage, store_sigma: bool = True) -> int:
     """Payload of a layered record's base: μ in the latent dtype and σ as one byte per dimension, or (compact) μ
-    as D int8 values (after a float16 step unless on the fixed grid) and σ as one shared byte."""
+    as D int8 values (after a float16 step unless on the fixed grid) and σ as one shared byte; no σ bytes when σ
+    is not stored (format 2.2)."""
     if mu_storage is None:
-        return latent_dim * latent_itemsize + latent_dim
-    return latent_dim + 1 + (STEP_BYTES if mu_storage == MU_INT8 else 0)
+        return latent_dim * latent_itemsize + (latent_dim if store_sigma else 0)
+    return latent_dim + (1 if store_sigma else 0) + (STEP_BYTES if mu_storage == MU_INT8 else 0)
 
 
 @functools.cache
@@ -548,7 +557,7 @@ def _bisect(
 
 
 def smallest_bytes_budget(
-    latent_dim: int, latent_itemsize: int, basis: bool, *, without_latent: bool = False
+    latent_dim: int, latent_itemsize: int, basis: bool, *, without_latent: bool = False, store_sigma: bool = True
 ) -> int:
     """The smallest ``bytes_budget`` that any material can be encoded within, for a model's latent size.
 
@@ -569,15 +578,17 @@ def smallest_bytes_budget(
     without_latent : bool, default False
         Whether records without a latent may be written (``EncodeOptions.latent = "auto"``, a shared basis and a
         decoder whose linear path covers it).
+    store_sigma : bool, default True
+        Whether records store σ (False: format 2.2, μ alone).
 
     Returns
     -------
     int
     """
-    plain = 2 * latent_dim * latent_itemsize + record_overhead("a")
+    plain = (2 if store_sigma else 1) * latent_dim * latent_itemsize + record_overhead("a")
     if not basis:
         return plain
     if without_latent:
         return STEP_BYTES + 1 + record_overhead("a", basis_count=1)
-    compact = _layered_base_bytes(latent_dim, latent_itemsize, MU_INT8_FIXED) + STEP_BYTES + 1
+    compact = _layered_base_bytes(latent_dim, latent_itemsize, MU_INT8_FIXED, store_sigma) + STEP_BYTES + 1
     return min(plain, compact + record_overhead("a", basis_count=1))

@@ -386,8 +386,8 @@ def detail_frame(head: list[int], total: int) -> bytes:
 
 def layered_record(name: str, mu: np.ndarray, sigma: np.ndarray) -> LatentRecord:
     """A layered record (§4.4) whose detail layer has three non-zero DCT coefficients (step 0.125)."""
-    from brdfcodec.layers.detail import N_DETAIL_VALUES, DetailLayer
     from brdfcodec.format.layered_record import LayeredRecord
+    from brdfcodec.layers.detail import N_DETAIL_VALUES, DetailLayer
 
     layer = DetailLayer(0.125, "int16", detail_frame([8, -4, 2], N_DETAIL_VALUES))
     return LayeredRecord(name, mu, sigma, {"effort": 1, "rate": {"payload_bytes": 64 + len(layer.data),
@@ -401,9 +401,9 @@ def basis_record(name: str, mu: np.ndarray, sigma: np.ndarray, sha256: str, *, d
     (and a detail layer); with ``compact_base``, compact mu and the shared sigma byte instead (since 1.4),
     with ``fixed_grid`` too, mu on the fixed grid (since 1.5); with ``project``, the base projected on that
     many basis vectors (since 1.6)."""
+    from brdfcodec.format.layered_record import LayeredRecord
     from brdfcodec.layers.basis import BasisLayer
     from brdfcodec.layers.detail import N_DETAIL_VALUES, DetailLayer
-    from brdfcodec.format.layered_record import LayeredRecord
 
     layer = DetailLayer(0.125, "int16", detail_frame([8, -4, 2], N_DETAIL_VALUES)) if detail else None
     basis = BasisLayer(sha256, 0.5, np.array([12, -7, 3, 0, -1], dtype=np.int8), first, project)
@@ -414,9 +414,9 @@ def basis_record(name: str, mu: np.ndarray, sigma: np.ndarray, sha256: str, *, d
 
 def basis_only_record(name: str, sha256: str, *, detail: bool = False) -> LatentRecord:
     """A record without a latent (§4.6, since 2.1): 5 coefficients from vector 0 (and a detail layer)."""
+    from brdfcodec.format.layered_record import LayeredRecord
     from brdfcodec.layers.basis import BasisLayer
     from brdfcodec.layers.detail import N_DETAIL_VALUES, DetailLayer
-    from brdfcodec.format.layered_record import LayeredRecord
 
     layer = DetailLayer(0.125, "int16", detail_frame([8, -4, 2], N_DETAIL_VALUES)) if detail else None
     basis = BasisLayer(sha256, 0.5, np.array([24, -7, 3, 0, -1], dtype=np.int8))
