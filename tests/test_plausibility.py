@@ -11,7 +11,6 @@ from brdfcodec.cli import main
 from brdfcodec.conventions import MERL_COLOR_SCALE, NETWORK_INPUT_SHAPE
 from brdfcodec.edit.plausibility import (
     PlausibilityCriteria,
-    decompose_output,
     inverted_cells,
     measure_plausibility,
     new_holes,
@@ -20,6 +19,7 @@ from brdfcodec.edit.plausibility import (
     white_sky_albedo,
 )
 from brdfcodec.edit.plausibility import _invalid_counts as invalid_counts
+from brdfcodec.models.output_paths import decompose_output
 from brdfcodec.representation import to_network_layout
 from brdfcodec.representation.mapping import map_values
 

@@ -36,8 +36,9 @@ import torch
 
 from brdfcodec.codec import BrdfDecoder, MaterialLibrary
 from brdfcodec.conventions import MAPPED_MAX
+from brdfcodec.edit.plausibility import DEFAULT_STEPS, inverted_cells, new_holes
 from brdfcodec.examples import example_library
-from brdfcodec.edit.plausibility import DEFAULT_STEPS, decompose_output, inverted_cells, new_holes
+from brdfcodec.models.output_paths import decompose_output
 from brdfcodec.representation.mapping import LOG_RANGE
 
 
