@@ -292,7 +292,9 @@ def run_plausibility(args: argparse.Namespace) -> int:
     report = measure_plausibility(decoder, records, dims=_parse_dims(args.dims, decoder.latent_dim),
                                   criteria=criteria, reference=everything, energy_bound=not args.raw)
     if args.json:
-        summary = {"model": decoder.manifest.name if decoder.manifest else None,
+        from brdfcodec.report.rows import current_commit
+
+        summary = {"commit": current_commit(), "model": decoder.manifest.name if decoder.manifest else None,
                    "decoder_sha256": decoder.reference.sha256 if decoder.reference else None,
                    "library": library_label, **report.to_dict()}
         print(json.dumps(summary, allow_nan=False))

@@ -92,10 +92,19 @@ def _plot(records: Sequence[dict[str, Any]], x_key: str, x_label: str, path: Pat
 
 def write_report(folder: str | os.PathLike[str], records: Sequence[dict[str, Any]],
                  rows: Sequence[dict[str, Any]]) -> list[Path]:
-    """Write ``report.jsonl``, ``materials.jsonl``, ``report.md`` and two plots into ``folder``."""
+    """Write ``report.jsonl``, ``materials.jsonl``, ``report.md`` and two plots into ``folder``.
+
+    Every row of the two JSON Lines files names the commit it was measured at (``commit``,
+    :func:`brdfcodec.report.rows.current_commit`).
+    """
+    from brdfcodec.report.rows import current_commit
+
     out = Path(folder)
     out.mkdir(parents=True, exist_ok=True)
     written = []
+    commit = current_commit()
+    records = [{"commit": commit, **item} for item in records]
+    rows = [{"commit": commit, **item} for item in rows]
     for name, items in (("report.jsonl", records), ("materials.jsonl", rows)):
         with atomic_output(out / name, overwrite=True) as tmp:
             tmp.write_text("".join(json.dumps(item, sort_keys=True) + "\n" for item in items), encoding="utf-8")
