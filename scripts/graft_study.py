@@ -57,7 +57,10 @@ def main() -> None:
             }
             rows.append(row)
             print(json.dumps(row), flush=True)
-    args.output.write_text(json.dumps({"data": str(args.dataset), "model": decoder.manifest.name, "rows": rows},
+    from brdfcodec.report.rows import current_commit
+
+    args.output.write_text(json.dumps({"commit": current_commit(), "data": str(args.dataset),
+                                       "model": decoder.manifest.name, "rows": rows},
                                       indent=2))
     print("\n| material | split | network | refined, 8 parameters | graft, 10 parameters |\n|---|---|---|---|---|")
     for row in rows:

@@ -18,7 +18,6 @@ import argparse
 import json
 from pathlib import Path
 
-import numpy as np
 
 import brdfcodec as bc
 from brdfcodec.codec import DecodedMaterial, measure
@@ -70,7 +69,10 @@ def main() -> None:
                           title="RelAE and what it looks like (one directional light, same exposure)",
                           label_width=330)
     write_png(args.output / "levels.png", sheet, overwrite=True)
+    from brdfcodec.report.rows import current_commit
+
     (args.output / "levels.json").write_text(json.dumps({
+        "commit": current_commit(),
         "data": "NBRDF proxy of MERL (merl-nbrdf-90.zip)" + (", NBRDF proxy of RGL (rgl-nbrdf-30.zip)" if args.rgl_zip
                                                                 else ""),
         "command": "python scripts/relae_levels.py ../shared/data/merl-nbrdf-90.zip --rgl-zip "
