@@ -107,6 +107,7 @@ def test_traversals_of_materials_never_trained_on_conserve_energy(decoder, analy
     assert float(report.fractions["unphysical"].max()) == 0.0
     raw = measure_plausibility(decoder, records, dims=(0, 1), energy_bound=False)
     assert raw.energy_bound is False and report.energy_bound is True
+    assert float(raw.fractions["unphysical"].max()) > 0  # the network's own decodes do exceed 1 here
     for record in records:
         for edit in traverse(record, 0, [-3.0, 3.0]):
             assert float(directional_albedo(decoder.decode(edit)).max()) <= BOUND

@@ -56,6 +56,14 @@ def is_edited(record: Record) -> bool:
     return "edit" in record.meta
 
 
+def _table(mapped: np.ndarray, bins: Sequence[int] | None, energy_bound: bool) -> npt.NDArray[np.float32]:
+    """The table of full mapped slices (only ``bins`` when given), times the energy bound's factor when asked."""
+    table = table_from_mapped(mapped, phi_d_bins=bins)
+    if energy_bound and (scale := energy_bound_scale_mapped(mapped)) != 1.0:
+        table *= np.float32(scale)
+    return table
+
+
 class _EvalMode:
     """Puts a module in evaluation mode for a ``with`` block and restores its mode after."""
 
@@ -513,19 +521,10 @@ class BrdfDecoder:
         self._check_record(record)
         bound = energy_bound if energy_bound is not None else is_edited(record)
         with codec_threads():
-            if bound:
-                mapped = self._mapped_record(record)
-                scale = energy_bound_scale_mapped(mapped)
-                bins = None if phi_d_bins is None else validate_phi_d_bins(phi_d_bins)
-                table = table_from_mapped(mapped, phi_d_bins=bins)
-                if scale != 1.0:
-                    table *= np.float32(scale)
-                return _apply_mask(table, bins, masked)
-            if phi_d_bins is None:
-                return _apply_mask(table_from_mapped(self._mapped_record(record)), None, masked)
-            bins = validate_phi_d_bins(phi_d_bins)
-            table = table_from_mapped(self.mapped_for_bins(record, bins), phi_d_bins=bins)
-            return _apply_mask(table, bins, masked)
+            bins = None if phi_d_bins is None else validate_phi_d_bins(phi_d_bins)
+            if bound or bins is None:  # the bound's factor needs the whole table
+                return _apply_mask(_table(self._mapped_record(record), bins, bound), bins, masked)
+            return _apply_mask(table_from_mapped(self.mapped_for_bins(record, bins), phi_d_bins=bins), bins, masked)
 
     def decode_many(
         self, records: Sequence[Record], *, masked: MaskedEntries = "unmeasured", batch_size: int = 16
@@ -548,10 +547,7 @@ class BrdfDecoder:
                         mapped = self._with_layers(record, next(batch))
                     else:
                         mapped = self._mapped_record(record)
-                    table = table_from_mapped(mapped)
-                    if is_edited(record) and (scale := energy_bound_scale_mapped(mapped)) != 1.0:
-                        table *= np.float32(scale)
-                    table = _apply_mask(table, None, masked)
+                    table = _apply_mask(_table(mapped, None, is_edited(record)), None, masked)
                 yield table
 
     def _check_record(self, record: Record) -> None:

@@ -75,7 +75,7 @@ from brdfcodec.conventions import (
     N_THETA_H,
     NETWORK_INPUT_SHAPE,
 )
-from brdfcodec.representation.energy import directional_albedo_mapped, scale_mapped
+from brdfcodec.representation.energy import bound_scales, directional_albedo_mapped, scale_mapped
 from brdfcodec.representation.mapping import LOG_RANGE
 
 __all__ = [
@@ -394,7 +394,7 @@ def bounded(mapped: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """
     flat = np.asarray(mapped).reshape(-1, *NETWORK_INPUT_SHAPE)
     largest = directional_albedo_mapped(flat).max(axis=(-2, -1))
-    scales = np.where(largest > 1.0, 1.0 / np.maximum(largest, 1.0), 1.0)
+    scales = bound_scales(largest)
     out = flat.copy()  # decodes within the bound stay as they are (non-finite values too, for ``invalid``)
     for i in np.flatnonzero(scales < 1.0):
         out[i] = scale_mapped(flat[i], float(scales[i]))

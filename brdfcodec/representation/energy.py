@@ -55,6 +55,7 @@ from brdfcodec.representation.units import reflectance_from_stored
 
 __all__ = [
     "ALBEDO_THETA_I_DEG",
+    "bound_scales",
     "directional_albedo",
     "directional_albedo_mapped",
     "energy_bound_scale",
@@ -179,8 +180,10 @@ def directional_albedo_mapped(mapped: npt.ArrayLike) -> np.ndarray:
     return out[0] if single else out
 
 
-def _scale_of(largest: float) -> float:
-    return 1.0 if not largest > 1.0 else 1.0 / largest
+def bound_scales(largest: npt.ArrayLike) -> np.ndarray:
+    """The energy bound's factors ``min(1, 1 / a)`` of largest directional albedos ``a`` (any shape)."""
+    values = np.asarray(largest, dtype=np.float64)
+    return np.where(values > 1.0, 1.0 / np.maximum(values, 1.0), 1.0)
 
 
 def energy_bound_scale(table: npt.ArrayLike) -> float:
@@ -196,12 +199,12 @@ def energy_bound_scale(table: npt.ArrayLike) -> float:
     float
         In (0, 1]; 1 when the table's largest directional albedo is at most 1.
     """
-    return _scale_of(float(np.max(directional_albedo(table))))
+    return float(bound_scales(np.max(directional_albedo(table))))
 
 
 def energy_bound_scale_mapped(mapped: npt.ArrayLike) -> float:
     """:func:`energy_bound_scale` of the table that mapped kept slices (63, 90, 90) decode to."""
-    return _scale_of(float(np.max(directional_albedo_mapped(mapped))))
+    return float(bound_scales(np.max(directional_albedo_mapped(mapped))))
 
 
 def scale_mapped(mapped: npt.ArrayLike, scale: float) -> np.ndarray:

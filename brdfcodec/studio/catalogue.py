@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -206,8 +206,6 @@ class Catalogue:
             from brdfcodec.format.layered_record import LayeredRecord
 
             if isinstance(base, LayeredRecord):
-                from dataclasses import replace
-
                 from brdfcodec.edit.latent_edits import with_parameters
 
                 layered = with_parameters(base, z, name=name, edit={"op": "studio"}, sigma=sigma)
