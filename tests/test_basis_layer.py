@@ -383,7 +383,9 @@ def test_the_basis_layer_follows_the_decoder_output_it_was_fitted_on(analytic_ta
     base_error = measure(base.encode(brdf, name="m"), base.decoder, brdf).meta["relae"]["mapped"]
     # Unprojected, so that the refit below needs no projection (test_projected_base.py covers projected fits).
     # latent="always": this test is about the basis layer beside a latent (records without one: test_basis_only.py)
-    encoder = BrdfEncoder(effort=1, bytes=64, latent_dtype="float16", project_base="never", latent="always")
+    # basis_coding="int8": one byte per coefficient (packed layers: test_packed_basis.py)
+    encoder = BrdfEncoder(effort=1, bytes=64, latent_dtype="float16", project_base="never", latent="always",
+                          basis_coding="int8")
     record = encoder.encode(brdf, name="m")
     # 64 B cannot hold all 75 coefficients beside a float16 μ, so the base is compact: 8 bytes of μ on the fixed
     # grid (its μ fits ±3.97), and no σ (format 2.2: the encoder leaves it out unless asked).
@@ -408,7 +410,8 @@ def test_the_basis_layer_follows_the_decoder_output_it_was_fitted_on(analytic_ta
                                          basis.vectors(8, record.basis.count), basis.entries, 1,
                                          fit_latent=False)
     assert quantise_coefficients(basis.sha256, refitted[0], 8).q.tolist() == record.basis.q.tolist()
-    tiny = BrdfEncoder(effort=1, bytes=14).encode(brdf, name="t")  # the smallest record: compact base, 1 coefficient
+    # the smallest record with int8 coefficients: compact base, 1 coefficient
+    tiny = BrdfEncoder(effort=1, bytes=14, basis_coding="int8").encode(brdf, name="t")
     assert tiny.basis.count == 1 and tiny.meta["rate"]["payload_bytes"] == 11
     assert tiny.meta["rate"]["record_bytes"] == 14  # with its index entry: name length, form, count
     no_basis = BrdfEncoder(effort=1, bytes=64, latent_dtype="float16", basis=False).encode(brdf, name="m")
@@ -429,9 +432,11 @@ def test_an_error_target_takes_the_smallest_candidate_that_meets_it(analytic_tab
     assert isinstance(chosen, LayeredRecord) and chosen.basis is not None and chosen.detail is None
     # a record without a detail layer stores its base compact, as a size budget does: at most 32 coefficients
     assert chosen.compact_mu and not chosen.store_sigma and chosen.fixed_mu_grid
-    assert chosen.meta["rate"]["payload_bytes"] == 8 + 2 + chosen.basis.count <= 42
+    # in the bytes of at most 32 int8 coefficients and their step (packed: more coefficients, format 2.3)
+    assert chosen.meta["rate"]["payload_bytes"] == 8 + chosen.basis.nbytes <= 42 and chosen.basis.top
     loose = BrdfEncoder(effort=0, max_relae=1.0, latent_dtype="float16", latent="always").encode(brdf, name="m")
-    assert loose.compact_mu and loose.basis.count == 4 and loose.meta["rate"]["payload_bytes"] == 14
+    assert loose.compact_mu and loose.basis.count >= 4 and loose.meta["rate"]["payload_bytes"] == 8 + loose.basis.nbytes
+    assert loose.basis.nbytes <= 2 + 4  # the smallest candidate: the bytes of 4 int8 coefficients
 
 
 def test_an_error_target_tries_candidates_from_small_to_large() -> None:
@@ -450,7 +455,7 @@ def test_cli_bytes_writes_the_basis_layer(red_plastic_file, tmp_path, capsys) ->
 
     out = tmp_path / "r.bvae"
     assert main(["compress", str(red_plastic_file), "-o", str(out), "--bytes", "64", "--float16",
-                 "--provenance", "--latent", "always"]) == 0  # records without a latent: test_basis_only.py
+                 "--provenance", "--latent", "always", "--basis-coding", "int8"]) == 0  # no latent: test_basis_only.py
     entry = parse_bvae(out.read_bytes()).header.entries[0]
     # 64 B beyond the name: 61 B of payload (9 of compact base, 2 of step, 50 coefficients) and 3 of index entry
     assert entry.kind == "layered" and entry.length == 61 and entry.layers["basis"]["count"] == 51
@@ -464,7 +469,8 @@ def test_cli_bytes_writes_the_basis_layer(red_plastic_file, tmp_path, capsys) ->
     projected = entry.layers["basis"].get("project") == 50  # auto: chosen per material
     assert ("base projected on 50" in shown) == projected
     smallest = tmp_path / "s.bvae"
-    assert main(["compress", str(red_plastic_file), "-o", str(smallest), "--bytes", "14", "--latent", "always"]) == 0
+    assert main(["compress", str(red_plastic_file), "-o", str(smallest), "--bytes", "14", "--latent", "always",
+                 "--basis-coding", "int8"]) == 0
     capsys.readouterr()
     assert main(["info", str(smallest)]) == 0
     shown = capsys.readouterr().out

@@ -71,8 +71,10 @@ def test_under_a_size_budget_sigma_bytes_go_to_the_basis_layer(analytic_tables) 
     brdf = analytic_tables["gold"]
     assert BrdfEncoder(effort=0, store_sigma=True).encode(brdf).kind == "latent"
     assert not BrdfEncoder(effort=0).encode(brdf).store_sigma
-    lean = BrdfEncoder(effort=0, bytes=64, latent="always", project_base="never").encode(brdf)
-    kept = BrdfEncoder(effort=0, bytes=64, latent="always", project_base="never", store_sigma=True).encode(brdf)
+    # int8 coefficients, one byte each (packed layers: test_packed_basis.py)
+    lean = BrdfEncoder(effort=0, bytes=64, latent="always", project_base="never", basis_coding="int8").encode(brdf)
+    kept = BrdfEncoder(effort=0, bytes=64, latent="always", project_base="never", store_sigma=True,
+                       basis_coding="int8").encode(brdf)
     assert lean.kind == kept.kind == "layered" and lean.compact_mu and kept.compact_mu
     assert not lean.store_sigma and kept.shared_sigma  # one byte of σ ...
     assert lean.basis.count == kept.basis.count + 1  # ... is one more coefficient

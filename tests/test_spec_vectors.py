@@ -49,9 +49,12 @@ def test_manifest_covers_what_the_spec_asks_for() -> None:
     # Records without a latent (2.1): the pairing of mu and sigma "none", the basis layer they need, no projection.
     assert {"basis-only-sigma-with-mu", "basis-only-mu-with-sigma", "basis-only-no-basis", "basis-only-projected",
             "basis-only-unknown-sigma"} <= invalid
-    assert {"basis-only", "version-2.0"} <= valid
+    # Packed basis layers (2.3): the padding, the widths the count needs, the top width, the layer bit's pairing.
+    assert {"packed-padding-bits", "packed-too-many", "packed-top-zero", "packed-top-range", "packed-without-basis",
+            "packed-short"} <= invalid
+    assert {"basis-only", "version-2.0", "packed-basis"} <= valid
     without = [r for v in MANIFEST["valid"] for r in v["records"] if r.get("layers", {}).get("mu") == "none"]
-    assert len(without) == 4 and all(r["mu"] is None and r["layers"]["sigma"] == "none" for r in without)
+    assert len(without) == 5 and all(r["mu"] is None and r["layers"]["sigma"] == "none" for r in without)
     assert {"reference.basis-only", "reference.basis-only-detail"} <= set(MANIFEST["decode_layers"]["values"])
     projected = [r for v in MANIFEST["valid"] for r in v["records"]
                  if "project" in r.get("layers", {}).get("basis", {})]
@@ -68,7 +71,7 @@ def test_manifest_covers_what_the_spec_asks_for() -> None:
 def test_valid_vector_reads_as_listed(vector: dict[str, Any]) -> None:
     parsed = parse_bvae((VECTORS / vector["file"]).read_bytes(), vector["file"])
     header = parsed.header
-    assert (FORMAT_MAJOR, FORMAT_MINOR) == (2, 2) and MANIFEST["format_version"] == "2.2"
+    assert (FORMAT_MAJOR, FORMAT_MINOR) == (2, 3) and MANIFEST["format_version"] == "2.3"
     assert f"{header.major}.{header.minor}" == vector["format_version"]  # the lowest version that holds the file
     assert header.decoder.sha256 == vector["decoder_sha256"]
     assert header.basis_sha256 == vector["basis_sha256"]

@@ -88,6 +88,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
                         help="also store the posterior width σ (by default a record stores μ alone, format 2.2, and "
                         "reads back with σ = 1; under --bytes σ's bytes go to the layers instead): the shipped "
                         "model's σ carries no information, see its model card")
+    parser.add_argument("--basis-coding", choices=("packed", "int8"), default="packed",
+                        help="with --bytes/--max-relae: how records without a detail layer store basis "
+                        "coefficients: packed (default, format 2.3: later vectors get fewer bits at one step, "
+                        "about twice the coefficients in the same bytes) or int8 (one byte each, readable by "
+                        "format 2.2 readers)")
     parser.set_defaults(handler=run)
 
 
@@ -207,7 +212,7 @@ def run(args: argparse.Namespace) -> int:
     encoder = BrdfEncoder(
         args.model, effort=args.effort, bytes=args.bytes, max_relae=args.max_relae, metric=args.metric or "mapped",
         basis=not args.no_basis, project_base=args.project_base or "auto",
-        latent_dtype=dtype, latent=latent, store_sigma=args.sigma,
+        latent_dtype=dtype, latent=latent, store_sigma=args.sigma, basis_coding=args.basis_coding,
     )
     with tqdm(total=len(items), desc="compress", unit="material", disable=len(items) < 2 or None) as bar:
         records: list[Record] = encode_records(

@@ -143,7 +143,8 @@ def _record_summary(entry: RecordEntry, latent_dtype: str) -> dict[str, Any]:
         item["graft_dims"] = list(entry.graft_dims)
     if "basis" in layers:
         basis = layers["basis"]
-        item["basis"] = {"count": basis["count"], "first": basis.get("first", 0), "project": basis.get("project", 0)}
+        item["basis"] = {"count": basis["count"], "first": basis.get("first", 0), "project": basis.get("project", 0),
+                         "packed_top": basis.get("top", 0)}
     if "detail" in layers:
         item["detail_bytes"] = layers["detail"]["length"]
     item.update({k: v for k, v in entry.meta.items()
@@ -161,7 +162,9 @@ def _stored_forms(item: dict[str, Any], latent_dtype: str) -> str:
     if "basis" in item:
         count, first, project = item["basis"]["count"], item["basis"]["first"], item["basis"]["project"]
         vectors = f"vector {first + 1}" if count == 1 else f"vectors {first + 1}–{first + count}"
-        parts.append(f"basis {count} ({vectors})" + (f", base projected on {project}" if project else ""))
+        top = item["basis"].get("packed_top", 0)
+        parts.append(f"basis {count} ({vectors}{f'; packed, top width {top}' if top else ''})"
+                     + (f", base projected on {project}" if project else ""))
     if "detail_bytes" in item:
         parts.append(f"detail {item['detail_bytes']:,} B")
     return ", ".join(parts)

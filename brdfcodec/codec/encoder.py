@@ -37,7 +37,7 @@ from brdfcodec.representation.metrics import relae_both
 from brdfcodec.runtime.threads import codec_threads
 
 if TYPE_CHECKING:
-    from brdfcodec.codec.encoding import LatentChoice, ProjectBase
+    from brdfcodec.codec.encoding import BasisCoding, LatentChoice, ProjectBase
 
 from brdfcodec.codec.decoder import BrdfDecoder, _EvalMode
 from brdfcodec.codec.prepare import ModelSpec, prepare_source, resolve_model
@@ -117,6 +117,11 @@ class BrdfEncoder:
         half a plain record's payload; under a size budget its bytes go to the layers) and reads back with
         σ = 1: the shipped model's σ says nothing about how certain an encoding is (its model card, "The
         posterior width σ").
+    basis_coding : {"packed", "int8"}, default "packed"
+        With ``bytes`` or ``max_relae``: how records without a detail layer store their basis
+        coefficients. ``"packed"`` (format
+        2.3) gives later basis vectors fewer bits at one step, so a budget holds about twice as many
+        coefficients; ``"int8"`` stores one byte each (readable by 2.2 readers).
     """
 
     manifest: ModelManifest | None
@@ -136,13 +141,14 @@ class BrdfEncoder:
         project_base: ProjectBase | bool = "auto",
         latent: LatentChoice = "auto",
         store_sigma: bool = False,
+        basis_coding: BasisCoding = "packed",
     ) -> None:
         from brdfcodec.codec.encoding import EncodeOptions
 
         self.options = EncodeOptions(
             effort=effort, bytes_budget=bytes, max_relae=max_relae, metric=metric, detail_step=detail_step,
             latent_itemsize=2 if latent_dtype == "float16" else 4, basis=basis, project_base=project_base,
-            latent=latent, store_sigma=store_sigma,
+            latent=latent, store_sigma=store_sigma, basis_coding=basis_coding,
         )
         manifest = resolve_model(model)
         network, _, loaded = load_model(manifest.folder, parts=("encoder",), device=str(device))

@@ -22,12 +22,16 @@ from brdfcodec.conventions import MAPPED_MAX
 from brdfcodec.format.bvae import LatentRecord, descriptor_size
 from brdfcodec.format.layered_record import MU_INT8_FIXED, LayeredRecord, compact_mu_values
 from brdfcodec.layers.basis import (
+    MAX_BASIS_COUNT,
+    STEP_BYTES,
     BasisError,
     BasisLayer,
     SharedBasis,
     basis_offset,
+    packed_coefficients,
     quantise_coefficients,
 )
+from brdfcodec.layers.packed import choose_packing, packed_widths
 
 if TYPE_CHECKING:
     from brdfcodec.io.merl import MerlBRDF
@@ -51,7 +55,8 @@ class LayerDecoder(Protocol):
     def project_base(self, record: LayeredRecord, mapped: np.ndarray) -> None: ...
 
 __all__ = [
-    "PROJECTED_BASE_VECTORS", "EncodeOptions", "LatentChoice", "ProjectBase", "layer_records", "projected_base_vectors",
+    "PROJECTED_BASE_VECTORS", "BasisCoding", "EncodeOptions", "LatentChoice", "ProjectBase", "layer_records",
+    "projected_base_vectors",
 ]
 
 #: Basis vectors a writer projects a layered record's base decode on (``layers.basis.project``, format 1.6) when
@@ -74,6 +79,18 @@ _PROJECT_BASE_CHOICES: tuple[str, ...] = get_args(ProjectBase)
 #: every record can be edited.
 LatentChoice = Literal["auto", "always"]
 _LATENT_CHOICES: tuple[str, ...] = get_args(LatentChoice)
+
+#: How the records of rate control without a detail layer store their basis coefficients (:class:`EncodeOptions`):
+#: ``"packed"`` (format 2.3, ``spec/bvae-format.md`` §4.7: one step, fewer bits for later vectors, so the bytes
+#: of k int8 coefficients hold about twice as many) or ``"int8"`` (a float16 step and one byte each, as before
+#: 2.3). Records with a detail layer store int8.
+BasisCoding = Literal["packed", "int8"]
+_BASIS_CODINGS: tuple[str, ...] = get_args(BasisCoding)
+
+#: Most coefficients of a packed layer that fits where k int8 ones would: its count's varint in the record's
+#: descriptor stays as long as k's.
+def _most_packed(k: int) -> int:
+    return 127 if k < 128 else MAX_BASIS_COUNT
 
 
 def projected_base_vectors(decoder: LayerDecoder, basis: SharedBasis) -> int:
@@ -121,6 +138,9 @@ class EncodeOptions:
         keeps a latent code. Nothing changes without a target, or without a shared basis.
     store_sigma : bool
         Store σ (False, the default: μ alone, format 2.2; rate control gives σ's bytes to the layers).
+    basis_coding : {"packed", "int8"}
+        How the records of rate control (a size budget or an error target) without a detail layer store basis
+        coefficients (:data:`BasisCoding`; default ``"packed"``, format 2.3).
     """
 
     effort: int = 1
@@ -133,8 +153,11 @@ class EncodeOptions:
     project_base: ProjectBase = "auto"
     latent: LatentChoice = "auto"
     store_sigma: bool = False
+    basis_coding: BasisCoding = "packed"
 
     def __post_init__(self) -> None:
+        if self.basis_coding not in _BASIS_CODINGS:
+            raise ValueError(f"basis_coding must be one of {list(_BASIS_CODINGS)}, got {self.basis_coding!r}")
         if self.latent not in _LATENT_CHOICES:
             raise ValueError(f"latent must be one of {list(_LATENT_CHOICES)}, got {self.latent!r}")
         if isinstance(self.project_base, bool):
@@ -152,6 +175,12 @@ class EncodeOptions:
             raise ValueError(f"max_relae must be a positive number, got {self.max_relae}")
         if self.metric not in ("mapped", "linear"):
             raise ValueError(f"metric must be 'mapped' or 'linear', got {self.metric!r}")
+
+    @property
+    def packed(self) -> bool:
+        """Whether records without a detail layer pack their basis layer (``"packed"`` under a size budget or an
+        error target)."""
+        return self.basis_coding == "packed" and (self.bytes_budget is not None or self.max_relae is not None)
 
     @property
     def layered(self) -> bool:
@@ -240,6 +269,8 @@ def _basis_only_fit(
     weights = np.asarray(masks, dtype=np.float32).reshape(-1)[on_basis]
 
     def fit(k: int) -> tuple[BasisLayer, np.ndarray]:
+        if options.packed:
+            return fit_packed(k)
         components = basis.vectors(0, k)
         coefficients = fit_basis_only_coefficients(target, weights, centre, components, options.effort)
         layer = quantise_coefficients(basis.sha256, coefficients)
@@ -247,6 +278,25 @@ def _basis_only_fit(
             q = polish_quantised_coefficients(layer.step, layer.q, target, weights, centre, components,
                                               POLISH_PASSES[options.effort])
             layer = BasisLayer(basis.sha256, layer.step, q)
+        return layer, basis.on_grid(centre + basis.weighted_sum(layer.coefficients()))
+
+    def fit_packed(k: int) -> tuple[BasisLayer, np.ndarray]:
+        # in the bytes of k int8 coefficients: the count the least-squares coefficients pack to, then those fitted
+        # (Adam) and packed, and the integers polished within their fields
+        max_bytes = STEP_BYTES + k
+        available = min(basis.count, _most_packed(k))
+        least_squares = fit_basis_only_coefficients(target, weights, centre, basis.vectors(0, available), 0)
+        count = _packed_count(least_squares, 0, max_bytes)
+        components = basis.vectors(0, count)
+        coefficients = fit_basis_only_coefficients(target, weights, centre, components, options.effort)
+        layer = packed_coefficients(basis.sha256, coefficients, max_bytes)
+        assert layer is not None
+        if POLISH_PASSES[options.effort]:
+            widths = packed_widths(layer.top, 0, layer.count)
+            q = polish_quantised_coefficients(layer.step, layer.q, target, weights, centre, components[:layer.count],
+                                              POLISH_PASSES[options.effort],
+                                              bounds=(-(1 << (widths - 1)), (1 << (widths - 1)) - 1))
+            layer = BasisLayer(basis.sha256, layer.step, q, 0, 0, layer.top)
         return layer, basis.on_grid(centre + basis.weighted_sum(layer.coefficients()))
 
     return fit
@@ -261,22 +311,31 @@ def _basis_fit(
     config = decoder.network.config
     linear_rank = config.latent_dim if config.linear_basis else 0
 
-    joint: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]] = {}
+    joint: dict[tuple[int, int, int], tuple[np.ndarray, np.ndarray]] = {}
     project = projected_base_vectors(decoder, basis) if options.project_base != "never" else 0
     ways = [project] if options.project_base == "always" or not project else [0, project]
     target, weights = np.asarray(inputs, dtype=np.float32), np.asarray(masks, dtype=np.float32)
-    made: dict[tuple[int, MuStorage, int], tuple[LatentRecord, BasisLayer, np.ndarray]] = {}
+    made: dict[tuple[int, MuStorage, int, bool], tuple[LatentRecord, BasisLayer, np.ndarray]] = {}
 
-    def fit_one(k: int, mu_storage: MuStorage, p: int) -> tuple[LatentRecord, BasisLayer, np.ndarray]:
-        first = basis_offset(linear_rank, basis.count, k)
-        components = basis.vectors(first, k)
+    def fit_one(k: int, mu_storage: MuStorage, p: int, packed: bool) -> tuple[LatentRecord, BasisLayer, np.ndarray]:
         projection = None if not p else (basis.vectors(0, p), decoder.projection_centre)
-        if (k, p) not in joint:
-            joint[k, p] = fit_basis_coefficients(
+        max_bytes = STEP_BYTES + k
+        if packed:  # in the bytes of k int8 coefficients: as many as the least-squares coefficients pack to
+            first = min(linear_rank, basis.count - 1)
+            available = min(basis.count - first, _most_packed(k))
+            _, least_squares = fit_basis_coefficients(
+                decoder.network, base.mu[None], inputs[None], masks[None], basis.vectors(first, available),
+                basis.entries, 0, projection=projection)
+            k = _packed_count(least_squares[0], first, max_bytes)
+        else:
+            first = basis_offset(linear_rank, basis.count, k)
+        components = basis.vectors(first, k)
+        if (first, k, p) not in joint:
+            joint[first, k, p] = fit_basis_coefficients(
                 decoder.network, base.mu[None], inputs[None], masks[None], components, basis.entries, options.effort,
                 projection=projection,
             )
-        codes, coefficients = joint[k, p]
+        codes, coefficients = joint[first, k, p]
         if mu_storage is not None:
             # μ as a compact record stores it (int8 on the fixed grid or with a step), then the coefficients
             # refitted to that code.
@@ -287,7 +346,12 @@ def _basis_fit(
             )
         else:
             code = _as_stored(codes, options.latent_itemsize)[0]
-        layer = quantise_coefficients(basis.sha256, coefficients[0], first, p)
+        if packed:
+            packed_layer = packed_coefficients(basis.sha256, coefficients[0], max_bytes, first, p)
+            assert packed_layer is not None
+            layer = packed_layer
+        else:
+            layer = quantise_coefficients(basis.sha256, coefficients[0], first, p)
         record = LatentRecord(base.name, code, base.sigma, base.meta)
         mapped = decoder.decode_mapped(code)
         decoder.project_base(LayeredRecord(base.name, code, base.sigma, base.meta, basis=layer), mapped)
@@ -304,10 +368,19 @@ def _basis_fit(
         # 1.5x a base-only one that a layered decode may take (benchmark decode-layered).
         chosen = [0] if under_detail and options.project_base == "auto" else ways
         fits = []
+        packed = options.packed and not under_detail
         for p in chosen:
-            if (k, mu_storage, p) not in made:
-                made[k, mu_storage, p] = fit_one(k, mu_storage, p)
-            fits.append(made[k, mu_storage, p])
+            if (k, mu_storage, p, packed) not in made:
+                made[k, mu_storage, p, packed] = fit_one(k, mu_storage, p, packed)
+            fits.append(made[k, mu_storage, p, packed])
         return min(fits, key=lambda candidate: kept_slice_error(candidate[2]))
 
     return fit
+
+
+def _packed_count(coefficients: np.ndarray, first: int, max_bytes: int) -> int:
+    """How many of these coefficients (of vectors ``first``, …) the best packed layer of ``max_bytes`` keeps."""
+    choice = choose_packing(coefficients, first, max_bytes)
+    if choice is None:
+        raise ValueError(f"no packed basis layer fits in {max_bytes} bytes")
+    return len(choice.q)

@@ -400,7 +400,11 @@ class _WithoutLatent:
         return self.fits[k]
 
     def size(self, k: int) -> int:
-        """Payload (the step and k coefficients) and descriptor."""
+        """Payload and descriptor of the record fitted in the bytes of k int8 coefficients (the step and k bytes;
+        a packed layer's own size once fitted, which is at most that)."""
+        if k in self.fits:
+            layer = self.fits[k][0]
+            return layer.nbytes + record_overhead(self.base.name, basis_count=layer.count)
         return STEP_BYTES + k + record_overhead(self.base.name, basis_count=k)
 
     def for_budget(self, bytes_budget: int) -> int | None:

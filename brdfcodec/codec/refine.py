@@ -363,7 +363,8 @@ def polish_quantised_coefficients(
     centre: npt.ArrayLike,
     components: npt.ArrayLike,
     passes: int,
-) -> npt.NDArray[np.int8]:
+    bounds: tuple[npt.ArrayLike, npt.ArrayLike] | None = None,
+) -> npt.NDArray[np.int8] | npt.NDArray[np.int64]:
     """Integer coefficients moved a step at a time while that lowers the mapped L1 error of clamp(m + s·Σ qᵢ vᵢ).
 
     Rounding each coefficient to the step s = max |c| / 127 adds an error the float fit never saw; this
@@ -381,14 +382,18 @@ def polish_quantised_coefficients(
         As for :func:`fit_basis_only_coefficients`.
     components : array_like, shape (k, E)
     passes : int
+    bounds : (low, high) of array_like of int, shape (k,), optional
+        Each integer's range (a packed layer's fields, :mod:`brdfcodec.layers.packed`); default −127 … 127.
 
     Returns
     -------
-    ndarray of int8, shape (k,)
+    ndarray of int8 (int64 with ``bounds``), shape (k,)
     """
     from brdfcodec.conventions import MAPPED_MAX
 
     codes = np.asarray(q, dtype=np.int64).copy()
+    low, high = (np.full(len(codes), -127), np.full(len(codes), 127)) if bounds is None else (
+        np.asarray(bounds[0], dtype=np.int64), np.asarray(bounds[1], dtype=np.int64))
     vectors = np.asarray(components, dtype=np.float32)
     x = np.asarray(inputs, dtype=np.float32).reshape(-1)
     w = np.asarray(masks, dtype=np.float32).reshape(-1)
@@ -409,7 +414,7 @@ def polish_quantised_coefficients(
             for direction in (1, -1):
                 change = np.float32(direction * step) * vectors[i]
                 steps = 0
-                while abs(codes[i] + direction) <= 127:  # further while each step lowers the error
+                while low[i] <= codes[i] + direction <= high[i]:  # further while each step lowers the error
                     trial = decoded + change
                     trial_error = error(trial)
                     if trial_error >= current:
@@ -420,4 +425,4 @@ def polish_quantised_coefficients(
                     break
         if not moved:
             break
-    return codes.astype(np.int8)
+    return codes.astype(np.int8) if bounds is None else codes

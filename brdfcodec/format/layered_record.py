@@ -38,6 +38,7 @@ from brdfcodec.layers.basis import (
     int8_with_step,
 )
 from brdfcodec.layers.detail import _DTYPES, DETAIL_TRANSFORM, MAX_STEP, MIN_STEP, DetailLayer, check_detail_frame
+from brdfcodec.layers.packed import MAX_TOP_WIDTH, packed_bytes, packed_widths
 
 __all__ = [
     "LAYERED_KIND",
@@ -378,7 +379,7 @@ def layers_length(layers: object, where: str, latent_dim: int = 0) -> int:
 def _basis_length(basis: object, where: str) -> int:
     if not isinstance(basis, Mapping):
         raise ValueError(f"{where} layers.basis is not a JSON object")
-    unknown = sorted(set(basis) - {"sha256", "count", "first", "project"})
+    unknown = sorted(set(basis) - {"sha256", "count", "first", "project", "top"})
     if unknown:
         raise UnsupportedLayerError(
             f"{where} basis layer has fields {unknown}, unknown to this reader; upgrade brdfcodec"
@@ -395,6 +396,14 @@ def _basis_length(basis: object, where: str) -> int:
         )
     if not isinstance(project, int) or isinstance(project, bool) or not 1 <= project <= MAX_BASIS_COUNT:
         raise ValueError(f"{where} basis project {project!r} is not an integer in [1, {MAX_BASIS_COUNT}]")
+    if "top" in basis:
+        top = basis["top"]
+        if not isinstance(top, int) or isinstance(top, bool) or not 1 <= top <= MAX_TOP_WIDTH:
+            raise ValueError(f"{where} basis top width {top!r} is not an integer in [1, {MAX_TOP_WIDTH}]")
+        if packed_widths(top, first, count)[-1] < 1:
+            raise ValueError(f"{where} packs {count} basis coefficients from vector {first} with top width {top}, "
+                             "more than it holds (every field needs at least 1 bit)")
+        return packed_bytes(top, first, count)
     return STEP_BYTES + count
 
 
@@ -439,7 +448,7 @@ def layered_from_payload(
     then σ unless stored as bytes: :func:`latent_values_stored` of them) and the payload bytes after them."""
     d = latent_dim
     if layers.get("mu") == MU_NONE:  # a basis-only record (format 2.1): the basis layer, then any detail layer
-        size = STEP_BYTES + int(layers["basis"]["count"])
+        size = _basis_length(layers["basis"], name)
         coefficients = basis_layer_from_bytes(layers["basis"], bytes(tail[:size]))
         residual = None
         if "detail" in layers:
@@ -474,7 +483,7 @@ def layered_from_payload(
              "fixed_mu_grid": fixed_mu_grid, "store_sigma": store_sigma}
     basis = None
     if "basis" in layers:
-        size = STEP_BYTES + int(layers["basis"]["count"])
+        size = _basis_length(layers["basis"], name)
         basis = basis_layer_from_bytes(layers["basis"], bytes(tail[:size]))
         tail = tail[size:]
     if "detail" not in layers:

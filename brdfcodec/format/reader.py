@@ -25,6 +25,7 @@ from brdfcodec.format.container import (
     _DTYPES,
     _LAYER_BASIS,
     _LAYER_DETAIL,
+    _LAYER_PACKED,
     _PREAMBLE,
     _VARINT_MAX_BYTES,
     FLAG_BASIS,
@@ -55,6 +56,7 @@ from brdfcodec.format.records import MAX_LATENT_DIM as MAX_LATENT_DIM  # re-expo
 from brdfcodec.format.records import GraftRecord, LatentRecord, meta_problem
 from brdfcodec.format.strict_json import _check_json_text
 from brdfcodec.format.writer import _DETAIL_CODES, _KIND_CODES, _MU_CODES, _SIGMA_CODES
+from brdfcodec.layers.packed import MAX_TOP_WIDTH
 
 __all__ = ["BvaeReader", "parse_bvae", "read_bvae", "read_header"]
 
@@ -158,7 +160,7 @@ def _parse_form(path: str, cursor: _Cursor, i: int, latent_dim: int, basis_sha: 
     mu_code, sigma_code, layer_bits = cursor.u8(f"{where}'s mu"), cursor.u8(f"{where}'s sigma"), cursor.u8(where)
     mus = {v: k for k, v in _MU_CODES.items()}
     sigmas = {v: k for k, v in _SIGMA_CODES.items()}
-    if mu_code not in mus or sigma_code not in sigmas or layer_bits & ~(_LAYER_BASIS | _LAYER_DETAIL):
+    if mu_code not in mus or sigma_code not in sigmas or layer_bits & ~(_LAYER_BASIS | _LAYER_DETAIL | _LAYER_PACKED):
         raise UnsupportedVersionError(
             path, f"{where} stores mu, sigma or layers in a way unknown to this reader (codes {mu_code}, {sigma_code}, "
             f"{layer_bits}); upgrade brdfcodec")
@@ -172,6 +174,8 @@ def _parse_form(path: str, cursor: _Cursor, i: int, latent_dim: int, basis_sha: 
                     "without a stored sigma may be its base alone)")
     if mus[mu_code] == "none" and not layer_bits & _LAYER_BASIS:
         raise _fail(path, f"{where} stores no latent and no basis layer: a record without a latent needs one")
+    if layer_bits & _LAYER_PACKED and not layer_bits & _LAYER_BASIS:
+        raise _fail(path, f"{where} packs a basis layer it does not have (layer bit 2 without bit 0)")
     layers: dict[str, Any] = {}
     if mus[mu_code] is not None:
         layers["mu"] = mus[mu_code]
@@ -184,9 +188,15 @@ def _parse_form(path: str, cursor: _Cursor, i: int, latent_dim: int, basis_sha: 
         if project and mus[mu_code] == "none":
             raise _fail(path, f"{where} stores no latent but projects its base on {project} basis vectors (a record "
                         "without a latent has no base decode to project: project must be 0)")
-        # as brdfcodec.format.layered_record.layers_entry writes it: ``first`` and ``project`` only when not 0
+        top = 0
+        if layer_bits & _LAYER_PACKED:
+            top = cursor.u8(f"{where}'s packed top width")
+            if not 1 <= top <= MAX_TOP_WIDTH:
+                raise _fail(path, f"{where} packs its basis layer with top width {top}, outside 1 to {MAX_TOP_WIDTH}")
+        # as brdfcodec.format.layered_record.layers_entry writes it: ``first``, ``project`` and ``top`` only when
+        # not 0
         layers["basis"] = {"sha256": basis_sha, "count": 1, **({"first": first} if first else {}),
-                           **({"project": project} if project else {})}
+                           **({"project": project} if project else {}), **({"top": top} if top else {})}
     if layer_bits & _LAYER_DETAIL:
         dtypes = {v: k for k, v in _DETAIL_CODES.items()}
         code = cursor.u8(f"{where}'s detail form")

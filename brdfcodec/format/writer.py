@@ -21,6 +21,7 @@ from brdfcodec.format.container import (
     _DTYPES,
     _LAYER_BASIS,
     _LAYER_DETAIL,
+    _LAYER_PACKED,
     _PREAMBLE,
     _VARINT_MAX_BYTES,
     _ZSTD_FAST_ABOVE,
@@ -134,7 +135,8 @@ def _form_of(record: Record) -> tuple[Any, ...]:
     layers = layers_entry(record)  # type: ignore[arg-type]
     basis, detail = layers.get("basis"), layers.get("detail")
     return ("layered", layers.get("mu"), layers.get("sigma"),
-            None if basis is None else (int(basis.get("first", 0)), int(basis.get("project", 0))),
+            None if basis is None else (int(basis.get("first", 0)), int(basis.get("project", 0)),
+                                        int(basis.get("top", 0))),
             None if detail is None else str(detail["dtype"]))
 
 
@@ -146,18 +148,25 @@ def _form_bytes(form: tuple[Any, ...]) -> bytes:
     if kind == "layered":
         _, mu, sigma, basis, detail = form
         layers = (_LAYER_BASIS if basis is not None else 0) | (_LAYER_DETAIL if detail is not None else 0)
+        if basis is not None and basis[2]:
+            layers |= _LAYER_PACKED
         out += bytes([_MU_CODES[mu], _SIGMA_CODES[sigma], layers])
         if basis is not None:
             out += _varint(basis[0]) + _varint(basis[1])
+            if basis[2]:
+                out += bytes([basis[2]])
         if detail is not None:
             out += bytes([_DETAIL_CODES[detail]])
     return out
 
 
 def _minor_needed(records: Sequence[Record]) -> int:
-    """The lowest minor version that holds these records (§2): 2 once a record stores a latent without σ."""
+    """The lowest minor version that holds these records (§2): 3 once a basis layer is packed, 2 once a record
+    stores a latent without σ, else 1."""
+    if any(getattr(getattr(r, "basis", None), "top", 0) for r in records):
+        return FORMAT_MINOR
     without_sigma = any(getattr(r, "has_latent", False) and not getattr(r, "store_sigma", True) for r in records)
-    return FORMAT_MINOR if without_sigma else FORMAT_MINOR - 1
+    return 2 if without_sigma else 1
 
 
 def encode_bvae(

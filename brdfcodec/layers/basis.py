@@ -36,6 +36,7 @@ from brdfcodec.layers.basis_layer import (
     basis_layer_from_bytes,
     check_basis_layers,
     check_records_without_latent,
+    packed_coefficients,
     quantise_coefficients,
 )
 from brdfcodec.layers.basis_storage import (
@@ -99,6 +100,7 @@ __all__ = [
     "int8_with_step",
     "load_shared_basis",
     "model_basis_lookup",
+    "packed_coefficients",
     "quantise_coefficients",
     "shared_basis_rank",
     "with_colour_permutations",

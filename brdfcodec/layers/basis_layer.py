@@ -14,6 +14,17 @@ import numpy.typing as npt
 
 from brdfcodec.errors import BasisError, BasisMismatchError
 from brdfcodec.io.hashing import is_sha256_hex
+from brdfcodec.layers.packed import (
+    MAX_TOP_WIDTH,
+    PACKED_HEADER_BYTES,
+    choose_packing,
+    pack_fields,
+    packed_bytes,
+    packed_step,
+    packed_step_code,
+    packed_widths,
+    unpack_fields,
+)
 from brdfcodec.layers.quantise import (
     MAX_BASIS_COUNT,
     STEP_BYTES,
@@ -29,6 +40,7 @@ __all__ = [
     "basis_layer_from_bytes",
     "check_basis_layers",
     "check_records_without_latent",
+    "packed_coefficients",
     "quantise_coefficients",
 ]
 
@@ -42,8 +54,9 @@ class BasisLayer:
     sha256 : str
         The shared basis' SHA-256 (64 lower-case hex digits).
     step : float
-        Quantisation step s (a positive, finite float16 value), mapped units.
-    q : ndarray of int8, shape (k,)
+        Quantisation step s, mapped units: a positive, finite float16 value, or in a packed layer one of the
+        steps 2^(e/16 − 8) (:func:`~brdfcodec.layers.packed.packed_step`).
+    q : ndarray of int8 (int64 in a packed layer), shape (k,)
         Quantised coefficients; the coefficients are ``s · q``.
     first : int, default 0
         Index of the basis vector of the first coefficient: the layer codes
@@ -54,17 +67,24 @@ class BasisLayer:
         P > 0: the base decode is projected on the basis' first P vectors
         around the decoder's linear-path mean before the layer is added
         (format 1.6, :meth:`SharedBasis.project`); 0: it is not.
+    top : int, default 0
+        T > 0: a packed layer (format 2.3, :mod:`brdfcodec.layers.packed`), coefficient i a field of
+        T − round(log₂(first + i + 1)) bits; 0: int8 coefficients.
     """
 
     sha256: str
     step: float
-    q: npt.NDArray[np.int8]
+    q: npt.NDArray[np.int8] | npt.NDArray[np.int64]
     first: int = 0
     project: int = 0
+    top: int = 0
 
     def __post_init__(self) -> None:
         if not is_sha256_hex(self.sha256):
             raise ValueError(f"basis sha256 must be 64 lower-case hex digits, got {self.sha256!r}")
+        if self.top:
+            self._check_packed()
+            return
         step = np.float16(self.step)
         if not (np.isfinite(step) and step > 0 and float(step) == float(self.step)):
             raise ValueError(f"basis step must be a positive finite float16 value, got {self.step!r}")
@@ -81,6 +101,30 @@ class BasisLayer:
         ):
             raise ValueError(f"basis projection must be an integer in [0, {MAX_BASIS_COUNT}], got {self.project!r}")
 
+    def _check_packed(self) -> None:
+        if isinstance(self.top, bool) or not isinstance(self.top, int | np.integer) or not (
+                1 <= self.top <= MAX_TOP_WIDTH):
+            raise ValueError(f"packed basis layer's top width must be an integer in [1, {MAX_TOP_WIDTH}], "
+                             f"got {self.top!r}")
+        packed_step_code(self.step)
+        q = np.asarray(self.q)
+        if q.ndim != 1 or not np.issubdtype(q.dtype, np.integer) or not 1 <= len(q) <= MAX_BASIS_COUNT:
+            raise ValueError(f"basis coefficients must be 1 to {MAX_BASIS_COUNT} integers")
+        for name in ("first", "project"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int | np.integer) or not 0 <= value <= MAX_BASIS_COUNT:
+                raise ValueError(f"basis {name} must be an integer in [0, {MAX_BASIS_COUNT}], got {value!r}")
+        if self.first + len(q) > MAX_BASIS_COUNT:
+            raise ValueError(f"basis first vector must be an integer with first + count ≤ {MAX_BASIS_COUNT}, "
+                             f"got {self.first!r}")
+        widths = packed_widths(self.top, self.first, len(q))
+        if widths[-1] < 1:
+            raise ValueError(f"a packed layer of top width {self.top} from vector {self.first} holds fewer than "
+                             f"{len(q)} coefficients")
+        low, high = -(1 << (widths - 1)), (1 << (widths - 1)) - 1
+        if ((q < low) | (q > high)).any():
+            raise ValueError("a packed coefficient does not fit its field")
+
     @property
     def count(self) -> int:
         """Number of coefficients k."""
@@ -88,12 +132,18 @@ class BasisLayer:
 
     @property
     def nbytes(self) -> int:
-        """Stored size: the float16 step and k bytes."""
+        """Stored size: the float16 step and k bytes; packed, the step code and the fields' bytes."""
+        if self.top:
+            return packed_bytes(self.top, self.first, self.count)
         return STEP_BYTES + self.count
 
     @property
     def data(self) -> bytes:
-        """Payload bytes: the step as little-endian float16, then the k int8 coefficients."""
+        """Payload bytes: the step as little-endian float16, then the k int8 coefficients; packed, the step
+        code, then the fields (§4.7)."""
+        if self.top:
+            widths = packed_widths(self.top, self.first, self.count)
+            return bytes([packed_step_code(self.step)]) + pack_fields(self.q, widths)
         return int8_step_bytes(self.step, self.q)
 
     def coefficients(self) -> npt.NDArray[np.float32]:
@@ -107,6 +157,8 @@ class BasisLayer:
             entry["first"] = int(self.first)
         if self.project:
             entry["project"] = int(self.project)
+        if self.top:
+            entry["top"] = int(self.top)
         return entry
 
 def quantise_coefficients(sha256: str, coefficients: npt.ArrayLike, first: int = 0, project: int = 0) -> BasisLayer:
@@ -115,6 +167,16 @@ def quantise_coefficients(sha256: str, coefficients: npt.ArrayLike, first: int =
     vectors (0: not projected)."""
     step, q = int8_with_step(coefficients, "basis coefficients")
     return BasisLayer(sha256, step, q, int(first), int(project))
+
+def packed_coefficients(sha256: str, coefficients: npt.ArrayLike, max_bytes: int, first: int = 0,
+                        project: int = 0) -> BasisLayer | None:
+    """A packed basis layer (format 2.3) of at most ``max_bytes`` closest to ``coefficients`` (of vectors
+    ``first``, ``first + 1``, …; the leading ones that fit), over a base projected on ``project`` vectors;
+    None when not even one coefficient fits (:func:`~brdfcodec.layers.packed.choose_packing`)."""
+    choice = choose_packing(coefficients, int(first), int(max_bytes))
+    if choice is None:
+        return None
+    return BasisLayer(sha256, packed_step(choice.step_code), choice.q, int(first), int(project), choice.top)
 
 def check_basis_layers(
     entries: Sequence[Any], basis_named: Callable[[str], SharedBasis | None], where: str, own: str | None
@@ -203,6 +265,12 @@ def check_records_without_latent(
 def basis_layer_from_bytes(entry: Mapping[str, Any], data: bytes) -> BasisLayer:
     """A basis layer from its validated index entry and its payload bytes."""
     count = int(entry["count"])
+    top, first = int(entry.get("top", 0)), int(entry.get("first", 0))
+    if top:
+        if len(data) != packed_bytes(top, first, count):
+            raise ValueError(f"packed basis layer holds {len(data)} bytes, expected {packed_bytes(top, first, count)}")
+        q = unpack_fields(data[PACKED_HEADER_BYTES:], packed_widths(top, first, count))
+        return BasisLayer(str(entry["sha256"]), packed_step(data[0]), q, first, int(entry.get("project", 0)), top)
     if len(data) != STEP_BYTES + count:
         raise ValueError(f"basis layer holds {len(data)} bytes, expected {STEP_BYTES + count}")
     step, q = int8_from_step_bytes(data, "basis step")

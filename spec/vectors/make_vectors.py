@@ -74,12 +74,15 @@ def graft_form(dims: list[int]) -> bytes:
 
 
 def layered_form(mu: int = 0, sigma: int = 0, *, basis: tuple[int, int] | None = None, detail: int | None = None,
-                 layer_bits: int | None = None) -> bytes:
-    """A layered form (§3.2): mu and sigma codes, basis (first, project), detail code; ``layer_bits`` overrides."""
-    bits = (1 if basis is not None else 0) | (2 if detail is not None else 0)
+                 layer_bits: int | None = None, top: int | None = None) -> bytes:
+    """A layered form (§3.2): mu and sigma codes, basis (first, project), detail code, a packed basis layer's top
+    width (since 2.3); ``layer_bits`` overrides the layer bits."""
+    bits = (1 if basis is not None else 0) | (2 if detail is not None else 0) | (4 if top is not None else 0)
     out = bytes([2, mu, sigma, bits if layer_bits is None else layer_bits])
     if basis is not None:
         out += varint(basis[0]) + varint(basis[1])
+    if top is not None:
+        out += bytes([top])
     if detail is not None:
         out += bytes([detail])
     return out
@@ -238,8 +241,8 @@ def invalid_vectors() -> dict[str, tuple[bytes, str, str]]:
     lay = {"step": 0.1, "detail_length": len(detail)}
     add("layered-unknown-detail-form", one("l", lay_payload, layered_form(detail=2), **lay), "unsupported",
         "detail form code 2 (a transform or coefficient type this reader does not know)")
-    add("layered-unknown-layer", one("l", lay_payload, layered_form(detail=0, layer_bits=2 | 4), **lay),
-        "unsupported", "layer bit 2 set besides the detail layer's")
+    add("layered-unknown-layer", one("l", lay_payload, layered_form(detail=0, layer_bits=2 | 8), **lay),
+        "unsupported", "layer bit 3 set besides the detail layer's (bit 2, a packed basis layer, is known since 2.3)")
     add("layered-no-layer", one("l", good, layered_form(layer_bits=0)), "malformed",
         "a layered form with neither a basis nor a detail layer")
     add("detail-step-range", one("l", lay_payload, layered_form(detail=0), step=1000.0,
@@ -320,6 +323,23 @@ def invalid_vectors() -> dict[str, tuple[bytes, str, str]]:
         "malformed", "a record without a latent followed by the 8 bytes of a float32 mu (trailing bytes)")
     add("basis-only-unknown-sigma", basis_file(layered_form(3, 4, basis=(0, 0)), only), "unsupported",
         "mu 'none' with sigma code 4: an unknown code is unsupported before the pairing is checked")
+    # Packed basis layers (2.3, §4.7): form bit 2 and a top width; the step code, then the fields. T = 9 from
+    # vector 0: widths 9, 8, 7 (24 bits: 3 bytes); values 3, -3, 0 least significant bit first.
+    packed = bytes([128, 3, 250, 1])
+    packed_form = layered_form(3, 3, basis=(0, 0), top=9)
+    add("packed-padding-bits", basis_file(layered_form(3, 3, basis=(0, 0), top=8), packed[:1] + bytes([3, 125, 128])),
+        "malformed", "top width 8 (widths 8, 7, 6: 21 bits), but an unused bit of the last byte is set")
+    add("packed-too-many", basis_file(layered_form(3, 3, basis=(0, 0), top=1), packed[:1] + bytes([1]), count=2),
+        "malformed", "top width 1 holds one coefficient (the second's field would be 0 bits wide), count 2")
+    add("packed-top-zero", basis_file(layered_form(3, 3, basis=(0, 0), top=0), packed), "malformed",
+        "a packed basis layer of top width 0 (1 to 24)")
+    add("packed-top-range", basis_file(layered_form(3, 3, basis=(0, 0), top=25), packed), "malformed",
+        "a packed basis layer of top width 25 (1 to 24)")
+    add("packed-without-basis", one("l", detail, layered_form(0, 1, detail=0, layer_bits=6), step=0.1,
+                                    detail_length=len(detail)),
+        "malformed", "layer bit 2 (a packed basis layer) without bit 0 (a basis layer)")
+    add("packed-short", basis_file(packed_form, packed[:3]), "malformed",
+        "widths 9, 8, 7 take 3 bytes after the step code, the file holds 2")
     for label, name, why in [
         ("name-parent", "../UP", "a name holding '/' and '..'"),
         ("name-absolute", "/tmp/ESCAPED", "an absolute path as a name"),
@@ -438,6 +458,28 @@ def no_sigma_records() -> tuple[list, DecoderReference, str, bool | None]:
              LatentRecord("gold", mu(), sigma)], TEST_DECODER, "float32", False)
 
 
+def packed_records() -> tuple[list, DecoderReference, str, bool | None]:
+    """Records whose basis layer is packed (since 2.3): one without a latent, one on a compact base from vector 8,
+    and one on a float32 base, beside an int8 layer (written as 2.3)."""
+    from brdfcodec.format.layered_record import LayeredRecord
+    from brdfcodec.layers.basis import BasisLayer
+    from brdfcodec.layers.packed import packed_step
+
+    rng = np.random.default_rng(2029)  # its own draws: the other vectors keep their values
+    mu = lambda: (np.round(rng.normal(size=8) * 8) / 8).astype(np.float32)  # noqa: E731 - exact on the grid
+    sigma = (2.0 ** -rng.integers(1, 6, size=8)).astype(np.float32)
+    sha = "cd" * 32
+    only = BasisLayer(sha, packed_step(128), np.array([200, -90, 41, -7, 0, 3, -1]), 0, 0, 9)
+    after = BasisLayer(sha, packed_step(100), np.array([25, -17, 0, 9, -2, 1]), 8, 0, 9)
+    return ([LayeredRecord.without_latent("gold.packed-basis-only", 8, only),
+             LayeredRecord("gold.packed-compact", mu(), sigma, {"effort": 1}, basis=after, compact_mu=True,
+                           fixed_mu_grid=True, store_sigma=False),
+             LayeredRecord("gold.packed", mu(), sigma, {"effort": 1}, basis=after, compact_sigma=True),
+             LayeredRecord("gold.int8", mu(), sigma, {"effort": 1},
+                           basis=BasisLayer(sha, 0.5, np.array([12, -7, 3], dtype=np.int8), 8), store_sigma=False)],
+            TEST_DECODER, "float32", False)
+
+
 def valid_records() -> dict[str, tuple[list, DecoderReference, str, bool | None]]:
     """name -> (records, decoder, latent dtype, compress header)."""
     rng = np.random.default_rng(2026)
@@ -499,6 +541,7 @@ def valid_records() -> dict[str, tuple[list, DecoderReference, str, bool | None]
                                   compact_base=True, fixed_grid=True, project=50)],
                     TEST_DECODER, "float32", False),
         "no-sigma": no_sigma_records(),
+        "packed-basis": packed_records(),
     }
 
 
@@ -534,7 +577,7 @@ def generate(folder: Path, *, with_reference: bool = True) -> dict[str, Any]:
     (folder / "valid").mkdir(parents=True, exist_ok=True)
     (folder / "invalid").mkdir(parents=True, exist_ok=True)
     manifest: dict[str, Any] = {
-        "format_version": "2.2",
+        "format_version": "2.3",
         "error_classes": {
             "malformed": "BvaeFormatError",
             "checksum": "BvaeChecksumError",
