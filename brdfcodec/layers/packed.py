@@ -73,9 +73,9 @@ def packed_step_code(step: float) -> int:
 
 
 def _round_log2(n: npt.NDArray[np.int64]) -> npt.NDArray[np.int64]:
-    """round(log₂ n) for integers n ≥ 1, exactly: ⌊log₂(2n²) / 2⌋ (log₂ n is never halfway between integers)."""
-    squared = 2 * n.astype(object) ** 2
-    return np.array([(int(v).bit_length() - 1) // 2 for v in squared], dtype=np.int64)
+    """round(log₂ n) for integers n ≥ 1, exactly: ⌊log₂(2n²) / 2⌋ (log₂ n is never halfway between integers),
+    in Python integers."""
+    return np.array([((2 * v * v).bit_length() - 1) // 2 for v in n.tolist()], dtype=np.int64)
 
 
 def packed_widths(top: int, first: int, count: int) -> npt.NDArray[np.int64]:
