@@ -91,7 +91,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     parser.add_argument("--basis-coding", choices=("packed", "int8"), default="packed",
                         help="with --bytes/--max-relae: how records without a detail layer store basis "
                         "coefficients: packed (default, format 2.3: later vectors get fewer bits at one step, "
-                        "about twice the coefficients in the same bytes) or int8 (one byte each, readable by "
+                        "more coefficients in the same bytes) or int8 (one byte each, readable by "
                         "format 2.2 readers)")
     parser.set_defaults(handler=run)
 

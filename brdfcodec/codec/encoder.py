@@ -119,9 +119,8 @@ class BrdfEncoder:
         posterior width σ").
     basis_coding : {"packed", "int8"}, default "packed"
         With ``bytes`` or ``max_relae``: how records without a detail layer store their basis
-        coefficients. ``"packed"`` (format
-        2.3) gives later basis vectors fewer bits at one step, so a budget holds about twice as many
-        coefficients; ``"int8"`` stores one byte each (readable by 2.2 readers).
+        coefficients. ``"packed"`` (format 2.3) gives later basis vectors fewer bits at one step, so a
+        budget holds more coefficients; ``"int8"`` stores one byte each (readable by 2.2 readers).
     """
 
     manifest: ModelManifest | None

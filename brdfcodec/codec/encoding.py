@@ -82,14 +82,14 @@ _LATENT_CHOICES: tuple[str, ...] = get_args(LatentChoice)
 
 #: How the records of rate control without a detail layer store their basis coefficients (:class:`EncodeOptions`):
 #: ``"packed"`` (format 2.3, ``spec/bvae-format.md`` §4.7: one step, fewer bits for later vectors, so the bytes
-#: of k int8 coefficients hold about twice as many) or ``"int8"`` (a float16 step and one byte each, as before
+#: of k int8 coefficients hold more of them) or ``"int8"`` (a float16 step and one byte each, as before
 #: 2.3). Records with a detail layer store int8.
 BasisCoding = Literal["packed", "int8"]
 _BASIS_CODINGS: tuple[str, ...] = get_args(BasisCoding)
 
-#: Most coefficients of a packed layer that fits where k int8 ones would: its count's varint in the record's
-#: descriptor stays as long as k's.
 def _most_packed(k: int) -> int:
+    """Most coefficients of a packed layer that fits where k int8 ones would: its count's varint in the record's
+    descriptor stays as long as k's."""
     return 127 if k < 128 else MAX_BASIS_COUNT
 
 

@@ -82,15 +82,15 @@ class BasisLayer:
     def __post_init__(self) -> None:
         if not is_sha256_hex(self.sha256):
             raise ValueError(f"basis sha256 must be 64 lower-case hex digits, got {self.sha256!r}")
-        if self.top:
-            self._check_packed()
-            return
-        step = np.float16(self.step)
-        if not (np.isfinite(step) and step > 0 and float(step) == float(self.step)):
-            raise ValueError(f"basis step must be a positive finite float16 value, got {self.step!r}")
         q = np.asarray(self.q)
-        if q.dtype != np.int8 or q.ndim != 1 or not 1 <= len(q) <= MAX_BASIS_COUNT:
-            raise ValueError(f"basis coefficients must be 1 to {MAX_BASIS_COUNT} int8 values")
+        if self.top:
+            self._check_packed(q)
+        else:
+            step = np.float16(self.step)
+            if not (np.isfinite(step) and step > 0 and float(step) == float(self.step)):
+                raise ValueError(f"basis step must be a positive finite float16 value, got {self.step!r}")
+            if q.dtype != np.int8 or q.ndim != 1 or not 1 <= len(q) <= MAX_BASIS_COUNT:
+                raise ValueError(f"basis coefficients must be 1 to {MAX_BASIS_COUNT} int8 values")
         if isinstance(self.first, bool) or not isinstance(self.first, int | np.integer) or not (
             0 <= self.first and self.first + len(q) <= MAX_BASIS_COUNT
         ):
@@ -101,22 +101,17 @@ class BasisLayer:
         ):
             raise ValueError(f"basis projection must be an integer in [0, {MAX_BASIS_COUNT}], got {self.project!r}")
 
-    def _check_packed(self) -> None:
+    def _check_packed(self, q: np.ndarray) -> None:
+        """The packed layer's own rules: top width, step code, integer fields of width ≥ 1 that hold q."""
         if isinstance(self.top, bool) or not isinstance(self.top, int | np.integer) or not (
                 1 <= self.top <= MAX_TOP_WIDTH):
             raise ValueError(f"packed basis layer's top width must be an integer in [1, {MAX_TOP_WIDTH}], "
                              f"got {self.top!r}")
         packed_step_code(self.step)
-        q = np.asarray(self.q)
         if q.ndim != 1 or not np.issubdtype(q.dtype, np.integer) or not 1 <= len(q) <= MAX_BASIS_COUNT:
             raise ValueError(f"basis coefficients must be 1 to {MAX_BASIS_COUNT} integers")
-        for name in ("first", "project"):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, int | np.integer) or not 0 <= value <= MAX_BASIS_COUNT:
-                raise ValueError(f"basis {name} must be an integer in [0, {MAX_BASIS_COUNT}], got {value!r}")
-        if self.first + len(q) > MAX_BASIS_COUNT:
-            raise ValueError(f"basis first vector must be an integer with first + count ≤ {MAX_BASIS_COUNT}, "
-                             f"got {self.first!r}")
+        if isinstance(self.first, bool) or not isinstance(self.first, int | np.integer) or self.first < 0:
+            return  # refused with its message by the checks of every layer
         widths = packed_widths(self.top, self.first, len(q))
         if widths[-1] < 1:
             raise ValueError(f"a packed layer of top width {self.top} from vector {self.first} holds fewer than "

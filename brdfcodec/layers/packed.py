@@ -11,7 +11,7 @@ a two's-complement field of
 
 where T, the *top width*, is stated once per record form. At the same step
 the later coefficients then cost a few bits each instead of eight, so a size
-budget holds about twice as many of them.
+budget holds more of them.
 
 Part of :mod:`brdfcodec.layers.basis`, which gathers the names of its parts.
 """
