@@ -138,6 +138,27 @@ def test_penalty_draws_leave_the_plain_stream_alone() -> None:
     assert offsets.abs().max() <= 2.0 and offsets.min() < 0 < offsets.max()
 
 
+def test_traversed_codes_follow_a_direction() -> None:
+    mu = torch.zeros(1, 2)
+    direction = torch.tensor([[0.6, 0.8]])
+    assert traversed_codes(mu, direction, torch.tensor([2.0])).tolist() == [[pytest.approx(1.2), pytest.approx(1.6)]]
+
+
+def test_any_direction_draws_unit_vectors_after_the_axes_stream() -> None:
+    axes = TrainConfig(epochs=1, batch_size=4, seed=3, traversal_weight=1.0)
+    anywhere = TrainConfig(epochs=1, batch_size=4, seed=3, traversal_weight=1.0, traversal_directions="any")
+    on_axes, drawn = list(_global_batches(40, axes, 0, 4)), list(_global_batches(40, anywhere, 0, 4))
+    for key in ("rows", "noise", "traverse_offset"):
+        assert torch.equal(on_axes[0][key], drawn[0][key]), key
+    directions = torch.cat([d["traverse_dim"] for d in drawn])
+    assert directions.shape == (40, 4)
+    assert torch.allclose(directions.norm(dim=1), torch.ones(40))
+    assert (directions.abs().amax(dim=1) < 0.99).float().mean() > 0.9  # not the axes
+    assert (directions > 0).any(dim=0).all() and (directions < 0).any(dim=0).all()
+    with pytest.raises(ValueError, match="traversal_directions"):
+        TrainConfig(traversal_directions="diagonal")  # type: ignore[arg-type]
+
+
 @pytest.mark.slow  # > 10 s on 2 cores
 def test_a_run_with_the_penalty_logs_it_and_is_reproducible(tmp_path: Path) -> None:
     data = tmp_path / "analytic.h5"

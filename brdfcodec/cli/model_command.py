@@ -37,18 +37,23 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     export.add_argument("--basis-colour-permutations", action=argparse.BooleanOptionalAction, default=True,
                         help="fit the shared basis on the training materials in all 6 orders of their colour "
                         "channels (default; at most 5 × materials − 1 vectors), or as measured only")
+    export.add_argument("--align-factors", type=int, default=0, metavar="N",
+                        help="rotate the latent axes to follow the factors (albedo, hue, specular, roughness, "
+                             "grazing, sheen, metallic) of N analytic materials, before measuring (0: keep the "
+                             "trained axes, the default; 300 is the release recipe's)")
     export.set_defaults(handler=run_export)
     fit = actions.add_parser(
         "fit-basis", help="fit a shared basis (the basis layer's) for an exported model",
-        description="Fit the shared basis of the basis layer (principal components of the training split's "
-        "mapped kept slices, by default in all 6 orders of their colour channels) for a model folder that "
+        description="Fit the shared basis of the basis layer (principal components of the mapped kept slices "
+        "of the materials the model trained on, as its model.json lists them, else of the dataset's training "
+        "split; by default in all 6 orders of their colour channels) for a model folder that "
         "lacks one, and name it in model.json. The weights are not touched: the decoder hash, and every file "
         "made with the model, stay valid. A model that has a basis keeps it unless --replace is given; then the "
         "new basis replaces it (a model ships one basis), and files with basis layers made with the old one no "
         "longer decode with this folder.",
     )
     fit.add_argument("folder", type=Path, help="model folder")
-    fit.add_argument("--dataset", type=Path, required=True, help="dataset whose training split the model used")
+    fit.add_argument("--dataset", type=Path, required=True, help="dataset holding the materials the model trained on")
     fit.add_argument("--count", type=int, default=None, metavar="K", help="vectors (default 75)")
     fit.add_argument("--replace", action="store_true",
                      help="give a model that has a basis a new one; files with basis layers made with the old "
@@ -158,9 +163,12 @@ def run_export(args: argparse.Namespace) -> int:
     count = DEFAULT_BASIS_COUNT if args.basis_count is None else args.basis_count
     if count < 0:
         raise ValueError(f"--basis-count must be ≥ 0, got {count}")
+    if args.align_factors < 0:
+        raise ValueError(f"--align-factors must be ≥ 0, got {args.align_factors}")
     manifest = export_run(args.run_dir, args.output, name=args.name, dataset_path=args.dataset, command=command,
                           comparisons=comparisons, basis_count=count,
-                          basis_colour_permutations=args.basis_colour_permutations)
+                          basis_colour_permutations=args.basis_colour_permutations,
+                          align_materials=args.align_factors)
     print(f"wrote {args.output}: {manifest.name}, decoder sha256 {manifest.decoder_sha256}")
     return 0
 

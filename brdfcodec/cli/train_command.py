@@ -38,6 +38,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
                         help="weight of the traversal plausibility penalty (0: none; see TrainConfig)")
     parser.add_argument("--traversal-range", type=float,
                         help="largest traversal offset of that penalty, prior σ units (default 3)")
+    parser.add_argument("--traversal-directions", choices=("axes", "any"),
+                        help="directions that penalty traverses: the latent axes (default) or any unit vector "
+                             "(keeps every direction plausible, also the axes of `bvae model export "
+                             "--align-factors`)")
     parser.add_argument("--linear-path-rate", type=float,
                         help="learning rate of the decoder's linear (PCA) path as a fraction of the network's "
                              "(0: frozen, the default)")

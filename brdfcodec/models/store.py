@@ -150,8 +150,8 @@ _DERIVED_FROM_DECODER = ("basis_mean", "basis_projection")
 def compact_encoder_tensors(state: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
     """An encoder's tensors as a compact file stores them (``spec/model.md`` §3).
 
-    The linear path's buffers are left out (the encoder's projection is the decoder's components divided by
-    their squared norms, and both share the mean), and floating tensors of 65,536 elements or more (the
+    The linear path's buffers are left out (the encoder's projection is the least-squares inverse of the
+    decoder's components, ``(C Cᵀ)⁻¹ C``, and both share the mean), and floating tensors of 65,536 elements or more (the
     fully connected layer) are stored as float16.
     """
     out = {}
@@ -173,7 +173,9 @@ def expand_encoder_tensors(
     if "basis_components" in decoder_tensors:
         components = decoder_tensors["basis_components"].double()
         out["basis_mean"] = decoder_tensors["basis_mean"].float()
-        out["basis_projection"] = (components / (components * components).sum(1, keepdim=True)).float()
+        # The least-squares inverse of the decoder's linear path, (C Cᵀ)⁻¹ C: each row divided by its squared
+        # norm when the rows are orthogonal (principal components), and right for rotated ones too.
+        out["basis_projection"] = torch.linalg.solve(components @ components.T, components).float()
     return out
 
 

@@ -73,7 +73,9 @@ def render_model_card(manifest: dict[str, Any]) -> str:
         f"materials with probability {train['mix_probability']}"
         + (f"; decoder dropout {train['decoder_dropout']:g}" if train.get("decoder_dropout") else "")
         + (f"; traversal plausibility penalty, weight {train['traversal_weight']:g}, offsets up to "
-           f"±{train['traversal_range']:g} σ" if train.get("traversal_weight") else "")
+           f"±{train['traversal_range']:g} σ"
+           + (" in any direction" if train.get("traversal_directions") == "any" else " along the axes")
+           if train.get("traversal_weight") else "")
         + (f"; linear path trained at {train['linear_path_rate']:g} × the learning rate"
            if train.get("linear_path_rate") else "") + ".",
         f"- Training time: {info['training_seconds'] / 60:.1f} min on {info['device']} "

@@ -47,6 +47,12 @@ class TrainConfig:
     traversal_range : float
         Largest traversal offset of the penalty, prior σ units (3: the span
         ``bvae model plausibility`` checks).
+    traversal_directions : {"axes", "any"}
+        Directions the penalty traverses: the latent axes ``e_d`` (the
+        default), or unit vectors drawn uniformly on the sphere, so that
+        every direction is kept plausible, also the axes of a model whose
+        latent is rotated after training (``bvae model export
+        --align-factors``) and the studio's moves between materials.
     linear_path_rate : float
         Learning rate of the decoder's linear path (its PCA mean and
         components, ``ModelConfig.linear_basis``) as a fraction of the
@@ -112,6 +118,7 @@ class TrainConfig:
     decoder_dropout: float = 0.0
     traversal_weight: float = 0.0
     traversal_range: float = 3.0
+    traversal_directions: Literal["axes", "any"] = "axes"
     linear_path_rate: float = 0.0
     average_from_epoch: int = 0
     warmup_epochs: int = 2
@@ -144,6 +151,8 @@ class TrainConfig:
         if not (0 <= self.traversal_weight < float("inf") and 0 < self.traversal_range < float("inf")):
             raise ValueError(f"traversal_weight must be finite and ≥ 0 and traversal_range finite and > 0, got "
                              f"{self.traversal_weight}, {self.traversal_range}")
+        if self.traversal_directions not in ("axes", "any"):
+            raise ValueError(f"traversal_directions must be 'axes' or 'any', got {self.traversal_directions!r}")
         if not 0 <= self.linear_path_rate < float("inf"):
             raise ValueError(f"linear_path_rate must be finite and ≥ 0, got {self.linear_path_rate}")
         if not 0 <= self.average_from_epoch <= self.epochs:

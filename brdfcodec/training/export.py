@@ -19,6 +19,7 @@ from brdfcodec.models.config import ModelConfig
 from brdfcodec.models.network import BetaVAE
 from brdfcodec.models.parameters import describe_parameters
 from brdfcodec.models.store import DECODER_FILE, MANIFEST, ModelManifest, load_manifest, write_manifest, write_weights
+from brdfcodec.training.alignment import align_to_factors
 from brdfcodec.training.card import render_model_card
 from brdfcodec.training.measurements import kl_per_dim, measure_model, summarise, traversal_changes
 from brdfcodec.version import __version__
@@ -51,6 +52,7 @@ def export_run(
     comparisons: dict[str, str | os.PathLike[str]] | None = None,
     basis_count: int = DEFAULT_BASIS_COUNT,
     basis_colour_permutations: bool = True,
+    align_materials: int = 0,
 ) -> ModelManifest:
     """Export the best weights of a run with every measurement its card needs, and fit its shared basis.
 
@@ -78,6 +80,10 @@ def export_run(
         5N − 1 vectors, :func:`~brdfcodec.layers.basis.shared_basis_rank`), not as measured only: it spans
         materials the model was not trained on better, since a permuted material is a valid one with other
         colours (documentation: Layers and rate control).
+    align_materials : int, default 0
+        Rotate the latent space, before anything is measured, so that its dimensions follow the analytic
+        factors of this many materials (:func:`brdfcodec.training.alignment.align_to_factors`; stored as
+        ``info.alignment``); 0 keeps the trained axes.
     """
     run = Path(run_dir)
     run_info = json.loads((run / "run.json").read_text())
@@ -86,6 +92,7 @@ def export_run(
     model = BetaVAE(config)
     model.load_state_dict(best["model"])
     model.eval()
+    alignment = align_to_factors(model, materials=align_materials) if align_materials else None
     log = [json.loads(line) for line in (run / "log.jsonl").read_text().splitlines()]
     summary_file = run / "summary.json"
     seconds = sum(record["seconds"] for record in log)
@@ -127,6 +134,8 @@ def export_run(
         "traversal": traversal,
         "limits": _LIMITS,
     }
+    if alignment is not None:
+        info["alignment"] = alignment.as_dict()
     info["comparisons"] = [_comparison_row("this model", info, None)]
     for label, other in (comparisons or {}).items():
         other_manifest = json.loads((Path(other) / MANIFEST).read_text())
@@ -193,7 +202,11 @@ def _fit_basis(folder: Path, dataset: BrdfDataset, rows: list[int], count: int, 
 def add_shared_basis(folder: str | os.PathLike[str], dataset_path: str | os.PathLike[str],
                      count: int = DEFAULT_BASIS_COUNT, *, colour_permutations: bool = True,
                      replace: bool = False) -> ModelManifest:
-    """Fit a shared basis for an exported model (on a dataset's training split) and name it in ``model.json``.
+    """Fit a shared basis for an exported model and name it in ``model.json``.
+
+    The basis is fitted on the materials the model trained on (``info.data.train`` of its ``model.json``:
+    a cross-validation fold's or a family's, as :func:`export_run` fits it), or on the dataset's training
+    split when the model does not list them or the dataset lacks one of them.
 
     For a model exported before shared bases existed (:func:`export_run` fits one itself), or, with
     ``replace``, to give a model a new basis: the new one replaces the old one (a model ships one basis), so
@@ -217,8 +230,10 @@ def add_shared_basis(folder: str | os.PathLike[str], dataset_path: str | os.Path
             "that replaces this one (files with basis layers made with it then no longer decode with this folder)"
         )
     fitting = ".basis-fitting.safetensors"
+    trained_on = json.loads((out / MANIFEST).read_text()).get("info", {}).get("data", {})
     with BrdfDataset(dataset_path) as dataset:
-        basis = _fit_basis(out, dataset, dataset.indices("train"), count, colour_permutations, name=fitting)
+        basis = _fit_basis(out, dataset, _trained_rows(dataset, trained_on), count, colour_permutations,
+                           name=fitting)
     os.replace(out / fitting, out / BASIS_FILE)
 
     def add(stored: dict[str, Any]) -> None:

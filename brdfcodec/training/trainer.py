@@ -112,7 +112,9 @@ def _global_batches(
     A decoder dropout mask ``(size, dropout_width)`` is drawn after the
     noise, and only when ``config.decoder_dropout`` > 0; the traversal
     penalty's dimensions and offsets last, and only when
-    ``config.traversal_weight`` > 0: runs without them keep their stream.
+    ``config.traversal_weight`` > 0: runs without them keep their stream
+    (with ``traversal_directions = "any"`` a unit direction per sample is drawn
+    after them and replaces the dimension).
     """
     generator = _epoch_generator(config.seed, epoch)
     order = torch.randperm(n_train, generator=generator)
@@ -132,6 +134,9 @@ def _global_batches(
         if config.traversal_weight > 0:
             draw["traverse_dim"] = torch.randint(0, latent_dim, (size,), generator=generator)
             draw["traverse_offset"] = (2 * torch.rand(size, generator=generator) - 1) * config.traversal_range
+            if config.traversal_directions == "any":
+                direction = torch.randn(size, latent_dim, generator=generator)
+                draw["traverse_dim"] = direction / direction.norm(dim=1, keepdim=True).clamp_min(1e-12)
         yield draw
 
 

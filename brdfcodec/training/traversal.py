@@ -103,8 +103,11 @@ def _albedo(mapped_blocks: torch.Tensor, weights: torch.Tensor, ceiling: float =
 
 
 def traversed_codes(mu: torch.Tensor, dims: torch.Tensor, offsets: torch.Tensor) -> torch.Tensor:
-    """``μ + t·e_d`` per row: ``mu`` (B, M) detached, ``dims`` (B,) in [0, M), ``offsets`` (B,) prior σ units."""
-    step = torch.nn.functional.one_hot(dims.long(), mu.shape[1]).to(mu.dtype) * offsets.to(mu.dtype)[:, None]
+    """``μ + t·e_d`` per row: ``mu`` (B, M) detached, ``dims`` (B,) in [0, M) or unit directions (B, M),
+    ``offsets`` (B,) prior σ units."""
+    direction = (dims.to(mu.dtype) if dims.ndim == 2
+                 else torch.nn.functional.one_hot(dims.long(), mu.shape[1]).to(mu.dtype))
+    step = direction * offsets.to(mu.dtype)[:, None]
     return mu.detach() + step.to(mu.device)
 
 
