@@ -305,6 +305,27 @@ def test_fit_basis_replace_fits_a_new_basis_and_names_it(analytic_training_set, 
         decoder.decode(old)
 
 
+def test_fit_basis_fits_on_the_materials_the_model_lists_as_trained_on(analytic_training_set, tmp_path) -> None:
+    import json
+    import shutil
+
+    from brdfcodec.cli.main import main
+    from brdfcodec.datasets.hdf5 import BrdfDataset
+    from brdfcodec.models.registry import default_model_folder
+
+    folder = tmp_path / "model"
+    shutil.copytree(default_model_folder(), folder)
+    with BrdfDataset(analytic_training_set) as dataset:
+        names = [dataset.names[i] for i in dataset.indices("validation")][:1] + list(dataset.names[:2])
+    stored = json.loads((folder / "model.json").read_text())
+    stored["info"]["data"]["train"] = names  # a fold's materials, one of them outside the stored training split
+    (folder / "model.json").write_text(json.dumps(stored))
+    assert main(["model", "fit-basis", str(folder), "--dataset", str(analytic_training_set), "--replace",
+                 "--count", "500"]) == 0
+    info = json.loads((folder / "model.json").read_text())["info"]["basis"]
+    assert info["materials"] == len(set(names)) and info["count"] == 5 * len(set(names)) - 1
+
+
 def test_the_shipped_model_has_a_basis_and_partial_decoding_matches() -> None:
     from brdfcodec.codec import BrdfDecoder
 

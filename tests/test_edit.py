@@ -137,3 +137,9 @@ def test_distinct_labels_tell_apart_dimensions_with_the_same_largest_effect() ->
     assert labels[2] == "lobe width (haziness), wider with +z"
     assert labels[3] == "diffuse level, higher with +z; also brighter highlight (b)"
     assert len(set(labels)) == 4
+    # aligned dimensions are named by their factor first, which tells apart what the statistics alone do not
+    rows[0]["factor"], rows[3]["factor"] = "albedo", "metallic"
+    aligned = distinct_labels(rows)
+    assert aligned[0] == "albedo: diffuse level, higher with +z; also brighter highlight"
+    assert aligned[3] == "metallic: diffuse level, higher with +z; also brighter highlight"
+    assert aligned[1:3] == labels[1:3]

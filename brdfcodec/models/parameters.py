@@ -20,6 +20,7 @@ the model's manifest (``parameters``) by :func:`describe_parameters`.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass
 from typing import Any
 
@@ -139,7 +140,9 @@ def distinct_labels(dimensions: list[dict[str, Any]]) -> list[str]:
 
     A dimension is named by its largest normalised effect (as ``label``). Where several dimensions share that
     statistic, each name adds the dimension's next largest effect (``"diffuse level, lower with +z; also
-    darker highlight"``); dimensions alike in both get a letter, ``(a)``, ``(b)``, in dimension order.
+    darker highlight"``). A dimension aligned with a factor of appearance (an entry's ``factor``,
+    ``bvae model export --align-factors``) is named by it first (``"roughness: specular level, lower with
+    +z"``). Dimensions still alike get a letter, ``(a)``, ``(b)``, in dimension order.
 
     Parameters
     ----------
@@ -159,7 +162,7 @@ def distinct_labels(dimensions: list[dict[str, Any]]) -> list[str]:
         if sum(1 for other in primary if other[0] == name) > 1:
             _, second, _ = _ranked(row)[1]
             label = f"{label}; also {_short(second, row)}"
-        labels.append(label)
+        labels.append(f"{row['factor']}: {label}" if row.get("factor") else label)
     for label in set(labels):
         same = [i for i, other in enumerate(labels) if other == label]
         if len(same) > 1:
@@ -204,10 +207,24 @@ def colour_dims_of(effects: list[DimensionEffect], count: int = 2) -> tuple[int,
     return tuple(sorted(e.dim for e in ranked[:count]))
 
 
-def describe_parameters(decoder: Any, *, span: float = 2.0) -> dict[str, Any]:
-    """The ``parameters`` entry of a model manifest: colour dimensions and each dimension's effects."""
+def describe_parameters(decoder: Any, *, span: float = 2.0,
+                        factors: Sequence[tuple[str, float]] = ()) -> dict[str, Any]:
+    """The ``parameters`` entry of a model manifest: colour dimensions and each dimension's effects.
+
+    Parameters
+    ----------
+    decoder : brdfcodec.codec.BrdfDecoder
+    span : float, default 2.0
+        Half-range of the traversals, prior σ.
+    factors : sequence of (str, float), optional
+        The factor each of the first dimensions is aligned with and the correlation of the two over the
+        materials the alignment was fitted to (:class:`brdfcodec.training.alignment.FactorAlignment`); stored
+        as ``factor`` and ``factor_correlation`` and named first in the label.
+    """
     effects = measure_dimension_effects(decoder, span=span)
     dimensions = [asdict(e) for e in effects]
+    for row, (factor, correlation) in zip(dimensions, factors, strict=False):
+        row["factor"], row["factor_correlation"] = str(factor), float(correlation)
     for row, label in zip(dimensions, distinct_labels(dimensions), strict=True):
         row["label"] = label
     return {
@@ -231,6 +248,12 @@ def parameters_markdown(parameters: dict[str, Any]) -> str:
             f"{row['diffuse_level']:+.2f} | {row['specular_level']:+.2f} | {row['lobe_width_deg']:+.1f} | "
             f"{row['grazing']:+.2f} |"
         )
+    aligned = [row for row in rows if row.get("factor")]
+    if aligned:
+        lines += ["", "Aligned dimensions (`bvae model export --align-factors`) and the correlation of each with its "
+                  "factor over the analytic materials the alignment was fitted to: "
+                  + ", ".join(f"z{row['dim'] + 1} {row['factor']} {row['factor_correlation']:.2f}" for row in aligned)
+                  + "."]
     dims = ", ".join(str(d + 1) for d in parameters["colour_dims"])
     lines.append("")
     lines.append(f"Colour dimensions used for green-channel grafting: z{dims} (1-based).")

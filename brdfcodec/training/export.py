@@ -150,7 +150,9 @@ def export_run(
         manifest["basis_sha256"] = basis.pop("sha256")
         info["basis"] = basis
     manifest["info"] = info
-    manifest["parameters"] = describe_parameters(BrdfDecoder.from_network(model.decoder))
+    manifest["parameters"] = describe_parameters(
+        BrdfDecoder.from_network(model.decoder),
+        factors=() if alignment is None else list(zip(alignment.factor_names, alignment.correlation, strict=True)))
     write_card(out, manifest)
     return write_manifest(out, manifest)  # last: a folder with a model.json is a complete model
 
@@ -230,7 +232,7 @@ def add_shared_basis(folder: str | os.PathLike[str], dataset_path: str | os.Path
             "that replaces this one (files with basis layers made with it then no longer decode with this folder)"
         )
     fitting = ".basis-fitting.safetensors"
-    trained_on = json.loads((out / MANIFEST).read_text()).get("info", {}).get("data", {})
+    trained_on = json.loads((out / MANIFEST).read_text()).get("info", {})  # its "data" names the materials
     with BrdfDataset(dataset_path) as dataset:
         basis = _fit_basis(out, dataset, _trained_rows(dataset, trained_on), count, colour_permutations,
                            name=fitting)
@@ -273,10 +275,14 @@ def write_card(folder: str | os.PathLike[str], manifest: dict[str, Any]) -> Path
 def add_named_parameters(folder: str | Path) -> dict[str, Any]:
     """Measure what each latent dimension controls, store it as ``parameters`` in ``model.json``, rewrite the card.
 
-    For a model exported before named parameters existed (:func:`export_run` measures them itself). The
+    For a model exported before named parameters existed, or before aligned dimensions were named by their
+    factor (``info.alignment``; :func:`export_run` measures them itself). The
     weights are not touched, so the model's identity (its decoder hash) is unchanged.
     """
-    parameters = describe_parameters(BrdfDecoder(load_manifest(folder)))
+    manifest = load_manifest(folder)
+    alignment = manifest.info.get("alignment")
+    factors = list(zip(alignment["factor_names"], alignment["correlation"], strict=False)) if alignment else []
+    parameters = describe_parameters(BrdfDecoder(manifest), factors=factors)
 
     def add(stored: dict[str, Any]) -> None:
         stored["parameters"] = parameters
