@@ -8,10 +8,11 @@ import numpy as np
 import pytest
 import torch
 
+from brdfcodec.models.alignment import AlignmentError, factor_rotation, rotate_latent
 from brdfcodec.models.config import TINY_CONFIG
 from brdfcodec.models.network import BetaVAE, initialise_linear_basis
 from brdfcodec.models.store import compact_encoder_tensors, expand_encoder_tensors
-from brdfcodec.training.alignment import AlignmentError, align_to_factors, factor_rotation, rotate_latent
+from brdfcodec.training.alignment import align_to_factors
 
 
 def random_rotation(dims: int, seed: int) -> np.ndarray:

@@ -183,7 +183,10 @@ def test_bvae_model_disentanglement_writes_stamped_rows(tiny_model_folder: Path,
     printed = capsys.readouterr().out
     assert "MIG" in printed and "tiny-test-model" in printed and "PCA-8" in printed
     rows = read_rows(out)
-    assert [row["model"] for row in rows] == ["tiny-test-model", "PCA-8"]
+    assert [row["model"] for row in rows] == ["tiny-test-model", "PCA-8", "PCA-8 aligned"]
+    pca, aligned = rows[1], rows[2]
+    assert aligned["code"] == "pca-aligned" and aligned["base_relae_kept_mapped"] == pca["base_relae_kept_mapped"]
+    assert aligned["mig"] != pca["mig"]  # the same code, turned
     for row in rows:
         assert row["study"] == "disentanglement" and row["materials"] == 30 and row["seed"] == 2
         assert 0 <= row["mig"] <= 1 and 0 <= row["dci_informativeness"] <= 1

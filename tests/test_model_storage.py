@@ -81,3 +81,22 @@ def test_a_compact_encoder_needs_its_decoder(compacted) -> None:
     (broken / "decoder.safetensors").write_bytes(bytes(data))
     with pytest.raises(ModelChecksumError, match="decoder.safetensors"):
         load_model(broken, parts=("encoder",))
+
+
+def test_a_renamed_copy_decodes_as_the_original_under_a_new_hash(tmp_path) -> None:
+    from brdfcodec.codec import BrdfDecoder
+    from brdfcodec.format.bvae import LatentRecord
+    from brdfcodec.models.registry import default_model_folder
+    from brdfcodec.models.store import load_manifest
+    from brdfcodec.training.export import copy_renamed
+
+    original = load_manifest(default_model_folder())
+    copy = copy_renamed(default_model_folder(), tmp_path / "renamed", "bvae-renamed")
+    assert copy.name == "bvae-renamed" and copy.decoder_sha256 != original.decoder_sha256
+    assert copy.basis_sha256 == original.basis_sha256 and copy.info["errors"] == original.info["errors"]
+    assert "# Model card: bvae-renamed" in (tmp_path / "renamed" / "MODEL_CARD.md").read_text()
+    record = LatentRecord("probe", np.linspace(-1, 1, 8).astype(np.float32), np.ones(8))
+    np.testing.assert_array_equal(BrdfDecoder(tmp_path / "renamed").mapped_record(record),
+                                  BrdfDecoder(default_model_folder()).mapped_record(record))
+    with pytest.raises(FileExistsError):
+        copy_renamed(default_model_folder(), tmp_path / "renamed", "again")

@@ -502,7 +502,20 @@ def pca_codes(inputs: np.ndarray, masks: np.ndarray, components: int = 8) -> dic
     codes = basis.encode(inputs)
     decoded = clamp_mapped(basis.decode(codes))
     return {"codes": codes, "relae": _kept_relae(inputs, decoded, masks), "name": f"PCA-{components}",
-            "decoder_sha256": None}
+            "decoder_sha256": None, "basis": basis}
+
+
+def aligned_pca_codes(pca: dict[str, Any], count: int) -> dict[str, Any]:
+    """:func:`pca_codes`' codes turned by the rotation that aligns them with the analytic factors, as
+    ``bvae model export --align-factors`` turns a model's (:func:`brdfcodec.models.alignment.factor_rotation`,
+    fitted on ``count`` factor materials of :data:`~brdfcodec.models.alignment.ALIGNMENT_SEED` projected on
+    the same basis). A rotation changes no reconstruction: the error is PCA's.
+    """
+    from brdfcodec.models.alignment import ALIGNMENT_SEED, factor_rotation
+
+    drawn, inputs, _ = benchmark_inputs(count, ALIGNMENT_SEED)
+    rotation = factor_rotation(pca["basis"].encode(inputs), drawn.factors)
+    return {**pca, "codes": pca["codes"] @ rotation.T, "name": f"{pca['name']} aligned"}
 
 
 def run_benchmark(
@@ -517,7 +530,8 @@ def run_benchmark(
     count, seed : int
         Of :func:`benchmark_inputs`; materials are split 2/3 : 1/3 for DCI's regressors.
     pca : bool, default True
-        Also score PCA-8 of the same materials (fitted on them).
+        Also score PCA-8 of the same materials (fitted on them), as fitted and aligned with the factors
+        (:func:`aligned_pca_codes`, fitted on as many materials of another seed).
     progress : callable, optional
         Called with a short message before each step.
 
@@ -531,11 +545,18 @@ def run_benchmark(
     say = progress or (lambda message: None)
     say(f"tabulating {count} analytic materials with independent factors (seed {seed})")
     drawn, inputs, masks = benchmark_inputs(count, seed)
-    sources: list[tuple[str, Any]] = [("model", model) for model in models] + ([("pca", None)] if pca else [])
+    sources: list[tuple[str, Any]] = [("model", model) for model in models]
+    sources += [("pca", None), ("pca-aligned", None)] if pca else []
     rows = []
+    fitted: dict[str, Any] = {}
     for kind, model in sources:
-        say("fitting PCA-8" if kind == "pca" else f"encoding with {model or 'the shipped default model'}")
-        result = model_codes(model, inputs, masks) if kind == "model" else pca_codes(inputs, masks)
+        say({"model": f"encoding with {model or 'the shipped default model'}", "pca": "fitting PCA-8",
+             "pca-aligned": "aligning PCA-8 with the factors"}[kind])
+        if kind == "model":
+            result = model_codes(model, inputs, masks)
+        else:
+            fitted = pca_codes(inputs, masks) if kind == "pca" else aligned_pca_codes(fitted, count)
+            result = fitted
         scores = score_code(result["codes"], drawn.factors, drawn.names)
         rows.append({"code": kind, "model": result["name"], "decoder_sha256": result["decoder_sha256"],
                      "latent_dim": int(result["codes"].shape[1]), "materials": count, "seed": seed,

@@ -24,7 +24,7 @@ from brdfcodec.training.card import render_model_card
 from brdfcodec.training.measurements import kl_per_dim, measure_model, summarise, traversal_changes
 from brdfcodec.version import __version__
 
-__all__ = ["CARD", "DEFAULT_BASIS_COUNT", "add_shared_basis", "export_run", "store_info"]
+__all__ = ["CARD", "DEFAULT_BASIS_COUNT", "add_shared_basis", "copy_renamed", "export_run", "store_info"]
 
 CARD = "MODEL_CARD.md"
 #: Vectors of the shared basis that ``bvae model export`` fits (at most the rank of the fitted data,
@@ -262,6 +262,43 @@ def _rewrite_manifest(folder: str | os.PathLike[str], change: Callable[[dict[str
     change(stored)
     write_card(out, stored)
     return write_manifest(out, stored)
+
+
+def copy_renamed(source: str | os.PathLike[str], destination: str | os.PathLike[str], name: str) -> ModelManifest:
+    """Copy an exported model under a new name: the same tensors, new weight files (their metadata names the
+    model, so the decoder hash changes), the same measurements and basis, a card with the new name.
+
+    For a release made from a run exported under a working name. ``destination`` must not exist; it is
+    written in a temporary folder beside it and renamed when complete.
+    """
+    import shutil
+
+    from brdfcodec.layers.basis import BASIS_FILE
+    from brdfcodec.models.store import load_model
+
+    out = Path(destination)
+    if out.exists():
+        raise FileExistsError(f"{out}: already exists")
+    encoder, decoder, manifest = load_model(source)
+    assert encoder is not None and decoder is not None
+    model = BetaVAE(manifest.config)
+    model.encoder.load_state_dict(encoder.state_dict())
+    model.decoder.load_state_dict(decoder.state_dict())
+    building = out.with_name(f".{out.name}.building")
+    shutil.rmtree(building, ignore_errors=True)
+    identity = write_weights(model, building, name=name, compact=manifest.encoder_storage == "compact")
+    if (Path(source) / BASIS_FILE).exists():
+        shutil.copy2(Path(source) / BASIS_FILE, building / BASIS_FILE)
+    stored = json.loads((Path(source) / MANIFEST).read_text(encoding="utf-8"))
+    stored.update({key: identity[key] for key in ("name", "decoder_sha256", "encoder_sha256", "encoder_storage")})
+    info = stored.setdefault("info", {})
+    info["decoder_bytes"], info["encoder_bytes"] = identity["decoder_bytes"], identity["encoder_bytes"]
+    if info.get("comparisons"):
+        info["comparisons"][0]["decoder_bytes"] = identity["decoder_bytes"]
+    write_card(building, stored)
+    write_manifest(building, stored)
+    os.replace(building, out)
+    return load_manifest(out)
 
 
 def write_card(folder: str | os.PathLike[str], manifest: dict[str, Any]) -> Path:
