@@ -3,12 +3,11 @@
 ``nbrdf-proxy-90.bvae`` is a library of the 90 materials of the NBRDF proxy
 of MERL (neural fits of MERL materials evaluated on the MERL grid; see the
 documentation's data page, ``docs/data.md``), encoded by the shipped default
-model's encoder alone (written in format 1.0
-before encode-time refinement existed: what ``bvae compress
-merl-nbrdf-proxy.h5 -o nbrdf-proxy-90.bvae --effort 0 --provenance`` gives,
-its ``source_sha256`` then hashes of the dataset tables; rewritten in format
-2.0 with the same records and metadata). Each record's metadata holds its
-RelAE against the proxy table.
+model's encoder alone: what ``bvae dataset build --nbrdf-zip
+../shared/data/merl-nbrdf-90.zip -o merl90.h5 && bvae compress merl90.h5 -o
+nbrdf-proxy-90.bvae --effort 0 --provenance`` gives (μ alone, no σ: format
+2.2; ``source_sha256`` hashes of the dataset tables). Each record's metadata
+holds its RelAE against the proxy table.
 """
 
 from __future__ import annotations

@@ -197,18 +197,34 @@ def test_measure_plausibility_rejects_bad_arguments() -> None:
         PlausibilityCriteria(inversion_tolerance=-1)
 
 
+#: The v1 model's codes (encoder means and σ) of two NBRDF-proxy materials, as its example library held them:
+#: the gold-paint black hole is a regression record of that model, kept in the package so its files decode.
+V1_CODES = {
+    "gold-paint": ([0.5339580178260803, 1.052498459815979, 0.8193047046661377, -0.520190954208374,
+                    -0.5816634893417358, -0.023433931171894073, -0.16083616018295288, -1.1392714977264404],
+                   [0.00164775678422302, 0.001937229884788394, 0.00246493355371058, 0.00251145102083683,
+                    0.00278239487670362, 0.0037739169783890247, 0.0035181185230612755, 0.005003512836992741]),
+    "white-paint": ([0.007233893498778343, 1.7448983192443848, -0.702756941318512, -0.8171016573905945,
+                     2.735748052597046, 0.07654551416635513, 2.9515914916992188, 0.24483662843704224],
+                    [0.0014511741464957595, 0.0017642825841903687, 0.0022836390417069197, 0.002288002287968993,
+                     0.002605573972687125, 0.003546015825122595, 0.0033274635206907988, 0.004809557925909758]),
+}
+
+
 @pytest.fixture(scope="module")
 def default_library() -> tuple[object, dict[str, object]]:
-    from brdfcodec.codec import BrdfDecoder, MaterialLibrary
-    from brdfcodec.examples import example_library
+    """The v1 model (shipped beside the default) and its records of gold-paint and white-paint."""
+    from brdfcodec.codec import BrdfDecoder
+    from brdfcodec.format.bvae import LatentRecord
+    from brdfcodec.models.registry import package_model_folder
 
-    decoder = BrdfDecoder()
-    with MaterialLibrary(example_library(), decoder=decoder) as library:
-        records = {name: library.record(name) for name in ("gold-paint", "white-paint")}
+    decoder = BrdfDecoder(package_model_folder("nbrdf-proxy-small-v1"))
+    records = {name: LatentRecord(name, np.asarray(mu, np.float32), np.asarray(sigma, np.float32))
+               for name, (mu, sigma) in V1_CODES.items()}
     return decoder, records
 
 
-def test_default_model_gold_paint_black_hole_is_found(default_library: tuple[object, dict[str, object]]) -> None:
+def test_v1_model_gold_paint_black_hole_is_found(default_library: tuple[object, dict[str, object]]) -> None:
     decoder, records = default_library
     report = measure_plausibility(decoder, list(records.values()), dims=[0])
     plus1 = report.steps.index(1.0)

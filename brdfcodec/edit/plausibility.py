@@ -32,9 +32,11 @@ source decode at μ and against the library:
     exceeds 1 (by more than 1e-4) at some incident elevation and channel: lit
     from that direction it reflects more light than it receives.
 By default the traversal decodes are judged as an editor shows them: with the
-energy bound of ``spec/bvae-format.md`` §6.3 (a decode whose directional
-albedo exceeds 1 is scaled down to 1), so ``unphysical`` checks that the bound
-holds; ``energy_bound=False`` judges the network's raw decodes.
+highlight guard of ``spec/bvae-format.md`` §6 step 6 (near-specular entries
+raised to within τ = 0.05 of their flank, :mod:`brdfcodec.representation.highlight`)
+and the energy bound of step 5 (a decode whose directional albedo exceeds 1
+is scaled down to 1), so ``inverted``, ``holes`` and ``unphysical`` check that
+they hold; ``energy_bound=False`` judges the network's raw decodes.
 
 ``holes``
     Some near-specular entry (θh bins 0–1, above the horizon) decodes to
@@ -76,6 +78,12 @@ from brdfcodec.conventions import (
     NETWORK_INPUT_SHAPE,
 )
 from brdfcodec.representation.energy import bound_scales, directional_albedo_mapped, scale_mapped
+from brdfcodec.representation.highlight import (
+    NEAR_THETA_H_BINS,
+    OFF_THETA_H_BINS,
+    cell_valid_mask,
+    guard_highlights_mapped,
+)
 from brdfcodec.representation.mapping import LOG_RANGE
 
 __all__ = [
@@ -101,10 +109,6 @@ __all__ = [
 
 #: Traversal offsets, prior σ units.
 DEFAULT_STEPS: tuple[float, ...] = (-3.0, -2.0, -1.0, 1.0, 2.0, 3.0)
-#: θh bins of the near-specular peak (they span θh < 0.045°).
-NEAR_THETA_H_BINS: tuple[int, ...] = (0, 1)
-#: θh bins of the off-specular flank (they span θh 0.18–0.54°).
-OFF_THETA_H_BINS: tuple[int, ...] = (4, 5, 6)
 #: How far above 1 a directional albedo may be before ``unphysical`` flags it (float32 rounding of the bound).
 UNPHYSICAL_TOLERANCE = 1e-4
 #: The kinds of implausibility, in report order.
@@ -144,17 +148,6 @@ def _split(mapped: npt.ArrayLike) -> np.ndarray:
     if array.shape[-3:] != NETWORK_INPUT_SHAPE:
         raise ValueError(f"expected mapped slices of shape (..., {NETWORK_INPUT_SHAPE}), got {array.shape}")
     return array.reshape(*array.shape[:-3], N_CHANNELS, N_KEPT_SLICES, N_THETA_H, N_THETA_D)
-
-
-@functools.cache
-def cell_valid_mask() -> BoolArray:
-    """(21, 90): kept slot × θd bin cells whose near and off θh entries are all above the horizon."""
-    from brdfcodec.representation.mask import kept_slice_horizon_mask
-
-    rows = kept_slice_horizon_mask()[list(NEAR_THETA_H_BINS + OFF_THETA_H_BINS)]  # (5, θd, slot)
-    valid = np.ascontiguousarray(rows.all(axis=0).T)
-    valid.setflags(write=False)
-    return valid
 
 
 @functools.cache
@@ -378,12 +371,14 @@ class PlausibilityReport:
         lines.append(f"All {len(self.materials)} materials × {len(self.dims)} dims × {len(self.steps)} steps: {totals}")
         lines.append(f"μ decodes with an inverted cell already: {self.source_inverted:.3f}; albedo limit "
                      f"{self.albedo_limit:.3f} (library max {self.library_albedo_max:.3f}); decodes judged "
-                     + ("with the energy bound (as edits decode)" if self.energy_bound else "raw (no energy bound)"))
+                     + ("with the highlight guard and the energy bound (as edits decode)" if self.energy_bound
+                        else "raw (neither the highlight guard nor the energy bound)"))
         return "\n".join(lines)
 
 
 def bounded(mapped: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Decodes (..., 63, 90, 90) with the energy bound applied, as edits decode (spec §6.3).
+    """Decodes (..., 63, 90, 90) as edits decode: the highlight guard, then the energy bound
+    (``spec/bvae-format.md`` §6 steps 6 and 5).
 
     Returns
     -------
@@ -392,7 +387,7 @@ def bounded(mapped: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     albedo : ndarray of float64, shape (...)
         Each bounded decode's largest directional albedo: ``s · max a`` of the raw decode, s its factor.
     """
-    flat = np.asarray(mapped).reshape(-1, *NETWORK_INPUT_SHAPE)
+    flat = guard_highlights_mapped(np.asarray(mapped).reshape(-1, *NETWORK_INPUT_SHAPE))
     largest = directional_albedo_mapped(flat).max(axis=(-2, -1))
     scales = bound_scales(largest)
     out = flat.copy()  # decodes within the bound stay as they are (non-finite values too, for ``invalid``)

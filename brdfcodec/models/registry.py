@@ -28,6 +28,7 @@ __all__ = [
     "unregister_model_folder",
     "available_models",
     "default_model_folder",
+    "package_model_folder",
     "find_model",
     "config_file",
     "register_model_folder",
@@ -85,6 +86,22 @@ def process_registry() -> ModelRegistry:
 
 def _package_models() -> Path:
     return Path(str(resources.files("brdfcodec").joinpath("data/models")))
+
+
+def package_model_folder(name: str) -> Path:
+    """Folder of a model shipped in the package (``brdfcodec/data/models/NAME``): ``"default"``, or an earlier
+    default kept so that the files made with it still decode (``"nbrdf-proxy-small-v1"``).
+
+    Raises
+    ------
+    ModelNotFoundError
+        The package ships no model of that name.
+    """
+    folder = _package_models() / name
+    if not (folder / MANIFEST).is_file():
+        shipped = sorted(p.name for p in _package_models().iterdir() if (p / MANIFEST).is_file())
+        raise ModelNotFoundError(f"{folder}: the package ships no model {name!r} (it ships {', '.join(shipped)})")
+    return folder
 
 
 def default_model_folder() -> Path:
