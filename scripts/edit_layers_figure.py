@@ -1,8 +1,8 @@
 """Figure: an edit of a layered record keeps its detail (issue 41, part 6; docs/editing.md).
 
 Compresses the analytic red plastic into 16 KB with the shipped model (a basis
-and a detail layer), makes it "a little more specular" (z1 − 1.5σ: the model
-card's z1 is the specular level, lower with +z), and renders four spheres
+and a detail layer), makes it "a little glossier" (z4 − 1.5σ: the model card's
+z4 follows roughness and lowers the specular level with +z), and renders four spheres
 under the same light and exposure: the original and the edit, each with its
 layers and as its base alone. Prints the mapped RelAE of each against the
 source table where there is one, the edit's distance from "edited base +
@@ -29,7 +29,7 @@ from brdfcodec.render.images import auto_exposure, encode_srgb
 from brdfcodec.representation import clamp_mapped
 from brdfcodec.representation.metrics import relae_mapped
 
-DIM, STEP, LIGHT = 0, -1.5, (-1.0, 1.0, 1.0)
+DIM, STEP, LIGHT = 3, -1.5, (-1.0, 1.0, 1.0)
 
 
 def main() -> None:

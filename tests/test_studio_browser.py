@@ -102,7 +102,7 @@ def test_editor_paints_the_library_render_and_sliders_change_it(page: Any, studi
     assert painted_error(page, catalogue, "editor") < MAX_DELTA_E_ITP
     before = canvas_pixels(page, "editor-canvas")
     count = paint_count(page)
-    set_slider(page, "z1", -2.5)  # z2 (element ids are 0-based): diffuse level
+    set_slider(page, "z1", -2.5)  # z2 (element ids are 0-based): hue
     wait_for_paint_after(page, count)
     after = canvas_pixels(page, "editor-canvas")
     assert np.abs(after.astype(int) - before.astype(int)).mean() > 2.0
