@@ -55,8 +55,10 @@ def render_model_card(manifest: dict[str, Any]) -> str:
         "## Data",
         "",
         f"- {info['data']['description']} (`source_kind = {info['data']['source_kind']}`).",
-        f"- {len(info['data']['train'])} training materials, {len(info['data']['validation'])} validation "
-        "materials that training never saw: " + ", ".join(info["data"]["validation"]) + ".",
+        f"- {len(info['data']['train'])} training materials, "
+        + (f"{len(info['data']['validation'])} validation materials that training never saw: "
+           + ", ".join(info["data"]["validation"]) + "." if info["data"]["validation"]
+           else "none held out (every material of the dataset was trained on)."),
         "- Every number on this card was measured on this data, not on measured MERL.",
         "",
         "## Training",
@@ -66,7 +68,8 @@ def render_model_card(manifest: dict[str, Any]) -> str:
         f"- {_optimizer_words(train.get('weight_decay', 0.0))}, batch {train['batch_size']}, "
         f"learning rate {train['learning_rate']:g} with {train['warmup_epochs']} "
         f"warm-up epochs and cosine decay to {train['min_learning_rate']:g}, {info['epochs_done']} of "
-        f"{train['epochs']} epochs; weights of epoch {info['best_epoch']} (best validation RelAE"
+        f"{train['epochs']} epochs; weights of epoch {info['best_epoch']} ("
+        + ("the last" if train.get("keep") == "last" else "best validation RelAE")
         + (f"; equal-weight average of every step's weights from epoch {train['average_from_epoch']} on"
            if 0 < train.get("average_from_epoch", 0) <= info["best_epoch"] else "") + ").",
         f"- Augmentation: colour permutation with probability {train['permute_colours']}, reflectance blend of two "

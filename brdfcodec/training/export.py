@@ -33,8 +33,8 @@ CARD = "MODEL_CARD.md"
 DEFAULT_BASIS_COUNT = 75
 
 _LIMITS = [
-    "Trained and measured on the NBRDF proxy of MERL (neural fits evaluated on the MERL grid), which is smoother "
-    "than the measurements; errors on genuine MERL files will be larger.",
+    "Trained and measured on NBRDF proxies (neural fits evaluated on the MERL grid, the card's Data section says "
+    "of which families), which are smoother than the measurements; errors on genuine files will be larger.",
     "Materials far from the training set (saturated greens above all; MERL has few) reconstruct worse. "
     "Colour-permutation augmentation is meant to help there; whether it does for this model is in the "
     "comparison table (green-acrylic and the green mean, with and without it).",
