@@ -105,7 +105,7 @@ def test_traversals_of_materials_never_trained_on_conserve_energy(decoder, analy
     encoder = BrdfEncoder(effort=0)
     records = [encoder.encode(analytic_tables[name], name=name) for name in ("gold", "white-matte")]
     report = measure_plausibility(decoder, records)
-    for kind in ("unphysical", "inverted", "holes", "invalid"):
+    for kind in ("unphysical", "inverted", "holes", "pits", "invalid"):
         assert float(report.fractions[kind].max()) == 0.0, kind
     raw = measure_plausibility(decoder, records, dims=(0, 1), energy_bound=False)
     assert raw.energy_bound is False and report.energy_bound is True
@@ -129,5 +129,5 @@ def test_traversals_of_the_held_out_proxies_conserve_energy(decoder, nbrdf_zip, 
     with bc.MaterialLibrary(library, decoder=decoder) as opened:
         records = [opened.record(name) for name in opened.names]
     report = measure_plausibility(decoder, records)
-    for kind in ("unphysical", "inverted", "holes"):
+    for kind in ("unphysical", "inverted", "holes", "pits"):
         assert float(report.fractions[kind].max()) == 0.0, kind

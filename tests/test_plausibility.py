@@ -147,7 +147,7 @@ def test_measure_plausibility_on_a_constructed_decoder() -> None:
 
 def test_inversions_the_source_already_has_do_not_count() -> None:
     records = [Code("dented", [0.8, 0.0]).record]  # peak 0.2 under its flank 0.5 at μ
-    report = measure_plausibility(PeakDecoder(), records, dims=[0])
+    report = measure_plausibility(PeakDecoder(), records, dims=[0], energy_bound=False)  # the raw decodes
     assert report.source_inverted == 1
     assert report.fractions["inverted"][0].tolist() == [0, 0, 0, 0, 0, 0]
     assert report.fractions["holes"][0].tolist() == [0, 0, 0, 1, 1, 1]  # the peak still falls to 0 under its flank
@@ -163,9 +163,10 @@ def test_plausible_range_stops_before_the_first_implausible_step() -> None:
     limit = float(white_sky_albedo(peaked(2.0))[0]) * 1.1  # energy: a at −1σ (peak 2) fine, −2σ (peak 3) not
     assert plausible_range(decoder, Code("a", [0.0, 0.0]).record, 0, albedo_limit=limit, **raw) == (-1.0, 0.0)
     assert plausible_range(decoder, Code("a", [0.0, 0.0]).record, 1, **raw) == (-3.0, 3.0)
-    # as edits decode (the energy bound scales a decode down to albedo 1), energy no longer ends a range
-    assert plausible_range(decoder, Code("b", [-0.9, 0.0]).record, 0) == (-3.0, 1.0)
-    assert plausible_range(decoder, Code("a", [0.0, 0.0]).record, 0) == (-3.0, 0.0)
+    # as edits decode (the energy bound scales a decode down to albedo 1, the highlight guard lifts a peak
+    # that falls under its flank), neither energy nor a dark peak ends a range
+    assert plausible_range(decoder, Code("b", [-0.9, 0.0]).record, 0) == (-3.0, 3.0)
+    assert plausible_range(decoder, Code("a", [0.0, 0.0]).record, 0) == (-3.0, 3.0)
 
 
 class NotchDecoder(PeakDecoder):
@@ -178,7 +179,7 @@ class NotchDecoder(PeakDecoder):
 
 
 def test_plausible_range_stops_at_the_first_implausible_step_even_if_later_ones_are_fine() -> None:
-    assert plausible_range(NotchDecoder(), Code("a", [0.0, 0.0]).record, 0) == (-1.0, 0.0)
+    assert plausible_range(NotchDecoder(), Code("a", [0.0, 0.0]).record, 0, energy_bound=False) == (-1.0, 0.0)
 
 
 def test_measure_plausibility_counts_non_finite_decodes() -> None:
@@ -226,7 +227,7 @@ def default_library() -> tuple[object, dict[str, object]]:
 
 def test_v1_model_gold_paint_black_hole_is_found(default_library: tuple[object, dict[str, object]]) -> None:
     decoder, records = default_library
-    report = measure_plausibility(decoder, list(records.values()), dims=[0])
+    report = measure_plausibility(decoder, list(records.values()), dims=[0], energy_bound=False)  # the network's
     plus1 = report.steps.index(1.0)
     assert report.fractions["inverted"][0, plus1] >= 0.5  # gold-paint at +1σ of z1
     assert report.fractions["holes"][0, plus1] >= 0.5

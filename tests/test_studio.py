@@ -112,7 +112,8 @@ def test_catalogue_refuses_unknown_names_and_bad_codes(catalogue: Catalogue) -> 
 
 def test_decode_returns_the_decoders_kept_slices(studio: str, catalogue: Catalogue) -> None:
     record = catalogue.record("gold-paint")
-    status, payload, headers = request(f"{studio}/api/decode", {"z": [float(v) for v in record.mu], "graft": None})
+    body = {"z": [float(v) for v in record.mu], "graft": None, "base": "gold-paint"}  # the material, not an edit
+    status, payload, headers = request(f"{studio}/api/decode", body)
     assert status == 200 and headers["Content-Type"] == "application/octet-stream"
     sent = np.frombuffer(payload, dtype="<u2").reshape(63, 90, 90) * SLICE_STEP
     expected = np.clip(catalogue.decoder.mapped_record(record), 0.0, 5.0)
@@ -126,7 +127,8 @@ def test_decode_of_a_graft_uses_the_second_code(studio: str, catalogue: Catalogu
     status, payload, _ = request(f"{studio}/api/decode", {"z": [float(v) for v in record.mu], "graft": graft})
     assert status == 200
     expected = catalogue.decoder.mapped_record(
-        GraftRecord("g", record.mu, record.sigma, catalogue.colour_dims, np.asarray(graft, np.float32)))
+        GraftRecord("g", record.mu, record.sigma, catalogue.colour_dims, np.asarray(graft, np.float32),
+                    {"edit": {"op": "studio"}}))  # a graft is an edit: decoded with the guard and the bound
     sent = np.frombuffer(payload, dtype="<u2").reshape(63, 90, 90) * SLICE_STEP
     assert np.abs(sent - np.clip(expected, 0, 5)).max() <= SLICE_STEP / 2 + 1e-6
 
@@ -240,7 +242,8 @@ def test_exports_merl_png_and_exr(studio: str, save_dir: Path, catalogue: Catalo
         status, payload, _ = request(f"{studio}/api/save", save_body(file=name, z=z))
         assert status == 200, payload
     merl = read_merl(save_dir / "gold.binary")
-    expected = catalogue.decoder.decode(LatentRecord("g", record.mu, record.sigma))
+    # saved without a base material, the code is an edit: decoded with the guard and the bound (spec §6)
+    expected = catalogue.decoder.decode(LatentRecord("g", record.mu, record.sigma, {"edit": {"op": "studio"}}))
     assert np.allclose(merl.values, expected, rtol=1e-5, atol=1e-6)
     from PIL import Image
 

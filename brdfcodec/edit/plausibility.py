@@ -31,18 +31,26 @@ source decode at μ and against the library:
     The decode's directional albedo (:func:`brdfcodec.representation.energy.directional_albedo_mapped`)
     exceeds 1 (by more than 1e-4) at some incident elevation and channel: lit
     from that direction it reflects more light than it receives.
-By default the traversal decodes are judged as an editor shows them: with the
-highlight guard of ``spec/bvae-format.md`` §6 step 6 (near-specular entries
-raised to within τ = 0.05 of their flank, :mod:`brdfcodec.representation.highlight`)
-and the energy bound of step 5 (a decode whose directional albedo exceeds 1
-is scaled down to 1), so ``inverted``, ``holes`` and ``unphysical`` check that
-they hold; ``energy_bound=False`` judges the network's raw decodes.
-
 ``holes``
     Some near-specular entry (θh bins 0–1, above the horizon) decodes to
     exactly 0 (the decoder's output was clamped at the floor of the mapped
     domain) while the off-specular flank of its cell (θh bins 4–6) is above
     0, where the source decode was above 0: the "black hole" of issue 12.
+``pits``
+    A *pit* in the highlight that the source did not have: in some cell,
+    a value at θh bin i below 20 falls more than τ below the largest value at
+    bins i + 1 to 20 (θh below 4.4°; entries above the horizon only,
+    :func:`pit_cells`). It sees what ``inverted`` and ``holes``, which compare
+    bins 0–1 with 4–6 only, miss: a centre that goes dark over a wider disc,
+    the black dot a traversal sheet shows.
+
+By default the traversal decodes are judged as an editor shows them: with the
+highlight guard of ``spec/bvae-format.md`` §6 step 6 (values of θh bins 0–19
+raised to within τ = 0.05 of the largest value beyond them up to bin 20,
+:mod:`brdfcodec.representation.highlight`) and the energy bound of step 5 (a
+decode whose directional albedo exceeds 1 is scaled down to 1), so
+``inverted``, ``holes``, ``pits`` and ``unphysical`` check that they hold;
+``energy_bound=False`` judges the network's raw decodes.
 
 Examples
 --------
@@ -79,10 +87,13 @@ from brdfcodec.conventions import (
 )
 from brdfcodec.representation.energy import bound_scales, directional_albedo_mapped, scale_mapped
 from brdfcodec.representation.highlight import (
+    GUARD_THETA_H_BINS,
     NEAR_THETA_H_BINS,
     OFF_THETA_H_BINS,
     cell_valid_mask,
     guard_highlights_mapped,
+    outer_maximum,
+    window_valid_mask,
 )
 from brdfcodec.representation.mapping import LOG_RANGE
 
@@ -102,6 +113,8 @@ __all__ = [
     "inverted_cells",
     "measure_plausibility",
     "new_holes",
+    "pit_cells",
+    "pit_depth",
     "plausible_range",
     "specular_deficit",
     "white_sky_albedo",
@@ -112,7 +125,7 @@ DEFAULT_STEPS: tuple[float, ...] = (-3.0, -2.0, -1.0, 1.0, 2.0, 3.0)
 #: How far above 1 a directional albedo may be before ``unphysical`` flags it (float32 rounding of the bound).
 UNPHYSICAL_TOLERANCE = 1e-4
 #: The kinds of implausibility, in report order.
-KINDS: tuple[str, ...] = ("invalid", "inverted", "energetic", "unphysical", "holes")
+KINDS: tuple[str, ...] = ("invalid", "inverted", "energetic", "unphysical", "holes", "pits")
 
 FloatArray = npt.NDArray[np.floating]
 BoolArray = npt.NDArray[np.bool_]
@@ -193,6 +206,26 @@ def inverted_cells(mapped: npt.ArrayLike, tolerance: float = 0.1) -> BoolArray:
     broken = ~np.isfinite(rows).all(axis=-2) & cell_valid_mask()
     with np.errstate(invalid="ignore"):
         return (deficit > tolerance) | broken
+
+
+def pit_depth(mapped: npt.ArrayLike) -> FloatArray:
+    """How far each cell's highlight falls towards its centre: max over θh bins i < 20 above the horizon of
+    (R_i − m_i), R_i the largest value at bins i + 1 to 20 above the horizon (mapped units), shape
+    (..., 3, 21, 90); NaN where no such pair exists."""
+    blocks = _split(mapped)
+    outer = outer_maximum(mapped)
+    inner = blocks[..., : GUARD_THETA_H_BINS - 1, :]
+    usable = np.isfinite(outer) & window_valid_mask()[:, :-1, :]
+    with np.errstate(invalid="ignore"):
+        depth = np.where(usable, outer - inner, -np.inf).max(axis=-2)
+    depth = depth.astype(np.result_type(blocks.dtype, np.float32), copy=False)
+    return np.where(np.isfinite(depth), depth, np.nan)
+
+
+def pit_cells(mapped: npt.ArrayLike, tolerance: float = 0.1) -> BoolArray:
+    """Cells whose :func:`pit_depth` exceeds ``tolerance`` (mapped units), shape (..., 3, 21, 90)."""
+    with np.errstate(invalid="ignore"):
+        return pit_depth(mapped) > tolerance
 
 
 def new_holes(source: npt.ArrayLike, edited: npt.ArrayLike) -> BoolArray:
@@ -292,7 +325,8 @@ class Offender:
 
     ``score`` depends on ``kind``: ``inverted``, the largest specular deficit
     (mapped units) among new inversions, at ``where`` = (colour, φd bin, θd bin);
-    ``holes``, the number of new zero entries near the peak; ``energetic``, the largest channel's
+    ``holes``, the number of new zero entries near the peak; ``pits``, the largest new pit depth (mapped
+    units); ``energetic``, the largest channel's
     white-sky albedo; ``unphysical``, the largest directional albedo; ``invalid``, the number of bad values.
     """
 
@@ -398,7 +432,7 @@ def bounded(mapped: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _judge(
-    source: np.ndarray, source_inv: np.ndarray, mapped: np.ndarray, limit: float, tol: float,
+    source: np.ndarray, source_inv: np.ndarray, source_pits: np.ndarray, mapped: np.ndarray, limit: float, tol: float,
     directional: np.ndarray | None = None,
 ) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray], np.ndarray]:
     """Flags and scores of each kind for edited decodes ``mapped`` (..., 63, 90, 90) of one source.
@@ -409,6 +443,7 @@ def _judge(
     lead = mapped.shape[:-3]
     bad = _invalid_counts(mapped.reshape(-1, *NETWORK_INPUT_SHAPE)).reshape(lead)
     new_inv = inverted_cells(mapped, tol) & ~source_inv
+    depth = np.where(pit_cells(mapped, tol) & ~source_pits, pit_depth(mapped), -np.inf)
     deficit = np.where(new_inv, specular_deficit(mapped), -np.inf)
     holes = new_holes(source, mapped).reshape(*lead, -1).sum(axis=-1)
     albedo = white_sky_albedo(mapped).max(axis=-1)
@@ -421,9 +456,10 @@ def _judge(
         "energetic": albedo > limit,
         "unphysical": directional > 1 + UNPHYSICAL_TOLERANCE,
         "holes": holes > 0,
+        "pits": np.isfinite(depth).reshape(*lead, -1).any(axis=-1),
     }
     scores = {"invalid": bad, "inverted": deficit.reshape(*lead, -1).max(axis=-1), "energetic": albedo,
-              "unphysical": directional, "holes": holes}
+              "unphysical": directional, "holes": holes, "pits": depth.reshape(*lead, -1).max(axis=-1)}
     return flags, scores, deficit
 
 
@@ -470,8 +506,8 @@ def plausible_range(
     mapped, directional = decoder.decode_mapped(codes), None
     if energy_bound:
         mapped, directional = bounded(mapped)
-    flags, _, _ = _judge(source[0], inverted_cells(source[0], tol), mapped, np.inf if albedo_limit is None
-                         else albedo_limit, tol, directional)
+    flags, _, _ = _judge(source[0], inverted_cells(source[0], tol), pit_cells(source[0], tol), mapped,
+                         np.inf if albedo_limit is None else albedo_limit, tol, directional)
     bad = np.logical_or.reduce(list(flags.values()))
     low = high = 0.0
     for step, implausible in sorted(((s, b) for s, b in zip(steps, bad, strict=True) if s > 0)):
@@ -543,6 +579,7 @@ def measure_plausibility(
     mus = np.stack([np.asarray(r.mu, dtype=np.float32) for r in records])
     sources = decoder.decode_mapped(mus, batch_size=batch_size)
     source_inv = inverted_cells(sources, tol)
+    source_pits = pit_cells(sources, tol)
     if reference is None:
         library_max = float(white_sky_albedo(sources).max())
     else:
@@ -560,7 +597,7 @@ def measure_plausibility(
         directional = None
         if energy_bound:
             mapped, directional = bounded(mapped)
-        flags, scores, deficit = _judge(sources[m], source_inv[m], mapped, limit, tol, directional)
+        flags, scores, deficit = _judge(sources[m], source_inv[m], source_pits[m], mapped, limit, tol, directional)
         for kind, flag in flags.items():
             counts[kind] += flag
             for i, j in zip(*np.nonzero(flag), strict=True):
