@@ -61,7 +61,8 @@ def main() -> None:
     definition = clamp_mapped(decoder.decode_mapped(edited.mu) + residual)
     undone = traverse(edited, DIM, [-STEP])[0]
     print(f"record: {size:,} bytes")
-    print(f"edited vs clamp(edited base + original layers): max |Δ| = {np.abs(mapped(edited) - definition).max():.3g}")
+    kept = decoder.mapped_record(edited, energy_bound=False)  # the layers' rule (§4.4); guard and bound after (§6)
+    print(f"edited vs clamp(edited base + original layers): max |Δ| = {np.abs(kept - definition).max():.3g}")
     print(f"undone vs original: max |Δ| (mapped) = {np.abs(mapped(undone) - mapped(record)).max():.3g}")
 
     def error(r: object) -> float:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 from pathlib import Path
 
@@ -64,7 +65,19 @@ def test_a_fitted_graft_worse_than_the_code_alone_is_not_written_silently(capsys
         return GraftRecord(f"{record.name}.graft", record.mu, record.sigma, dims, np.full(len(dims), 3.0, np.float32),
                            {"edit": {"op": "fit-graft"}})
 
+    import brdfcodec.codec as codec
+
+    measured = codec.measure
+
+    def measure_worse(record, decoder, source):  # a graft that measures worse than the code alone, whatever it is
+        out = measured(record, decoder, source)
+        if isinstance(out, GraftRecord):
+            relae = dict(out.meta["relae"], mapped=1.0 + out.meta["relae"]["mapped"])
+            out = dataclasses.replace(out, meta={**out.meta, "relae": relae})
+        return out
+
     monkeypatch.setattr(edit, "fit_graft", worse_fit)
+    monkeypatch.setattr(codec, "measure", measure_worse)
     code, out, err = run(capsys, "edit", "graft", str(library), "--material", "gold", "--fit",
                          str(tmp_path / "gold.binary"), "-o", str(tmp_path / "f.bvae"))
     assert code == 0, err

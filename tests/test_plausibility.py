@@ -68,6 +68,19 @@ def test_non_finite_peaks_count_as_inverted() -> None:
     assert inverted_cells(broken).sum() == 1
 
 
+def test_a_pit_wider_than_the_peak_rows_is_seen_by_pits_only() -> None:
+    from brdfcodec.edit.plausibility import pit_cells, pit_depth
+
+    mapped = np.full((63, 90, 90), 0.6, dtype=np.float32)
+    mapped[GREEN_SLOT_10, 0:10, 10] = 0.0  # a dark disc out to θh bin 9 inside a lit rim: the dot a sheet shows
+    assert not inverted_cells(mapped).any()  # bins 0–1 against 4–6: both dark
+    assert not new_holes(np.full_like(mapped, 0.6), mapped).any()  # no lit flank at bins 4–6
+    depth = pit_depth(mapped)
+    assert float(depth[1, 10, 10]) == pytest.approx(0.6) and pit_cells(mapped)[1, 10, 10]
+    others = np.delete(depth.reshape(-1), np.ravel_multi_index((1, 10, 10), depth.shape))
+    assert int(pit_cells(mapped).sum()) == 1 and float(np.nanmax(others)) == 0.0
+
+
 def test_invalid_values_are_counted_above_the_horizon_only() -> None:
     good = peaked()[None]
     assert invalid_counts(good).tolist() == [0]
@@ -163,10 +176,9 @@ def test_plausible_range_stops_before_the_first_implausible_step() -> None:
     limit = float(white_sky_albedo(peaked(2.0))[0]) * 1.1  # energy: a at −1σ (peak 2) fine, −2σ (peak 3) not
     assert plausible_range(decoder, Code("a", [0.0, 0.0]).record, 0, albedo_limit=limit, **raw) == (-1.0, 0.0)
     assert plausible_range(decoder, Code("a", [0.0, 0.0]).record, 1, **raw) == (-3.0, 3.0)
-    # as edits decode (the energy bound scales a decode down to albedo 1, the highlight guard lifts a peak
-    # that falls under its flank), neither energy nor a dark peak ends a range
-    assert plausible_range(decoder, Code("b", [-0.9, 0.0]).record, 0) == (-3.0, 3.0)
-    assert plausible_range(decoder, Code("a", [0.0, 0.0]).record, 0) == (-3.0, 3.0)
+    # as edits decode (the energy bound scales a decode down to albedo 1), energy no longer ends a range
+    assert plausible_range(decoder, Code("b", [-0.9, 0.0]).record, 0) == (-3.0, 1.0)
+    assert plausible_range(decoder, Code("a", [0.0, 0.0]).record, 0) == (-3.0, 0.0)
 
 
 class NotchDecoder(PeakDecoder):

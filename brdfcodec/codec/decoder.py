@@ -39,7 +39,6 @@ from brdfcodec.representation import (
     validate_phi_d_bins,
 )
 from brdfcodec.representation.energy import energy_bound_scale_mapped, scale_mapped
-from brdfcodec.representation.highlight import guard_highlights_mapped
 from brdfcodec.runtime.threads import codec_threads
 
 if TYPE_CHECKING:
@@ -58,10 +57,7 @@ def is_edited(record: Record) -> bool:
 
 
 def _table(mapped: np.ndarray, bins: Sequence[int] | None, energy_bound: bool) -> npt.NDArray[np.float32]:
-    """The table of full mapped slices (only ``bins`` when given); decoded as an edit when asked: the highlight
-    guard, then the energy bound's factor (``spec/bvae-format.md`` §6 steps 6 and 5)."""
-    if energy_bound:
-        mapped = guard_highlights_mapped(mapped)
+    """The table of full mapped slices (only ``bins`` when given), times the energy bound's factor when asked."""
     table = table_from_mapped(mapped, phi_d_bins=bins)
     if energy_bound and (scale := energy_bound_scale_mapped(mapped)) != 1.0:
         table *= np.float32(scale)
@@ -466,23 +462,20 @@ class BrdfDecoder:
         ----------
         record : Record
         energy_bound : bool, optional
-            Decode as an edit: the highlight guard (``spec/bvae-format.md`` §6 step 6,
-            :mod:`brdfcodec.representation.highlight`), then the energy bound (:meth:`energy_scale`, §6 step 5)
-            in the mapped domain. By default, exactly for edited records (:func:`is_edited`).
+            Apply the energy bound (:meth:`energy_scale`, ``spec/bvae-format.md`` §6.3) in the mapped domain.
+            By default, exactly for edited records (:func:`is_edited`).
         """
         mapped = self._mapped_record(record)
         if energy_bound if energy_bound is not None else is_edited(record):
-            mapped = guard_highlights_mapped(mapped)
             mapped = scale_mapped(mapped, energy_bound_scale_mapped(mapped)).astype(np.float32, copy=False)
         return mapped
 
     def energy_scale(self, record: Record) -> float:
         """The energy bound's factor for a record: ``min(1, 1 / max a)`` over its decode's directional albedo.
 
-        See :mod:`brdfcodec.representation.energy`; 1 when the decode conserves energy. Measured on the
-        decode with the highlight guard (§6 step 6), as an edit's bound is.
+        See :mod:`brdfcodec.representation.energy`; 1 when the decode conserves energy.
         """
-        return energy_bound_scale_mapped(guard_highlights_mapped(self._mapped_record(record)))
+        return energy_bound_scale_mapped(self._mapped_record(record))
 
     def _mapped_record(self, record: Record) -> npt.NDArray[np.float32]:
         with codec_threads():
@@ -516,11 +509,10 @@ class BrdfDecoder:
             Below-horizon bins: ``-1`` (MERL's unmeasured marker), ``0``, or
             the network's value.
         energy_bound : bool, optional
-            Decode as an edit: raise near-specular entries that fall below their flank (the
-            highlight guard, ``spec/bvae-format.md`` §6 step 6), then multiply the table by
-            ``min(1, 1 / max a)``, a its directional albedo (§6 step 5), so that it reflects at
-            most the light it receives. By default, exactly for edited records (:func:`is_edited`):
-            an encoded material decodes as measured, an edit never creates energy or black pits.
+            Multiply the table by ``min(1, 1 / max a)``, a its directional albedo
+            (``spec/bvae-format.md`` §6.3), so that it reflects at most the light it
+            receives. By default, exactly for edited records (:func:`is_edited`): an
+            encoded material decodes as measured, an edit never creates energy.
 
         Returns
         -------

@@ -45,12 +45,9 @@ source decode at μ and against the library:
     the black dot a traversal sheet shows.
 
 By default the traversal decodes are judged as an editor shows them: with the
-highlight guard of ``spec/bvae-format.md`` §6 step 6 (values of θh bins 0–19
-raised to within τ = 0.05 of the largest value beyond them up to bin 20,
-:mod:`brdfcodec.representation.highlight`) and the energy bound of step 5 (a
-decode whose directional albedo exceeds 1 is scaled down to 1), so
-``inverted``, ``holes``, ``pits`` and ``unphysical`` check that they hold;
-``energy_bound=False`` judges the network's raw decodes.
+energy bound of ``spec/bvae-format.md`` §6.3 (a decode whose directional
+albedo exceeds 1 is scaled down to 1), so ``unphysical`` checks that the bound
+holds; ``energy_bound=False`` judges the network's raw decodes.
 
 Examples
 --------
@@ -87,11 +84,10 @@ from brdfcodec.conventions import (
 )
 from brdfcodec.representation.energy import bound_scales, directional_albedo_mapped, scale_mapped
 from brdfcodec.representation.highlight import (
-    GUARD_THETA_H_BINS,
     NEAR_THETA_H_BINS,
     OFF_THETA_H_BINS,
+    PIT_THETA_H_BINS,
     cell_valid_mask,
-    guard_highlights_mapped,
     outer_maximum,
     window_valid_mask,
 )
@@ -214,7 +210,7 @@ def pit_depth(mapped: npt.ArrayLike) -> FloatArray:
     (..., 3, 21, 90); NaN where no such pair exists."""
     blocks = _split(mapped)
     outer = outer_maximum(mapped)
-    inner = blocks[..., : GUARD_THETA_H_BINS - 1, :]
+    inner = blocks[..., : PIT_THETA_H_BINS - 1, :]
     usable = np.isfinite(outer) & window_valid_mask()[:, :-1, :]
     with np.errstate(invalid="ignore"):
         depth = np.where(usable, outer - inner, -np.inf).max(axis=-2)
@@ -405,14 +401,12 @@ class PlausibilityReport:
         lines.append(f"All {len(self.materials)} materials × {len(self.dims)} dims × {len(self.steps)} steps: {totals}")
         lines.append(f"μ decodes with an inverted cell already: {self.source_inverted:.3f}; albedo limit "
                      f"{self.albedo_limit:.3f} (library max {self.library_albedo_max:.3f}); decodes judged "
-                     + ("with the highlight guard and the energy bound (as edits decode)" if self.energy_bound
-                        else "raw (neither the highlight guard nor the energy bound)"))
+                     + ("with the energy bound (as edits decode)" if self.energy_bound else "raw (no energy bound)"))
         return "\n".join(lines)
 
 
 def bounded(mapped: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Decodes (..., 63, 90, 90) as edits decode: the highlight guard, then the energy bound
-    (``spec/bvae-format.md`` §6 steps 6 and 5).
+    """Decodes (..., 63, 90, 90) with the energy bound applied, as edits decode (spec §6.3).
 
     Returns
     -------
@@ -421,7 +415,7 @@ def bounded(mapped: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     albedo : ndarray of float64, shape (...)
         Each bounded decode's largest directional albedo: ``s · max a`` of the raw decode, s its factor.
     """
-    flat = guard_highlights_mapped(np.asarray(mapped).reshape(-1, *NETWORK_INPUT_SHAPE))
+    flat = np.asarray(mapped).reshape(-1, *NETWORK_INPUT_SHAPE)
     largest = directional_albedo_mapped(flat).max(axis=(-2, -1))
     scales = bound_scales(largest)
     out = flat.copy()  # decodes within the bound stay as they are (non-finite values too, for ``invalid``)
