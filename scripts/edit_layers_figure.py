@@ -1,7 +1,7 @@
 """Figure: an edit of a layered record keeps its detail (issue 41, part 6; docs/editing.md).
 
 Compresses the analytic red plastic into 16 KB with the shipped model (a basis
-and a detail layer), makes it "a little glossier" (z4 − 1.5σ: the model card's
+and a detail layer), moves it along the roughness axis (z4 − 1.5σ: the model card's
 z4 follows roughness and lowers the specular level with +z), and renders four spheres
 under the same light and exposure: the original and the edit, each with its
 layers and as its base alone. Prints the mapped RelAE of each against the
