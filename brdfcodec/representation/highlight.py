@@ -57,7 +57,7 @@ def cell_valid_mask() -> npt.NDArray[np.bool_]:
 
 @functools.cache
 def window_valid_mask() -> npt.NDArray[np.bool_]:
-    """(21 slots, 21 θh bins 0–20, 90 θd): the entries of the guard's window that lie above the horizon."""
+    """(21 slots, 21 θh bins 0–20, 90 θd): the entries of the pits check's window that lie above the horizon."""
     from brdfcodec.representation.mask import kept_slice_horizon_mask
 
     valid = np.ascontiguousarray(np.moveaxis(kept_slice_horizon_mask()[:PIT_THETA_H_BINS], -1, 0))
