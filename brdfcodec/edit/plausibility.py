@@ -437,7 +437,9 @@ def _judge(
     lead = mapped.shape[:-3]
     bad = _invalid_counts(mapped.reshape(-1, *NETWORK_INPUT_SHAPE)).reshape(lead)
     new_inv = inverted_cells(mapped, tol) & ~source_inv
-    depth = np.where(pit_cells(mapped, tol) & ~source_pits, pit_depth(mapped), -np.inf)
+    depth = pit_depth(mapped)
+    with np.errstate(invalid="ignore"):
+        depth = np.where((depth > tol) & ~source_pits, depth, -np.inf)  # new pits only, measured once
     deficit = np.where(new_inv, specular_deficit(mapped), -np.inf)
     holes = new_holes(source, mapped).reshape(*lead, -1).sum(axis=-1)
     albedo = white_sky_albedo(mapped).max(axis=-1)
