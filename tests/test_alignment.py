@@ -108,3 +108,19 @@ def test_alignment_makes_the_first_dimensions_follow_the_factors(model: BetaVAE)
     assert stored["materials"] == 24 and stored["seed"] == 5 and len(stored["rotation"]) == 8
     with pytest.raises(AlignmentError, match="more than 8 materials"):
         align_to_factors(aligned, materials=8)
+
+
+def test_measuring_without_turning_keeps_the_weights_and_reports_the_present_axes(model: BetaVAE) -> None:
+    kept = BetaVAE(model.config).eval()
+    kept.load_state_dict(model.state_dict())
+    before = {key: value.clone() for key, value in kept.state_dict().items()}
+    result = align_to_factors(kept, materials=24, seed=5, rotate=False)
+    assert np.array_equal(result.rotation, np.eye(model.config.latent_dim))
+    assert all(torch.equal(before[key], value) for key, value in kept.state_dict().items())
+    # The correlations are those of the present axes with the factors.
+    from brdfcodec.training.alignment import factor_codes
+
+    with torch.no_grad():
+        codes, factors, _ = factor_codes(kept.encoder, 24, 5)
+    expected = [np.corrcoef(codes[:, i], factors[:, i])[0, 1] for i in range(factors.shape[1])]
+    assert np.allclose(result.correlation, expected)

@@ -152,6 +152,8 @@ def test_measure_plausibility_on_a_constructed_decoder() -> None:
     assert report.fractions["energetic"][0].tolist() == [1, 1, 0.5, 0, 0, 0]
     assert report.fractions["unphysical"][0].tolist() == [1, 0.5, 0, 0, 0, 0]  # albedo > 1: peaks 4.9 and 3.9
     assert report.fractions["any"][0].tolist() == [1, 1, 0.5, 0.5, 1, 1]
+    # a broken highlight: inverted or holes, each decode counted once
+    assert report.fractions["highlight"][0].tolist() == [0, 0, 0, 0.5, 1, 1]
     worst = [o for o in report.worst if o.kind == "inverted"][0]
     assert worst.score == pytest.approx(0.5) and worst.step > 0 and worst.dim == 0
     assert report.source_inverted == 0
@@ -164,6 +166,15 @@ def test_inversions_the_source_already_has_do_not_count() -> None:
     assert report.source_inverted == 1
     assert report.fractions["inverted"][0].tolist() == [0, 0, 0, 0, 0, 0]
     assert report.fractions["holes"][0].tolist() == [0, 0, 0, 1, 1, 1]  # the peak still falls to 0 under its flank
+    assert report.fractions["highlight"][0].tolist() == [0, 0, 0, 1, 1, 1]  # holes without inversions count
+
+
+def test_an_inversion_without_a_hole_is_a_broken_highlight() -> None:
+    records = [Code("c", [-0.3, 0.0]).record]  # peak 1.3 − t: 0.3 at +1σ (under its flank 0.5, above 0)
+    report = measure_plausibility(PeakDecoder(), records, dims=[0], energy_bound=False)
+    assert report.fractions["inverted"][0].tolist() == [0, 0, 0, 1, 1, 1]
+    assert report.fractions["holes"][0].tolist() == [0, 0, 0, 0, 1, 1]
+    assert report.fractions["highlight"][0].tolist() == [0, 0, 0, 1, 1, 1]
 
 
 def test_plausible_range_stops_before_the_first_implausible_step() -> None:

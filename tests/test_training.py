@@ -177,6 +177,28 @@ def test_export_card_store_and_registry(tiny_dataset: Path, tmp_path: Path) -> N
         load_model(folder, parts=("decoder",))
 
 
+def test_a_run_can_start_from_an_exported_model(tiny_dataset: Path, tmp_path: Path) -> None:
+    from brdfcodec.models.store import export_model, load_model
+
+    torch.manual_seed(123)  # not the run's seed: a fresh model of the run would differ
+    folder = tmp_path / "start"
+    export_model(BetaVAE(TINY_CONFIG), folder, name="tiny-start", info={})
+    # A learning rate of 0: the run's weights are the initial model's, not fresh ones.
+    still = TrainConfig(**{**TINY_TRAIN.to_dict(), "epochs": 1, "learning_rate": 1e-30, "min_learning_rate": 0.0})
+    run = tmp_path / "run"
+    train(tiny_dataset, run, model_config=TINY_CONFIG, train_config=still, progress=False, initial_model=folder)
+    best = torch.load(run / "best.pt", weights_only=False)["model"]
+    _, decoder, manifest = load_model(folder)
+    for key, value in decoder.state_dict().items():
+        assert torch.allclose(best[f"decoder.{key}"], value, atol=1e-6), key
+    recorded = json.loads((run / "run.json").read_text())["initial_model"]
+    assert recorded["name"] == "tiny-start" and recorded["decoder_sha256"] == manifest.decoder_sha256
+    other = dataclasses.replace(TINY_CONFIG, latent_dim=TINY_CONFIG.latent_dim + 1)
+    with pytest.raises(ValueError, match="configuration differs"):
+        train(tiny_dataset, tmp_path / "other", model_config=other, train_config=still, progress=False,
+              initial_model=folder)
+
+
 def test_early_stopping_after_patience_evaluations_without_gain(
     tiny_dataset: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:

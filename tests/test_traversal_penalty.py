@@ -82,6 +82,23 @@ def test_a_peak_below_the_floor_under_a_lit_flank_is_a_hole(flat, penalty) -> No
     assert float(penalty(edited, black_source).holes[0]) == 0
 
 
+def test_hole_margin_keeps_a_lit_peak_above_the_floor(flat: torch.Tensor, penalty) -> None:
+    edited = flat.clone()
+    edited[0, channel(GREEN, SLOT), 0, THETA_D] = 0.01  # just above the floor: no hole without a margin
+    assert float(penalty(edited, flat).holes[0]) == 0
+    kept = TraversalPenalty(flat, hole_margin=0.05)
+    assert float(kept(edited, flat).holes[0]) == pytest.approx(0.04, abs=1e-6)
+    # The material's own value, where lower than the margin, is the floor it must keep.
+    dim = flat.clone()
+    dim[0, channel(GREEN, SLOT), 0, THETA_D] = 0.02
+    assert float(kept(edited, dim).holes[0]) == pytest.approx(0.01, abs=1e-6)
+    assert float(kept(flat, flat).holes[0]) == 0
+    with pytest.raises(ValueError, match="hole_margin"):
+        TraversalPenalty(flat, hole_margin=-0.01)
+    with pytest.raises(ValueError, match="traversal_hole_margin"):
+        TrainConfig(traversal_hole_margin=float("nan"))
+
+
 def test_energy_is_the_log_excess_over_the_limit(flat, penalty) -> None:
     edited = flat + 0.3
     albedo = white_sky_albedo(edited[0].numpy())

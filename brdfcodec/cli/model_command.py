@@ -41,6 +41,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
                         help="rotate the latent axes to follow the factors (albedo, hue, specular, roughness, "
                              "grazing, sheen, metallic) of N analytic materials, before measuring (0: keep the "
                              "trained axes, the default; 300 is the release recipe's)")
+    export.add_argument("--keep-axes", action="store_true",
+                        help="with --align-factors: measure how the trained axes follow the factors without "
+                             "turning them (a run fine-tuned with `bvae train --init` from an aligned model, whose "
+                             "axis penalty acted on those axes)")
     export.set_defaults(handler=run_export)
     fit = actions.add_parser(
         "fit-basis", help="fit a shared basis (the basis layer's) for an exported model",
@@ -165,10 +169,12 @@ def run_export(args: argparse.Namespace) -> int:
         raise ValueError(f"--basis-count must be ≥ 0, got {count}")
     if args.align_factors < 0:
         raise ValueError(f"--align-factors must be ≥ 0, got {args.align_factors}")
+    if args.keep_axes and not args.align_factors:
+        raise ValueError("--keep-axes measures the axes against the factors: it needs --align-factors N")
     manifest = export_run(args.run_dir, args.output, name=args.name, dataset_path=args.dataset, command=command,
                           comparisons=comparisons, basis_count=count,
                           basis_colour_permutations=args.basis_colour_permutations,
-                          align_materials=args.align_factors)
+                          align_materials=args.align_factors, turn_axes=not args.keep_axes)
     print(f"wrote {args.output}: {manifest.name}, decoder sha256 {manifest.decoder_sha256}")
     return 0
 

@@ -22,8 +22,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     )
     parser.add_argument("dataset", type=Path, help="dataset .h5 file (with full tables)")
     parser.add_argument("-o", "--run-dir", type=Path, required=True, help="run folder (logs, checkpoints)")
-    parser.add_argument("--model", default="small",
-                        help=f"model size: {', '.join(_PRESETS)}, or a JSON file of ModelConfig fields")
+    parser.add_argument("--model", default=None,
+                        help=f"model size: {', '.join(_PRESETS)} (default small), or a JSON file of ModelConfig "
+                        "fields")
+    parser.add_argument("--init", type=Path, dest="initial_model", metavar="MODEL_DIR",
+                        help="start from the weights of this exported model folder (fine-tuning; its "
+                        "configuration is the run's), e.g. one turned by `bvae model export --align-factors` so "
+                        "that the axis penalty acts on its aligned axes")
     parser.add_argument("--latent-dim", type=int, help="override the latent size")
     parser.add_argument("--linear-basis", action=argparse.BooleanOptionalAction, default=None,
                         help="override the model's linear (PCA) path")
@@ -42,6 +47,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
                         help="directions that penalty traverses: the latent axes (default) or any unit vector "
                              "(keeps every direction plausible, also the axes of `bvae model export "
                              "--align-factors`)")
+    parser.add_argument("--traversal-hole-margin", type=float,
+                        help="mapped height above the floor that the penalty keeps a lit highlight's centre at "
+                        "(0: only crossing the floor is penalised, the default)")
     parser.add_argument("--linear-path-rate", type=float,
                         help="learning rate of the decoder's linear (PCA) path as a fraction of the network's "
                              "(0: frozen, the default)")
@@ -100,9 +108,17 @@ def run(args: argparse.Namespace) -> int:
         for field in dataclasses.fields(TrainConfig)
         if getattr(args, field.name, None) is not None
     }
+    if args.initial_model is not None and args.model is None:
+        from brdfcodec.models.store import load_manifest
+
+        model_config = load_manifest(args.initial_model).config
+        if args.latent_dim is not None or args.linear_basis is not None:
+            raise ValueError("--latent-dim and --linear-basis cannot change the model of --init")
+    else:
+        model_config = _model_config(args.model or "small", args.latent_dim, args.linear_basis)
     result = train(
-        args.dataset, args.run_dir, model_config=_model_config(args.model, args.latent_dim, args.linear_basis),
-        train_config=TrainConfig(**overrides), resume=args.resume, progress=not args.quiet,
+        args.dataset, args.run_dir, model_config=model_config, train_config=TrainConfig(**overrides),
+        resume=args.resume, progress=not args.quiet, initial_model=args.initial_model,
     )
     if result.run_dir.joinpath("summary.json").exists():
         print(f"{result.run_dir}: {result.epochs_done} epochs ({result.stop_reason}), best validation mapped "

@@ -96,6 +96,7 @@ from brdfcodec.representation.mapping import LOG_RANGE
 __all__ = [
     "DEFAULT_STEPS",
     "KINDS",
+    "SUMMARY_KINDS",
     "NEAR_THETA_H_BINS",
     "OFF_THETA_H_BINS",
     "Offender",
@@ -122,6 +123,8 @@ DEFAULT_STEPS: tuple[float, ...] = (-3.0, -2.0, -1.0, 1.0, 2.0, 3.0)
 UNPHYSICAL_TOLERANCE = 1e-4
 #: The kinds of implausibility, in report order.
 KINDS: tuple[str, ...] = ("invalid", "inverted", "energetic", "unphysical", "holes", "pits")
+#: Unions of kinds that a report counts too: ``highlight`` (inverted or holes, a broken highlight) and ``any``.
+SUMMARY_KINDS: tuple[str, ...] = ("highlight", "any")
 
 FloatArray = npt.NDArray[np.floating]
 BoolArray = npt.NDArray[np.bool_]
@@ -346,8 +349,9 @@ class PlausibilityReport:
     steps : tuple of float
         Offsets, prior σ units.
     fractions : dict of str to ndarray, shape (len(dims), len(steps))
-        For each kind in :data:`KINDS` and ``"any"``: the fraction of the
-        library's materials whose decode at (dim, step) is flagged.
+        For each kind in :data:`KINDS`, ``"highlight"`` (inverted or holes: a broken highlight, the
+        kinds issue 41 bounds together) and ``"any"``: the fraction of the library's materials whose decode
+        at (dim, step) is flagged.
     source_inverted : float
         Fraction of the μ decodes that already have an inverted cell (these cells never count).
     albedo_limit : float
@@ -393,10 +397,10 @@ class PlausibilityReport:
         steps = " | ".join(f"{s:+g}σ" for s in self.steps)
         lines = [f"| dim | kind | {steps} |", "|---|---|" + "---:|" * len(self.steps)]
         for i, dim in enumerate(self.dims):
-            for kind in (*KINDS, "any"):
+            for kind in (*KINDS, *SUMMARY_KINDS):
                 cells = " | ".join(f"{v:.3f}" for v in self.fractions[kind][i])
                 lines.append(f"| z{dim + 1} | {kind} | {cells} |")
-        totals = ", ".join(f"{k} {float(self.fractions[k].mean()):.3f}" for k in (*KINDS, "any"))
+        totals = ", ".join(f"{k} {float(self.fractions[k].mean()):.3f}" for k in (*KINDS, *SUMMARY_KINDS))
         lines.append("")
         lines.append(f"All {len(self.materials)} materials × {len(self.dims)} dims × {len(self.steps)} steps: {totals}")
         lines.append(f"μ decodes with an inverted cell already: {self.source_inverted:.3f}; albedo limit "
@@ -584,7 +588,7 @@ def measure_plausibility(
     limit = library_max * (1 + criteria.energy_margin)
 
     shape = (len(dims), len(steps))
-    counts = {kind: np.zeros(shape) for kind in (*KINDS, "any")}
+    counts = {kind: np.zeros(shape) for kind in (*KINDS, *SUMMARY_KINDS)}
     offenders: dict[str, list[Offender]] = {kind: [] for kind in KINDS}
     for m, record in enumerate(records):
         edits = [e for d in dims for e in traverse(record, d, steps)]
@@ -603,6 +607,7 @@ def measure_plausibility(
                     where = (int(c), int(KEPT_PHI_D_SLICES[s]), int(t))
                 offenders[kind].append(Offender(record.name, dims[i], steps[j], kind, float(scores[kind][i, j]),
                                                 where))
+        counts["highlight"] += flags["inverted"] | flags["holes"]
         counts["any"] += np.logical_or.reduce(list(flags.values()))
     worst = tuple(o for kind in KINDS for o in sorted(offenders[kind], key=lambda o: -o.score)[:n_worst])
     fractions = {kind: c / len(records) for kind, c in counts.items()}

@@ -47,8 +47,8 @@ def factor_codes(encoder: Encoder, count: int, seed: int, *, batch_size: int = 1
 
 
 @torch.no_grad()
-def align_to_factors(model: BetaVAE, *, materials: int = ALIGNMENT_MATERIALS, seed: int = ALIGNMENT_SEED
-                     ) -> FactorAlignment:
+def align_to_factors(model: BetaVAE, *, materials: int = ALIGNMENT_MATERIALS, seed: int = ALIGNMENT_SEED,
+                     rotate: bool = True) -> FactorAlignment:
     """Rotate ``model``'s latent space (in place) so that its dimensions follow the analytic factors.
 
     Parameters
@@ -59,6 +59,9 @@ def align_to_factors(model: BetaVAE, *, materials: int = ALIGNMENT_MATERIALS, se
         Analytic factor materials to fit the rotation to; more than the latent size.
     seed : int, default :data:`ALIGNMENT_SEED`
         Their seed.
+    rotate : bool, default True
+        Turn the latent; False measures how the present axes follow the factors (identity rotation), for a
+        model fine-tuned from an aligned one.
 
     Returns
     -------
@@ -69,8 +72,9 @@ def align_to_factors(model: BetaVAE, *, materials: int = ALIGNMENT_MATERIALS, se
         raise AlignmentError(f"an alignment needs more than {model.config.latent_dim} materials, got {materials}")
     model.eval()
     codes, factors, names = factor_codes(model.encoder, materials, seed)
-    rotation = factor_rotation(codes, factors)
-    rotate_latent(model.encoder, model.decoder, rotation)
+    rotation = factor_rotation(codes, factors) if rotate else np.eye(codes.shape[1])
+    if rotate:
+        rotate_latent(model.encoder, model.decoder, rotation)
     aligned = codes @ rotation.T
     correlation = np.array([np.corrcoef(aligned[:, i], factors[:, i])[0, 1] for i in range(factors.shape[1])])
     return FactorAlignment(rotation, tuple(names), correlation, materials, seed)

@@ -78,9 +78,14 @@ def render_model_card(manifest: dict[str, Any]) -> str:
         + (f"; traversal plausibility penalty, weight {train['traversal_weight']:g}, offsets up to "
            f"±{train['traversal_range']:g} σ"
            + (" in any direction" if train.get("traversal_directions") == "any" else " along the axes")
+           + (f", near-specular entries kept {train['traversal_hole_margin']:g} above the floor"
+              if train.get("traversal_hole_margin") else "")
            if train.get("traversal_weight") else "")
         + (f"; linear path trained at {train['linear_path_rate']:g} × the learning rate"
            if train.get("linear_path_rate") else "") + ".",
+        *([f"- Fine-tuned from `{info['initial_model']['name']}` (decoder "
+           f"`{info['initial_model']['decoder_sha256'][:12]}…`): these epochs start from its weights and its latent "
+           "frame."] if info.get("initial_model") else []),
         f"- Training time: {info['training_seconds'] / 60:.1f} min on {info['device']} "
         f"({info['world_size']} process(es)).",
         f"- Reproduce: `{info['command']}`",

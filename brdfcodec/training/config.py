@@ -47,6 +47,11 @@ class TrainConfig:
     traversal_range : float
         Largest traversal offset of the penalty, prior σ units (3: the span
         ``bvae model plausibility`` checks).
+    traversal_hole_margin : float
+        Mapped height above the floor that the penalty's ``holes`` term keeps a
+        lit highlight's near-specular entries at (or the material's own value
+        where lower; :class:`brdfcodec.training.traversal.TraversalPenalty`);
+        0, the default, penalises only crossing the floor.
     traversal_directions : {"axes", "any"}
         Directions the penalty traverses: the latent axes ``e_d`` (the
         default), or unit vectors drawn uniformly on the sphere, so that
@@ -119,6 +124,7 @@ class TrainConfig:
     traversal_weight: float = 0.0
     traversal_range: float = 3.0
     traversal_directions: Literal["axes", "any"] = "axes"
+    traversal_hole_margin: float = 0.0
     linear_path_rate: float = 0.0
     average_from_epoch: int = 0
     warmup_epochs: int = 2
@@ -151,6 +157,8 @@ class TrainConfig:
         if not (0 <= self.traversal_weight < float("inf") and 0 < self.traversal_range < float("inf")):
             raise ValueError(f"traversal_weight must be finite and ≥ 0 and traversal_range finite and > 0, got "
                              f"{self.traversal_weight}, {self.traversal_range}")
+        if not 0 <= self.traversal_hole_margin < float("inf"):
+            raise ValueError(f"traversal_hole_margin must be finite and ≥ 0, got {self.traversal_hole_margin}")
         if self.traversal_directions not in ("axes", "any"):
             raise ValueError(f"traversal_directions must be 'axes' or 'any', got {self.traversal_directions!r}")
         if not 0 <= self.linear_path_rate < float("inf"):

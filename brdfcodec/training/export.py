@@ -53,6 +53,7 @@ def export_run(
     basis_count: int = DEFAULT_BASIS_COUNT,
     basis_colour_permutations: bool = True,
     align_materials: int = 0,
+    turn_axes: bool = True,
 ) -> ModelManifest:
     """Export the best weights of a run with every measurement its card needs, and fit its shared basis.
 
@@ -84,6 +85,9 @@ def export_run(
         Rotate the latent space, before anything is measured, so that its dimensions follow the analytic
         factors of this many materials (:func:`brdfcodec.training.alignment.align_to_factors`; stored as
         ``info.alignment``); 0 keeps the trained axes.
+    turn_axes : bool, default True
+        With ``align_materials``: turn the axes (the default), or only measure how the trained axes follow the
+        factors (``info.alignment`` with the identity rotation; a run fine-tuned from an aligned model).
     """
     run = Path(run_dir)
     run_info = json.loads((run / "run.json").read_text())
@@ -92,7 +96,8 @@ def export_run(
     model = BetaVAE(config)
     model.load_state_dict(best["model"])
     model.eval()
-    alignment = align_to_factors(model, materials=align_materials) if align_materials else None
+    alignment = (align_to_factors(model, materials=align_materials, rotate=turn_axes) if align_materials
+                 else None)
     log = [json.loads(line) for line in (run / "log.jsonl").read_text().splitlines()]
     summary_file = run / "summary.json"
     seconds = sum(record["seconds"] for record in log)
@@ -136,6 +141,8 @@ def export_run(
     }
     if alignment is not None:
         info["alignment"] = alignment.as_dict()
+    if "initial_model" in run_info:
+        info["initial_model"] = run_info["initial_model"]
     info["comparisons"] = [_comparison_row("this model", info, None)]
     for label, other in (comparisons or {}).items():
         other_manifest = json.loads((Path(other) / MANIFEST).read_text())

@@ -38,6 +38,7 @@ from brdfcodec.io.atomic import atomic_output
 from brdfcodec.models.config import ModelConfig
 from brdfcodec.models.loss import beta_vae_loss, kl_per_dimension
 from brdfcodec.models.network import BetaVAE, initialise_linear_basis, linear_path_trainable
+from brdfcodec.models.store import load_model
 from brdfcodec.training.augment import COLOUR_PERMUTATIONS, mix_physical, permute_colours
 from brdfcodec.training.config import TrainConfig
 from brdfcodec.training.dropout import DecoderHiddenDropout
@@ -212,6 +213,21 @@ def _run_info(dataset_path: str | os.PathLike[str], model_config: ModelConfig, t
     }
 
 
+def _initial_model(folder: str | os.PathLike[str], model_config: ModelConfig, run_info: dict[str, Any]) -> BetaVAE:
+    """The exported model a fine-tuning run starts from (checked against ``model_config``); records it in
+    ``run_info["initial_model"]``."""
+    encoder, decoder, manifest = load_model(folder)
+    if manifest.config != model_config:
+        raise ValueError(f"{folder}: the initial model's configuration differs from the run's: "
+                         f"{manifest.config.to_json()} against {model_config.to_json()}")
+    model = BetaVAE(model_config)
+    model.encoder.load_state_dict(encoder.state_dict())
+    model.decoder.load_state_dict(decoder.state_dict())
+    run_info["initial_model"] = {"folder": str(Path(folder).resolve()), "name": manifest.name,
+                                 "decoder_sha256": manifest.decoder_sha256}
+    return model
+
+
 def _check_run_folder(out: Path, run_info: dict[str, Any], resume: bool) -> None:
     """Refuse a non-empty folder for a new run, or a resume with another trajectory."""
     if resume:
@@ -272,12 +288,15 @@ def _load_training_data(dataset_path: str | os.PathLike[str], world: _World,
 
 
 def _build_model(model_config: ModelConfig, train_config: TrainConfig, data: _TrainingData, world: _World,
-                 out: Path, resume: bool) -> tuple[BetaVAE, torch.optim.Optimizer, _Progress, AveragedModel | None]:
-    """A fresh model (linear basis fitted) or the one of the checkpoint, with its optimiser, progress and weight
-    average (None unless ``average_from_epoch`` is set)."""
+                 out: Path, resume: bool, initial: BetaVAE | None = None
+                 ) -> tuple[BetaVAE, torch.optim.Optimizer, _Progress, AveragedModel | None]:
+    """A fresh model (linear basis fitted), a copy of ``initial`` (fine-tuning), or the one of the checkpoint, with
+    its optimiser, progress and weight average (None unless ``average_from_epoch`` is set)."""
     torch.manual_seed(train_config.seed)
     model = BetaVAE(model_config)
-    if model_config.linear_basis and not resume:
+    if initial is not None and not resume:
+        model.load_state_dict(initial.state_dict())
+    elif model_config.linear_basis and not resume:
         initialise_linear_basis(model, data.inputs)
     if train_config.linear_path_rate > 0:
         linear_path_trainable(model.decoder)  # before loading a checkpoint, whose path is float32 then
@@ -446,6 +465,7 @@ def train(
     train_config: TrainConfig,
     resume: bool = False,
     progress: bool = True,
+    initial_model: str | os.PathLike[str] | None = None,
 ) -> TrainResult:
     """Train a β-VAE on the training split of a dataset.
 
@@ -461,6 +481,11 @@ def train(
         Continue from ``run_dir/checkpoint.pt``.
     progress : bool, default True
         Progress bar on stderr (rank 0).
+    initial_model : str or os.PathLike, optional
+        An exported model folder to start from instead of fresh weights (fine-tuning; for example a model whose
+        latent was turned by ``bvae model export --align-factors``, so that an axis penalty acts on its
+        aligned axes). Its configuration must equal ``model_config``; ``run.json`` records its name and
+        decoder hash.
 
     Returns
     -------
@@ -474,12 +499,14 @@ def train(
     if train_config.linear_path_rate > 0 and not model_config.linear_basis:
         raise ValueError("linear_path_rate > 0 needs a model with a linear path (ModelConfig.linear_basis)")
     run_info = _run_info(dataset_path, model_config, train_config, world)
+    initial = _initial_model(initial_model, model_config, run_info) if initial_model is not None else None
     _check_run_folder(out, run_info, resume)
     data = _load_training_data(dataset_path, world, train_config)
     if train_config.traversal_weight > 0:
-        data.traversal_penalty = TraversalPenalty(data.inputs).to(world.device)
+        data.traversal_penalty = TraversalPenalty(
+            data.inputs, hole_margin=train_config.traversal_hole_margin).to(world.device)
     run_info["data"] = data.info
-    model, optimizer, state, average = _build_model(model_config, train_config, data, world, out, resume)
+    model, optimizer, state, average = _build_model(model_config, train_config, data, world, out, resume, initial)
     _resident(data, world.device)
     if world.is_main and not resume:
         out.mkdir(parents=True, exist_ok=True)

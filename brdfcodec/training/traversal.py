@@ -19,9 +19,13 @@ that it weighs like the reconstruction, which is a sum over valid entries:
 ``holes``
     Σ over near-specular entries (θh bins 0–1, above the horizon) where the
     material is above 0 and the decode's flank (θh bins 4–6) is lit, of
-    ``relu(−u')``: the peak may not cross the floor of the mapped domain under
-    a lit flank, where the clamp would make it a black hole (a region that
-    goes black as a whole is not penalised).
+    ``relu(min(x, hole_margin) − u')``: the peak may not cross the floor of the
+    mapped domain under a lit flank, where the clamp would make it a black hole
+    (a region that goes black as a whole is not penalised). With
+    ``hole_margin`` > 0 it must stay that far above the floor (or at the
+    material's own value, where that is lower), so that the hinge still pushes
+    where the output hovers just above 0: the plausibility check counts a
+    single clamped entry as a hole.
 ``energy``
     ``ENERGY_SCALE`` · Σ over colours of ``relu(log A_c(u') − log A_max)``:
     the white-sky albedo (:func:`brdfcodec.edit.plausibility.white_sky_albedo`, of
@@ -124,12 +128,18 @@ class TraversalPenalty:
     energy_margin : float, default 0.1
         Relative margin of ``A_max`` over the training materials' largest albedo
         (the plausibility check's ``energetic`` margin).
+    hole_margin : float, default 0
+        Mapped height above the floor that a lit highlight's near-specular entries must keep (``holes``);
+        0 penalises only crossing the floor.
     """
 
-    def __init__(self, train_inputs: torch.Tensor, *, margin: float = 0.05, energy_margin: float = 0.1) -> None:
-        if not (math.isfinite(margin) and margin >= 0 and math.isfinite(energy_margin) and energy_margin >= 0):
-            raise ValueError(f"margin and energy_margin must be finite and ≥ 0, got {margin}, {energy_margin}")
+    def __init__(self, train_inputs: torch.Tensor, *, margin: float = 0.05, energy_margin: float = 0.1,
+                 hole_margin: float = 0.0) -> None:
+        values = (margin, energy_margin, hole_margin)
+        if not all(math.isfinite(v) and v >= 0 for v in values):
+            raise ValueError(f"margin, energy_margin and hole_margin must be finite and ≥ 0, got {values}")
         self.margin = margin
+        self.hole_margin = hole_margin
         self._cells = torch.from_numpy(np.array(cell_valid_mask()))  # (21, θd)
         self._near = torch.from_numpy(np.array(entry_valid_mask()[:, _NEAR, :]))  # (21, 2, θd)
         self._weights = torch.from_numpy(np.array(albedo_weights(), dtype=np.float32))  # (21, θh, θd)
@@ -172,7 +182,8 @@ class TraversalPenalty:
         inversion = torch.relu(_deficit(out.clamp(min=0.0)) - allowed) * cells
         flank_lit = out[..., _OFF, :].detach().amax(dim=-2, keepdim=True) > 0
         lit = (src[..., _NEAR, :] > 0) & flank_lit & near_valid
-        holes = torch.relu(-out[..., _NEAR, :]) * lit
+        floor = src[..., _NEAR, :].clamp(max=self.hole_margin)
+        holes = torch.relu(floor - out[..., _NEAR, :]) * lit
         # Above MAPPED_MAX the decode saturates, and a clamp there would hide the peaks that carry the energy.
         albedo = _albedo(out, self._weights.to(device=device, dtype=dtype), ENERGY_CEILING).clamp(min=1e-12)
         energy = torch.relu(torch.log(albedo) - math.log(self.albedo_limit)).sum(dim=1) * ENERGY_SCALE
