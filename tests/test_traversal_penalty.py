@@ -11,7 +11,7 @@ import torch
 
 from brdfcodec.datasets.hdf5 import build_dataset
 from brdfcodec.datasets.sources import analytic_sources
-from brdfcodec.edit.plausibility import inverted_cells, new_holes, white_sky_albedo
+from brdfcodec.edit.plausibility import inverted_cells, new_holes, pit_cells, white_sky_albedo
 from brdfcodec.models.config import TINY_CONFIG
 from brdfcodec.models.loss import beta_norm
 from brdfcodec.training.config import TrainConfig
@@ -97,6 +97,25 @@ def test_hole_margin_keeps_a_lit_peak_above_the_floor(flat: torch.Tensor, penalt
         TraversalPenalty(flat, hole_margin=-0.01)
     with pytest.raises(ValueError, match="traversal_hole_margin"):
         TrainConfig(traversal_hole_margin=float("nan"))
+
+
+def test_pits_term_counts_a_fall_towards_the_centre_beyond_the_material_s_own(flat: torch.Tensor, penalty) -> None:
+    pitted = flat.clone()
+    pitted[0, channel(GREEN, SLOT), 0:3, THETA_D] = 0.1  # θh bins 0–2 fall 0.4 below the ring beyond them
+    assert float(penalty(pitted, flat).pits[0]) == 0  # left out without a weight
+    weighted = TraversalPenalty(flat, pit_weight=2.0)
+    assert float(weighted(pitted, flat).pits[0]) == pytest.approx(2.0 * 3 * (0.4 - weighted.margin), abs=1e-5)
+    assert pit_cells(pitted[0].numpy())[GREEN, SLOT, THETA_D]  # the plausibility check sees the same pit
+    assert float(weighted(pitted, pitted).pits[0]) == 0  # the material's own pit is allowed
+    # Only the centre is pushed up: the ring it falls from is held fixed.
+    edited = pitted.clone().requires_grad_(True)
+    weighted(edited, flat).pits.sum().backward()
+    grad = edited.grad[0, channel(GREEN, SLOT), :, THETA_D]
+    assert (grad[0:3] < 0).all() and (grad[3:] == 0).all()
+    with pytest.raises(ValueError, match="pit_weight"):
+        TraversalPenalty(flat, pit_weight=-1.0)
+    with pytest.raises(ValueError, match="traversal_pit_weight"):
+        TrainConfig(traversal_pit_weight=float("inf"))
 
 
 def test_energy_is_the_log_excess_over_the_limit(flat, penalty) -> None:

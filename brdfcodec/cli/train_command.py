@@ -50,6 +50,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     parser.add_argument("--traversal-hole-margin", type=float,
                         help="mapped height above the floor that the penalty keeps a lit highlight's centre at "
                         "(0: only crossing the floor is penalised, the default)")
+    parser.add_argument("--traversal-pit-weight", type=float,
+                        help="weight of the penalty's term against a highlight that darkens towards its centre "
+                        "(within 4.4° of the half vector) more than the material does (0: none, the default)")
     parser.add_argument("--linear-path-rate", type=float,
                         help="learning rate of the decoder's linear (PCA) path as a fraction of the network's "
                              "(0: frozen, the default)")

@@ -80,6 +80,7 @@ def render_model_card(manifest: dict[str, Any]) -> str:
            + (" in any direction" if train.get("traversal_directions") == "any" else " along the axes")
            + (f", near-specular entries kept {train['traversal_hole_margin']:g} above the floor"
               if train.get("traversal_hole_margin") else "")
+           + (f", pits weighted {train['traversal_pit_weight']:g}" if train.get("traversal_pit_weight") else "")
            if train.get("traversal_weight") else "")
         + (f"; linear path trained at {train['linear_path_rate']:g} × the learning rate"
            if train.get("linear_path_rate") else "") + ".",

@@ -52,6 +52,10 @@ class TrainConfig:
         lit highlight's near-specular entries at (or the material's own value
         where lower; :class:`brdfcodec.training.traversal.TraversalPenalty`);
         0, the default, penalises only crossing the floor.
+    traversal_pit_weight : float
+        Weight of the penalty's ``pits`` term (a highlight that darkens towards
+        its centre within θh < 4.4° more than the material does) against its
+        other terms; 0, the default, leaves it out.
     traversal_directions : {"axes", "any"}
         Directions the penalty traverses: the latent axes ``e_d`` (the
         default), or unit vectors drawn uniformly on the sphere, so that
@@ -125,6 +129,7 @@ class TrainConfig:
     traversal_range: float = 3.0
     traversal_directions: Literal["axes", "any"] = "axes"
     traversal_hole_margin: float = 0.0
+    traversal_pit_weight: float = 0.0
     linear_path_rate: float = 0.0
     average_from_epoch: int = 0
     warmup_epochs: int = 2
@@ -157,6 +162,8 @@ class TrainConfig:
         if not (0 <= self.traversal_weight < float("inf") and 0 < self.traversal_range < float("inf")):
             raise ValueError(f"traversal_weight must be finite and ≥ 0 and traversal_range finite and > 0, got "
                              f"{self.traversal_weight}, {self.traversal_range}")
+        if not 0 <= self.traversal_pit_weight < float("inf"):
+            raise ValueError(f"traversal_pit_weight must be finite and ≥ 0, got {self.traversal_pit_weight}")
         if not 0 <= self.traversal_hole_margin < float("inf"):
             raise ValueError(f"traversal_hole_margin must be finite and ≥ 0, got {self.traversal_hole_margin}")
         if self.traversal_directions not in ("axes", "any"):

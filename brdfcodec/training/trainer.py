@@ -504,7 +504,8 @@ def train(
     data = _load_training_data(dataset_path, world, train_config)
     if train_config.traversal_weight > 0:
         data.traversal_penalty = TraversalPenalty(
-            data.inputs, hole_margin=train_config.traversal_hole_margin).to(world.device)
+            data.inputs, hole_margin=train_config.traversal_hole_margin,
+            pit_weight=train_config.traversal_pit_weight).to(world.device)
     run_info["data"] = data.info
     model, optimizer, state, average = _build_model(model_config, train_config, data, world, out, resume, initial)
     _resident(data, world.device)

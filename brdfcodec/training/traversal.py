@@ -26,6 +26,14 @@ that it weighs like the reconstruction, which is a sum over valid entries:
     material's own value, where that is lower), so that the hinge still pushes
     where the output hovers just above 0: the plausibility check counts a
     single clamped entry as a hole.
+``pits`` (only with ``pit_weight`` > 0)
+    ``pit_weight`` · Σ over the window of the *pits* check (θh bins i < 20,
+    above the horizon; :mod:`brdfcodec.representation.highlight`) of
+    ``relu(R_i − max(u'_i, 0) − P − margin)``, ``R_i`` the largest floored
+    output at bins i + 1 to 20 of the same cell (held fixed: the centre is
+    lifted, the ring is not lowered) and ``P`` the material's own largest
+    such fall in that cell: a traversal may not darken a highlight towards
+    its centre more than the material does.
 ``energy``
     ``ENERGY_SCALE`` · Σ over colours of ``relu(log A_c(u') − log A_max)``:
     the white-sky albedo (:func:`brdfcodec.edit.plausibility.white_sky_albedo`, of
@@ -64,6 +72,7 @@ from brdfcodec.edit.plausibility import (
     cell_valid_mask,
     entry_valid_mask,
 )
+from brdfcodec.representation.highlight import PIT_THETA_H_BINS, window_valid_mask
 from brdfcodec.representation.mapping import LOG_RANGE
 
 __all__ = ["ENERGY_CEILING", "ENERGY_SCALE", "TraversalPenalty", "TraversalTerms", "traversed_codes"]
@@ -84,10 +93,11 @@ class TraversalTerms:
     inversion: torch.Tensor
     holes: torch.Tensor
     energy: torch.Tensor
+    pits: torch.Tensor
 
     def total(self) -> torch.Tensor:
-        """Sum of the three parts, shape (B,)."""
-        return self.inversion + self.holes + self.energy
+        """Sum of the parts, shape (B,)."""
+        return self.inversion + self.holes + self.energy + self.pits
 
 
 def _blocks(mapped: torch.Tensor) -> torch.Tensor:
@@ -98,6 +108,17 @@ def _blocks(mapped: torch.Tensor) -> torch.Tensor:
 def _deficit(blocks: torch.Tensor) -> torch.Tensor:
     """max(m[θh 4–6]) − max(m[θh 0–1]) per (B, colour, slot, θd)."""
     return blocks[..., _OFF, :].amax(dim=-2) - blocks[..., _NEAR, :].amax(dim=-2)
+
+
+def _falls(blocks: torch.Tensor, window: torch.Tensor) -> torch.Tensor:
+    """R_i − m_i per (B, colour, slot, θh bin i < 20, θd) where bin i and some bin beyond it lie above the horizon
+    (0 elsewhere): R_i the largest value at bins i + 1 to 20, held fixed (detached)."""
+    inside = blocks[..., :PIT_THETA_H_BINS, :]
+    floor = torch.finfo(inside.dtype).min
+    masked = inside.detach().masked_fill(~window, floor)
+    outer = torch.flip(torch.cummax(torch.flip(masked, dims=[-2]), dim=-2).values, dims=[-2])[..., 1:, :]
+    usable = window[:, :-1, :] & (outer > floor)
+    return torch.where(usable, outer - inside[..., :-1, :], torch.zeros_like(outer))
 
 
 def _albedo(mapped_blocks: torch.Tensor, weights: torch.Tensor, ceiling: float = MAPPED_MAX) -> torch.Tensor:
@@ -131,15 +152,20 @@ class TraversalPenalty:
     hole_margin : float, default 0
         Mapped height above the floor that a lit highlight's near-specular entries must keep (``holes``);
         0 penalises only crossing the floor.
+    pit_weight : float, default 0
+        Weight of the ``pits`` term against the others; 0 leaves it out (and uncomputed).
     """
 
     def __init__(self, train_inputs: torch.Tensor, *, margin: float = 0.05, energy_margin: float = 0.1,
-                 hole_margin: float = 0.0) -> None:
-        values = (margin, energy_margin, hole_margin)
+                 hole_margin: float = 0.0, pit_weight: float = 0.0) -> None:
+        values = (margin, energy_margin, hole_margin, pit_weight)
         if not all(math.isfinite(v) and v >= 0 for v in values):
-            raise ValueError(f"margin, energy_margin and hole_margin must be finite and ≥ 0, got {values}")
+            raise ValueError(f"margin, energy_margin, hole_margin and pit_weight must be finite and ≥ 0, got "
+                             f"{values}")
         self.margin = margin
         self.hole_margin = hole_margin
+        self.pit_weight = pit_weight
+        self._window = torch.from_numpy(np.array(window_valid_mask()))  # (21 slots, 21 θh, θd)
         self._cells = torch.from_numpy(np.array(cell_valid_mask()))  # (21, θd)
         self._near = torch.from_numpy(np.array(entry_valid_mask()[:, _NEAR, :]))  # (21, 2, θd)
         self._weights = torch.from_numpy(np.array(albedo_weights(), dtype=np.float32))  # (21, θh, θd)
@@ -155,8 +181,16 @@ class TraversalPenalty:
     def to(self, device: torch.device | str) -> TraversalPenalty:
         """Keep the penalty's fixed masks and weights on ``device`` (the training device), so that a step does not
         copy them there; returns ``self``."""
-        self._cells, self._near, self._weights = (t.to(device) for t in (self._cells, self._near, self._weights))
+        self._cells, self._near, self._weights, self._window = (
+            t.to(device) for t in (self._cells, self._near, self._weights, self._window))
         return self
+
+    def _pits(self, out: torch.Tensor, src: torch.Tensor) -> torch.Tensor:
+        """The ``pits`` term per sample (unweighted) of floored output blocks ``out`` against ``src``."""
+        window = self._window.to(out.device)
+        edited, allowed = _falls(out.clamp(min=0.0), window), _falls(src, window)
+        depth = allowed.amax(dim=-2, keepdim=True).clamp(min=0.0) + self.margin  # the material's own, per cell
+        return torch.relu(edited - depth).flatten(1).sum(1)
 
     def __call__(self, edited: torch.Tensor, material: torch.Tensor) -> TraversalTerms:
         """Penalties of unbounded traversed decodes ``edited`` against the batch's materials.
@@ -187,4 +221,7 @@ class TraversalPenalty:
         # Above MAPPED_MAX the decode saturates, and a clamp there would hide the peaks that carry the energy.
         albedo = _albedo(out, self._weights.to(device=device, dtype=dtype), ENERGY_CEILING).clamp(min=1e-12)
         energy = torch.relu(torch.log(albedo) - math.log(self.albedo_limit)).sum(dim=1) * ENERGY_SCALE
-        return TraversalTerms(inversion=inversion.flatten(1).sum(1), holes=holes.flatten(1).sum(1), energy=energy)
+        pits = (self.pit_weight * self._pits(out, src) if self.pit_weight > 0
+                else torch.zeros_like(energy))
+        return TraversalTerms(inversion=inversion.flatten(1).sum(1), holes=holes.flatten(1).sum(1), energy=energy,
+                              pits=pits)
