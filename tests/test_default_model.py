@@ -65,3 +65,15 @@ def test_card_numbers_are_reproduced(nbrdf_zip: Path) -> None:
         estimate = decoder.decode(record, masked="keep").astype(np.float64)
         measured = relae_mapped(brdf.values, estimate, brdf.mask).overall
         assert measured == pytest.approx(card[source.name]["relae_mapped"], rel=1e-3, abs=1e-4), source.name
+
+
+@pytest.mark.parametrize("name", ["nbrdf-proxy-small-v1", "nbrdf-proxy-small-v2"])
+def test_earlier_defaults_still_ship_and_are_found_by_their_decoder(name: str) -> None:
+    """Files made with an earlier default name its decoder by hash: the package keeps it findable."""
+    from brdfcodec.models.registry import package_model_folder
+    from brdfcodec.models.store import load_manifest
+
+    manifest = load_manifest(package_model_folder(name))
+    assert manifest.name == f"bvae-{name}"
+    assert find_model(manifest.decoder_sha256).folder == manifest.folder
+    assert manifest.decoder_sha256 != load_manifest(default_model_folder()).decoder_sha256

@@ -90,7 +90,7 @@ def _package_models() -> Path:
 
 def package_model_folder(name: str) -> Path:
     """Folder of a model shipped in the package (``brdfcodec/data/models/NAME``): ``"default"``, or an earlier
-    default kept so that the files made with it still decode (``"nbrdf-proxy-small-v1"``).
+    default kept so that the files made with it still decode (``"nbrdf-proxy-small-v1"``, ``"nbrdf-proxy-small-v2"``).
 
     Raises
     ------

@@ -84,9 +84,9 @@ def render_model_card(manifest: dict[str, Any]) -> str:
            if train.get("traversal_weight") else "")
         + (f"; linear path trained at {train['linear_path_rate']:g} × the learning rate"
            if train.get("linear_path_rate") else "") + ".",
-        *([f"- Fine-tuned from `{info['initial_model']['name']}` (decoder "
-           f"`{info['initial_model']['decoder_sha256'][:12]}…`): these epochs start from its weights and its latent "
-           "frame."] if info.get("initial_model") else []),
+        *([f"- Fine-tuned from `{info['initial_model']['name']}` ("
+           + (info["initial_model"].get("note") or f"decoder `{info['initial_model']['decoder_sha256'][:12]}…`")
+           + "): these epochs start from its weights and its latent frame."] if info.get("initial_model") else []),
         f"- Training time: {info['training_seconds'] / 60:.1f} min on {info['device']} "
         f"({info['world_size']} process(es)).",
         f"- Reproduce: `{info['command']}`",
