@@ -150,8 +150,11 @@ def test_decode_many_gives_each_record_its_own_layers() -> None:
         LayeredRecord("detail", rng.normal(size=8), np.ones(8), detail=layer_of(sparse_coefficients(5, 0.01), 0.05)),
     ]
     batched = list(decoder.decode_many(records, masked="zero", batch_size=3))
+    # float32 convolutions differ by ~5e-7 (mapped) between a batch of 3 and of 1; the mapping's exponential
+    # turns that into up to ~5e-4 relative on the darkest entries, where ε dominates ρ + ε. A wrong record's
+    # layers (a detail of 0.01 mapped) would move them by percents.
     for record, table in zip(records, batched, strict=True):
-        np.testing.assert_allclose(table, decoder.decode(record, masked="zero"), rtol=1e-5, atol=1e-6,
+        np.testing.assert_allclose(table, decoder.decode(record, masked="zero"), rtol=2e-3, atol=1e-6,
                                    err_msg=record.name)
     assert np.abs(batched[0] - decoder.decode(records[0].base(), masked="zero")).max() > 1e-3
 
