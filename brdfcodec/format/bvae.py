@@ -86,7 +86,6 @@ from brdfcodec.format.reader import (
 )
 from brdfcodec.format.records import MAX_LATENT_DIM, GraftRecord, LatentRecord
 from brdfcodec.format.strict_json import (
-    _JSON_STRING,
     _LONG_INTEGER,
     _check_json_structure,
     _check_json_text,

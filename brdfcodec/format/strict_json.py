@@ -42,19 +42,46 @@ def canonical_json(value: Any) -> bytes:
 
 
 def _check_json_structure(data: bytes, fail: Any) -> bytes:
-    """The bounds of §3 on JSON objects and arrays (their number, their nesting); returns the text without strings."""
-    # Outside strings, brackets are exactly the containers: count them and their nesting before parsing.
-    outside_strings = _JSON_STRING.sub(b'""', data)
-    structure = np.frombuffer(outside_strings, dtype=np.uint8)
-    opens = (structure == ord("{")) | (structure == ord("["))
-    containers = int(np.count_nonzero(opens))
-    if containers > MAX_HEADER_CONTAINERS:
-        raise fail(f"header holds {containers} JSON objects and arrays, more than {MAX_HEADER_CONTAINERS}")
-    closes = (structure == ord("}")) | (structure == ord("]"))
-    depth = int(np.cumsum(opens.astype(np.int64) - closes).max(initial=0))
-    if depth > MAX_HEADER_DEPTH:
-        raise fail(f"header JSON is nested {depth} levels deep, more than {MAX_HEADER_DEPTH}")
-    return outside_strings
+    """The bounds of §3 on JSON objects and arrays (their number, their nesting); returns the text without strings.
+
+    Linear in time and bounded in memory (a few MB beyond the text): escapes are removed with
+    :meth:`bytes.replace`, then every byte's place inside or outside a string is the parity of the quotes
+    before it, computed in chunks with NumPy. No regular expression that could backtrack over a hostile
+    string (issue 49, R3-01 and R3-03), and no Python object per token.
+
+    The string contents are removed; each string's closing quote is kept (as a separator), so numbers outside
+    strings keep their neighbours. For text that is not valid JSON the counts may be off, but then the parse
+    that follows refuses it (an unterminated string counts as running to the end).
+    """
+    # Inside a string, "\\" and "\"" are the only escapes that involve a backslash or a quote; removing the
+    # backslash pairs first (left to right, as a run of backslashes pairs up) leaves every remaining backslash
+    # escaping the character after it, so that removing "\"" leaves only the quotes that delimit strings.
+    unescaped = data.replace(b"\\\\", b"").replace(b'\\"', b"")
+    text = np.frombuffer(unescaped, dtype=np.uint8)
+    kept: list[bytes] = []
+    containers = depth = deepest = 0
+    inside = 0  # parity of the quotes before the chunk
+    for start in range(0, text.size, _SCAN_CHUNK):
+        chunk = text[start : start + _SCAN_CHUNK]
+        quotes = chunk == _QUOTE
+        # cumulative parity (uint8 wraps modulo 256, which keeps it): 1 on an opening quote and the string's
+        # content, 0 on its closing quote and outside
+        parity = (np.cumsum(quotes, dtype=np.uint8) + np.uint8(inside)) & np.uint8(1)
+        outside = chunk[parity == 0]
+        inside = int(parity[-1])
+        opens = (outside == _OPEN_OBJECT) | (outside == _OPEN_ARRAY)
+        closes = (outside == _CLOSE_OBJECT) | (outside == _CLOSE_ARRAY)
+        containers += int(np.count_nonzero(opens))
+        if containers > MAX_HEADER_CONTAINERS:
+            raise fail(f"header holds more than {MAX_HEADER_CONTAINERS} JSON objects and arrays")
+        steps = opens[opens | closes].astype(np.int32) * 2 - 1
+        if steps.size:
+            levels = np.cumsum(steps) + depth
+            deepest, depth = max(deepest, int(levels.max())), int(levels[-1])
+        if deepest > MAX_HEADER_DEPTH:
+            raise fail(f"header JSON is nested {deepest} levels deep, more than {MAX_HEADER_DEPTH}")
+        kept.append(outside.tobytes())
+    return b"".join(kept)
 
 
 def _check_json_text(data: bytes, fail: Any) -> Any:
@@ -79,8 +106,9 @@ def _check_json_text(data: bytes, fail: Any) -> Any:
 
 #: An integer token of 16 digits or more (2^53 has 16): the only ones that can exceed ±(2^53 - 1).
 _LONG_INTEGER = re.compile(rb"(?<![0-9.eE+-])-?[0-9]{16,}(?![0-9.eE])")
-#: A JSON string (with escapes): its content is removed before counting brackets.
-_JSON_STRING = re.compile(rb'"(?:[^"\\]|\\.)*"', re.S)
+#: Bytes of the text the structure check looks at a time (its working memory is a few times this).
+_SCAN_CHUNK = 1 << 20
+_QUOTE, _OPEN_OBJECT, _OPEN_ARRAY, _CLOSE_OBJECT, _CLOSE_ARRAY = (ord(c) for c in '"{[}]')
 
 
 def _finite_float(text: str) -> float:
