@@ -96,3 +96,19 @@ def test_bad_input_is_refused(kwargs: dict) -> None:  # type: ignore[type-arg]
         encode_integers(symbols, **kwargs)
     with pytest.raises(ValueError):
         ideal_code_length_bits(symbols, **kwargs)
+
+
+def test_per_entry_bounds_round_trip_and_cost_less_than_one_wide_bound() -> None:
+    rng = np.random.default_rng(4)
+    spreads = np.exp(rng.normal(0, 2, 150))
+    bounds = np.clip(np.ceil(16 * spreads), 1, 2**16).astype(int)
+    q = np.clip(np.rint(rng.laplace(0, spreads / math.sqrt(2))), -bounds, bounds).astype(int)
+    data = encode_integers(q, spreads, bound=bounds)
+    assert decode_integers(data, spreads, bound=bounds).tolist() == q.tolist()
+    assert len(data) <= len(encode_integers(q, spreads, bound=2**16))
+    with pytest.raises(ValueError):
+        encode_integers(q, spreads, bound=bounds[:-1])
+    wrong = q.copy()
+    wrong[0] = bounds[0] + 1
+    with pytest.raises(ValueError):
+        encode_integers(wrong, spreads, bound=bounds)

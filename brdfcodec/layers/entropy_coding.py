@@ -6,9 +6,12 @@ This module codes such a vector **for real** with the range coder of
 `constriction <https://bamler-lab.github.io/constriction/>`_, entry ``i``
 under a zero-mean Laplace (or Gaussian) density of standard deviation
 ``spreads[i]`` (in quantiser bins) integrated over the bin
-``[q − ½, q + ½]`` on the symbols ``−bound … bound`` (constriction's
+``[q − ½, q + ½]`` on the symbols ``−boundᵢ … boundᵢ`` (constriction's
 ``QuantizedLaplace`` / ``QuantizedGaussian``: every symbol in range keeps a
-non-zero probability, so any vector within the bound can be coded).
+non-zero probability, so any vector within the bounds can be coded). The
+bound is one for all entries or one per entry: each symbol in range keeps at
+least 2⁻²⁴ of the probability, so a bound near the entry's plausible range
+(a few spreads) costs less than one far beyond it.
 
 - :func:`encode_integers` returns the coder's bytes, **terminated as short as
   the decoder allows**: the range coder's 32-bit words are written
@@ -64,59 +67,75 @@ MAX_BOUND = 2**20
 _PAD_WORDS = 2
 
 
-def _check(spreads: npt.ArrayLike, bound: int, prior: str) -> npt.NDArray[np.float64]:
+def _check(spreads: npt.ArrayLike, bound: int | npt.ArrayLike,
+           prior: str) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.int64]]:
+    """Spreads and per-entry bounds as arrays, after checking them."""
     s = np.asarray(spreads, dtype=np.float64)
     if s.ndim != 1:
         raise ValueError(f"spreads must be a 1-D array, got shape {s.shape}")
     if not np.all(np.isfinite(s)) or np.any(s <= 0):
         raise ValueError("spreads must be finite and > 0 (standard deviations in quantiser bins)")
-    if int(bound) != bound or not 1 <= int(bound) <= MAX_BOUND:
-        raise ValueError(f"bound must be a whole number in [1, {MAX_BOUND}], got {bound!r}")
+    given = np.asarray(bound)
+    if given.ndim not in (0, 1) or (given.ndim == 1 and given.shape != s.shape):
+        raise ValueError(f"bound must be a whole number or one per entry (shape {s.shape}), got shape {given.shape}")
+    if given.dtype.kind not in "iuf" or not np.all(np.isfinite(given)) or np.any(given != np.rint(given)) or (
+            given.size and (given.min() < 1 or given.max() > MAX_BOUND)):
+        raise ValueError(f"bound must hold whole numbers in [1, {MAX_BOUND}], got {bound!r}")
     if prior not in ("laplace", "gaussian"):
         raise ValueError(f"prior must be 'laplace' or 'gaussian', got {prior!r}")
-    return s
+    return s, np.broadcast_to(given.astype(np.int64), s.shape)
 
 
-def _symbols(symbols: npt.ArrayLike, size: int, bound: int) -> npt.NDArray[np.int32]:
+def _symbols(symbols: npt.ArrayLike, bounds: npt.NDArray[np.int64]) -> npt.NDArray[np.int32]:
     q = np.asarray(symbols)
-    if q.shape != (size,):
-        raise ValueError(f"symbols have shape {q.shape}, spreads ({size},)")
+    if q.shape != bounds.shape:
+        raise ValueError(f"symbols have shape {q.shape}, spreads {bounds.shape}")
     if q.size and not np.issubdtype(q.dtype, np.integer):
         if not np.all(np.isfinite(q)) or np.any(q != np.rint(q)):
             raise ValueError("symbols must be integers")
-    if q.size and int(np.max(np.abs(q))) > bound:
-        raise ValueError(f"a symbol lies outside [−{bound}, {bound}]: |q| = {int(np.max(np.abs(q)))}")
+    if q.size and np.any(np.abs(q) > bounds):
+        i = int(np.argmax(np.abs(q) > bounds))
+        raise ValueError(f"symbol {i} lies outside [−{bounds[i]}, {bounds[i]}]: {int(q[i])}")
     return q.astype(np.int32)
 
 
-def _model(spreads: npt.NDArray[np.float64], bound: int, prior: str) -> tuple[Any, npt.NDArray[np.float64],
-                                                                                 npt.NDArray[np.float64]]:
+def _groups(bounds: npt.NDArray[np.int64]) -> list[tuple[int, npt.NDArray[np.intp]]]:
+    """Entries coded under one model family, in coding order: by increasing bound, entries in order."""
+    return [(int(b), np.flatnonzero(bounds == b)) for b in np.unique(bounds)]
+
+
+def _family(bound: int, prior: str) -> Any:
     import constriction
 
-    family: Any
     if prior == "laplace":
-        family = constriction.stream.model.QuantizedLaplace(-int(bound), int(bound))
-        width = spreads / math.sqrt(2.0)  # the Laplace scale b: variance 2b²
-    else:
-        family = constriction.stream.model.QuantizedGaussian(-int(bound), int(bound))
-        width = spreads
-    return family, np.zeros(len(spreads), dtype=np.float64), np.ascontiguousarray(width, dtype=np.float64)
+        return constriction.stream.model.QuantizedLaplace(-bound, bound)
+    return constriction.stream.model.QuantizedGaussian(-bound, bound)
 
 
-def _decode(data: bytes, spreads: npt.NDArray[np.float64], bound: int, prior: str) -> npt.NDArray[np.int64] | None:
+def _widths(spreads: npt.NDArray[np.float64], prior: str) -> npt.NDArray[np.float64]:
+    # The Laplace scale b has variance 2b²; the Gaussian's parameter is its standard deviation.
+    width = spreads / math.sqrt(2.0) if prior == "laplace" else spreads
+    return np.ascontiguousarray(width, dtype=np.float64)
+
+
+def _decode(data: bytes, spreads: npt.NDArray[np.float64], bounds: npt.NDArray[np.int64],
+            prior: str) -> npt.NDArray[np.int64] | None:
     """The vector coded in ``data``, or None where the coder finds the data invalid for the priors."""
     import constriction
 
+    result = np.zeros(len(spreads), dtype=np.int64)
     if len(spreads) == 0:
-        return np.zeros(0, dtype=np.int64)
+        return result
     padded = bytes(data) + b"\0" * ((-len(data)) % 4 + 4 * _PAD_WORDS)
     words = np.frombuffer(padded, dtype=">u4").astype(np.uint32)
-    family, means, widths = _model(spreads, bound, prior)
     decoder = constriction.stream.queue.RangeDecoder(words)
+    widths = _widths(spreads, prior)
     try:
-        return np.asarray(decoder.decode(family, means, widths), dtype=np.int64)
+        for bound, entries in _groups(bounds):
+            result[entries] = decoder.decode(_family(bound, prior), np.zeros(len(entries)), widths[entries])
     except (AssertionError, ValueError, RuntimeError):
         return None
+    return result
 
 
 def encode_integers(symbols: npt.ArrayLike, spreads: npt.ArrayLike, *, bound: int,
@@ -129,8 +148,10 @@ def encode_integers(symbols: npt.ArrayLike, spreads: npt.ArrayLike, *, bound: in
         The integers to code, each in ``[−bound, bound]`` (quantiser bins).
     spreads : array_like of float, shape (n,)
         Standard deviation of each entry's zero-mean prior before quantisation, > 0 (quantiser bins).
-    bound : int
-        Symbols lie in ``[−bound, bound]``, ``1 ≤ bound ≤`` :data:`MAX_BOUND`; the decoder needs the same.
+    bound : int or array_like of int, shape (n,)
+        Symbols lie in ``[−bound, bound]`` (one bound for all entries, or one per entry), each in
+        ``[1,`` :data:`MAX_BOUND` ``]``; the decoder needs the same. Entries of one bound are coded together,
+        by increasing bound.
     prior : {"laplace", "gaussian"}, optional
         The density quantised to the bins (default Laplace).
 
@@ -143,23 +164,24 @@ def encode_integers(symbols: npt.ArrayLike, spreads: npt.ArrayLike, *, bound: in
     Raises
     ------
     ValueError
-        Shapes that differ, non-integer symbols or symbols beyond the bound, spreads not finite and > 0, a
-        bound outside ``[1, MAX_BOUND]``, an unknown prior.
+        Shapes that differ, non-integer symbols or symbols beyond their bound, spreads not finite and > 0, a
+        bound outside ``[1, MAX_BOUND]`` or of another shape, an unknown prior.
     """
     import constriction
 
-    s = _check(spreads, bound, prior)
-    q = _symbols(symbols, len(s), int(bound))
+    s, bounds = _check(spreads, bound, prior)
+    q = _symbols(symbols, bounds)
     if len(q) == 0:
         return b""
-    family, means, widths = _model(s, int(bound), prior)
     encoder = constriction.stream.queue.RangeEncoder()
-    encoder.encode(q, family, means, widths)
+    widths = _widths(s, prior)
+    for group_bound, entries in _groups(bounds):
+        encoder.encode(q[entries], _family(group_bound, prior), np.zeros(len(entries)), widths[entries])
     full = np.asarray(encoder.get_compressed(), dtype=np.uint32).astype(">u4").tobytes()
     expected = q.astype(np.int64)
 
     def decodes(candidate: bytes) -> bool:
-        result = _decode(candidate, s, int(bound), prior)
+        result = _decode(candidate, s, bounds, prior)
         return result is not None and np.array_equal(result, expected)
 
     # The shortest termination: drop trailing bytes while a prefix (or the prefix plus one in its last byte,
@@ -191,8 +213,8 @@ def decode_integers(data: bytes, spreads: npt.ArrayLike, *, bound: int,
         The coded vector.
     spreads : array_like of float, shape (n,)
         The spreads it was coded with (quantiser bins); ``n`` is the vector's length.
-    bound : int
-        The bound it was coded with.
+    bound : int or array_like of int, shape (n,)
+        The bound(s) it was coded with.
     prior : {"laplace", "gaussian"}, optional
         The prior it was coded with.
 
@@ -209,8 +231,8 @@ def decode_integers(data: bytes, spreads: npt.ArrayLike, *, bound: int,
         The coder finds the data invalid for these priors (damaged or not such data). Damage is not always
         detected: check the bytes (a CRC) before decoding.
     """
-    s = _check(spreads, bound, prior)
-    result = _decode(bytes(data), s, int(bound), prior)
+    s, bounds = _check(spreads, bound, prior)
+    result = _decode(bytes(data), s, bounds, prior)
     if result is None:
         raise FileFormatError(f"entropy-coded integers: {len(data)} bytes are not a valid code of {len(s)} "
                               f"symbols under these {prior} priors")
@@ -240,10 +262,10 @@ def ideal_code_length_bits(symbols: npt.ArrayLike, spreads: npt.ArrayLike, *, bo
     ValueError
         As :func:`encode_integers`.
     """
-    s = _check(spreads, bound, prior)
-    q = _symbols(symbols, len(s), int(bound)).astype(np.float64)
-    upper = np.where(q >= bound, np.inf, q + 0.5)
-    lower = np.where(q <= -bound, -np.inf, q - 0.5)
+    s, bounds = _check(spreads, bound, prior)
+    q = _symbols(symbols, bounds).astype(np.float64)
+    upper = np.where(q >= bounds, np.inf, q + 0.5)
+    lower = np.where(q <= -bounds, -np.inf, q - 0.5)
     if prior == "laplace":
         b = s / math.sqrt(2.0)
 
