@@ -7,11 +7,20 @@ today's model hashes, so the tests do not read them.
 
 from __future__ import annotations
 
+import os
+import subprocess
+import sys
 import time
 import tracemalloc
+from pathlib import Path
 
+import numpy as np
 import pytest
 
+from brdfcodec.cli import main
+from brdfcodec.cli.info_command import describe_file
+from brdfcodec.errors import BvaeFormatError, LatentDimensionError
+from brdfcodec.format.bvae import DecoderReference, LatentRecord, encode_bvae, read_bvae, write_bvae
 from brdfcodec.format.strict_json import _check_json_structure, _check_json_text
 
 # --------------------------------------------------------------------------- R3-01, R3-03: the metadata's JSON check
@@ -75,3 +84,123 @@ def test_structure_check_spans_chunks() -> None:
     text = b'{"a":"' + b"x" * pad + b'[[[{{{\\"]]]"' + b',"b":[[[]]]}'
     outside = _check_json_structure(text, _refuse)
     assert outside.count(b"[") == 3 and outside.count(b"{") == 1
+
+
+# --------------------------------------------------------------------------- R3-11: info reads what the header declares
+
+
+def _shipped() -> tuple[str, str, str, int]:
+    """The default model's decoder hash, name, basis hash and latent size."""
+    from brdfcodec.models.manifest import load_manifest
+    from brdfcodec.models.registry import default_model_folder
+
+    manifest = load_manifest(default_model_folder())
+    return manifest.decoder_sha256, manifest.name, str(manifest.basis_sha256), manifest.config.latent_dim
+
+
+def test_read_bvae_of_a_large_file_reads_only_its_preamble(tmp_path: Path) -> None:
+    """A 300 MB sparse file named .bvae was read whole before its magic was checked (1.5 GB: 1.6 GB RSS)."""
+    path = tmp_path / "big.bvae"
+    with open(path, "wb") as handle:
+        handle.truncate(300 << 20)
+    tracemalloc.start()
+    try:
+        with pytest.raises(BvaeFormatError, match="wrong magic") as caught:
+            read_bvae(path)
+        _, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    assert str(path) in str(caught.value)
+    assert peak < 1 << 20, peak
+    with pytest.raises(BvaeFormatError, match="wrong magic"):
+        describe_file(path)
+
+
+def test_read_bvae_reads_no_more_than_the_header_declares(tmp_path: Path) -> None:
+    """Bytes after the records are refused without being read (the file is read up to its declared end + 1)."""
+    good = encode_bvae([LatentRecord("gold", np.zeros(8), np.ones(8))], DecoderReference("ab" * 32, "t"))
+    path = tmp_path / "long.bvae"
+    with open(path, "wb") as handle:
+        handle.write(good)
+        handle.truncate(len(good) + (300 << 20))
+    tracemalloc.start()
+    try:
+        with pytest.raises(BvaeFormatError, match="trailing bytes"):
+            read_bvae(path)
+        _, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    assert peak < 1 << 20, peak
+    path.write_bytes(good)
+    assert read_bvae(path).records[0].name == "gold"
+
+
+@pytest.mark.skipif(not (os.path.exists("/dev/zero") and os.path.exists("/dev/urandom")), reason="no /dev/zero")
+def test_info_of_devices_named_bvae_is_refused_at_once(tmp_path: Path) -> None:
+    """``x.bvae -> /dev/zero`` gave MemoryError (exit 3) under a 4 GB cap. Run in a child under a 1 GB cap, so that
+    a regression fails instead of filling the machine's memory."""
+    for target in ("/dev/zero", "/dev/urandom"):
+        (tmp_path / f"{Path(target).name}.bvae").symlink_to(target)
+    script = ("import resource, sys; resource.setrlimit(resource.RLIMIT_AS, (1 << 30, 1 << 30)); "
+              "from brdfcodec.cli import main; sys.exit(max(main(['info', a]) for a in sys.argv[1:]) + 10)")
+    paths = [str(tmp_path / "zero.bvae"), str(tmp_path / "urandom.bvae")]
+    done = subprocess.run([sys.executable, "-c", script, *paths], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 11, done.stderr
+    assert done.stderr.count("not a .bvae file (wrong magic number)") == 2, done.stderr
+    assert "zero.bvae" in done.stderr and "Traceback" not in done.stderr
+
+
+# --------------------------------------------------------------------------- R3-04, R3-14: info refuses what decoding does
+
+
+def test_info_refuses_a_latent_size_its_installed_decoder_cannot_take(tmp_path: Path,
+                                                                     capsys: pytest.CaptureFixture[str]) -> None:
+    """R3-04: info accepted it, decompress refused it (``LatentDimensionError``; tested with the vectors)."""
+    sha, name, _, dim = _shipped()
+    path = tmp_path / "latent_dim_9.bvae"
+    write_bvae(path, [LatentRecord("gold", np.zeros(dim + 1), np.ones(dim + 1))], DecoderReference(sha, name))
+    with pytest.raises(LatentDimensionError, match=f"latent_dim {dim + 1}") as caught:
+        describe_file(path)
+    assert str(path) in str(caught.value)
+    assert main(["info", str(path)]) == 1
+    assert f"latent_dim {dim + 1}" in capsys.readouterr().err
+    ok = tmp_path / "ok.bvae"
+    write_bvae(ok, [LatentRecord("gold", np.zeros(dim), np.ones(dim))], DecoderReference(sha, name))
+    assert describe_file(ok)["latent_dim"] == dim
+
+
+def _packed_padding_and_count_above_k(sha: str, basis: str, dim: int, count: int) -> bytes:
+    """A basis-only record packed with ``count`` coefficients (more than the shipped basis holds: step 10's
+    BasisError) whose last byte has an unused bit set (step 9's malformed), byte by byte."""
+    from bvae_bytes import bytes_writer as bw
+
+    from brdfcodec.layers.packed import packed_bytes, packed_widths
+
+    top = 9
+    bits = int(packed_widths(top, 0, count).sum())
+    assert bits % 8, "needs unused bits in the last byte"
+    layer = bytearray(packed_bytes(top, 0, count))
+    layer[0] = 128  # step code
+    layer[-1] = 0x80  # the last byte's highest bit is unused
+    form = bw.layered_form(3, 3, basis=(0, 0), top=top)
+    stored = bw.header([form], [bw.descriptor("gold", 0, count=count)], bytes(layer), dim=dim, decoder=sha,
+                       basis=basis)
+    return bw.assemble(stored, bytes(layer), flags=2, minor=3)
+
+
+def test_packed_padding_and_count_above_k_is_the_same_error_everywhere(tmp_path: Path) -> None:
+    """R3-14: info said malformed (step 9), decompress BasisError (step 10): step 9 comes first for both."""
+    from brdfcodec.codec import MaterialLibrary
+
+    sha, _, basis, dim = _shipped()
+    path = tmp_path / "packed.bvae"
+    for count in range(200, 220):  # past every shipped basis' K, with unused bits in the last byte
+        try:
+            path.write_bytes(_packed_padding_and_count_above_k(sha, basis, dim, count))
+            break
+        except AssertionError:
+            continue
+    for open_file in (read_bvae, describe_file, MaterialLibrary):
+        with pytest.raises(BvaeFormatError, match="unused bits") as caught:
+            open_file(path)
+        assert type(caught.value) is BvaeFormatError

@@ -89,16 +89,23 @@ def _dataset_summary(path: Path) -> dict[str, Any]:
 
 
 def _bvae_summary(path: Path) -> dict[str, Any]:
-    from brdfcodec.errors import DecoderNotFoundError
+    from brdfcodec.errors import DecoderNotFoundError, LatentDimensionError
     from brdfcodec.models.registry import find_model
 
-    header = read_bvae(path).header  # every record verified (CRC, finite values, sigma > 0), not only the header
+    # Every record verified (CRC, finite values, sigma > 0), not only the header; the preamble is read first, then
+    # only what the header declares (a device or a huge file that is not a .bvae file is refused at once).
+    header = read_bvae(path).header
     try:
         model = find_model(header.decoder.sha256)
         installed: str | None = str(model.folder)
     except DecoderNotFoundError:
         installed = None
-    else:  # basis layers checked against the model's shared bases, as opening the file for decoding does (§4.5)
+    else:  # §7 step 10, as opening the file for decoding does: the latent size (§6 rule 1), then the basis layers
+        if header.latent_dim != model.config.latent_dim:
+            raise LatentDimensionError(
+                path, f"declares latent_dim {header.latent_dim}, but its decoder {model.name} "
+                f"({header.decoder.sha256[:12]}…) has {model.config.latent_dim}: the file is inconsistent",
+            )
         from brdfcodec.layers.basis import check_basis_layers, check_records_without_latent, model_basis_lookup
 
         bases = model_basis_lookup(model.folder, model.basis_sha256, {})  # one basis per model (issue 40)

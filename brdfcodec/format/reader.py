@@ -401,13 +401,16 @@ def parse_bvae(data: bytes, path: str | os.PathLike[str] = "<bytes>") -> ParsedB
         Needs a newer reader.
     """
     name = os.fspath(path)
-    handle = io.BytesIO(data)
-    header = _header_from_handle(name, handle, len(data))
-    start = header.records_offset
-    _check_payload_crc(name, header, zlib.crc32(memoryview(data)[start:]))
-    records = tuple(
-        _decode_record(name, header, e, data[start + e.offset : start + e.offset + e.length]) for e in header.entries
-    )
+    header = _header_from_handle(name, io.BytesIO(data), len(data))
+    return _parse_records(name, header, memoryview(data)[header.records_offset :])
+
+
+def _parse_records(name: str, header: BvaeHeader, payloads: bytes | memoryview) -> ParsedBvae:
+    """Every record from the payloads (the bytes after the header): their CRC-32 (§7 step 8), then each record's
+    values (step 9)."""
+    _check_payload_crc(name, header, zlib.crc32(payloads))
+    records = tuple(_decode_record(name, header, e, bytes(payloads[e.offset : e.offset + e.length]))
+                    for e in header.entries)
     return ParsedBvae(header, records)
 
 
@@ -427,19 +430,33 @@ def read_header(path: str | os.PathLike[str]) -> BvaeHeader:
 
 
 def read_bvae(path: str | os.PathLike[str]) -> ParsedBvae:
-    """Read and verify a whole ``.bvae`` file (the header's and the payloads' CRC-32 are checked)."""
-    handle, _ = _open_checked(path)
+    """Read and verify a whole ``.bvae`` file (the header's and the payloads' CRC-32 are checked).
+
+    The preamble is read first, then the header it declares (at most 16 MB), then exactly the payload bytes the
+    header declares: a file that is not a ``.bvae`` file (a device such as ``/dev/zero``, a large sparse file)
+    is refused after its first 24 bytes, whatever its size.
+    """
+    handle, size = _open_checked(path)
+    name = os.fspath(path)
     with handle:
-        data = handle.read()
-    return parse_bvae(data, path)
+        header = _header_from_handle(name, handle, size)
+        wanted = header.file_size - header.records_offset
+        payloads = _read_exact(handle, wanted)
+        if len(payloads) != wanted:
+            raise _fail(name, f"truncated: the records need {wanted} bytes, {len(payloads)} could be read")
+        if _read_exact(handle, 1):
+            raise _fail(name, "trailing bytes after the last record (the file grew while it was read)")
+    return _parse_records(name, header, payloads)
 
 
 class BvaeReader:
     """Random access to the records of a ``.bvae`` file.
 
-    Opening reads the preamble and header, and reads the payloads once to
-    check their CRC-32 (one for all records, §3); :meth:`read` then reads
-    one record's bytes. Use as a context manager, or call :meth:`close`.
+    Opening reads the preamble and header, reads the payloads once to
+    check their CRC-32 (one for all records, §3), and checks every record's
+    values (§7 step 9, before a decoder's checks of step 10); :meth:`read`
+    then reads one record's bytes. Use as a context manager, or call
+    :meth:`close`.
 
     Parameters
     ----------
@@ -467,6 +484,10 @@ class BvaeReader:
         self.close()
 
     def close(self) -> None:
+            # §7: every record's values (step 9) are checked before the file is used, so that a reader that opens it
+            # for decoding (step 10 next) refuses a file for the same reason as one that reads it whole (info).
+            for entry in self.header.entries:
+                self._read_entry(entry)
         """Close the file."""
         self._handle.close()
 
@@ -477,7 +498,9 @@ class BvaeReader:
 
     def read(self, name: str) -> Record:
         """Read one material's record (``KeyError`` if absent); the payloads were verified on opening."""
-        entry = self.header.entry(name)
+        return self._read_entry(self.header.entry(name))
+
+    def _read_entry(self, entry: RecordEntry) -> Record:
         self._handle.seek(self.header.records_offset + entry.offset)
         return _decode_record(os.fspath(self.path), self.header, entry, _read_exact(self._handle, entry.length))
 
