@@ -101,7 +101,12 @@ def _symbols(symbols: npt.ArrayLike, bounds: npt.NDArray[np.int64]) -> npt.NDArr
 
 def _groups(bounds: npt.NDArray[np.int64]) -> list[tuple[int, npt.NDArray[np.intp]]]:
     """Entries coded under one model family, in coding order: by increasing bound, entries in order."""
-    return [(int(b), np.flatnonzero(bounds == b)) for b in np.unique(bounds)]
+    if len(bounds) == 0:
+        return []
+    order = np.argsort(bounds, kind="stable")
+    values, starts = np.unique(bounds[order], return_index=True)
+    return [(int(b), order[start:end]) for b, start, end in zip(values, starts, [*starts[1:], len(order)],
+                                                                 strict=True)]
 
 
 def _family(bound: int, prior: str) -> Any:
@@ -118,20 +123,20 @@ def _widths(spreads: npt.NDArray[np.float64], prior: str) -> npt.NDArray[np.floa
     return np.ascontiguousarray(width, dtype=np.float64)
 
 
-def _decode(data: bytes, spreads: npt.NDArray[np.float64], bounds: npt.NDArray[np.int64],
+def _decode(data: bytes, widths: npt.NDArray[np.float64], groups: list[tuple[int, npt.NDArray[np.intp]]],
             prior: str) -> npt.NDArray[np.int64] | None:
-    """The vector coded in ``data``, or None where the coder finds the data invalid for the priors."""
+    """The vector coded in ``data`` (prior widths, groups of :func:`_groups`), or None where the coder finds
+    the data invalid for the priors."""
     import constriction
 
-    result = np.zeros(len(spreads), dtype=np.int64)
-    if len(spreads) == 0:
+    result = np.zeros(len(widths), dtype=np.int64)
+    if len(widths) == 0:
         return result
     padded = bytes(data) + b"\0" * ((-len(data)) % 4 + 4 * _PAD_WORDS)
     words = np.frombuffer(padded, dtype=">u4").astype(np.uint32)
     decoder = constriction.stream.queue.RangeDecoder(words)
-    widths = _widths(spreads, prior)
     try:
-        for bound, entries in _groups(bounds):
+        for bound, entries in groups:
             result[entries] = decoder.decode(_family(bound, prior), np.zeros(len(entries)), widths[entries])
     except (AssertionError, ValueError, RuntimeError):
         return None
@@ -175,13 +180,14 @@ def encode_integers(symbols: npt.ArrayLike, spreads: npt.ArrayLike, *, bound: in
         return b""
     encoder = constriction.stream.queue.RangeEncoder()
     widths = _widths(s, prior)
-    for group_bound, entries in _groups(bounds):
+    groups = _groups(bounds)
+    for group_bound, entries in groups:
         encoder.encode(q[entries], _family(group_bound, prior), np.zeros(len(entries)), widths[entries])
     full = np.asarray(encoder.get_compressed(), dtype=np.uint32).astype(">u4").tobytes()
     expected = q.astype(np.int64)
 
     def decodes(candidate: bytes) -> bool:
-        result = _decode(candidate, s, bounds, prior)
+        result = _decode(candidate, widths, groups, prior)
         return result is not None and np.array_equal(result, expected)
 
     # The shortest termination: drop trailing bytes while a prefix (or the prefix plus one in its last byte,
@@ -232,7 +238,7 @@ def decode_integers(data: bytes, spreads: npt.ArrayLike, *, bound: int,
         detected: check the bytes (a CRC) before decoding.
     """
     s, bounds = _check(spreads, bound, prior)
-    result = _decode(bytes(data), s, bounds, prior)
+    result = _decode(bytes(data), _widths(s, prior), _groups(bounds), prior)
     if result is None:
         raise FileFormatError(f"entropy-coded integers: {len(data)} bytes are not a valid code of {len(s)} "
                               f"symbols under these {prior} priors")
