@@ -52,7 +52,10 @@ def test_rows_compare_file_bytes_with_pca_of_the_same_training_materials(fold_mo
         assert row["bytes_per_material"] == (row["file_bytes"] - names) / len(row["materials"])
         assert row["bytes_per_material"] <= row["budget_bytes"] and row["bytes_flag"] < row["budget_bytes"]
     pca = {row["point"] for row in rows} - {"bvae"}
-    assert pca == {"pca-int8", "pca-float16", "pca-perm-int8", "pca-perm-float16"}
+    assert pca == {f"{base}-{kind}" for base in ("pca", "pca-perm")
+                   for kind in ("int8", "float16", "tc", "ec-laplace", "ec-gaussian")}
+    coded = [row for row in rows if row["point"].endswith(("-tc", "-ec-laplace", "-ec-gaussian"))]
+    assert all(row["bytes_max"] <= row["budget_bytes"] for row in coded)
     # Plain PCA of 2/3 of 14 materials has at most 8 components: k is capped at the basis' rank.
     plain = [row for row in rows if row["point"] == "pca-int8" and row["budget_bytes"] == 64]
     assert plain[0]["coefficients"] <= 8
@@ -92,7 +95,7 @@ def test_summary_pools_the_folds_of_a_group_and_takes_the_best_pca(tmp_path: Pat
             _row("cv", "pca-int8", 16, [0.02, 0.04], 16), _row("cv", "pca-int8", 16, [0.06], 16),  # pooled 0.04
             _row("cv", "pca-perm-int8", 16, [0.035, 0.035], 16), _row("cv", "pca-perm-int8", 16, [0.035], 16)]
     table = summary_markdown(rows)
-    assert "| 16 B | 0.0300 | 15.3 | 0.0350 | pca-perm-int8 | 16 | yes |" in table, table
+    assert "| 16 B | 0.0300 | 15.3 | 0.0350 | pca-perm-int8 | 16 | 0.0350 | yes |" in table, table
     # Worse than the best PCA, or over the budget: "no".
     rows[1]["per_material_mapped"] = [0.09]
     assert "| 16 B | 0.0433 |" in summary_markdown(rows) and "| no |" in summary_markdown(rows)

@@ -47,7 +47,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
         description="Run the experiments of a configuration file (JSON: dataset, experiments of model folder "
         "and label, budgets): encode each model's held-out materials per family with --bytes N into one "
         "library, count the file's bytes less the names, and compare the mean mapped RelAE with PCA of the "
-        "same training materials filling N bytes. Writes one row per point (schema brdfcodec.rows/1, with the "
+        "same training materials in N bytes: int8 or float16 coefficients, transform-coded (bits by reverse "
+        "water-filling, a gain byte) and entropy-coded (range coder, priors of the training spread). Writes one row per point (schema brdfcodec.rows/1, with the "
         "commit) as JSON Lines and prints the summary table.",
     )
     rd.add_argument("--config", type=Path, required=True, help="runner configuration (JSON)")
@@ -55,7 +56,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     rd.add_argument("--quiet", action="store_true", help="no progress lines")
     rd.set_defaults(handler=run_rd)
     table = ops.add_parser("table", help="print the summary table of result rows (.jsonl files)",
-                           description="Summary tables (Markdown) of rows written by `bvae bench rd`.")
+                           description="Summary tables (Markdown) of rows written by `bvae bench rd`: brdfcodec "
+                           "against the best of every PCA variant at each budget (the best int8/float16 PCA "
+                           "beside it).")
     table.add_argument("rows", type=Path, nargs="+", help="row files (.jsonl)")
     table.add_argument("-o", "--output", type=Path, help="also write the table to this Markdown file")
     table.add_argument("--plot", type=Path, help="also draw the rate–distortion panels (PNG), one per family")

@@ -21,7 +21,15 @@ materials, :func:`run_experiment` measures
   orders, ``pca-perm``), with k coefficients as int8 plus one float16 scale
   (k + 2 bytes) or as float16 (2k bytes), k chosen to fill N bytes (at most
   the basis' rank). No container, index or name is counted for PCA: the
-  comparison favours it.
+  comparison favours it;
+- ``pca-tc``, ``pca-perm-tc``: the same bases (all the components the training
+  materials support) **transform-coded**: bits per coefficient by reverse
+  water-filling on the training coefficients' variances, uniform quantisers,
+  one gain byte per material, exactly N bytes; ``pca-ec-laplace``,
+  ``pca-ec-gaussian`` (and ``pca-perm-…``): **entropy-coded**, one step per
+  material (a byte) and the coefficients range-coded under priors of the
+  training spread, at most N bytes counted from the coder's output
+  (:mod:`brdfcodec.report.pca_coding`, issue 48).
 
 Errors are the mean mapped and linear RelAE on the full table over valid
 entries (``spec/conventions.md``). Every row carries the commit, the model's
@@ -241,6 +249,7 @@ def run_experiment(config: RdConfig, experiment: Experiment,
     from brdfcodec.datasets.hdf5 import BrdfDataset
     from brdfcodec.models.pca import fit_pca, fit_pca_colour_orders
     from brdfcodec.models.store import load_manifest
+    from brdfcodec.report.pca_coding import coded_pca_rows
     from brdfcodec.representation.metrics import relae_linear, relae_mapped
 
     manifest = load_manifest(experiment.model)
@@ -262,9 +271,10 @@ def run_experiment(config: RdConfig, experiment: Experiment,
         if not held:
             raise ValueError(f"{experiment.label}: no held-out material of the model is in {config.dataset}")
         train_inputs = dataset.inputs(train_rows)
-        n_perm = min(max(config.budgets), 5 * len(train_rows) - 1)
-        bases = {"pca": fit_pca(train_inputs, min(max(config.budgets), len(train_rows) - 1)),
-                 "pca-perm": fit_pca_colour_orders(train_inputs, n_perm)}
+        # Every component the training materials support (their rank): the coded points spend bits on as many
+        # as water-filling asks for; the int8/float16 points take the first k that fill the budget.
+        bases = {"pca": fit_pca(train_inputs, max(1, len(train_rows) - 1)),
+                 "pca-perm": fit_pca_colour_orders(train_inputs, 5 * len(train_rows) - 1)}
         del train_inputs
         common = {"experiment": experiment.label, "group": experiment.group or experiment.label,
                   "model": manifest.name, "decoder_sha256": manifest.decoder_sha256,
@@ -287,6 +297,8 @@ def run_experiment(config: RdConfig, experiment: Experiment,
             for label, basis in bases.items():
                 family_rows += _pca_rows(label, basis, inputs[chosen], [references[k] for k in chosen],
                                          config.budgets, error)
+                family_rows += coded_pca_rows(label, basis, inputs[chosen], [references[k] for k in chosen],
+                                              config.budgets, error)
             rows += [{**common, "family": family, "materials": [names[k] for k in chosen], **row}
                      for row in family_rows]
     return rows
