@@ -48,7 +48,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
         "and label, budgets): encode each model's held-out materials per family with --bytes N into one "
         "library, count the file's bytes less the names, and compare the mean mapped RelAE with PCA of the "
         "same training materials in N bytes: int8 or float16 coefficients, transform-coded (bits by reverse "
-        "water-filling, a gain byte) and entropy-coded (range coder, priors of the training spread). Writes one row per point (schema brdfcodec.rows/1, with the "
+        "water-filling, a gain byte) and entropy-coded (range coder, priors of the training spread). Writes "
+        "one row per point (schema brdfcodec.rows/1, with the "
         "commit) as JSON Lines and prints the summary table.",
     )
     rd.add_argument("--config", type=Path, required=True, help="runner configuration (JSON)")

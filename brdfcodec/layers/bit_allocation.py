@@ -106,7 +106,8 @@ def reverse_water_filling(variances: npt.ArrayLike, total_bits: float) -> WaterF
     Notes
     -----
     Exact: with the variances sorted in decreasing order, the ``k`` largest are active when
-    ``θₖ = (Πⱼ≤ₖ σⱼ²)^(1/k) · 2^(−2R/k)`` lies in ``[σₖ₊₁², σₖ²)``; the largest such ``k`` is taken.
+    ``θₖ = (Πⱼ≤ₖ σⱼ²)^(1/k) · 2^(−2R/k)`` lies in ``[σₖ₊₁², σₖ²)``; the first such ``k`` (the
+    only one) is taken.
     """
     v = _variances(variances)
     budget = _budget(total_bits)

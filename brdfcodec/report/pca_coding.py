@@ -118,10 +118,16 @@ def gaussian_loading(bits: int) -> float:
         a = np.concatenate([[-np.inf], edges])
         b = np.concatenate([edges, [np.inf]])
         r = -half_width + step * (np.arange(levels) + 0.5)
-        big_phi = lambda x: 0.5 * (1.0 + erf(x / math.sqrt(2.0)))  # noqa: E731
-        phi = lambda x: np.where(np.isfinite(x), np.exp(-0.5 * np.where(np.isfinite(x), x, 0.0) ** 2), 0.0) / (  # noqa: E731
-            math.sqrt(2.0 * math.pi))
-        x_phi = lambda x: np.where(np.isfinite(x), np.where(np.isfinite(x), x, 0.0) * phi(x), 0.0)  # noqa: E731
+        def big_phi(x: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+            return 0.5 * (1.0 + erf(x / math.sqrt(2.0)))
+
+        def phi(x: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:  # 0 at ±inf
+            finite = np.where(np.isfinite(x), x, 0.0)
+            return np.where(np.isfinite(x), np.exp(-0.5 * finite**2), 0.0) / math.sqrt(2.0 * math.pi)
+
+        def x_phi(x: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:  # x·φ(x), 0 at ±inf
+            return np.where(np.isfinite(x), np.where(np.isfinite(x), x, 0.0) * phi(x), 0.0)
+
         mass = big_phi(b) - big_phi(a)
         # ∫ₐᵇ (x − r)² φ = (1 + r²)(Φ(b) − Φ(a)) − (bφ(b) − aφ(a)) − 2r(φ(a) − φ(b))
         return float(np.sum((1.0 + r * r) * mass - (x_phi(b) - x_phi(a)) - 2.0 * r * (phi(a) - phi(b))))
@@ -338,8 +344,9 @@ def coded_pca_rows(name: str, basis: Any, inputs: npt.NDArray[Any], references: 
         if budget >= 2:
             tc = TransformCodedPca(spreads, budget)
             coders.append((f"{name}-tc", tc, int(np.count_nonzero(tc.bits))))
-            coders += [(f"{name}-ec-{prior}", EntropyCodedPca(spreads, budget, prior), len(spreads))  # type: ignore[arg-type]
-                       for prior in ("laplace", "gaussian")]
+            priors: tuple[Prior, ...] = ("laplace", "gaussian")
+            coders += [(f"{name}-ec-{prior}", EntropyCodedPca(spreads, budget, prior), len(spreads))
+                       for prior in priors]
         for point, coder, count in coders:
             sizes, errors = [], []
             for c, reference in zip(coefficients, references, strict=True):
