@@ -57,11 +57,13 @@ def is_edited(record: Record) -> bool:
 
 
 def _table(mapped: np.ndarray, bins: Sequence[int] | None, energy_bound: bool) -> npt.NDArray[np.float32]:
-    """The table of full mapped slices (only ``bins`` when given), times the energy bound's factor when asked."""
-    table = table_from_mapped(mapped, phi_d_bins=bins)
-    if energy_bound and (scale := energy_bound_scale_mapped(mapped)) != 1.0:
-        table *= np.float32(scale)
-    return table
+    """The table of full mapped slices (only ``bins`` when given), times the energy bound's factor when asked.
+
+    The order of ``spec/bvae-format.md`` §6: the slices are interpolated to the bins and unmapped (step 2),
+    then multiplied by the factor (step 5), which is computed from the whole table.
+    """
+    scale = energy_bound_scale_mapped(mapped) if energy_bound else 1.0
+    return table_from_mapped(mapped, phi_d_bins=bins, scale=scale)
 
 
 class _EvalMode:
@@ -462,8 +464,16 @@ class BrdfDecoder:
         ----------
         record : Record
         energy_bound : bool, optional
-            Apply the energy bound (:meth:`energy_scale`, ``spec/bvae-format.md`` §6.3) in the mapped domain.
-            By default, exactly for edited records (:func:`is_edited`).
+            Apply the energy bound (:meth:`energy_scale`, ``spec/bvae-format.md`` §6 step 5) in the mapped
+            domain. By default, exactly for edited records (:func:`is_edited`).
+
+        Notes
+        -----
+        With the bound, the slices are exactly the kept φd bins of the bounded table, but the bound is a
+        factor on reflectance, which does not commute with the interpolation in the mapped domain: the
+        table of bounded slices (:func:`~brdfcodec.representation.table_from_mapped`) is not the bounded
+        table at the other bins. For tables, use :meth:`decode`, or the slices with ``energy_bound=False``
+        and ``table_from_mapped(..., scale=decoder.energy_scale(record))``.
         """
         mapped = self._mapped_record(record)
         if energy_bound if energy_bound is not None else is_edited(record):
@@ -510,8 +520,8 @@ class BrdfDecoder:
             the network's value.
         energy_bound : bool, optional
             Multiply the table by ``min(1, 1 / max a)``, a its directional albedo
-            (``spec/bvae-format.md`` §6.3), so that it reflects at most the light it
-            receives. By default, exactly for edited records (:func:`is_edited`): an
+            (``spec/bvae-format.md`` §6 step 5), applied after the interpolation, so that it reflects at
+            most the light it receives. By default, exactly for edited records (:func:`is_edited`): an
             encoded material decodes as measured, an edit never creates energy.
 
         Returns

@@ -29,12 +29,13 @@ from brdfcodec.representation import (
     table_from_mapped,
     validate_phi_d_bins,
 )
+from brdfcodec.representation.energy import energy_bound_scale_mapped
 from brdfcodec.representation.mask import horizon_mask
 
 if TYPE_CHECKING:
     pass
 
-from brdfcodec.codec.decoder import BrdfDecoder
+from brdfcodec.codec.decoder import BrdfDecoder, is_edited
 from brdfcodec.codec.prepare import MaskedEntries, _apply_mask
 
 __all__ = ["DecodedMaterial", "MaterialLibrary"]
@@ -61,8 +62,15 @@ class DecodedMaterial:
 
     @functools.cached_property
     def mapped(self) -> npt.NDArray[np.float32]:
-        """Decoder output, (63, 90, 90) mapped slices in [0, MAPPED_MAX] (computed once)."""
-        return self.decoder.mapped_record(self.record)
+        """Decoder output, (63, 90, 90) mapped slices in [0, MAPPED_MAX] (computed once), before the energy
+        bound (:attr:`energy_scale`), which applies to the interpolated table (``spec/bvae-format.md`` §6)."""
+        return self.decoder.mapped_record(self.record, energy_bound=False)
+
+    @functools.cached_property
+    def energy_scale(self) -> float:
+        """The factor on this material's table: the energy bound ``min(1, 1 / max a)`` of an edited record
+        (``spec/bvae-format.md`` §6 step 5), 1 for any other."""
+        return energy_bound_scale_mapped(self.mapped) if is_edited(self.record) else 1.0
 
     def table(
         self, *, phi_d_bins: Sequence[int] | None = None, masked: MaskedEntries = "unmeasured"
@@ -73,15 +81,15 @@ class DecodedMaterial:
         kept slices they need); the full decode is cached once made.
         """
         if phi_d_bins is None:
-            return _apply_mask(table_from_mapped(self.mapped), None, masked)
+            return _apply_mask(table_from_mapped(self.mapped, scale=self.energy_scale), None, masked)
         if "mapped" not in self.__dict__:
             return self.decoder.decode(self.record, phi_d_bins=phi_d_bins, masked=masked)
         bins = validate_phi_d_bins(phi_d_bins)
-        return _apply_mask(table_from_mapped(self.mapped, phi_d_bins=bins), bins, masked)
+        return _apply_mask(table_from_mapped(self.mapped, phi_d_bins=bins, scale=self.energy_scale), bins, masked)
 
     @functools.cached_property
     def _reflectance(self) -> npt.NDArray[np.float32]:
-        table = _apply_mask(reflectance_from_mapped(self.mapped), None, "zero")  # no trip through stored units
+        table = _apply_mask(reflectance_from_mapped(self.mapped, scale=self.energy_scale), None, "zero")  # no trip through stored units
         table.setflags(write=False)
         return table
 

@@ -27,10 +27,17 @@ from collections.abc import Sequence
 import numpy as np
 import numpy.typing as npt
 
-from brdfcodec.conventions import EPSILON, MERL_COLOR_SCALE, N_CHANNELS, N_KEPT_SLICES, NETWORK_INPUT_SHAPE
+from brdfcodec.conventions import (
+    EPSILON,
+    KEPT_PHI_D_SLICES,
+    MERL_COLOR_SCALE,
+    N_CHANNELS,
+    N_KEPT_SLICES,
+    N_PHI_D,
+    NETWORK_INPUT_SHAPE,
+)
 from brdfcodec.representation.layout import (
     from_network_layout,
-    interpolation_plan,
     select_kept_slices,
     to_network_layout,
     validate_phi_d_bins,
@@ -69,35 +76,136 @@ def network_input_from_table(
 
 
 @functools.cache
-def _unmapping_matrix(phi_d_bins: tuple[int, ...]) -> np.ndarray:
-    """(21, K) float32 matrix: interpolation weights to the chosen bins, times the mapping's log range."""
-    left, right, weight = interpolation_plan()
-    bins = np.asarray(phi_d_bins)
-    matrix = np.zeros((N_KEPT_SLICES, len(bins)), dtype=np.float64)
-    columns = np.arange(len(bins))
-    matrix[left[bins], columns] += 1.0 - weight[bins]
-    matrix[right[bins], columns] += weight[bins]
-    out = (matrix * LOG_RANGE).astype(np.float32)
-    out.setflags(write=False)
-    return out
+def _interpolation_steps(phi_d_bins: tuple[int, ...]) -> tuple[np.ndarray, np.ndarray, tuple[tuple[np.ndarray, np.ndarray], ...]]:
+    """How the chosen bins are reached from the kept slices (built once per choice of bins).
+
+    Every φd bin p lies in the gap that starts at a kept slot g (the last kept bin, 179, in a gap of its own)
+    at offset j = p − kept[g]; the gap holds n = kept[g + 1] − kept[g] bins.
+
+    Returns
+    -------
+    gaps : ndarray of intp
+        The gaps the bins need (their left kept slots), sorted.
+    steps : ndarray of float64
+        Each needed gap's length n (1 for the last kept bin's gap, where no step is taken).
+    writes : tuple of (positions, columns)
+        For each offset j = 0, 1, …: the positions in ``gaps`` and the output columns of the bins at offset j.
+    """
+    kept = np.asarray(KEPT_PHI_D_SLICES)
+    bins = np.asarray(phi_d_bins, dtype=np.intp)
+    gap_of = np.searchsorted(kept, bins, side="right") - 1
+    offset = bins - kept[gap_of]
+    gaps = np.unique(gap_of)
+    lengths = np.diff(kept).astype(np.float64)
+    steps = np.where(gaps < N_KEPT_SLICES - 1, lengths[np.minimum(gaps, N_KEPT_SLICES - 2)], 1.0)
+    position = np.searchsorted(gaps, gap_of)
+    writes = tuple(
+        (position[offset == j], np.flatnonzero(offset == j)) for j in range(int(offset.max()) + 1 if len(bins) else 0)
+    )
+    for array in (gaps, steps, *(a for pair in writes for a in pair)):
+        array.setflags(write=False)
+    return gaps, steps, writes
 
 
-_STORED_PER_EXPM1 = (EPSILON / MERL_COLOR_SCALE).astype(np.float32).reshape(N_CHANNELS, 1, 1, 1)
+def _scaled_expm1(mapped: npt.ArrayLike, phi_d_bins: Sequence[int] | None, factor: np.ndarray) -> np.ndarray:
+    """``factor_c · expm1(L · m)`` at the chosen φd bins, m the mapped value interpolated there, as float32.
 
+    The numerically sensitive part of a decode (``spec/bvae-format.md`` §9), in float64: the interpolated
+    mapped value times the log range ``L`` is ``x = x_a + j·(x_b − x_a)/n`` between kept slices a and b, so
+    ``exp(x)`` is ``exp(x_a)·q^j`` with ``q = exp((x_b − x_a)/n)`` — one exponential per kept slice and one
+    per gap, then a product per bin (a geometric sequence, float64 rounding at each step: relative error below
+    1e-14 after the 9 steps of a gap). ``exp(x) − 1`` in float64 keeps dark entries (x near 0) to about
+    1e-16 absolute; the single rounding to float32 is last. The same operations in the same order for any
+    choice of bins, so a bin decoded alone equals the same bin of the full table.
 
-def _interpolated_expm1(mapped: npt.ArrayLike, phi_d_bins: Sequence[int] | None) -> np.ndarray:
-    """expm1 of the mapped slices interpolated to the chosen bins times the log range: reflectance · S_c / ε."""
+    Parameters
+    ----------
+    mapped : array_like, shape (..., 63, 90, 90)
+        Clamped mapped slices (network layout).
+    phi_d_bins : sequence of int or None
+        The bins, each in [0, 180); all by default.
+    factor : ndarray of float64, shape (3,)
+        Per-channel factor on ``expm1`` (ε / S_c for stored units, ε for reflectance, times the energy bound).
+
+    Returns
+    -------
+    ndarray of float32, shape (..., 3, 90, 90, K)
+    """
     bins = validate_phi_d_bins(phi_d_bins)
     array = np.asarray(mapped, dtype=np.float32)
     if array.shape[-3:] != NETWORK_INPUT_SHAPE:
         raise ValueError(f"mapped must have shape (..., {', '.join(map(str, NETWORK_INPUT_SHAPE))}), got {array.shape}")
-    kept = from_network_layout(array)  # (..., 3, 90, 90, 21)
-    table = np.matmul(kept, _unmapping_matrix(bins))
-    return np.expm1(table, out=table)
+    kept = from_network_layout(array)  # (..., 3, 90, 90, 21), a view
+    scale = np.asarray(factor, dtype=np.float64).reshape(N_CHANNELS, 1, 1, 1)
+    if bins == _ALL_BINS:
+        return _scaled_expm1_all(kept, scale)
+    gaps, steps, writes = _interpolation_steps(bins)
+    low = kept[..., gaps].astype(np.float64)
+    low *= LOG_RANGE
+    high = kept[..., np.minimum(gaps + 1, N_KEPT_SLICES - 1)].astype(np.float64)
+    high *= LOG_RANGE
+    ratio = np.subtract(high, low, out=high)
+    ratio /= steps
+    ratio = np.exp(ratio, out=ratio)  # q per gap
+    current = np.exp(low, out=low)  # scale · exp(x) at the gap's left kept slice, then one step further each round
+    current *= scale
+    out = np.empty((*kept.shape[:-1], len(bins)), dtype=np.float32)
+    for j, (positions, columns) in enumerate(writes):
+        if len(columns):
+            out[..., columns] = current[..., positions] - scale
+        if j + 1 < len(writes):
+            current *= ratio
+    return out
+
+
+_ALL_BINS = tuple(range(N_PHI_D))
+_GAP = KEPT_PHI_D_SLICES[1] - KEPT_PHI_D_SLICES[0]  # 9 bins from one kept slice to the next, but the last gap
+_LAST_GAP = KEPT_PHI_D_SLICES[-1] - KEPT_PHI_D_SLICES[-2]  # 8: from bin 171 to bin 179
+
+
+def _scaled_expm1_all(kept: np.ndarray, scale: np.ndarray) -> np.ndarray:
+    """:func:`_scaled_expm1` of all 180 bins: the same operations, the gaps stepped together.
+
+    Each round writes one offset of every gap into a contiguous float32 slab; one transposed copy then puts
+    the slab in φd order (a strided write per round is several times slower).
+    """
+    x = kept.astype(np.float64)
+    x *= LOG_RANGE
+    ratio = x[..., 1:] - x[..., :-1]
+    ratio /= np.diff(np.asarray(KEPT_PHI_D_SLICES)).astype(np.float64)
+    ratio = np.exp(ratio, out=ratio)
+    current = np.exp(x, out=x)
+    current *= scale
+    lead = kept.shape[:-1]
+    out = np.empty((*lead, N_PHI_D), dtype=np.float32)
+    last = N_KEPT_SLICES - 1
+    out[..., -1] = current[..., last] - scale[..., 0]  # bin 179, a kept slice of its own
+    current = np.ascontiguousarray(current[..., :last])
+    slab = np.empty((_GAP, *lead, last), dtype=np.float32)
+    for j in range(_GAP):
+        np.subtract(current, scale, out=slab[j], casting="same_kind")
+        if j + 1 < _GAP:
+            current *= ratio
+    split = KEPT_PHI_D_SLICES[-2]  # 171: the uniform gaps end here
+    uniform = out[..., :split].reshape(*lead, last - 1, _GAP)
+    uniform[...] = np.moveaxis(slab[..., : last - 1], 0, -1)
+    out[..., split:-1] = np.moveaxis(slab[:_LAST_GAP, ..., last - 1], 0, -1)
+    return out
+
+
+_STORED_PER_EXPM1 = EPSILON / np.asarray(MERL_COLOR_SCALE, dtype=np.float64)
+_REFLECTANCE_PER_EXPM1 = np.full(N_CHANNELS, EPSILON, dtype=np.float64)
+
+
+def _check_scale(scale: float) -> float:
+    value = float(scale)
+    if not (np.isfinite(value) and value >= 0.0):
+        raise ValueError(f"scale must be a finite factor ≥ 0 on reflectance, got {scale!r}")
+    return value
 
 
 def reflectance_from_mapped(
-    mapped: npt.ArrayLike, *, phi_d_bins: Sequence[int] | None = None
+    mapped: npt.ArrayLike, *, phi_d_bins: Sequence[int] | None = None, scale: float = 1.0
 ) -> npt.NDArray[np.float32]:
     """Reflectance (1/sr) from mapped slices in the mapped domain: :func:`table_from_mapped` without the colour scale.
 
@@ -105,18 +213,26 @@ def reflectance_from_mapped(
     reflectance is ``ε · expm1(·)`` directly; going through stored units would
     divide by the colour scale and multiply it back.
 
+    Parameters
+    ----------
+    mapped, phi_d_bins
+        As for :func:`table_from_mapped`.
+    scale : float, default 1.0
+        Factor on reflectance (the energy bound, ``spec/bvae-format.md`` §6 step 5), applied to the
+        interpolated table.
+
     Returns
     -------
     ndarray of float32, shape (..., 3, 90, 90, K)
         Finite and ≥ 0; equal to ``reflectance_from_stored(table_from_mapped(mapped))``
         up to float32 rounding.
     """
-    table = _interpolated_expm1(mapped, phi_d_bins)
-    table *= np.float32(EPSILON)
-    return table
+    return _scaled_expm1(mapped, phi_d_bins, _REFLECTANCE_PER_EXPM1 * _check_scale(scale))
 
 
-def table_from_mapped(mapped: npt.ArrayLike, *, phi_d_bins: Sequence[int] | None = None) -> npt.NDArray[np.float32]:
+def table_from_mapped(
+    mapped: npt.ArrayLike, *, phi_d_bins: Sequence[int] | None = None, scale: float = 1.0
+) -> npt.NDArray[np.float32]:
     """Table (or chosen φd bins) in stored units from mapped slices already in the mapped domain.
 
     Parameters
@@ -129,20 +245,21 @@ def table_from_mapped(mapped: npt.ArrayLike, *, phi_d_bins: Sequence[int] | None
     phi_d_bins : sequence of int, optional
         φd bins to produce, each in [0, 180); all 180 by default. One bin
         costs 1/180 of the full table.
+    scale : float, default 1.0
+        Factor ≥ 0 on reflectance, applied after the interpolation (the energy
+        bound of an edited record, ``spec/bvae-format.md`` §6 step 5).
 
     Returns
     -------
     ndarray of float32, shape (..., 3, 90, 90, K)
         Stored MERL values, finite and ≥ 0: the slices are interpolated in the
-        mapped domain (``spec/conventions.md`` §7), then unmapped (§4). Both
-        steps are one product with a (21, K) weight matrix followed by
-        ``expm1`` and the channel scale; a kept bin has weight exactly 1, so
-        it equals :func:`~brdfcodec.representation.mapping.unmap_values` of
-        the decoder's slice up to float32 rounding of the log range.
+        mapped domain (``spec/conventions.md`` §7), then unmapped (§4), in
+        float64 and rounded to float32 once (``spec/bvae-format.md`` §9; see
+        :func:`_scaled_expm1`): a kept bin equals
+        :func:`~brdfcodec.representation.mapping.unmap_values` of the
+        decoder's slice in float64, rounded to float32.
     """
-    table = _interpolated_expm1(mapped, phi_d_bins)
-    table *= _STORED_PER_EXPM1
-    return table
+    return _scaled_expm1(mapped, phi_d_bins, _STORED_PER_EXPM1 * _check_scale(scale))
 
 
 def table_from_network_output(
