@@ -2,7 +2,9 @@
 
 **One setting.** :func:`set_num_threads` (or the environment variable
 ``BVAE_NUM_THREADS``, then ``OMP_NUM_THREADS``) chooses how many threads
-torch runs on inside brdfcodec's encode and decode calls; by default half
+torch runs on inside brdfcodec's encode and decode calls, at most the cores the
+process may use (:func:`available_cores`: a larger count is limited to them, with a
+:class:`ThreadCountWarning`); by default half
 the cores, at least 1 and at most :data:`MAX_DEFAULT_THREADS`, as the
 ``bvae`` command line uses. The count is applied on the calling thread for
 the duration of each call and the caller's own torch setting is restored
@@ -24,7 +26,8 @@ call, so on a machine with few cores they take the cores torch's threads
 need next: with few cores a layered decode is slower with BLAS threaded
 than with BLAS on one thread, while a base-only decode is not (the benchmark
 suite's ``decode-layered`` groups; documentation: Development). The limit
-is set for the duration of a call only, through threadpoolctl, and the
+is set for the duration of a call only, through threadpoolctl (whose scan
+of the loaded libraries is made once, and again only after new imports), and the
 caller's own BLAS setting is restored afterwards; decodes that overlap on
 several threads share one limit (:class:`~brdfcodec.runtime.shared_limit.SharedLimit`).
 """
@@ -41,8 +44,8 @@ from typing import Any
 from brdfcodec.runtime.shared_limit import SharedLimit
 
 __all__ = [
-    "MAX_DEFAULT_THREADS", "codec_threads", "default_thread_count", "get_num_threads", "set_num_threads",
-    "single_blas_thread",
+    "MAX_DEFAULT_THREADS", "ThreadCountWarning", "available_cores", "codec_threads", "default_thread_count",
+    "environment_thread_count", "get_num_threads", "set_num_threads", "single_blas_thread",
 ]
 
 #: Most threads brdfcodec gives torch by default.
@@ -58,12 +61,50 @@ def default_thread_count(cpu_count: int | None = None) -> int:
     return max(1, min(MAX_DEFAULT_THREADS, cores // 2))
 
 
+def available_cores() -> int:
+    """The cores this process may run on (its CPU affinity where the system says, else the machine's), ≥ 1."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except (AttributeError, OSError):
+        return max(1, os.cpu_count() or 1)
+
+
+class ThreadCountWarning(UserWarning):
+    """A thread count asked for was more than the cores this process may use; the cores were used instead."""
+
+
+def _clamped(count: int, source: str) -> int:
+    """``count`` limited to :func:`available_cores`, with a :class:`ThreadCountWarning` naming ``source`` when
+    it was more: OpenMP allocates per thread up front, and a count such as 999999999 ends the process in
+    libgomp ("Out of memory allocating …", or "Thread creation failed") with no message of ours."""
+    cores = available_cores()
+    if count <= cores:
+        return count
+    import warnings
+
+    warnings.warn(f"{source}={count} asks for more threads than the {cores} cores this process may use; "
+                  f"using {cores}", ThreadCountWarning, stacklevel=3)
+    return cores
+
+
 def _positive(text: str | None) -> int | None:
     try:
-        count = int(text or "")
+        count = int((text or "").strip())
     except ValueError:
         return None
     return count if count >= 1 else None
+
+
+def environment_thread_count(environ: Mapping[str, str] | None = None) -> int | None:
+    """The thread count the environment asks for: ``BVAE_NUM_THREADS``, else ``OMP_NUM_THREADS``, each used only
+    when it is a positive integer, limited to :func:`available_cores` (with a :class:`ThreadCountWarning` naming
+    the variable); None when neither holds one."""
+    env = os.environ if environ is None else environ
+    for name in ("BVAE_NUM_THREADS", "OMP_NUM_THREADS"):
+        count = _positive(env.get(name))
+        if count is not None:
+            return _clamped(count, name)
+    return None
 
 
 def set_num_threads(count: int | None) -> None:
@@ -74,7 +115,8 @@ def set_num_threads(count: int | None) -> None:
     count : int or None
         A positive number of threads, or None to go back to the environment
         (``BVAE_NUM_THREADS``, then ``OMP_NUM_THREADS``) and else the default,
-        :func:`default_thread_count`.
+        :func:`default_thread_count`. More than :func:`available_cores` is
+        limited to them (:class:`ThreadCountWarning`).
 
     Raises
     ------
@@ -84,7 +126,7 @@ def set_num_threads(count: int | None) -> None:
     global _chosen
     if count is not None and (isinstance(count, bool) or not isinstance(count, int) or count < 1):
         raise ValueError(f"the number of threads must be a positive integer or None, got {count!r}")
-    _chosen = count
+    _chosen = None if count is None else _clamped(count, "set_num_threads")
 
 
 def get_num_threads(environ: Mapping[str, str] | None = None) -> int:
@@ -92,16 +134,13 @@ def get_num_threads(environ: Mapping[str, str] | None = None) -> int:
 
     :func:`set_num_threads` wins, then ``BVAE_NUM_THREADS``, then
     ``OMP_NUM_THREADS``, then :func:`default_thread_count` (a value that is
-    not a positive integer is ignored).
+    not a positive integer is ignored; one above :func:`available_cores` is
+    limited to them, :func:`environment_thread_count`).
     """
     if _chosen is not None:
         return _chosen
-    env = os.environ if environ is None else environ
-    for name in ("BVAE_NUM_THREADS", "OMP_NUM_THREADS"):
-        count = _positive(env.get(name))
-        if count is not None:
-            return count
-    return default_thread_count()
+    count = environment_thread_count(environ)
+    return default_thread_count() if count is None else count
 
 
 @contextlib.contextmanager
@@ -137,12 +176,25 @@ def codec_threads() -> Iterator[None]:
         yield
 
 
-def _controller() -> Any:
-    """The BLAS libraries loaded now (a quick scan): one loaded since the last call (scipy's own OpenBLAS,
-    say) is limited too."""
-    from threadpoolctl import ThreadpoolController
+_scanned: tuple[int, Any] | None = None
 
-    return ThreadpoolController()
+
+def _controller() -> Any:
+    """The BLAS libraries loaded in the process, scanned once and again only after new modules were imported.
+
+    A scan (threadpoolctl walks every loaded shared library and ``stat``s it) costs milliseconds, as much as
+    the rest of a decode's bookkeeping; a BLAS library loaded since the last scan (scipy's own OpenBLAS, say)
+    comes with an import, so ``len(sys.modules)`` changing is when to scan again. Called under
+    :class:`SharedLimit`'s lock.
+    """
+    global _scanned
+    modules = len(sys.modules)
+    if _scanned is None or _scanned[0] != modules:
+        from threadpoolctl import ThreadpoolController
+
+        _scanned = (modules, ThreadpoolController())
+        _scanned = (len(sys.modules), _scanned[1])  # the scan's own imports do not call for another
+    return _scanned[1]
 
 
 def _release_openblas_control() -> None:
