@@ -26,7 +26,8 @@ from brdfcodec.cli.main import (
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def test_thread_count_defaults_and_overrides() -> None:
+def test_thread_count_defaults_and_overrides(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr("brdfcodec.runtime.threads.available_cores", lambda: 64)  # above the cores: test_thread_limits
     assert default_thread_count(2) == 1 and default_thread_count(1) == 1
     assert default_thread_count(16) == 8 and default_thread_count(64) == 8
     env: dict[str, str] = {}

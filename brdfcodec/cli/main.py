@@ -49,7 +49,12 @@ from brdfcodec.cli import (
 from brdfcodec.cli.usage import UsageError
 from brdfcodec.errors import BrdfcodecError
 from brdfcodec.io.atomic import remove_unfinished_outputs
-from brdfcodec.runtime.threads import MAX_DEFAULT_THREADS, default_thread_count
+from brdfcodec.runtime.threads import (
+    MAX_DEFAULT_THREADS,
+    ThreadCountWarning,
+    default_thread_count,
+    environment_thread_count,
+)
 from brdfcodec.version import __version__
 
 __all__ = ["MAX_DEFAULT_THREADS", "build_parser", "configure_threads", "default_thread_count", "main"]
@@ -70,18 +75,19 @@ def configure_threads(environ: dict[str, str] | None = None) -> int:
     """Choose the thread count of a ``bvae`` run and apply it; return it.
 
     ``BVAE_NUM_THREADS`` wins, then ``OMP_NUM_THREADS``, then
-    :func:`default_thread_count`. The choice is exported as
+    :func:`default_thread_count`; a count above the cores the process may use
+    is limited to them (``bvae: warning: …`` names the variable), so that
+    OpenMP never aborts the process allocating for it (R3-12). The choice is exported as
     ``OMP_NUM_THREADS`` (read by torch when it is first imported) and applied
     to torch directly if it is already imported.
     """
     env = os.environ if environ is None else environ
-    chosen = env.get("BVAE_NUM_THREADS") or env.get("OMP_NUM_THREADS") or ""
-    try:
-        count = int(chosen)
-    except ValueError:
-        count = 0
-    if count < 1:
-        count = default_thread_count()
+    with warnings.catch_warnings(record=True) as caught:  # a count above the cores: limited, said in one line
+        warnings.simplefilter("always", ThreadCountWarning)
+        chosen = environment_thread_count(env)
+    for warning in caught:
+        print(f"bvae: warning: {warning.message}", file=sys.stderr)
+    count = default_thread_count() if chosen is None else chosen
     env["OMP_NUM_THREADS"] = str(count)
     if environ is None and "torch" in sys.modules:
         sys.modules["torch"].set_num_threads(count)
