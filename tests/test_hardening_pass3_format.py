@@ -20,7 +20,7 @@ import pytest
 from brdfcodec.cli import main
 from brdfcodec.cli.info_command import describe_file
 from brdfcodec.errors import BvaeFormatError, LatentDimensionError
-from brdfcodec.format.bvae import DecoderReference, LatentRecord, encode_bvae, read_bvae, write_bvae
+from brdfcodec.format.bvae import DecoderReference, LatentRecord, encode_bvae, parse_bvae, read_bvae, write_bvae
 from brdfcodec.format.strict_json import _check_json_structure, _check_json_text
 
 # --------------------------------------------------------------------------- R3-01, R3-03: the metadata's JSON check
@@ -204,3 +204,59 @@ def test_packed_padding_and_count_above_k_is_the_same_error_everywhere(tmp_path:
         with pytest.raises(BvaeFormatError, match="unused bits") as caught:
             open_file(path)
         assert type(caught.value) is BvaeFormatError
+
+
+# --------------------------------------------------------------------------- R3-05: compact μ is t·q as stored
+
+
+def _compact_mu_file(mu_code: int, stored: bytes) -> bytes:
+    """One layered record of D = 2 whose μ is stored compactly (``mu_code`` 1: step + bytes, 2: the fixed grid),
+    without σ and layers (format 2.2), byte by byte."""
+    from bvae_bytes import bytes_writer as bw
+
+    form = bw.layered_form(mu_code, 3, layer_bits=0)
+    return bw.assemble(bw.header([form], [bw.descriptor("m", 0)], stored), stored, minor=2)
+
+
+@pytest.mark.parametrize(("step", "q"), [
+    (1.0, [1, 0]),  # re-quantised, μ₀ read 0.99994
+    (float(np.float16(6e-8)), [127, -128]),  # a subnormal binary16 step: μ read 0
+    (65504.0, [127, -128]),  # μ = 8.3e6, finite: the file was refused ("too large for an int8 code")
+    (0.011810302734375, [-128, 21]),
+])
+def test_int8_mu_is_step_times_q_exactly(step: float, q: list[int]) -> None:
+    from brdfcodec.layers.basis import dequantise_int8
+
+    data = _compact_mu_file(1, np.float16(step).astype("<f2").tobytes() + np.array(q, dtype=np.int8).tobytes())
+    parsed = parse_bvae(data)
+    record = parsed.records[0]
+    expected = np.float32(step) * np.array(q, dtype=np.float32)
+    np.testing.assert_array_equal(record.mu, expected)
+    np.testing.assert_array_equal(record.mu, dequantise_int8(step, q))
+    assert np.isfinite(record.mu).all()
+    assert encode_bvae(parsed.records, parsed.header.decoder) == data  # written back byte for byte
+
+
+def test_int8_fixed_mu_byte_minus_128_is_minus_4() -> None:
+    """§4.5: "a reader accepts q = −128, μ = −4" (it read −3.96875)."""
+    data = _compact_mu_file(2, np.array([-128, 127], dtype=np.int8).tobytes())
+    parsed = parse_bvae(data)
+    np.testing.assert_array_equal(parsed.records[0].mu, np.array([-4.0, 127 / 32], dtype=np.float32))
+    assert encode_bvae(parsed.records, parsed.header.decoder) == data
+
+
+def test_a_writer_still_quantises_a_compact_mu_and_a_new_mu_is_quantised_anew() -> None:
+    import dataclasses
+
+    from brdfcodec.format.layered_record import LayeredRecord
+
+    record = LayeredRecord("m", np.array([0.3, -1.0]), np.ones(2), {}, compact_mu=True, store_sigma=False)
+    step, q = record.stored_mu
+    np.testing.assert_array_equal(record.mu, np.float32(step) * q.astype(np.float32))
+    assert abs(record.mu[0] - 0.3) <= step / 2
+    read = parse_bvae(_compact_mu_file(2, np.array([-128, 127], dtype=np.int8).tobytes())).records[0]
+    moved = dataclasses.replace(read, mu=np.array([0.5, 0.25]))  # an edit: the stored code no longer gives mu
+    np.testing.assert_array_equal(moved.mu, [0.5, 0.25])
+    assert moved.stored_mu[1].tolist() == [16, 8]
+    same = dataclasses.replace(read, name="n")
+    assert same.stored_mu[1].tolist() == [-128, 127]

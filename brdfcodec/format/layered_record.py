@@ -143,6 +143,12 @@ class LayeredRecord(LatentRecord):
         every dimension, the prior's width: nothing is claimed about the posterior. Such a record may hold no
         layer at all: it is then the base alone, μ in the form's storage (``spec/bvae-format.md`` §4.4).
     has_latent : bool
+    stored_mu : (float, ndarray of int8) or None
+        With ``compact_mu``: the code as stored, ``(t, q)`` with μ = t · q (t = 1/32 on the fixed grid), which
+        ``mu`` then holds exactly (``spec/bvae-format.md`` §4.5). A reader passes the stored code, so a record is
+        never re-quantised when it is read (q = −128 and any positive finite binary16 step included); None (a
+        writer's record): the code is made from ``mu`` (:func:`compact_mu_code`), and ``mu`` holds its values. A
+        code that does not give ``mu`` (a record copied with a new ``mu``) is made anew from ``mu`` too.
         False: a basis-only record (format 2.1, ``layers.mu = layers.sigma = "none"``; make one with
         :meth:`without_latent`). It stores neither μ nor σ; its base is the decoder's linear-path mean
         (``spec/bvae-format.md`` §4.6). It needs a basis layer whose base is not projected; ``mu`` and ``sigma``
@@ -160,6 +166,7 @@ class LayeredRecord(LatentRecord):
     has_latent: bool = True
     store_sigma: bool = True
 
+    stored_mu: tuple[float, np.ndarray] | None = field(default=None, compare=False, repr=False)
     @classmethod
     def without_latent(
         cls, name: str, latent_dim: int, basis: BasisLayer, *, detail: DetailLayer | None = None,
@@ -218,8 +225,25 @@ class LayeredRecord(LatentRecord):
             self._hold("sigma", sigma_from_codes(quantise_sigma(self.sigma)))
         if self.shared_sigma:
             self._hold("sigma", np.repeat(sigma_from_codes(shared_sigma_code(self.sigma)), len(self.mu)))
-        if self.compact_mu:
-            self._hold("mu", compact_mu_values(self.mu, self.fixed_mu_grid, f"{self.name}: mu"))
+        code = self._stored_code() if self.compact_mu else None
+        object.__setattr__(self, "stored_mu", code)
+        if code is not None:
+            self._hold("mu", dequantise_int8(*code))
+
+    def _stored_code(self) -> tuple[float, np.ndarray]:
+        """The compact μ's ``(t, q)``: the one given when it is a code of this form that gives ``mu`` exactly
+        (read from a file), else the code :func:`compact_mu_code` makes from ``mu`` (a writer's record)."""
+        given = self.stored_mu
+        if given is not None:
+            step, q = float(given[0]), np.asarray(given[1])
+            valid_step = step == FIXED_MU_STEP if self.fixed_mu_grid else (
+                np.isfinite(step) and step > 0 and float(np.float16(step)) == step)
+            if (valid_step and q.shape == np.shape(self.mu) and q.dtype == np.int8
+                    and np.array_equal(dequantise_int8(step, q), np.asarray(self.mu, dtype=np.float32))):
+                q = q.copy()
+                q.setflags(write=False)
+                return step, q
+        return compact_mu_code(self.mu, self.fixed_mu_grid, f"{self.name}: mu")
 
     def _hold(self, field_name: str, values: np.ndarray) -> None:
         """Replace ``mu`` or ``sigma`` by the values stored (float32, read-only like the base record's)."""
@@ -228,7 +252,8 @@ class LayeredRecord(LatentRecord):
         object.__setattr__(self, field_name, array)
 
     def _mu_code(self) -> tuple[float, np.ndarray]:
-        return compact_mu_code(self.mu, self.fixed_mu_grid, f"{self.name}: mu")
+        assert self.stored_mu is not None  # set by __post_init__ for every compact μ
+        return self.stored_mu
 
     @property
     def sigma_bytes_stored(self) -> bool:
@@ -459,10 +484,10 @@ def layered_from_payload(
     compact_mu = layers.get("mu") in _MU_MODES
     fixed_mu_grid = layers.get("mu") == MU_INT8_FIXED
     if fixed_mu_grid:
-        mu = dequantise_int8(FIXED_MU_STEP, np.frombuffer(tail[:d], dtype=np.int8))
+        stored_mu = (FIXED_MU_STEP, np.frombuffer(tail[:d], dtype=np.int8).copy())
         tail = tail[d:]
     elif compact_mu:
-        mu = dequantise_int8(*int8_from_step_bytes(tail[: STEP_BYTES + d], "compact mu step"))
+        stored_mu = int8_from_step_bytes(tail[: STEP_BYTES + d], "compact mu step")
         tail = tail[STEP_BYTES + d :]
     else:
         mu, values = values[:d], values[d:]
@@ -475,14 +500,17 @@ def layered_from_payload(
         sigma = sigma_from_codes(np.frombuffer(tail[:d], dtype=np.uint8))
         tail = tail[d:]
     elif shared:
+    stored_mu = None  # a compact μ is μ = t·q exactly as stored (§4.5): the record keeps the code, never re-quantised
         sigma = np.repeat(sigma_from_codes(np.frombuffer(tail[:1], dtype=np.uint8)), d)
         tail = tail[1:]
     else:
         sigma = values[:d]
     flags = {"compact_sigma": compact, "shared_sigma": shared, "compact_mu": compact_mu,
-             "fixed_mu_grid": fixed_mu_grid, "store_sigma": store_sigma}
+             "fixed_mu_grid": fixed_mu_grid, "store_sigma": store_sigma, "stored_mu": stored_mu}
     basis = None
     if "basis" in layers:
+    if stored_mu is not None:
+        mu = dequantise_int8(*stored_mu)
         size = _basis_length(layers["basis"], name)
         basis = basis_layer_from_bytes(layers["basis"], bytes(tail[:size]))
         tail = tail[size:]
