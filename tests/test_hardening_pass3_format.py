@@ -260,3 +260,20 @@ def test_a_writer_still_quantises_a_compact_mu_and_a_new_mu_is_quantised_anew() 
     assert moved.stored_mu[1].tolist() == [16, 8]
     same = dataclasses.replace(read, name="n")
     assert same.stored_mu[1].tolist() == [-128, 127]
+
+
+# --------------------------------------------------------------------------- R3-10: long names
+
+
+def test_atomic_output_of_a_name_of_255_bytes(tmp_path: Path) -> None:
+    """The temporary file was ``.{name}.XXXXXXXX.part``: 15 bytes more than the target, so a target of more than
+    240 bytes could not be written ("File name too long") although its own name was legal."""
+    from brdfcodec.io.atomic import TEMPORARY_PREFIX, atomic_output
+
+    target = tmp_path / ("a" * 248 + ".binary")
+    assert len(target.name.encode()) == 255
+    with atomic_output(target) as tmp:
+        assert tmp.name.startswith(TEMPORARY_PREFIX) and len(tmp.name) < 32
+        tmp.write_bytes(b"x")
+    assert target.read_bytes() == b"x"
+    assert [p.name for p in tmp_path.iterdir()] == [target.name]

@@ -9,8 +9,10 @@ import tempfile
 from collections.abc import Iterator
 from pathlib import Path
 
-__all__ = ["atomic_output", "check_output_path", "remove_unfinished_outputs"]
+__all__ = ["TEMPORARY_PREFIX", "atomic_output", "check_output_path", "remove_unfinished_outputs"]
 
+#: Start of the name of every temporary file :func:`atomic_output` makes (``.bvae-XXXXXXXX.part``, beside the target).
+TEMPORARY_PREFIX = ".bvae-"
 #: Temporary files of :func:`atomic_output` blocks not yet published or removed (paths as given by mkstemp).
 _UNFINISHED: set[str] = set()
 
@@ -109,7 +111,8 @@ def _name_target(error: OSError, tmp: Path, target: Path) -> None:
 def atomic_output(path: str | os.PathLike[str], *, overwrite: bool = False) -> Iterator[Path]:
     """Yield a temporary path that becomes ``path`` only if the block succeeds.
 
-    The temporary file lives in the target's folder, so the final rename is
+    The temporary file (``.bvae-XXXXXXXX.part``, a short name whatever the
+    target's) lives in the target's folder, so the final rename is
     atomic on POSIX and Windows. Without ``overwrite`` the file appears only
     if no file of that name exists at that moment (a hard link, which fails
     on an existing name), so two writers racing for one name cannot both
@@ -136,7 +139,9 @@ def atomic_output(path: str | os.PathLike[str], *, overwrite: bool = False) -> I
     """
     target = check_output_path(path, overwrite=overwrite)
     try:
-        fd, tmp_name = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".part", dir=target.parent)
+        # A short fixed name (19 bytes), not one made from the target's: a target whose name is as long as the
+        # file system allows must still have a temporary file beside it (issue 49, R3-10).
+        fd, tmp_name = tempfile.mkstemp(prefix=TEMPORARY_PREFIX, suffix=".part", dir=target.parent)
     except OSError as error:
         raise type(error)(error.errno, error.strerror, os.fspath(target)) from None
     _UNFINISHED.add(tmp_name)
