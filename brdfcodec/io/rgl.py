@@ -50,6 +50,11 @@ from brdfcodec.representation.mask import horizon_mask
 __all__ = [
     "RGL_SOURCE_KIND",
     "TENSOR_FILE_MAGIC",
+    "MAX_FIELD_VALUE",
+    "MIN_ANGLE_STEP",
+    "MIN_SIGMA",
+    "MIN_VNDF_PEAK",
+    "NegativeColourWarning",
     "RglHeader",
     "is_rgl_file",
     "read_rgl_bsdf",
@@ -195,6 +200,7 @@ def read_rgl_header(path: str | os.PathLike[str]) -> RglHeader:
                 file_path, f"field {name!r} (shape {list(shape)}) extends past the end of the file (truncated?)"
             )
         fields[name] = entry
+    _check_layout(file_path, fields, reader.position)
     missing = [name for name in _REQUIRED_FIELDS if name not in fields]
     if missing:
         raise SourceFormatError(file_path, f"not an RGL BRDF measurement: missing field(s) {', '.join(missing)}")
@@ -205,6 +211,21 @@ def read_rgl_header(path: str | os.PathLike[str]) -> RglHeader:
             stream.seek(entry.offset)
             description = stream.read(entry.nbytes).decode("utf-8", errors="replace").rstrip("\x00")
     return RglHeader(file_path, version, fields, description)
+
+
+def _check_layout(path: Path, fields: dict[str, RglField], header_end: int) -> None:
+    """Refuse fields whose bytes lie inside the header (which ends at byte ``header_end``) or overlap another
+    field's: each byte of a tensor file belongs to one field at most, so that a field cannot be read as two."""
+    spans = sorted((field.offset, field.offset + field.nbytes, name) for name, field in fields.items()
+                   if field.nbytes > 0)
+    for start, _, name in spans:
+        if start < header_end:
+            raise SourceFormatError(
+                path, f"field {name!r} starts at byte {start}, inside the header (which ends at byte {header_end})"
+            )
+    for (_, end, first), (start, _, second) in zip(spans, spans[1:], strict=False):
+        if start < end:
+            raise SourceFormatError(path, f"fields {first!r} and {second!r} overlap (bytes {start} to {end - 1})")
 
 
 class _HeaderReader:
@@ -286,13 +307,47 @@ def _check_field(header: RglHeader, name: str, *, ndim: int, dtype: str = "<f4")
     return field
 
 
+class NegativeColourWarning(UserWarning):
+    """An RGL file's ``rgb`` field holds negative values, which the MERL table cannot store (clipped to 0)."""
+
+
+#: Largest magnitude accepted in the density and colour fields. The plugin multiplies them in float32
+#: (f = rgb · D / (4 σ)): with every factor within [1e-10, 1e10] no product overflows (≤ 2.5e29 < 3.4e38).
+#: The database's files hold values below 1e3.
+MAX_FIELD_VALUE = 1e10
+#: Smallest projected area σ accepted: the plugin divides by it (the database's files: above 0.01).
+MIN_SIGMA = 1e-10
+#: Smallest largest value of a VNDF slice: the plugin scales each slice to a probability density, in float32;
+#: a slice of zeros or of denormals has none (the scale is infinite).
+MIN_VNDF_PEAK = 1e-20
+#: Smallest step between two incident angles, radians: the plugin interpolates between them in float32
+#: (a step that underflows gives an infinite weight). The database's steps are about 0.2 rad.
+MIN_ANGLE_STEP = 1e-6
+#: Largest incident elevation accepted, radians (π/2 plus float32's rounding of it).
+_MAX_THETA_I = math.pi / 2 + 1e-5
+#: Values read at a time when checking a large field.
+_CHUNK_VALUES = 1 << 20
+
+
 def check_measured_fields(header: RglHeader) -> None:
-    """Refuse a file whose fields Mitsuba's ``measured`` plugin would refuse, misread or crash on.
+    """Refuse a file whose fields Mitsuba's ``measured`` plugin would refuse, misread or crash on, or whose
+    evaluation would not be finite.
 
     Checks the type, dimensions and agreeing sizes of every field the plugin reads (``description``,
     ``jacobian``, ``theta_i``, ``phi_i``, ``ndf``, ``sigma``, ``vndf``, ``luminance``, ``rgb``), the
-    byte range of each (done by :func:`read_rgl_header`, in Python integers), and their values: the angle
-    grids finite and strictly increasing, the distributions finite and ≥ 0, the colours finite.
+    byte range of each (done by :func:`read_rgl_header`, in Python integers), and their values:
+
+    * the angle grids finite and strictly increasing in steps of at least :data:`MIN_ANGLE_STEP` radians,
+      ``theta_i`` within [0, π/2];
+    * ``sigma`` (the divisor of every evaluation) within [:data:`MIN_SIGMA`, :data:`MAX_FIELD_VALUE`];
+    * ``ndf``, ``vndf`` and ``luminance`` finite, ≥ 0 and at most :data:`MAX_FIELD_VALUE`; each
+      (φi, θi) slice of ``vndf`` with a largest value of at least :data:`MIN_VNDF_PEAK` (the plugin scales
+      each slice to a density);
+    * ``rgb`` finite and within ±:data:`MAX_FIELD_VALUE`. Negative colours (from a conversion of spectra
+      out of the sRGB gamut) are accepted with a :class:`NegativeColourWarning` that counts them (the MERL
+      table clips them to 0), unless no colour value is positive: such a file is refused.
+
+    Memory stays bounded: fields are read a slice (or :data:`_CHUNK_VALUES` values) at a time.
 
     Raises
     ------
@@ -323,14 +378,82 @@ def check_measured_fields(header: RglHeader) -> None:
                 "(incident azimuths, elevations, then a square grid of at least 2 × 2 for luminance and rgb)"
             )
     with open(path, "rb") as stream:
-        for name in ("theta_i", "phi_i", *_DENSITY_FIELDS, "rgb"):
-            values = _field_values(stream, path, name, fields[name])
-            if not np.isfinite(values).all():
-                raise SourceFormatError(path, f"field {name!r} holds non-finite values")
-            if name in ("theta_i", "phi_i") and np.any(np.diff(values) <= 0):
-                raise SourceFormatError(path, f"field {name!r} is not strictly increasing")
-            if name in _DENSITY_FIELDS and (values < 0).any():
-                raise SourceFormatError(path, f"field {name!r} holds negative values")
+        for name in ("theta_i", "phi_i"):
+            _check_angles(path, name, _field_values(stream, path, name, fields[name]))
+        for name in ("sigma", "ndf", "luminance"):
+            for values in _field_chunks(stream, path, name, fields[name]):
+                _check_range(path, name, values, low=MIN_SIGMA if name == "sigma" else 0.0)
+        vndf = fields["vndf"]
+        for index, values in enumerate(_field_chunks(stream, path, "vndf", vndf, per=math.prod(vndf.shape[2:]))):
+            _check_range(path, "vndf", values, low=0.0)
+            if not values.max() >= MIN_VNDF_PEAK:
+                phi, theta = divmod(index, n_theta)
+                raise SourceFormatError(
+                    path, f"field 'vndf' has no positive density for incident direction (φi {phi}, θi {theta}): "
+                    f"its largest value is {float(values.max()):.3g}, below {MIN_VNDF_PEAK:g} (the measured plugin "
+                    "scales each slice to a probability density)"
+                )
+        negative, total, lowest, positive = 0, fields["rgb"].count, 0.0, False
+        for values in _field_chunks(stream, path, "rgb", fields["rgb"]):
+            _check_range(path, "rgb", values, low=-MAX_FIELD_VALUE)
+            below = values < 0
+            positive = positive or bool((values > 0).any())
+            if below.any():
+                negative += int(below.sum())
+                lowest = min(lowest, float(values.min()))
+    if negative and not positive:
+        raise SourceFormatError(
+            path, f"field 'rgb' holds no positive value and {negative:,} negative ones (lowest {lowest:.3g}): "
+            "not a reflectance measurement"
+        )
+    if negative:
+        warnings.warn(
+            f"{path}: field 'rgb' holds {negative:,} negative values of {total:,} ({100 * negative / total:.3g} %, "
+            f"lowest {lowest:.3g}); they are read as 0 (a MERL table stores no negative reflectance)",
+            NegativeColourWarning,
+            stacklevel=3,
+        )
+
+
+def _check_angles(path: Path, name: str, values: np.ndarray) -> None:
+    """Incident angles: finite, strictly increasing in steps of at least :data:`MIN_ANGLE_STEP`; θi in [0, π/2]."""
+    if not np.isfinite(values).all():
+        raise SourceFormatError(path, f"field {name!r} holds non-finite values")
+    steps = np.diff(values.astype(np.float64))
+    if np.any(steps <= 0):
+        raise SourceFormatError(path, f"field {name!r} is not strictly increasing")
+    if np.any(steps < MIN_ANGLE_STEP):
+        raise SourceFormatError(
+            path, f"field {name!r} has a step of {float(steps.min()):.3g} rad between two angles, below "
+            f"{MIN_ANGLE_STEP:g} rad (the measured plugin's float32 interpolation would divide by it)"
+        )
+    if name == "theta_i" and (values[0] < 0 or values[-1] > _MAX_THETA_I):
+        raise SourceFormatError(
+            path, f"field 'theta_i' spans [{float(values[0]):.6g}, {float(values[-1]):.6g}] rad, outside the "
+            "incident elevations [0, π/2]"
+        )
+    if name == "phi_i" and np.abs(values).max() > 2 * math.pi + 1e-5:
+        raise SourceFormatError(path, "field 'phi_i' holds azimuths outside [−2π, 2π] rad")
+
+
+def _check_range(path: Path, name: str, values: np.ndarray, *, low: float) -> None:
+    """Values finite and within [low, :data:`MAX_FIELD_VALUE`]; a message that says which bound fails."""
+    if not np.isfinite(values).all():
+        raise SourceFormatError(path, f"field {name!r} holds non-finite values")
+    smallest, largest = float(values.min()), float(values.max())
+    if max(largest, -smallest) > MAX_FIELD_VALUE:
+        raise SourceFormatError(
+            path, f"field {name!r} holds {largest if largest > -smallest else smallest:.3g}, beyond "
+            f"±{MAX_FIELD_VALUE:g} (the measured plugin's float32 products of the fields would overflow; measured "
+            "files hold values below 1e3)"
+        )
+    if smallest < low:
+        if low == 0.0:
+            raise SourceFormatError(path, f"field {name!r} holds negative values (lowest {smallest:.3g})")
+        raise SourceFormatError(
+            path, f"field {name!r} holds {smallest:.3g}, below {low:g}"
+            + (" (the measured plugin divides by the projected area σ)" if name == "sigma" else "")
+        )
 
 
 def _field_values(stream: Any, path: Path, name: str, field: RglField) -> np.ndarray:
@@ -340,6 +463,20 @@ def _field_values(stream: Any, path: Path, name: str, field: RglField) -> np.nda
     if len(data) != field.nbytes:
         raise SourceFormatError(path, f"field {name!r} extends past the end of the file (truncated?)")
     return np.frombuffer(data, dtype=field.dtype)
+
+
+def _field_chunks(stream: Any, path: Path, name: str, field: RglField, *, per: int | None = None
+                  ) -> Iterator[np.ndarray]:
+    """A field's values, ``per`` at a time (default: up to :data:`_CHUNK_VALUES`), in file order."""
+    step = per or max(1, min(field.count, _CHUNK_VALUES))
+    itemsize = np.dtype(field.dtype).itemsize
+    stream.seek(field.offset)
+    for first in range(0, field.count, step):
+        wanted = min(step, field.count - first) * itemsize
+        data = stream.read(wanted)
+        if len(data) != wanted:
+            raise SourceFormatError(path, f"field {name!r} extends past the end of the file (truncated?)")
+        yield np.frombuffer(data, dtype=field.dtype)
 
 
 def read_rgl_bsdf(path: str | os.PathLike[str], *, name: str | None = None) -> MerlBRDF:
