@@ -78,7 +78,7 @@ def test_unsafe_material_names_are_refused_on_write_and_read(name: str) -> None:
     assert type(caught.value) is BvaeFormatError
 
 
-@pytest.mark.parametrize("name", ["gold", "café", "Ölfarbe №2 ☀", "gold.z4+2", "a~b@0.5", "a+b", "x" * 255, "日本"])
+@pytest.mark.parametrize("name", ["gold", "café", "Ölfarbe №2 ☀", "gold.z4+2", "a~b@0.5", "a+b", "x" * 240, "日本"])
 def test_ordinary_names_stay_valid(name: str, tmp_path: Path) -> None:
     assert parse_bvae(encode_bvae([record(name)], DECODER)).header.names == [name]
     assert material_file_path(tmp_path, name, "binary").parent == tmp_path

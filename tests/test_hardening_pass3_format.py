@@ -277,3 +277,66 @@ def test_atomic_output_of_a_name_of_255_bytes(tmp_path: Path) -> None:
         tmp.write_bytes(b"x")
     assert target.read_bytes() == b"x"
     assert [p.name for p in tmp_path.iterdir()] == [target.name]
+
+
+@pytest.mark.parametrize(("name", "problem"), [
+    ("a" * 241, "240"),
+    ("é" * 121, "242 bytes"),  # 121 code points, 242 bytes
+    ("x\u00ad" * 48 + "x", "433 bytes"),  # format characters count as their [U+XXXX] in the file name
+    ("\ufeffgold", r"U\+FEFF"),
+    ("COM¹", "device"), ("lpt³.bvae", "device"), ("Com² .txt", "device"),
+])
+def test_names_must_fit_a_file_name_and_avoid_the_remaining_device_names(name: str, problem: str) -> None:
+    from brdfcodec.format.material_names import check_material_name
+
+    with pytest.raises(ValueError, match=problem):
+        check_material_name(name)
+    with pytest.raises(ValueError, match=problem):
+        LatentRecord(name, np.zeros(2), np.ones(2))  # the writer refuses it
+
+
+def test_a_name_of_240_bytes_decompresses_into_a_folder(tmp_path: Path) -> None:
+    """The longest name gives a file name of 247 bytes with ``.binary`` (within 255), and a temporary file too."""
+    from brdfcodec.format.material_names import file_name_form, material_file_path
+
+    for name in ("a" * 240, "é" * 120, "x\u200b" * 26 + "x" * 6):
+        assert len(file_name_form(name).encode()) == 240
+        path = material_file_path(tmp_path, name, "binary")
+        path.write_bytes(b"")
+        assert path.parent == tmp_path and len(path.name.encode()) == 247
+
+
+def test_reader_refuses_what_the_writer_does_in_names(tmp_path: Path) -> None:
+    """Byte by byte: a name of 241 bytes, one starting with a BOM (the spec-reader's gap), a superscript device name,
+    and two names that would be one file once their format characters are written [U+XXXX]."""
+    from bvae_bytes import bytes_writer as bw
+
+    good = bw.f32(0.5, -1.0, 0.25, 0.5)
+    for name in ("a" * 241, "\ufeffgold", "LPT¹"):
+        data = bw.assemble(bw.header([bw.latent_form()], [bw.descriptor(name, 0)], good), good)
+        with pytest.raises(BvaeFormatError, match="record 0"):
+            parse_bvae(data)
+    twins = bw.assemble(bw.header([bw.latent_form()], [bw.descriptor("a\u200bb", 0), bw.descriptor("A[U+200B]B", 0)],
+                                  good + good), good + good)
+    with pytest.raises(BvaeFormatError, match="appears twice"):
+        parse_bvae(twins)
+    inside = bw.assemble(bw.header([bw.latent_form()], [bw.descriptor("go\ufeffld", 0)], good), good)
+    assert parse_bvae(inside).records[0].name == "go\ufeffld"  # U+FEFF elsewhere is a format character
+
+
+# --------------------------------------------------------------------------- R3-16: format characters shown escaped
+
+
+def test_format_characters_are_escaped_in_shown_names_and_file_names(tmp_path: Path,
+                                                                    capsys: pytest.CaptureFixture[str]) -> None:
+    from brdfcodec.format.material_names import material_file_path, shown_name
+
+    rlo = "gold\u202egnp.exe"
+    assert shown_name(rlo) == "gold\\u202egnp.exe" and shown_name("Ölfarbe №2 ☀") == "Ölfarbe №2 ☀"
+    assert material_file_path(tmp_path, rlo, "npy").name == "gold[U+202E]gnp.exe.npy"
+    path = tmp_path / "rlo.bvae"
+    write_bvae(path, [LatentRecord(rlo, np.zeros(2), np.ones(2)), LatentRecord("plain", np.zeros(2), np.ones(2))],
+               DecoderReference("ab" * 32, "t"))
+    assert main(["info", str(path)]) == 0
+    out = capsys.readouterr().out
+    assert "\u202e" not in out and "gold\\u202egnp.exe" in out

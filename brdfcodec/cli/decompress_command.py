@@ -11,7 +11,7 @@ from tqdm import tqdm
 from brdfcodec.cli.legend import RELAE_LEGEND
 from brdfcodec.cli.usage import UsageError
 from brdfcodec.conventions import N_PHI_D
-from brdfcodec.format.material_names import material_file_path
+from brdfcodec.format.material_names import material_file_path, shown_name
 from brdfcodec.io.atomic import check_output_path
 from brdfcodec.io.table_output import TABLE_FORMATS, table_format_of, write_table
 
@@ -112,7 +112,7 @@ def run(args: argparse.Namespace) -> int:
             note = _stored_error_note(material.record.meta)  # before writing: nothing may fail after a write
             kind = write_table(target, table, phi_d_bins=args.phi_d, overwrite=args.force,
                                rgl_resolution=rgl_resolution, name=name)
-            print(f"wrote {target} ({name}, {kind}){note}")
+            print(f"wrote {target} ({shown_name(name)}, {kind}){note}")  # format characters escaped (§4.3)
             legend = legend or bool(note)
         if reference_line is not None:
             print(reference_line)

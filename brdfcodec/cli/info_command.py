@@ -15,6 +15,7 @@ from brdfcodec.datasets.hdf5 import HDF5_SIGNATURE
 from brdfcodec.errors import FileFormatError
 from brdfcodec.format.bvae import FLAG_METADATA_ZSTD, RecordEntry, read_bvae
 from brdfcodec.format.bvae import MAGIC as BVAE_MAGIC
+from brdfcodec.format.material_names import shown_name
 from brdfcodec.io.genuine import genuine_merl_name
 from brdfcodec.io.merl import MERL_FILE_SIZE, read_merl
 from brdfcodec.io.rgl import TENSOR_FILE_MAGIC
@@ -257,7 +258,7 @@ def _format_text(summary: dict[str, Any]) -> str:
             if "source_kind" in item:
                 notes.append(f"source {item['source_kind']}")
             kind = "" if item["kind"] == "latent" else f"[{item['kind']}] "
-            lines.append(f"    {item['name']:<32} {kind}{_stored_forms(item, summary['latent_dtype'])}; "
+            lines.append(f"    {shown_name(item['name']):<32} {kind}{_stored_forms(item, summary['latent_dtype'])}; "
                          f"{item['payload_bytes']:,} B payload, {item['record_bytes']:,} B with its index entry  "
                          f"{'  '.join(notes)}".rstrip())
         if len(summary["materials"]) > 50:

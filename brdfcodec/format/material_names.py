@@ -18,19 +18,57 @@ from pathlib import Path
 
 __all__ = [
     "FORBIDDEN_CHARACTERS",
+    "MAX_NAME_BYTES",
     "MAX_NAME_LENGTH",
     "check_material_name",
+    "file_name_form",
     "material_file_path",
     "name_collision_key",
+    "shown_name",
 ]
 
-#: Longest material name, in Unicode code points.
-MAX_NAME_LENGTH = 255
+#: Most UTF-8 bytes of a name's file-name form (:func:`file_name_form`, ``spec/bvae-format.md`` §4.3): with the
+#: longest extension a tool adds (``.binary``, 7 bytes) and a margin, a file name within the 255 bytes that common
+#: file systems allow.
+MAX_NAME_BYTES = 240
+#: Longest material name, in Unicode code points (a name of more has more than :data:`MAX_NAME_BYTES` bytes).
+MAX_NAME_LENGTH = MAX_NAME_BYTES
 #: Characters a name MUST NOT hold besides control characters: path separators and what Windows refuses.
 FORBIDDEN_CHARACTERS = frozenset('/\\:*?"<>|')
 _WINDOWS_DEVICES = frozenset(
-    ["CON", "PRN", "AUX", "NUL"] + [f"{p}{i}" for p in ("COM", "LPT") for i in range(10)]
+    ["CON", "PRN", "AUX", "NUL"] + [f"{p}{i}" for p in ("COM", "LPT") for i in [*range(10), *"¹²³"]]
 )
+#: U+FEFF (a byte-order mark; §3.3 says names are UTF-8 without one) may not start a name.
+_BYTE_ORDER_MARK = "\ufeff"
+
+
+def file_name_form(name: str) -> str:
+    """The name as a file name: each format character (category Cf, such as U+202E right-to-left override)
+    replaced by ``[U+XXXX]``, so that no file name hides or reorders what it shows (``spec/bvae-format.md`` §4.3).
+
+    Examples
+    --------
+    >>> file_name_form("gold\u202egnp.exe")
+    'gold[U+202E]gnp.exe'
+    """
+    if name.isascii():
+        return name
+    return "".join(f"[U+{ord(c):04X}]" if unicodedata.category(c) == "Cf" else c for c in name)
+
+
+def shown_name(name: str) -> str:
+    """The name as shown to a person: every character that is not printable (format characters, white space
+    other than U+0020, …) escaped as ``\\uXXXX`` (``spec/bvae-format.md`` §4.3).
+
+    Examples
+    --------
+    >>> shown_name("gold\u202egnp.exe")
+    'gold\\u202egnp.exe'
+    """
+    if name.isprintable():
+        return name
+    return "".join(c if c.isprintable() else (f"\\u{ord(c):04x}" if ord(c) < 0x10000 else f"\\U{ord(c):08x}")
+                   for c in name)
 
 
 def _problem(name: str) -> str | None:
@@ -38,6 +76,8 @@ def _problem(name: str) -> str | None:
     if not 1 <= len(name) <= MAX_NAME_LENGTH:
         return f"must be 1 to {MAX_NAME_LENGTH} characters long, has {len(name)}"
     plain_ascii = name.isascii() and name.isprintable()  # the common case: no control character, no surrogate
+    if name.startswith(_BYTE_ORDER_MARK):
+        return "starts with U+FEFF (a byte-order mark)"
     for char in name if not plain_ascii else FORBIDDEN_CHARACTERS.intersection(name):
         category = unicodedata.category(char)
         if category == "Cs":
@@ -55,7 +95,11 @@ def _problem(name: str) -> str | None:
     if not plain_ascii and unicodedata.normalize("NFC", name) != name:
         return "is not in Unicode normalisation form NFC"
     if name.split(".", 1)[0].rstrip().upper() in _WINDOWS_DEVICES:
-        return "is a reserved device name on Windows (CON, PRN, AUX, NUL, COM0-9, LPT0-9)"
+        return "is a reserved device name on Windows (CON, PRN, AUX, NUL, COM0-9, LPT0-9, COM¹²³, LPT¹²³)"
+    size = len(file_name_form(name).encode("utf-8"))
+    if size > MAX_NAME_BYTES:
+        return (f"takes {size} bytes as a file name (UTF-8, format characters written [U+XXXX]), more than "
+                f"{MAX_NAME_BYTES}")
     return None
 
 
@@ -95,18 +139,20 @@ def check_material_name(name: object) -> str:
 
 
 def name_collision_key(name: str) -> str:
-    """The key under which two names count as the same: NFC, then Unicode case folding.
+    """The key under which two names count as the same: NFC, the file-name form (:func:`file_name_form`: two names
+    that would be one file, such as ``a\u200bb`` and ``a[U+200B]b``, are one name), then Unicode case folding.
 
     Examples
     --------
     >>> name_collision_key("Gold") == name_collision_key("gold")
     True
     """
-    return unicodedata.normalize("NFC", unicodedata.normalize("NFC", name).casefold())
+    return unicodedata.normalize("NFC", file_name_form(unicodedata.normalize("NFC", name)).casefold())
 
 
 def material_file_path(folder: str | os.PathLike[str], name: str, suffix: str) -> Path:
-    """The file ``folder/NAME.SUFFIX`` for a material, guaranteed to lie directly inside ``folder``.
+    """The file ``folder/NAME.SUFFIX`` for a material, guaranteed to lie directly inside ``folder``; NAME is the
+    name's :func:`file_name_form` (format characters written ``[U+XXXX]``).
 
     Parameters
     ----------
@@ -129,7 +175,7 @@ def material_file_path(folder: str | os.PathLike[str], name: str, suffix: str) -
     """
     check_material_name(name)
     base = Path(folder)
-    path = base / f"{name}.{suffix.lstrip('.')}"
+    path = base / f"{file_name_form(name)}.{suffix.lstrip('.')}"
     # Defence in depth: the rules above already exclude separators, '.' and '..'.
     if path.parent != base or len(path.parts) != len(base.parts) + 1:
         raise ValueError(f"material name {name!r} does not give a file name inside {base}")

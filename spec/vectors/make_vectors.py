@@ -357,7 +357,9 @@ def invalid_vectors() -> dict[str, tuple[bytes, str, str]]:
         ("name-device", "NUL", "a Windows device name"),
         ("name-device-space", "CON .txt", "a Windows device name before its first '.', white space at its end "
                                           "ignored (§4.3)"),
-        ("name-too-long", "x" * 256, "a name of 256 characters"),
+        ("name-too-long", "x" * 241, "a name of 241 bytes (at most 240, §4.3)"),
+        ("name-bom", "\ufeffgold", "a name that starts with U+FEFF (a byte-order mark)"),
+        ("name-device-superscript", "COM\u00b9", "the Windows device name COM¹ (superscript one)"),
     ]:
         add(label, one(name), "malformed", why)
     add("name-not-utf8", one(b"a\xffb"), "malformed", "a name whose bytes are not UTF-8")
@@ -387,6 +389,9 @@ def _last_block(block: bytes) -> bytes:
     return bytes([block[0] | 1]) + block[1:]
 
 
+    add("name-file-twins", assemble(header([latent_form()], [descriptor("a\u200bb", 0), descriptor("A[U+200B]B", 0)],
+                                           good + good), good + good), "malformed",
+        "names 'a' U+200B 'b' and 'A[U+200B]B' (one file name once format characters are written [U+XXXX])")
 def detail_frame(head: list[int], total: int) -> bytes:
     """A zstandard frame written by hand (independent of the zstandard library's version): int16 ``head``
     as a raw block, then zeros as RLE blocks, ``total`` int16 values in all; the frame declares its content size."""
