@@ -53,6 +53,8 @@ TARGETS = {
     "encode-16KB-busy": 1.5,
     # write + read 65,536 records vs 8,192 in the same rounds: 8 for linear work, 64 for quadratic (issue 36)
     "record-limit-round-trip": 16.0,
+    # decode_many of 32 random latents (full tables) vs the decoder network alone on them, paired (issue 51, 2)
+    "decode-many-32": 1.5,
 }
 
 #: Largest acceptable candidate median, in seconds, on 2 CPU cores (issue 4 targets).

@@ -163,33 +163,44 @@ _GAP = KEPT_PHI_D_SLICES[1] - KEPT_PHI_D_SLICES[0]  # 9 bins from one kept slice
 _LAST_GAP = KEPT_PHI_D_SLICES[-1] - KEPT_PHI_D_SLICES[-2]  # 8: from bin 171 to bin 179
 
 
+#: θh rows stepped at once by :func:`_scaled_expm1_all`: its working arrays (about 0.5 MB) stay in cache.
+_ROWS_PER_BLOCK = 10
+
+
 def _scaled_expm1_all(kept: np.ndarray, scale: np.ndarray) -> np.ndarray:
     """:func:`_scaled_expm1` of all 180 bins: the same operations, the gaps stepped together.
 
-    Each round writes one offset of every gap into a contiguous float32 slab; one transposed copy then puts
-    the slab in φd order (a strided write per round is several times slower).
+    Block by block of θh rows, each round writes one offset of every gap into a small contiguous float32
+    slab, and one transposed copy puts the slab in φd order: a strided write per round, or whole-table
+    passes, were several times slower (memory traffic, not arithmetic, is the cost).
     """
     x = kept.astype(np.float64)
     x *= LOG_RANGE
     ratio = x[..., 1:] - x[..., :-1]
     ratio /= np.diff(np.asarray(KEPT_PHI_D_SLICES)).astype(np.float64)
     ratio = np.exp(ratio, out=ratio)
-    current = np.exp(x, out=x)
-    current *= scale
-    lead = kept.shape[:-1]
+    start = np.exp(x, out=x)
+    start *= scale
+    lead = kept.shape[:-1]  # (..., 3, 90, 90)
     out = np.empty((*lead, N_PHI_D), dtype=np.float32)
     last = N_KEPT_SLICES - 1
-    out[..., -1] = current[..., last] - scale[..., 0]  # bin 179, a kept slice of its own
-    current = np.ascontiguousarray(current[..., :last])
-    slab = np.empty((_GAP, *lead, last), dtype=np.float32)
-    for j in range(_GAP):
-        np.subtract(current, scale, out=slab[j], casting="same_kind")
-        if j + 1 < _GAP:
-            current *= ratio
+    out[..., -1] = start[..., last] - scale[..., 0]  # bin 179, a kept slice of its own
     split = KEPT_PHI_D_SLICES[-2]  # 171: the uniform gaps end here
-    uniform = out[..., :split].reshape(*lead, last - 1, _GAP)
-    uniform[...] = np.moveaxis(slab[..., : last - 1], 0, -1)
-    out[..., split:-1] = np.moveaxis(slab[:_LAST_GAP, ..., last - 1], 0, -1)
+    blocks = np.ndindex(*lead[:-2])  # every leading index and channel
+    for index in blocks:
+        channel_scale = scale[index[-1], 0, 0]
+        for row in range(0, lead[-2], _ROWS_PER_BLOCK):
+            rows = (*index, slice(row, row + _ROWS_PER_BLOCK))
+            current = start[(*rows, Ellipsis, slice(0, last))].copy()
+            step = ratio[rows]
+            slab = np.empty((_GAP, *current.shape), dtype=np.float32)
+            for j in range(_GAP):
+                np.subtract(current, channel_scale, out=slab[j], casting="same_kind")
+                if j + 1 < _GAP:
+                    current *= step
+            target = out[rows]  # (rows, 90, 180), a view
+            target[:, :, :split].reshape(*target.shape[:2], last - 1, _GAP)[...] = slab[..., :-1].transpose(1, 2, 3, 0)
+            target[:, :, split:-1] = slab[:_LAST_GAP, ..., -1].transpose(1, 2, 0)
     return out
 
 
