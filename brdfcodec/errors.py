@@ -17,6 +17,7 @@ __all__ = [
     "BrdfcodecError",
     "BvaeChecksumError",
     "BvaeFormatError",
+    "CheckpointError",
     "DatasetError",
     "DecoderMismatchError",
     "DecoderNotFoundError",
@@ -24,6 +25,7 @@ __all__ = [
     "LatentDimensionError",
     "MerlFormatError",
     "ModelChecksumError",
+    "ModelFolderError",
     "ModelNotFoundError",
     "NoLatentError",
     "NonFiniteValueError",
@@ -142,6 +144,17 @@ class ModelNotFoundError(DecoderNotFoundError):
 
 class ModelChecksumError(BrdfcodecError):
     """A weight file's SHA-256 differs from its manifest: the file is corrupt or not the named model."""
+
+
+class ModelFolderError(FileFormatError):
+    """A model folder (``spec/model.md`` §3) that cannot be used: a ``model.json`` outside its schema or
+    bounds, a file that is not a regular file inside the folder or is too large, weights whose names,
+    shapes, values or stored config differ from the manifest's."""
+
+
+class CheckpointError(FileFormatError):
+    """A training checkpoint (``best.pt``, ``checkpoint.pt``) that is unreadable, holds anything but tensors
+    and plain values (a pickle that would run code is refused unread), or lacks what training stored."""
 class OptionalDependencyError(BrdfcodecError, ImportError):
     """An optional extra this operation needs is not installed; the message names the pip command."""
 class RateTargetError(BrdfcodecError, ValueError):

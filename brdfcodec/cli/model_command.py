@@ -28,7 +28,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     export.add_argument("-o", "--output", type=Path, required=True, help="model folder to write")
     export.add_argument("--name", required=True, help="model name, e.g. bvae-nbrdf-proxy-small-v1")
     export.add_argument("--dataset", type=Path, help="dataset to measure on (default: the run's)")
-    export.add_argument("--command", default="", help="the command that reproduces the run, for the card")
+    export.add_argument("--command", dest="reproduce", default="",  # not args.command: the error prefix's
+                        help="the command that reproduces the run, for the card")
     export.add_argument("--compare", action="append", default=[], metavar="LABEL=FOLDER",
                         help="an exported model to show beside this one in the card (repeatable)")
     export.add_argument("--basis-count", type=int, default=None, metavar="K",
@@ -155,7 +156,7 @@ def run_export(args: argparse.Namespace) -> int:
 
     if args.output.exists() and any(args.output.iterdir()):
         raise FileExistsError(f"{args.output}: folder is not empty")
-    command = args.command or " ".join(shlex.quote(a) for a in ["bvae", *sys.argv[1:]])
+    command = args.reproduce or " ".join(shlex.quote(a) for a in ["bvae", *sys.argv[1:]])
     comparisons = {}
     for item in args.compare:
         label, sep, folder = item.partition("=")

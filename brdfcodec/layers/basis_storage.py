@@ -43,6 +43,10 @@ def write_shared_basis(
         save_file(tensors, str(tmp))
     return sha256_of_file(path)
 
+#: Largest basis file read, bytes (the shipped one is 17 MB).
+MAX_BASIS_FILE_BYTES = 512 << 20
+
+
 def load_shared_basis(path: str | os.PathLike[str], expected_sha256: str) -> SharedBasis:
     """Read a basis file after checking its SHA-256.
 
@@ -54,9 +58,14 @@ def load_shared_basis(path: str | os.PathLike[str], expected_sha256: str) -> Sha
     from safetensors import SafetensorError
     from safetensors.numpy import load
 
-    from brdfcodec.io.hashing import read_with_sha256
+    import hashlib
 
-    data, actual = read_with_sha256(path)
+    from brdfcodec.io.folder_files import read_folder_file
+
+    file = Path(path)  # only a regular file inside its folder, of bounded size (spec/model.md §3)
+    data = read_folder_file(file.parent, file.name, limit=MAX_BASIS_FILE_BYTES,
+                            error=lambda where, problem: BasisError(f"{where}: {problem}"))
+    actual = hashlib.sha256(data).hexdigest()
     if actual != expected_sha256:
         raise BasisError(f"{path}: SHA-256 {actual} is not the {expected_sha256} its model.json names")
     try:

@@ -6,7 +6,7 @@ import json
 from dataclasses import asdict, dataclass, fields
 from typing import Any, Literal
 
-__all__ = ["PAPER_CONFIG", "SMALL_CONFIG", "TINY_CONFIG", "ModelConfig"]
+__all__ = ["CONFIG_BOUNDS", "PAPER_CONFIG", "SMALL_CONFIG", "TINY_CONFIG", "ModelConfig"]
 
 NormKind = Literal["batch", "group", "none"]
 
@@ -82,13 +82,81 @@ class ModelConfig:
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> ModelConfig:
-        """Inverse of :func:`dataclasses.asdict`; unknown keys are an error."""
+        """Inverse of :func:`dataclasses.asdict`, for a config read from a file: every field's type and bounds
+        are checked (:data:`CONFIG_BOUNDS`) before anything is built; unknown keys are an error.
+
+        Raises
+        ------
+        ValueError
+            Not a mapping, an unknown key, a value of the wrong type (a boolean is not an integer) or out of
+            its bounds.
+        """
+        if not isinstance(data, dict):
+            raise ValueError(f"a model config is a JSON object, got {type(data).__name__}")
         known = {f.name for f in fields(cls)}
-        unknown = sorted(set(data) - known)
+        unknown = sorted(str(key) for key in set(data) - known)
         if unknown:
             raise ValueError(f"unknown model config keys {unknown}")
-        values = {k: tuple(v) if isinstance(v, list) else v for k, v in data.items()}
+        values = {key: _checked_field(key, value) for key, value in data.items()}
         return cls(**values)
+
+
+#: What a config read from a file may hold (``spec/model.md`` §3): integer ranges of the sizes, how many
+#: fully connected layers, the leaky ReLU's slope. Far above any trained model's, they keep a crafted
+#: ``model.json`` from building a network of terabytes or thousands of layers.
+CONFIG_BOUNDS: dict[str, tuple[float, float]] = {
+    "latent_dim": (1, 1024),
+    "channels": (1, 1024),
+    "res_blocks": (0, 64),
+    "fc_width": (1, 16384),
+    "fc_layers": (0, 8),
+    "negative_slope": (0.0, 1.0),
+}
+
+
+def _bounded_int(key: str, value: object, bound: str) -> int:
+    low, high = CONFIG_BOUNDS[bound]
+    if isinstance(value, bool) or not isinstance(value, int):
+        raise ValueError(f"config {key} must be an integer, got {value!r}")
+    if not low <= value <= high:
+        raise ValueError(f"config {key} must be in [{low:g}, {high:g}], got {value}")
+    return value
+
+
+def _int_list(key: str, value: object, bound: str, count: tuple[int, int]) -> tuple[int, ...]:
+    if not isinstance(value, list | tuple):
+        raise ValueError(f"config {key} must be a list of integers, got {value!r}")
+    if not count[0] <= len(value) <= count[1]:
+        wanted = str(count[0]) if count[0] == count[1] else f"{count[0]} to {count[1]}"
+        raise ValueError(f"config {key} must hold {wanted} integers, got {len(value)}")
+    return tuple(_bounded_int(key, item, bound) for item in value)
+
+
+def _checked_field(key: str, value: object) -> object:
+    """One field of a config from a file, type- and bound-checked (tuples for lists)."""
+    fc_layers = (int(CONFIG_BOUNDS["fc_layers"][0]), int(CONFIG_BOUNDS["fc_layers"][1]))
+    if key == "latent_dim":
+        return _bounded_int(key, value, "latent_dim")
+    if key in ("encoder_channels", "decoder_channels"):
+        return _int_list(key, value, "channels", (3, 3))
+    if key in ("encoder_res_blocks", "decoder_res_blocks"):
+        return _bounded_int(key, value, "res_blocks")
+    if key in ("encoder_fc", "decoder_fc"):
+        return _int_list(key, value, "fc_width", fc_layers)
+    if key == "norm":
+        if value not in ("batch", "group", "none"):
+            raise ValueError(f"config norm must be 'batch', 'group' or 'none', got {value!r}")
+        return value
+    if key == "negative_slope":
+        low, high = CONFIG_BOUNDS["negative_slope"]
+        if isinstance(value, bool) or not isinstance(value, int | float) or not low <= value <= high:
+            raise ValueError(f"config negative_slope must be a number in [{low:g}, {high:g}], got {value!r}")
+        return float(value)
+    if key == "linear_basis":
+        if not isinstance(value, bool):
+            raise ValueError(f"config linear_basis must be true or false, got {value!r}")
+        return value
+    raise ValueError(f"unknown model config key {key!r}")
 
 
 #: The paper's sizes as far as its text gives them (78.9 MB in the paper).

@@ -14,11 +14,14 @@ or a folder of model folders), the folders saved by ``bvae model register``
 from __future__ import annotations
 
 import os
+import warnings
+from collections.abc import Iterator
 from importlib import resources
 from pathlib import Path
 
-from brdfcodec.errors import ModelNotFoundError
-from brdfcodec.models.manifest import MANIFEST, ModelManifest, load_manifest
+from brdfcodec.errors import BrdfcodecError, ModelNotFoundError
+from brdfcodec.io.folder_files import read_folder_file
+from brdfcodec.models.manifest import MANIFEST, MAX_MANIFEST_BYTES, ModelManifest, load_manifest
 
 __all__ = [
     "DEFAULT_MODEL_NAME",
@@ -158,37 +161,86 @@ def save_model_folder(folder: str | os.PathLike[str]) -> ModelManifest:
 
 
 def _candidate_folders() -> list[Path]:
+    """Every folder holding a ``model.json``, in search order (unreadable search folders are passed over)."""
     roots = list(_PROCESS_REGISTRY.folders)
     roots += [Path(p) for p in os.environ.get("BRDFCODEC_MODEL_PATH", "").split(os.pathsep) if p]
     roots += saved_model_folders()
     roots.append(_package_models())
     folders: list[Path] = []
     for root in roots:
-        if (root / MANIFEST).is_file():
-            folders.append(root)
-        elif root.is_dir():
-            folders += sorted(p for p in root.iterdir() if (p / MANIFEST).is_file())
+        try:
+            if (root / MANIFEST).is_file():
+                folders.append(root)
+            elif root.is_dir():
+                folders += sorted(p for p in root.iterdir() if (p / MANIFEST).is_file())
+        except OSError as error:  # a search folder that cannot be listed: like one that holds no model
+            warnings.warn(f"{root}: model folder search skips it ({error.strerror or error})", stacklevel=3)
     return folders
 
 
+def _usable_models() -> Iterator[ModelManifest | tuple[Path, BrdfcodecError]]:
+    """Each findable model's manifest in search order, or, for a folder whose ``model.json`` is invalid, the
+    folder and its error."""
+    for folder in _candidate_folders():
+        try:
+            yield load_manifest(folder)
+        except BrdfcodecError as error:
+            yield folder, error
+
+
+def _skip(folder: Path, error: BrdfcodecError) -> None:
+    warnings.warn(f"{folder}: skipped, not a usable model folder ({error})", stacklevel=3)
+
+
 def available_models() -> list[ModelManifest]:
-    """Every model that can be found, in search order."""
-    return [load_manifest(folder) for folder in _candidate_folders()]
+    """Every model that can be found, in search order; a folder whose ``model.json`` is invalid is skipped with
+    a warning (it breaks no other model)."""
+    models = []
+    for found in _usable_models():
+        if isinstance(found, ModelManifest):
+            models.append(found)
+        else:
+            _skip(*found)
+    return models
+
+
+def _names_hash(folder: Path, wanted: str) -> bool:
+    """Whether an invalid folder's ``model.json`` still names ``wanted`` as its decoder hash (a quick look at a
+    bounded regular file, so that the folder's own error is reported when it is the one a file needs)."""
+    try:
+        text = read_folder_file(folder, MANIFEST, limit=MAX_MANIFEST_BYTES)
+    except BrdfcodecError:
+        return False
+    return f'"{wanted}"'.encode() in text
 
 
 def find_model(decoder_sha256: str) -> ModelManifest:
     """The model whose decoder weights have this SHA-256.
 
+    Folders are searched in order and the first valid match wins; a folder whose ``model.json`` is invalid is
+    skipped with a warning, and its error is raised only when no valid folder has the hash and it names it.
+
     Raises
     ------
     ModelNotFoundError
         None has it; the message lists the hashes that are available.
+    ModelFolderError
+        No valid folder has the hash, and an invalid one names it.
     """
     wanted = decoder_sha256.lower()
-    models = available_models()
-    for manifest in models:
-        if manifest.decoder_sha256 == wanted:
-            return manifest
+    models: list[ModelManifest] = []
+    claimed: BrdfcodecError | None = None
+    for found in _usable_models():
+        if isinstance(found, ModelManifest):
+            if found.decoder_sha256 == wanted:
+                return found
+            models.append(found)
+            continue
+        _skip(*found)
+        if claimed is None and _names_hash(found[0], wanted):
+            claimed = found[1]
+    if claimed is not None:
+        raise claimed
     known = ", ".join(f"{m.decoder_sha256} ({m.name})" for m in models) or "none"
     raise ModelNotFoundError(
         f"no decoder with SHA-256 {wanted}; available: {known}. Register the model folder that made the file "

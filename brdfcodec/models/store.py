@@ -14,23 +14,30 @@ used.
 
 from __future__ import annotations
 
+import hashlib
 import json
 import os
+from dataclasses import fields
 from pathlib import Path
 from typing import Any
 
 import torch
+from safetensors import SafetensorError
 from safetensors.torch import load, save_file
 
-from brdfcodec.errors import ModelChecksumError
+from brdfcodec.errors import ModelChecksumError, ModelFolderError
 from brdfcodec.io.atomic import atomic_output
-from brdfcodec.io.hashing import read_with_sha256, sha256_of_file
+from brdfcodec.io.folder_files import read_folder_file
+from brdfcodec.io.hashing import sha256_of_file
+from brdfcodec.models.config import ModelConfig
 from brdfcodec.models.manifest import DECODER_FILE, ENCODER_FILE, MANIFEST, ModelManifest, load_manifest
 from brdfcodec.models.network import BetaVAE, Decoder, Encoder
 
 __all__ = [
     "MANIFEST",
+    "MAX_WEIGHT_BYTES",
     "ModelChecksumError",
+    "ModelFolderError",
     "ModelManifest",
     "compact_encoder",
     "compact_encoder_tensors",
@@ -130,15 +137,85 @@ def export_model(
     return write_manifest(folder, manifest)
 
 
+#: Largest weight file read, bytes (the shipped decoder is 9.7 MB; the paper's whole model 79 MB).
+MAX_WEIGHT_BYTES = 512 << 20
+
+
+def _safetensors_metadata(data: bytes, path: Path) -> dict[str, str]:
+    """The ``__metadata__`` map of a safetensors file's bytes (header bounds checked)."""
+    if len(data) < 8:
+        raise ModelFolderError(path, "too short for a safetensors file")
+    size = int.from_bytes(data[:8], "little")
+    if size > len(data) - 8:
+        raise ModelFolderError(path, f"safetensors header of {size:,} bytes runs past the file's end")
+    try:
+        header = json.loads(data[8 : 8 + size].decode("utf-8"))
+    except (RecursionError, ValueError) as error:
+        raise ModelFolderError(path, f"safetensors header is not JSON ({error})") from None
+    metadata = header.get("__metadata__", {}) if isinstance(header, dict) else None
+    if not isinstance(metadata, dict):
+        raise ModelFolderError(path, "safetensors header is not an object with a metadata map")
+    return metadata
+
+
+def _stored_config(metadata: dict[str, str], path: Path) -> ModelConfig:
+    """The config a weight file's metadata holds (``spec/model.md`` §3): it is covered by the file's hash."""
+    text = metadata.get("config")
+    if not isinstance(text, str):
+        raise ModelFolderError(path, "the weights' metadata holds no model config (spec/model.md §3)")
+    try:
+        return ModelConfig.from_dict(json.loads(text))
+    except (RecursionError, ValueError) as error:
+        raise ModelFolderError(path, f"the weights' metadata holds an invalid model config ({error})") from None
+
+
+def _config_difference(manifest: ModelConfig, stored: ModelConfig) -> str:
+    return ", ".join(f"{f.name} {getattr(manifest, f.name)!r} in model.json, {getattr(stored, f.name)!r} in the "
+                     "weights" for f in fields(ModelConfig) if getattr(manifest, f.name) != getattr(stored, f.name))
+
+
 def _verified_weights(manifest: ModelManifest, file: str, expected: str) -> dict[str, torch.Tensor]:
+    """A weight file's tensors, once its bytes match ``expected``, its stored config the manifest's, and every
+    floating value is finite; only a regular file inside the folder of at most :data:`MAX_WEIGHT_BYTES` is read."""
     path = manifest.folder / file
-    data, actual = read_with_sha256(path)
+    data = read_folder_file(manifest.folder, file, limit=MAX_WEIGHT_BYTES, error=ModelFolderError)
+    actual = hashlib.sha256(data).hexdigest()
     if actual != expected:
         raise ModelChecksumError(
             f"{path}: SHA-256 {actual} differs from the manifest's {expected}; the file is corrupt or belongs "
             "to another model (reinstall brdfcodec, or re-export the model)"
         )
-    return load(data)
+    stored = _stored_config(_safetensors_metadata(data, path), path)
+    if stored != manifest.config:
+        raise ModelFolderError(
+            path, f"model.json's config differs from the one stored in the weights ({_config_difference(manifest.config, stored)}); "
+            "the weights' own config, covered by their SHA-256, is the model's: re-export the model or restore its model.json"
+        )
+    try:
+        tensors = load(data)
+    except SafetensorError as error:
+        raise ModelFolderError(path, f"not a readable safetensors file ({error})") from None
+    for key, value in tensors.items():
+        if value.is_floating_point() and not bool(torch.isfinite(value).all()):
+            raise ModelFolderError(path, f"tensor {key!r} holds non-finite values")
+    return tensors
+
+
+def _matching_state(module: type[torch.nn.Module], config: ModelConfig, tensors: dict[str, torch.Tensor],
+                    path: Path) -> None:
+    """Refuse tensors whose names or shapes are not those of ``module(config)``: compared with the network
+    built on the meta device (no memory), so nothing is allocated for a network the weights do not fit."""
+    with torch.device("meta"):
+        expected = {key: tuple(value.shape) for key, value in module(config).state_dict().items()}
+    missing = sorted(set(expected) - set(tensors))
+    unexpected = sorted(set(tensors) - set(expected))
+    if missing or unexpected:
+        raise ModelFolderError(path, f"the tensors are not those of the config's network (missing {missing[:5]}, "
+                               f"unexpected {unexpected[:5]})")
+    for key, shape in expected.items():
+        if tuple(tensors[key].shape) != shape:
+            raise ModelFolderError(path, f"tensor {key!r} has shape {tuple(tensors[key].shape)}, the config's "
+                                   f"network needs {shape}")
 
 
 #: Floating tensors of at least this many elements are stored as float16 in a compact encoder file.
@@ -206,26 +283,49 @@ def compact_encoder(folder: str | os.PathLike[str]) -> ModelManifest:
 def load_model(
     folder: str | os.PathLike[str], *, parts: tuple[str, ...] = ("encoder", "decoder"), device: str = "cpu"
 ) -> tuple[Encoder | None, Decoder | None, ModelManifest]:
-    """Load a model's encoder and/or decoder after verifying their SHA-256.
+    """Load a model's encoder and/or decoder after verifying them (``spec/model.md`` §3).
+
+    In order, before any network is built: ``model.json`` is checked against its schema and bounds, each weight
+    file's SHA-256 against the manifest, the config stored in the weights (covered by that hash) against
+    ``model.json``'s, every floating value for finiteness, and the tensors' names and shapes against the
+    config's network. Only regular files inside the folder, of bounded size, are read.
 
     Returns
     -------
     encoder, decoder : Encoder or None, Decoder or None
         In evaluation mode; None for a part not asked for.
     manifest : ModelManifest
+
+    Raises
+    ------
+    ModelFolderError
+        The folder, a file in it, or the weights fail a check above; the message names the file.
+    ModelChecksumError
+        A weight file's SHA-256 differs from the manifest's.
     """
     manifest = load_manifest(folder)
+    decoder_path, encoder_path = manifest.folder / DECODER_FILE, manifest.folder / ENCODER_FILE
+    decoder_tensors = None
+    if "decoder" in parts or ("encoder" in parts and manifest.encoder_storage == "compact"):
+        decoder_tensors = _verified_weights(manifest, DECODER_FILE, manifest.decoder_sha256)
+        _matching_state(Decoder, manifest.config, decoder_tensors, decoder_path)
     encoder = decoder = None
     if "encoder" in parts:
-        encoder = Encoder(manifest.config)
         tensors = _verified_weights(manifest, ENCODER_FILE, manifest.encoder_sha256)
         if manifest.encoder_storage == "compact":
-            decoder_tensors = _verified_weights(manifest, DECODER_FILE, manifest.decoder_sha256)
-            tensors = expand_encoder_tensors(tensors, decoder_tensors)
+            assert decoder_tensors is not None
+            try:
+                tensors = expand_encoder_tensors(tensors, decoder_tensors)
+            except (RuntimeError, ValueError) as error:  # torch.linalg.LinAlgError: a singular basis
+                raise ModelFolderError(encoder_path, f"the compact encoder cannot be rebuilt from the decoder's "
+                                       f"basis ({str(error).splitlines()[0]})") from None
+        _matching_state(Encoder, manifest.config, tensors, encoder_path)
+        encoder = Encoder(manifest.config)
         encoder.load_state_dict(tensors)
         encoder = encoder.to(device).eval()
     if "decoder" in parts:
+        assert decoder_tensors is not None
         decoder = Decoder(manifest.config)
-        decoder.load_state_dict(_verified_weights(manifest, DECODER_FILE, manifest.decoder_sha256))
+        decoder.load_state_dict(decoder_tensors)
         decoder = decoder.to(device).eval()
     return encoder, decoder, manifest

@@ -14,6 +14,7 @@ import torch
 
 from brdfcodec.codec import BrdfDecoder
 from brdfcodec.datasets.hdf5 import BrdfDataset
+from brdfcodec.errors import CheckpointError
 from brdfcodec.io.atomic import atomic_output
 from brdfcodec.models.config import ModelConfig
 from brdfcodec.models.network import BetaVAE
@@ -21,6 +22,7 @@ from brdfcodec.models.parameters import describe_parameters
 from brdfcodec.models.store import DECODER_FILE, MANIFEST, ModelManifest, load_manifest, write_manifest, write_weights
 from brdfcodec.training.alignment import align_to_factors
 from brdfcodec.training.card import render_model_card
+from brdfcodec.training.checkpoint import load_checkpoint
 from brdfcodec.training.measurements import kl_per_dim, measure_model, summarise, traversal_changes
 from brdfcodec.version import __version__
 
@@ -91,10 +93,15 @@ def export_run(
     """
     run = Path(run_dir)
     run_info = json.loads((run / "run.json").read_text())
-    best = torch.load(run / "best.pt", map_location="cpu", weights_only=False)
-    config = ModelConfig.from_dict(json.loads(best["model_config"]))
-    model = BetaVAE(config)
-    model.load_state_dict(best["model"])
+    best_file = run / "best.pt"
+    best = load_checkpoint(best_file, required={"model": dict, "epoch": int, "model_config": str})
+    try:
+        config = ModelConfig.from_dict(json.loads(best["model_config"]))
+        model = BetaVAE(config)
+        model.load_state_dict(best["model"])
+    except (RecursionError, RuntimeError, ValueError) as error:
+        raise CheckpointError(best_file, f"its weights do not fit its model config "
+                              f"({str(error).strip().splitlines()[0][:200]})") from None
     model.eval()
     alignment = (align_to_factors(model, materials=align_materials, rotate=turn_axes) if align_materials
                  else None)

@@ -40,6 +40,7 @@ from brdfcodec.models.loss import beta_vae_loss, kl_per_dimension
 from brdfcodec.models.network import BetaVAE, initialise_linear_basis, linear_path_trainable
 from brdfcodec.models.store import load_model
 from brdfcodec.training.augment import COLOUR_PERMUTATIONS, mix_physical, permute_colours
+from brdfcodec.training.checkpoint import load_checkpoint
 from brdfcodec.training.config import TrainConfig
 from brdfcodec.training.dropout import DecoderHiddenDropout
 from brdfcodec.training.evaluation import MappedReference, reconstruct_mapped
@@ -305,7 +306,8 @@ def _build_model(model_config: ModelConfig, train_config: TrainConfig, data: _Tr
     average = AveragedModel(model, use_buffers=False) if train_config.average_from_epoch else None
     progress = _Progress()
     if resume:
-        state = torch.load(out / CHECKPOINT, map_location=world.device, weights_only=False)
+        state = load_checkpoint(out / CHECKPOINT, map_location=world.device, required={
+            "model": dict, "optimizer": dict, "epoch": int, "best": (int, float), "best_epoch": int, "step": int})
         model.load_state_dict(state["model"])
         optimizer.load_state_dict(state["optimizer"])
         if average is not None:
