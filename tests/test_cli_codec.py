@@ -109,7 +109,7 @@ def test_refusals_leave_nothing_behind(capsys, merl_folder: Path, tmp_path: Path
     assert not (tmp_path / "out.binary").exists()
 
     code, _, err = run(capsys, "decompress", str(lib), "-o", str(tmp_path / "out.txt"))
-    assert code == 1 and "unknown output type" in err
+    assert code == 2 and "must end in one of .binary, .npy, .exr, .bsdf" in err  # a usage error, as every command
 
     bad = tmp_path / "bad.binary"
     bad.write_bytes(b"\x01\x00\x00\x00" * 5)

@@ -84,4 +84,4 @@ def test_render_outputs(capsys, library: Path, tmp_path: Path) -> None:
     assert code == 0, err
     assert "ΔE ITP mean" in out and "PSNR" in out
     code, _, err = run(capsys, "render", str(library), "--material", "gold", "-o", str(tmp_path / "s.jpg"))
-    assert code == 1 and "png" in err
+    assert code == 2 and "png" in err  # a usage error, as every command's output type

@@ -9,6 +9,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 import pytest
+from nbrdf_files import keras_description
 
 from brdfcodec.conventions import MERL_COLOR_SCALE, UNMEASURED_VALUE
 from brdfcodec.datasets.analytic import ANALYTIC_PRESETS, AnalyticBRDF, random_analytic_materials
@@ -94,7 +95,7 @@ def make_archive(tmp_path: Path, fits: dict[str, list[tuple[np.ndarray, np.ndarr
             buffer = io.BytesIO()
             write_fit(buffer, layers)
             handle.writestr(f"merl-nbrdf/{name}.h5", buffer.getvalue())
-            handle.writestr(f"merl-nbrdf/{name}.json", "{}")
+            handle.writestr(f"merl-nbrdf/{name}.json", keras_description())
         handle.writestr("merl-nbrdf/LICENSE", "MIT")
     return archive
 

@@ -5,6 +5,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from brdfcodec.cli.outputs import require_output_type
+from brdfcodec.cli.usage import UsageError
 from brdfcodec.datasets.analytic import ANALYTIC_PRESETS, AnalyticBRDF
 from brdfcodec.io.merl import write_merl
 
@@ -32,7 +34,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
         "preset", nargs="?", choices=sorted(ANALYTIC_PRESETS), metavar="PRESET",
         help=f"one of: {', '.join(sorted(ANALYTIC_PRESETS))}",
     )
-    parser.add_argument("-o", "--output", type=Path, help="output .binary file")
+    parser.add_argument("-o", "--output", type=Path, help="output MERL .binary file (the only type it writes)")
     parser.add_argument("--diffuse", type=_rgb, help="Lambert albedo, R,G,B in [0, 1] (custom material)")
     parser.add_argument("--specular", type=_rgb, help="Fresnel F0, R,G,B in [0, 1] (custom material)")
     parser.add_argument("--roughness", type=float, help="GGX alpha in [1e-4, 1] (custom material)")
@@ -48,10 +50,11 @@ def run(args: argparse.Namespace) -> int:
             print(f"{name:<16} diffuse={preset.diffuse} specular={preset.specular} roughness={preset.roughness}")
         return 0
     if args.output is None:
-        raise ValueError("an output file is required: -o OUT.binary")
+        raise UsageError("an output file is required: -o OUT.binary")
+    require_output_type(args.output, "analytic", "a MERL table", (".binary",))
     custom = {k: v for k in ("diffuse", "specular", "roughness") if (v := getattr(args, k)) is not None}
     if args.preset is None and not custom:
-        raise ValueError("give a PRESET or custom --diffuse/--specular/--roughness (see --list)")
+        raise UsageError("give a PRESET or custom --diffuse/--specular/--roughness (see --list)")
     if args.preset is not None:
         base = ANALYTIC_PRESETS[args.preset]
         material = AnalyticBRDF(

@@ -14,11 +14,13 @@ import numpy as np
 from tqdm import tqdm
 
 from brdfcodec.cli.legend import RELAE_LEGEND
+from brdfcodec.cli.outputs import require_output_type
 from brdfcodec.cli.usage import UsageError
 from brdfcodec.datasets.hdf5 import HDF5_SIGNATURE
+from brdfcodec.datasets.nbrdf import is_nbrdf_weight_file
+from brdfcodec.datasets.sources import MaterialSource, input_sources
 from brdfcodec.format.bvae import Record, without_provenance, write_bvae
 from brdfcodec.io.atomic import check_output_path
-from brdfcodec.io.inputs import default_material_name, is_measured_file, read_measured
 from brdfcodec.representation import network_input_from_table
 
 if TYPE_CHECKING:
@@ -96,17 +98,17 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     parser.set_defaults(handler=run)
 
 
-def _measured_item(path: Path) -> _Item:
-    name = default_material_name(path)
+def _source_item(source: MaterialSource) -> _Item:
+    """A material file, or one of an NBRDF archive or folder, tabulated on the MERL grid when loaded."""
 
     def load() -> MaterialInput:
         from brdfcodec.codec import MaterialInput, prepare_source
 
-        brdf = prepare_source(read_measured(path, name=name))  # nothing measured: an error; beyond range: clamped
+        brdf = prepare_source(source.load().brdf)  # nothing measured: an error; beyond range: clamped
         inputs, mask = network_input_from_table(brdf.values, brdf.mask)
-        return MaterialInput(name, inputs, brdf, mask)
+        return MaterialInput(source.name, inputs, brdf, mask)
 
-    return _Item(name, str(path), load)
+    return _Item(source.name, source.origin, load)
 
 
 def _dataset_items(path: Path, split: str | None) -> Iterator[_Item]:
@@ -133,18 +135,14 @@ def collect_items(inputs: list[Path], split: str | None) -> list[_Item]:
     """Every material named by the inputs, in order; names must be unique."""
     items: list[_Item] = []
     for path in inputs:
-        if path.is_dir():
-            files = sorted(p for p in path.iterdir() if is_measured_file(p))
-            if not files:
-                raise FileNotFoundError(f"{path}: folder holds no MERL .binary or RGL .bsdf file")
-            items += [_measured_item(p) for p in files]
-            continue
-        with open(path, "rb") as stream:  # FileNotFoundError names the file
-            head = stream.read(8)
-        if head == HDF5_SIGNATURE:
-            items += list(_dataset_items(path, split))
-        else:
-            items.append(_measured_item(path))
+        if not path.is_dir():
+            with open(path, "rb") as stream:  # FileNotFoundError names the file
+                head = stream.read(8)
+            if head == HDF5_SIGNATURE and not is_nbrdf_weight_file(path):
+                items += list(_dataset_items(path, split))
+                continue
+        # MERL and RGL files, NBRDF fits (NAME.h5, their zip, their folder), folders of them: told by content
+        items += [_source_item(source) for source in input_sources(path)]
     seen: dict[str, str] = {}
     for item in items:
         if item.name in seen:
@@ -182,10 +180,22 @@ def _check_bytes_floor(budget: int, model: str | None, latent_itemsize: int, bas
                          f"({floor} bytes per material)")
 
 
+def _latent_summary(records: list[Record], dtype: str) -> str:
+    """What the records store of a latent code: ``latents float32``, ``latents float16 in 3 of 5 records``, or
+    ``no latent (basis-only records, not editable)`` when none has one (format 2.1)."""
+    with_latent = sum(1 for record in records if getattr(record, "has_latent", True))
+    if with_latent == len(records):
+        return f"latents {dtype}"
+    if with_latent == 0:
+        return "no latent (basis-only records, not editable)"
+    return f"latents {dtype} in {with_latent} of {len(records)} records"
+
+
 def run(args: argparse.Namespace) -> int:
     """Encode every input (:func:`brdfcodec.codec.encode_records`), write the file, print RelAE and sizes."""
     from brdfcodec.codec import BrdfEncoder, encode_records
 
+    require_output_type(args.output, "compress", "compressed materials", (".bvae",))
     if args.batch_size < 1:
         raise UsageError("--batch-size must be at least 1")
     if args.bytes is not None and not 1 <= args.bytes <= MAX_BYTES_BUDGET:
@@ -206,8 +216,6 @@ def run(args: argparse.Namespace) -> int:
         _check_bytes_floor(args.bytes, args.model, 2 if args.float16 else 4, not args.no_basis, latent == "auto",
                            args.sigma)
     check_output_path(args.output, overwrite=args.force)
-    if args.output.suffix != ".bvae":
-        raise ValueError(f"{args.output}: the output must end in .bvae")
     items = collect_items(args.inputs, args.split)
     encoder = BrdfEncoder(
         args.model, effort=args.effort, bytes=args.bytes, max_relae=args.max_relae, metric=args.metric or "mapped",
@@ -253,7 +261,7 @@ def run(args: argparse.Namespace) -> int:
     model_name = encoder.manifest.name if encoder.manifest is not None else "?"
     print(
         f"wrote {args.output}: {len(records)} material{'s' if len(records) != 1 else ''}, {size:,} bytes "
-        f"({size / len(records):.1f} bytes per material; latents {dtype}; decoder {model_name} "
+        f"({size / len(records):.1f} bytes per material; {_latent_summary(records, dtype)}; decoder {model_name} "
         f"{encoder.reference.sha256[:12]}…)"
     )
     return 0

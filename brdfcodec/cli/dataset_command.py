@@ -7,14 +7,15 @@ import sys
 import time
 from pathlib import Path
 
+from brdfcodec.cli.outputs import require_output_type
 from brdfcodec.datasets.analytic import ANALYTIC_PRESETS
-from brdfcodec.datasets.nbrdf import NBRDF_SOURCE_KIND, list_nbrdf_zip
+from brdfcodec.datasets.nbrdf import NBRDF_SOURCE_KIND
 from brdfcodec.datasets.sources import (
     ANALYTIC_SOURCE_KIND,
     MaterialSource,
     analytic_sources,
     merl_folder_sources,
-    nbrdf_zip_sources,
+    nbrdf_sources,
     rgl_folder_sources,
 )
 from brdfcodec.io.rgl import RGL_SOURCE_KIND
@@ -38,8 +39,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
                        help="folder of MERL .binary files (family merl)")
     build.add_argument("--rgl", type=Path, action="append", default=[], metavar="DIR",
                        help="folder of RGL .bsdf files, tabulated with Mitsuba 3 (family rgl; extra brdfcodec[rgl])")
-    build.add_argument("--nbrdf-zip", type=Path, action="append", default=[], metavar="ZIP",
-                       help="NBRDF proxy archive (merl-nbrdf-90.zip, rgl-nbrdf-30.zip; family from the archive)")
+    build.add_argument("--nbrdf-zip", type=Path, action="append", default=[], metavar="ZIP|DIR|H5",
+                       help="NBRDF fits: their archive (merl-nbrdf-90.zip, rgl-nbrdf-30.zip), the folder it unpacks "
+                       "to (merl-nbrdf/: NAME.h5 weights with NAME.json), or one fit's NAME.h5; family from the "
+                       "archive's or folder's name (merl-nbrdf → merl)")
     build.add_argument("--analytic", action="store_true",
                        help="the analytic Lambert + GGX presets (family analytic)")
     build.add_argument("-o", "--output", type=Path, required=True, help="output .h5 file")
@@ -89,12 +92,14 @@ def collect_sources(args: argparse.Namespace) -> list[MaterialSource]:
     for folder in args.rgl:
         sources += rgl_folder_sources(folder)
     unmatched = set(subset or ())
-    for archive in args.nbrdf_zip:
-        available = list_nbrdf_zip(archive)
-        wanted = None if subset is None else [n for n in subset if n in available]
+    for archive in args.nbrdf_zip:  # the zip, the folder it unpacks to, or one fit's .h5
+        every = nbrdf_sources(archive)
+        wanted = None if subset is None else [n for n in subset if n in {m.name for m in every}]
         unmatched -= set(wanted or ())
-        if wanted != []:
-            sources += nbrdf_zip_sources(archive, wanted)
+        if wanted is None:
+            sources += every
+        elif wanted:
+            sources += [m for n in wanted for m in every if m.name == n]
     if args.analytic:
         only_analytic = not args.nbrdf_zip  # then an unknown name is reported as an unknown preset
         presets = subset if subset is None or only_analytic else [n for n in subset if n in ANALYTIC_PRESETS]
@@ -114,9 +119,10 @@ def run_build(args: argparse.Namespace) -> int:
     from brdfcodec.datasets.hdf5 import MIXED_SOURCE_KIND, build_dataset
 
     if not (args.merl or args.rgl or args.nbrdf_zip or args.analytic or args.random):  # a usage error: exit 2
-        print("bvae dataset build: error: give at least one source: --merl DIR, --rgl DIR, --nbrdf-zip ZIP, "
+        print("bvae dataset build: error: give at least one source: --merl DIR, --rgl DIR, --nbrdf-zip ZIP|DIR, "
               "--analytic or --random N", file=sys.stderr)
         return 2
+    require_output_type(args.output, "dataset build", "an HDF5 dataset", (".h5",))
     sources = collect_sources(args)
     start = time.perf_counter()
     build_dataset(

@@ -9,6 +9,7 @@ from typing import TYPE_CHECKING
 from tqdm import tqdm
 
 from brdfcodec.cli.legend import RELAE_LEGEND
+from brdfcodec.cli.outputs import is_folder_request, require_output_type
 from brdfcodec.cli.usage import UsageError
 from brdfcodec.conventions import N_PHI_D
 from brdfcodec.format.material_names import material_file_path, shown_name
@@ -17,6 +18,7 @@ from brdfcodec.io.table_output import TABLE_FORMATS, table_format_of, write_tabl
 
 if TYPE_CHECKING:
     from brdfcodec.codec import DecodedMaterial
+    from brdfcodec.io.merl import MerlBRDF
     from brdfcodec.io.rgl_writer import RglResolution
 
 __all__ = ["parse_bins", "register"]
@@ -46,21 +48,30 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
         "stored units, -1 below the horizon; .exr (one 90x90 RGB part per phi_d bin, for viewers) holds "
         "reflectance in 1/sr, 0 below the horizon, and says so in each part's header; .bsdf (RGL tensor file "
         "for Mitsuba's built-in measured BSDF). "
-        "With several materials and no --material, OUT is a folder that "
-        "receives NAME.binary for each (or the suffix of --format).",
+        "OUT is one file, for one material, unless a folder is asked for: --output-dir DIR, or -o ending in a "
+        "slash (out/), naming an existing folder, or without an extension (out); the folder receives NAME.binary "
+        "for each material (or the type of --format). Several materials and a file name (-o x.binary) are "
+        "refused: choose one with --material, or give a folder.",
     )
     parser.add_argument("input", type=Path, metavar="IN.bvae")
-    parser.add_argument("-o", "--output", type=Path, required=True, help="output file, or folder for a library")
+    where = parser.add_mutually_exclusive_group(required=True)
+    where.add_argument("-o", "--output", metavar="OUT",
+                       help="output file (.binary, .npy, .exr or .bsdf) for one material, or folder (out/) for any "
+                       "number")
+    where.add_argument("--output-dir", type=Path, metavar="DIR",
+                       help="output folder, created if needed: NAME.binary (or --format's type) for each material")
     parser.add_argument("--material", action="append", help="material to decode (repeatable; default: all)")
-    parser.add_argument("--format", choices=[s.lstrip(".") for s in TABLE_FORMATS], default="binary",
+    parser.add_argument("--format", choices=[s.lstrip(".") for s in TABLE_FORMATS], default=None,
                         help="file type written into an output folder (default binary)")
     parser.add_argument("--phi-d", type=parse_bins, metavar="BINS",
                         help="only these phi_d bins, e.g. 0,90,170-179 (.npy and .exr only)")
     parser.add_argument("--masked", choices=("unmeasured", "zero"), default=None,
                         help="below-horizon entries of .binary and .npy outputs: -1 as MERL's unmeasured marker "
                         "(default), or 0 (.exr always holds 0 there)")
-    parser.add_argument("--reference", type=Path, metavar="SOURCE.binary",
-                        help="the original MERL file: print the RelAE of the decoded table against it")
+    parser.add_argument("--reference", type=Path, metavar="SOURCE",
+                        help="the original material: a MERL .binary or RGL .bsdf file, or an NBRDF fit (NAME.h5, or "
+                        "the zip or folder holding the material of that name); print the RelAE of the decoded table "
+                        "against it")
     parser.add_argument("--force", action="store_true", help="replace existing output files")
     parser.add_argument("--bsdf-theta-i", type=int, default=32, metavar="N",
                         help=".bsdf: incident elevations, uniform over [0, 90] degrees (default 32)")
@@ -79,21 +90,20 @@ def run(args: argparse.Namespace) -> int:
         names = args.material or library.names
         for name in names:
             library.record(name)  # unknown names and corrupt records fail before anything is written
-        single = len(names) == 1 and (args.material is not None or len(library) == 1)
-        if single:
-            table_format_of(args.output)
+        folder = _output_folder(args, len(names))
+        single = len(names) == 1
+        if folder is None:
             targets = {names[0]: check_output_path(args.output, overwrite=args.force)}
         else:
-            if args.output.exists() and not args.output.is_dir():
-                raise UsageError(f"{args.output}: several materials need an output folder, not a file")
-            for name in names:
-                material_file_path(args.output, name, args.format)  # refuse bad names before creating anything
-            args.output.mkdir(parents=True, exist_ok=True)
-            # A material name never chooses a folder: material_file_path keeps every file inside args.output.
-            targets = {
-                n: check_output_path(material_file_path(args.output, n, args.format), overwrite=args.force)
-                for n in names
-            }
+            if folder.exists() and not folder.is_dir():
+                raise UsageError(f"{folder}: is a file; the output folder must be a folder")
+            file_format = args.format or "binary"
+            # A material name never chooses a folder: material_file_path keeps every file inside the folder
+            # (and refuses bad names before anything is created).
+            targets = {n: material_file_path(folder, n, file_format) for n in names}
+            if folder.is_dir():  # a new folder holds no file to replace
+                for target in targets.values():
+                    check_output_path(target, overwrite=args.force)
         kinds = {table_format_of(target) for target in targets.values()}
         rgl_resolution = _rgl_resolution(args) if "bsdf" in kinds else None
         if "bsdf" in kinds and args.phi_d is not None:
@@ -105,6 +115,8 @@ def run(args: argparse.Namespace) -> int:
             raise UsageError("--reference needs a single material (use --material)")
         # Measured before writing: a bad reference must not fail the command after its output exists.
         reference_line = None if args.reference is None else _reference_error(args.reference, library[names[0]])
+        if folder is not None:  # created once every check has passed
+            folder.mkdir(parents=True, exist_ok=True)
         legend = False
         for name, target in tqdm(targets.items(), desc="decompress", unit="material", disable=len(targets) < 2 or None):
             material = library[name]
@@ -119,6 +131,29 @@ def run(args: argparse.Namespace) -> int:
         if legend or reference_line is not None:
             print(RELAE_LEGEND)
     return 0
+
+
+def _output_folder(args: argparse.Namespace, count: int) -> Path | None:
+    """The output folder, or None for one output file; usage errors for a file name that cannot be.
+
+    A folder only when asked (:func:`~brdfcodec.cli.outputs.is_folder_request`): ``--output-dir``, or ``-o``
+    ending in a slash, naming an existing folder, or without an extension. Otherwise ``-o`` names one file of a
+    type :func:`write_table` writes, for one material.
+    """
+    if args.output_dir is not None:
+        return Path(args.output_dir)
+    if is_folder_request(args.output):
+        return Path(args.output)
+    suffix = require_output_type(args.output, "decompress", "decoded tables", tuple(TABLE_FORMATS))
+    if count > 1:
+        stem = Path(args.output).with_suffix("")
+        raise UsageError(f"{args.output}: {count} materials to decode, and a {suffix} file holds one: choose one "
+                         f"with --material NAME, or write them all into a folder (-o {stem}/ or --output-dir "
+                         f"{stem})")
+    if args.format is not None and f".{args.format}" != suffix:
+        raise UsageError(f"--format {args.format} names the type of files in an output folder, and {args.output} "
+                         f"is a {suffix} file: leave --format out, or give a folder")
+    return None
 
 
 def _check_masked(masked: str | None, kinds: set[str]) -> None:
@@ -149,11 +184,25 @@ def _stored_error_note(meta: dict) -> str:
     return ""
 
 
+def _reference_source(path: Path, name: str) -> MerlBRDF:
+    """The ``--reference`` table: a MERL or RGL file or an NBRDF fit, or the material ``name`` of an NBRDF
+    archive or folder (:func:`~brdfcodec.datasets.sources.input_sources`)."""
+    from brdfcodec.datasets.sources import input_sources
+
+    sources = input_sources(path)
+    if len(sources) > 1:
+        matching = [source for source in sources if source.name == name]
+        if not matching:
+            raise UsageError(f"--reference {path}: holds {len(sources)} materials and none named {name!r}; give the "
+                             "original material's own file")
+        sources = matching
+    return sources[0].load().brdf
+
+
 def _reference_error(path: Path, material: DecodedMaterial) -> str:
     from brdfcodec.codec import measure
-    from brdfcodec.io.inputs import read_measured
 
-    relae = measure(material.record, material.decoder, read_measured(path)).meta.get("relae")
+    relae = measure(material.record, material.decoder, _reference_source(path, material.name)).meta.get("relae")
     if relae is None:
         raise ValueError(f"{path}: the reference reflects nothing (black): its RelAE is undefined (0/0)")
     return f"RelAE against {path}: mapped {relae['mapped']:.4f}, linear {relae['linear']:.4f}"

@@ -6,6 +6,7 @@ import argparse
 import warnings
 from pathlib import Path
 
+from brdfcodec.cli.outputs import require_output_type
 from brdfcodec.cli.usage import UsageError
 from brdfcodec.errors import NoLatentError
 from brdfcodec.format.bvae import LatentRecord, ParsedBvae, Record, read_bvae, write_bvae
@@ -116,6 +117,7 @@ def _check_parameters(numbers_from_zero: list[int], record: Record, option: str)
 def run(args: argparse.Namespace) -> int:
     """Apply the edit and write the new records."""
     from brdfcodec.edit import latent_edits as edit
+    require_output_type(args.output, f"edit {args.operation}", "edited materials", (".bvae",))
     library = read_bvae(args.input)
     records: list[Record]
     if args.operation == "traverse":

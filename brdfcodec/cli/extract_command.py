@@ -6,6 +6,7 @@ import argparse
 import sys
 from pathlib import Path
 
+from brdfcodec.cli.outputs import require_output_type
 from brdfcodec.cli.usage import UsageError
 from brdfcodec.format.bvae import read_bvae, write_bvae
 
@@ -39,6 +40,7 @@ def run(args: argparse.Namespace) -> int:
     if args.input is None or not args.material:
         print("bvae extract: error: name the library and at least one --material, or a --scene", file=sys.stderr)
         return 2  # a usage error, as argparse's own
+    require_output_type(args.output, "extract", "compressed materials", (".bvae",))
     if args.output.resolve() == args.input.resolve():
         raise UsageError(f"{args.output}: the output must not be the input")
     library = read_bvae(args.input)

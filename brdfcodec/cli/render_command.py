@@ -11,6 +11,7 @@ from typing import Any
 import numpy as np
 
 from brdfcodec.cli.edit_command import parse_floats
+from brdfcodec.cli.outputs import require_output_type
 from brdfcodec.io.atomic import check_output_path
 
 __all__ = ["register"]
@@ -108,9 +109,8 @@ def run(args: argparse.Namespace) -> int:
         return 2  # a usage error, as argparse's own
     if args.size < 8 or args.size > 4096:
         raise ValueError("--size must be between 8 and 4096 pixels")
+    require_output_type(args.output, "render", "an image", (".png", ".exr"))
     check_output_path(args.output, overwrite=args.force)
-    if args.output.suffix.lower() not in (".png", ".exr"):
-        raise ValueError(f"{args.output}: the output must be .png or .exr")
     if args.umap_grid is not None:
         from brdfcodec.studio.cli_support import run_umap_grid
 

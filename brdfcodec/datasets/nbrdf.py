@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import hashlib
 import io
+import json
 import os
 import zipfile
 from collections.abc import Iterator
@@ -35,13 +36,26 @@ from brdfcodec.representation import stored_from_reflectance
 from brdfcodec.representation.coords import grid_angles
 from brdfcodec.representation.mask import horizon_mask
 
-__all__ = ["NBRDF_SOURCE_KIND", "NbrdfFit", "iter_nbrdf_zip", "list_nbrdf_zip", "nbrdf_zip_family", "read_nbrdf_fit"]
+__all__ = [
+    "NBRDF_SOURCE_KIND",
+    "NbrdfFit",
+    "check_nbrdf_description",
+    "is_nbrdf_weight_file",
+    "iter_nbrdf_zip",
+    "list_nbrdf_folder",
+    "list_nbrdf_zip",
+    "nbrdf_folder_family",
+    "nbrdf_zip_family",
+    "read_nbrdf_fit",
+]
 
 #: ``source_kind`` of datasets built from these fits.
 NBRDF_SOURCE_KIND = "nbrdf-proxy"
 
 _LAYERS = ("dense_1", "dense_2", "dense_3")
 _LAYER_SHAPES = ((6, 21), (21, 21), (21, 3))
+_ACTIVATIONS = ("relu", "relu", "linear")
+_HDF5_SIGNATURE = b"\x89HDF\r\n\x1a\n"
 
 
 @dataclass(frozen=True)
@@ -82,7 +96,9 @@ class NbrdfFit:
         MerlBRDF
             Below-horizon entries hold
             :data:`~brdfcodec.conventions.UNMEASURED_VALUE`; negative fit
-            outputs above the horizon are clamped to 0.
+            outputs above the horizon are clamped to 0. ``source_kind`` is
+            ``"nbrdf-proxy"`` and ``source_sha256`` the weight file's, so that
+            a record encoded from it names the fit it came from.
         """
         theta_h, theta_d, phi_d = grid_angles()
         zeros = np.zeros_like(theta_h)
@@ -95,7 +111,10 @@ class NbrdfFit:
         stored = np.where(horizon_mask()[None], stored, UNMEASURED_VALUE)
         if not np.isfinite(stored).all():
             raise SourceFormatError(self.name, "the fit produces non-finite values on the MERL grid")
-        return MerlBRDF(np.ascontiguousarray(stored), name=self.name)
+        return MerlBRDF(
+            np.ascontiguousarray(stored), name=self.name, source_kind=NBRDF_SOURCE_KIND,
+            source_sha256=self.source_sha256 or None,
+        )
 
 
 def _read_weights(content: bytes, name: str, source: str) -> NbrdfFit:
@@ -126,16 +145,111 @@ def _weights_from_handle(handle: h5py.File, name: str, source: str, digest: str)
     return NbrdfFit(name, tuple(kernels), tuple(biases), digest)  # type: ignore[arg-type]
 
 
+def check_nbrdf_description(content: bytes, source: str | os.PathLike[str]) -> None:
+    """Check a fit's Keras model description (``NAME.json``) against the network brdfcodec evaluates.
+
+    The description must list, in order, Dense layers ``dense_1`` (21 units,
+    ReLU), ``dense_2`` (21, ReLU) and ``dense_3`` (3, linear), then at most
+    one Lambda layer (the published fits' ``exp(x) − 1``; its serialised code
+    is never run, brdfcodec applies ``expm1`` itself).
+
+    Parameters
+    ----------
+    content : bytes
+        The ``.json`` file's bytes.
+    source : str or os.PathLike
+        The file, for messages.
+
+    Raises
+    ------
+    SourceFormatError
+        Not JSON, or another architecture.
+    """
+    try:
+        description = json.loads(content)
+        config = description["config"]
+        layers = config["layers"] if isinstance(config, dict) else config
+        found = [(layer["class_name"], layer["config"].get("name"), layer["config"].get("units"),
+                  layer["config"].get("activation")) for layer in layers]
+    except (ValueError, KeyError, TypeError, AttributeError) as error:
+        raise SourceFormatError(source, f"not a Keras model description of an NBRDF fit ({error!r})") from None
+    expected = [("Dense", name, shape[1], activation)
+                for name, shape, activation in zip(_LAYERS, _LAYER_SHAPES, _ACTIVATIONS, strict=True)]
+    tail = found[len(expected):]
+    if found[: len(expected)] != expected or len(tail) > 1 or any(layer[0] != "Lambda" for layer in tail):
+        raise SourceFormatError(
+            source, f"describes layers {found}, not the NBRDF network {expected} followed by exp(x) - 1"
+        )
+
+
 def read_nbrdf_fit(path: str | os.PathLike[str], *, name: str | None = None) -> NbrdfFit:
-    """Read one fit from its Keras ``NAME.h5`` weight file.
+    """Read one fit from its Keras ``NAME.h5`` weight file (and check its ``NAME.json`` when it lies beside it).
+
+    The weights alone define the fit (the architecture is fixed, and their
+    shapes are checked); the description, when present, must describe that
+    architecture (:func:`check_nbrdf_description`).
 
     Raises
     ------
     SourceFormatError
         Not an HDF5 file, or not the NBRDF architecture.
+    FileNotFoundError, IsADirectoryError
+        ``path`` is not a file.
     """
     source = Path(path)
-    return _read_weights(source.read_bytes(), name or source.stem, str(source))
+    content = source.read_bytes()  # OSError names the file
+    description = source.with_suffix(".json")
+    if description.is_file():
+        check_nbrdf_description(description.read_bytes(), description)
+    return _read_weights(content, name or source.stem, str(source))
+
+
+def is_nbrdf_weight_file(path: str | os.PathLike[str]) -> bool:
+    """Whether a file is an HDF5 file holding NBRDF weights (``dense_1/dense_1/kernel:0``); False for other files.
+
+    Cheap: reads the signature, then opens HDF5 files to look for the first layer.
+    """
+    try:
+        with open(path, "rb") as stream:
+            if stream.read(len(_HDF5_SIGNATURE)) != _HDF5_SIGNATURE:
+                return False
+        with h5py.File(path, "r") as handle:
+            return f"{_LAYERS[0]}/{_LAYERS[0]}/kernel:0" in handle
+    except OSError:
+        return False
+
+
+def list_nbrdf_folder(folder: str | os.PathLike[str]) -> list[Path]:
+    """The weight files (``*.h5``) of an unpacked NBRDF archive's folder, sorted by name (not recursive).
+
+    Raises
+    ------
+    FileNotFoundError, NotADirectoryError
+        ``folder`` is not an existing folder.
+    SourceFormatError
+        The folder holds no ``.h5`` file.
+    """
+    root = Path(folder)
+    if not root.exists():
+        raise FileNotFoundError(f"{root}: no such folder")
+    if not root.is_dir():
+        raise NotADirectoryError(f"{root}: is not a folder of NBRDF fits (NAME.h5 with NAME.json)")
+    files = sorted(p for p in root.glob("*.h5") if p.is_file() and not p.name.startswith("."))
+    if not files:
+        below = sorted(p.name for p in root.iterdir() if p.is_dir() and any(p.glob("*.h5")))
+        hint = f"; look in its subfolder {' or '.join(below)}" if below else ""
+        raise SourceFormatError(root, f"folder holds no NBRDF weight files (*.h5){hint}")
+    return files
+
+
+def nbrdf_folder_family(folder: str | os.PathLike[str]) -> str:
+    """Measurement family of a folder of NBRDF fits: its name without ``-nbrdf`` (``merl-nbrdf/`` → ``"merl"``).
+
+    The unpacked published archives keep their fits in ``merl-nbrdf/`` and
+    ``rgl-nbrdf/``, so a folder gives the family its archive gives
+    (:func:`nbrdf_zip_family`).
+    """
+    return Path(os.path.abspath(folder)).name.split("-nbrdf")[0]
 
 
 def list_nbrdf_zip(path: str | os.PathLike[str]) -> list[str]:
@@ -211,4 +325,7 @@ def iter_nbrdf_zip(path: str | os.PathLike[str], names: list[str] | None = None)
             if name not in members:
                 raise SourceFormatError(path, f"archive has no material {name!r}")
             source = f"{os.fspath(path)}:{members[name]}"
+            description = str(PurePosixPath(members[name]).with_suffix(".json"))
+            if description in archive.namelist():
+                check_nbrdf_description(archive.read(description), f"{os.fspath(path)}:{description}")
             yield _read_weights(archive.read(members[name]), name, source)

@@ -20,11 +20,22 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 
 from brdfcodec.datasets.analytic import ANALYTIC_PRESETS, AnalyticBRDF, random_analytic_materials
-from brdfcodec.datasets.nbrdf import NBRDF_SOURCE_KIND, iter_nbrdf_zip, list_nbrdf_zip, nbrdf_zip_family
+from brdfcodec.datasets.nbrdf import (
+    NBRDF_SOURCE_KIND,
+    is_nbrdf_weight_file,
+    iter_nbrdf_zip,
+    list_nbrdf_folder,
+    list_nbrdf_zip,
+    nbrdf_folder_family,
+    nbrdf_zip_family,
+    read_nbrdf_fit,
+)
 from brdfcodec.errors import SourceFormatError
+from brdfcodec.io.file_kinds import describe_file_kind
 from brdfcodec.io.genuine import genuine_merl_name
+from brdfcodec.io.inputs import default_material_name, is_measured_file, read_measured
 from brdfcodec.io.merl import MerlBRDF, read_merl, source_digest
-from brdfcodec.io.rgl import RGL_SOURCE_KIND, read_rgl_bsdf
+from brdfcodec.io.rgl import RGL_SOURCE_KIND, is_rgl_file, read_rgl_bsdf
 
 __all__ = [
     "ANALYTIC_SOURCE_KIND",
@@ -32,10 +43,15 @@ __all__ = [
     "LoadedMaterial",
     "MaterialSource",
     "analytic_sources",
+    "input_sources",
+    "measured_file_source",
     "merl_folder_sources",
+    "nbrdf_sources",
     "nbrdf_zip_sources",
     "rgl_folder_sources",
 ]
+
+_ZIP_SIGNATURES = (b"PK\x03\x04", b"PK\x05\x06")
 
 MERL_SOURCE_KIND = "merl"
 ANALYTIC_SOURCE_KIND = "analytic"
@@ -176,6 +192,149 @@ def nbrdf_zip_sources(
         MaterialSource(n, f"{os.fspath(archive)}:{n}.h5 ({NBRDF_SOURCE_KIND})", loader(n), family, NBRDF_SOURCE_KIND)
         for n in chosen
     ]
+
+
+def _is_zip(path: Path) -> bool:
+    try:
+        with open(path, "rb") as stream:
+            return stream.read(4) in _ZIP_SIGNATURES
+    except OSError:
+        return False
+
+
+def _fit_source(path: Path, family: str) -> MaterialSource:
+    """One NBRDF weight file as a source (its ``.json`` beside it is checked when loaded)."""
+
+    def load() -> LoadedMaterial:
+        fit = read_nbrdf_fit(path)
+        return LoadedMaterial(fit.to_merl(), fit.source_sha256)
+
+    return MaterialSource(path.stem, f"{path} ({NBRDF_SOURCE_KIND})", load, family, NBRDF_SOURCE_KIND)
+
+
+def nbrdf_sources(path: str | os.PathLike[str], names: Iterable[str] | None = None) -> list[MaterialSource]:
+    """NBRDF fits in any of the forms they come in, tabulated on the MERL grid when loaded.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The published archive (``merl-nbrdf-90.zip``), the folder it unpacks
+        to (``merl-nbrdf/``: ``NAME.h5`` weights with ``NAME.json``
+        descriptions), or one fit's ``NAME.h5`` (or its ``NAME.json``, with
+        the weights beside it). The family is the archive's or the folder's
+        (:func:`~brdfcodec.datasets.nbrdf.nbrdf_zip_family`,
+        :func:`~brdfcodec.datasets.nbrdf.nbrdf_folder_family`).
+    names : iterable of str, optional
+        A subset of materials; all by default.
+
+    Raises
+    ------
+    FileNotFoundError
+        ``path`` does not exist.
+    SourceFormatError
+        Neither a zip archive, a folder nor an HDF5 file of NBRDF weights; a
+        folder or archive without fits; a name it does not hold.
+    """
+    root = Path(path)
+    if root.is_dir():
+        files = list_nbrdf_folder(root)
+        family = nbrdf_folder_family(root)
+        available = {p.stem: p for p in files}
+        chosen = list(available) if names is None else list(names)
+        unknown = sorted(set(chosen) - set(available))
+        if unknown:
+            raise SourceFormatError(root, f"folder has no material named {', '.join(unknown)}")
+        return [_fit_source(available[n], family) for n in chosen]
+    if not root.exists():
+        raise FileNotFoundError(f"{root}: no such file or folder")
+    if _is_zip(root):
+        return nbrdf_zip_sources(root, names)
+    weights = _weights_beside(root) if root.suffix.lower() == ".json" else root
+    if not is_nbrdf_weight_file(weights):
+        kind = describe_file_kind(weights) or "a file of unknown kind"
+        raise SourceFormatError(
+            root, f"this is {kind}, not NBRDF fits: expected their zip archive (merl-nbrdf-90.zip), the folder it "
+            "unpacks to, or one fit's NAME.h5 weights (with NAME.json beside it)"
+        )
+    source = _fit_source(weights, nbrdf_folder_family(weights.parent))
+    if names is not None and list(names) != [source.name]:
+        raise SourceFormatError(root, f"holds the one material {source.name!r}")
+    return [source]
+
+
+def _weights_beside(description: Path) -> Path:
+    """The ``NAME.h5`` weights of an NBRDF fit's ``NAME.json`` description (a SourceFormatError when absent)."""
+    weights = description.with_suffix(".h5")
+    if not weights.is_file():
+        raise SourceFormatError(
+            description, f"an NBRDF fit's description needs its weights beside it, and {weights.name} is missing "
+            "(the fit is the NAME.h5 file; the NAME.json only describes its network)"
+        )
+    return weights
+
+
+def measured_file_source(path: str | os.PathLike[str]) -> MaterialSource:
+    """One measured file — a MERL ``.binary`` or an RGL ``.bsdf``, told by content — as a source."""
+    file_path = Path(path)
+    name = default_material_name(file_path)
+    rgl = is_rgl_file(file_path)
+
+    def load() -> LoadedMaterial:
+        brdf = read_measured(file_path, name=name)
+        genuine = "" if rgl else genuine_merl_name(brdf.sha256) or ""
+        return LoadedMaterial(brdf, source_digest(brdf), genuine)
+
+    family, kind = ("rgl", RGL_SOURCE_KIND) if rgl else ("merl", MERL_SOURCE_KIND)
+    return MaterialSource(name, str(file_path), load, family, kind)
+
+
+def input_sources(path: str | os.PathLike[str]) -> list[MaterialSource]:
+    """The materials one input path names, told by content: what ``bvae compress`` reads besides datasets.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        A MERL ``.binary`` or RGL ``.bsdf`` file; an NBRDF fit (``NAME.h5``,
+        or its ``NAME.json`` with the weights beside it); an NBRDF archive
+        (``merl-nbrdf-90.zip``); or a folder of any of these files (not
+        recursive: its ``.binary`` and ``.bsdf`` files and the ``.h5`` files
+        that hold NBRDF weights, sorted by name). A brdfcodec dataset (an
+        HDF5 file without NBRDF weights) is not a source of this kind.
+
+    Returns
+    -------
+    list of MaterialSource
+        In order: the files, or the folder's or archive's materials by name.
+
+    Raises
+    ------
+    FileNotFoundError
+        The path does not exist, or a folder holds none of these files.
+    SourceFormatError
+        A malformed archive or fit description.
+    """
+    root = Path(path)
+    if root.is_dir():
+        found = sorted(p for p in root.iterdir() if is_measured_file(p) or (p.suffix.lower() == ".h5"
+                                                                           and is_nbrdf_weight_file(p)))
+        if not found:
+            below = sorted(p.name for p in root.iterdir() if p.is_dir() and not p.name.startswith(".")
+                           and any(is_measured_file(f) or f.suffix.lower() == ".h5" for f in p.iterdir()))
+            hint = f"; look in its subfolder {' or '.join(below)}" if below else ""
+            raise FileNotFoundError(
+                f"{root}: folder holds no MERL .binary, RGL .bsdf or NBRDF fit (NAME.h5 with NAME.json) file{hint}"
+            )
+        family = nbrdf_folder_family(root)
+        return [_fit_source(p, family) if p.suffix.lower() == ".h5" else measured_file_source(p) for p in found]
+    if not root.exists():
+        raise FileNotFoundError(f"{root}: no such file or folder")
+    if _is_zip(root):
+        return nbrdf_zip_sources(root)
+    if is_nbrdf_weight_file(root):
+        return nbrdf_sources(root)
+    if root.suffix.lower() == ".json" and (describe_file_kind(root) or "").startswith("a text file"):
+        return nbrdf_sources(root)  # an NBRDF fit's description: its weights beside it, or an error naming them
+    return [measured_file_source(root)]
 
 
 def analytic_sources(

@@ -10,6 +10,10 @@ compress``, ``bvae info``, ``bvae dataset build``, :func:`brdfcodec.compress`):
 
 The format is told by the file's first bytes, not its name, so a renamed file
 is still read correctly.
+
+NBRDF fits (``NAME.h5`` weights, their zip or folder), which ``bvae compress``
+also reads, are networks rather than tables: they are evaluated on the MERL
+grid one layer up, by :func:`brdfcodec.datasets.sources.input_sources`.
 """
 
 from __future__ import annotations

@@ -22,6 +22,7 @@ import numpy.typing as npt
 from brdfcodec.conventions import MERL_SHAPE, TABLE_SHAPE, UNMEASURED_VALUE
 from brdfcodec.errors import MerlFormatError, NonFiniteValueError
 from brdfcodec.io.atomic import atomic_output
+from brdfcodec.io.file_kinds import sniff_file_kind
 from brdfcodec.io.hashing import sha256_of_file
 from brdfcodec.representation.mask import validity_mask
 from brdfcodec.representation.units import reflectance_from_stored
@@ -130,9 +131,18 @@ class MerlBRDF:
 
 def _check_header(path: Path, header: bytes, size: int) -> None:
     if size < MERL_HEADER.size:
-        raise MerlFormatError(path, f"file is {size} bytes, too short for the 12-byte MERL header")
+        kind = sniff_file_kind(header)
+        what = f" ({kind})" if kind is not None else ""
+        raise MerlFormatError(path, f"file is {size} bytes{what}, too short for the 12-byte MERL header")
     dims = MERL_HEADER.unpack(header)
     if dims != MERL_SHAPE:
+        kind = sniff_file_kind(header)
+        if kind is not None:  # a known other format: say what it is, not its first bytes read as int32
+            raise MerlFormatError(
+                path,
+                f"this is {kind}, not a MERL BRDF .binary file (a 12-byte header of three int32 {MERL_SHAPE}, "
+                f"then {MERL_FILE_SIZE - MERL_HEADER.size:,} bytes of float64: {MERL_FILE_SIZE:,} bytes in all)",
+            )
         raise MerlFormatError(
             path,
             f"header gives dimensions {dims}, expected {MERL_SHAPE}: not a MERL BRDF .binary file "
