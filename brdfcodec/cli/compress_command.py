@@ -24,7 +24,7 @@ from brdfcodec.io.atomic import check_output_path
 from brdfcodec.representation import network_input_from_table
 
 if TYPE_CHECKING:
-    from brdfcodec.codec import MaterialInput
+    from brdfcodec.codec import BrdfEncoder, MaterialInput
 
 __all__ = ["register"]
 
@@ -180,6 +180,18 @@ def _check_bytes_floor(budget: int, model: str | None, latent_itemsize: int, bas
                          f"({floor} bytes per material)")
 
 
+def _absolute_error(record: Record, items: list[_Item], encoder: BrdfEncoder) -> float:
+    """Mean absolute reflectance error (1/sr) of a near-black material's decode against its source (reloaded)."""
+    from brdfcodec.representation.metrics import mean_absolute_error
+
+    item = next(item for item in items if item.name == record.name)
+    source = item.load().source
+    if source is None:  # measured against a source, so it has one
+        return float("nan")
+    decoded = encoder.decoder.decode(record, masked="keep").astype(np.float64)
+    return mean_absolute_error(source.values, decoded, source.mask).overall
+
+
 def _latent_summary(records: list[Record], dtype: str) -> str:
     """What the records store of a latent code: ``latents float32``, ``latents float16 in 3 of 5 records``, or
     ``no latent (basis-only records, not editable)`` when none has one (format 2.1)."""
@@ -240,8 +252,10 @@ def run(args: argparse.Namespace) -> int:
         elif args.no_measure or "source_sha256" not in record.meta:
             why = "--no-measure" if args.no_measure else "no source table"
             lines.append(f"  {record.name:<32} (RelAE not measured: {why}){tag}")
-        else:
-            lines.append(f"  {record.name:<32} (RelAE undefined: the material reflects nothing){tag}")
+        else:  # near black: a ratio to nothing means nothing; the absolute error does (issue 49)
+            error = _absolute_error(record, items, encoder)
+            lines.append(f"  {record.name:<32} near black (RelAE undefined): mean absolute error {error:.3g} /sr"
+                         f"{tag}")
     if encoder.reference is None:  # loaded from a model folder, so it has one
         raise RuntimeError("the encoder has no decoder reference")
     stored = records if args.provenance else without_provenance(records)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import math
 import warnings
 from pathlib import Path
 
@@ -15,11 +16,14 @@ __all__ = ["parse_floats", "register"]
 
 
 def parse_floats(text: str) -> list[float]:
-    """``"-3,-1.5,0,1.5,3"`` to floats."""
+    """``"-3,-1.5,0,1.5,3"`` to floats; NaN and infinities are refused (argparse names the option)."""
     try:
-        return [float(v) for v in text.split(",") if v.strip()]
+        values = [float(v) for v in text.split(",") if v.strip()]
     except ValueError:
         raise argparse.ArgumentTypeError(f"expected comma-separated numbers, got {text!r}") from None
+    if not all(math.isfinite(v) for v in values):
+        raise argparse.ArgumentTypeError(f"expected finite numbers, got {text!r}")
+    return values
 
 
 def _dims(text: str) -> list[int]:

@@ -33,12 +33,13 @@ from brdfcodec.representation import (
     to_network_layout,
 )
 from brdfcodec.representation.mask import kept_slice_horizon_mask
-from brdfcodec.representation.metrics import relae_both
+from brdfcodec.representation.metrics import NEAR_BLACK_REFLECTANCE, relae_both
 from brdfcodec.runtime.threads import codec_threads
 
 if TYPE_CHECKING:
     from brdfcodec.codec.encoding import BasisCoding, LatentChoice, ProjectBase
 
+from brdfcodec.codec.black import black_record, is_near_black_source
 from brdfcodec.codec.decoder import BrdfDecoder, _EvalMode
 from brdfcodec.codec.prepare import ModelSpec, prepare_source, resolve_model
 
@@ -197,11 +198,25 @@ class BrdfEncoder:
         """
         mu, sigma = self.posterior_from_inputs(inputs, batch_size=max(len(inputs), 1))
         records = self.make_records(names, mu, sigma, sources, source_digests)
-        if self.options.effort != 0 or self.options.layered:
+        black = {}  # near-black sources decode black (issue 49), where such a record fits the budget
+        for i, source in enumerate(sources):
+            made = black_record(records[i], store_sigma=self.options.store_sigma,
+                                bytes_budget=self.options.bytes_budget,
+                                latent_dtype="float16" if self.options.latent_itemsize == 2 else "float32",
+                                ) if is_near_black_source(source) else None
+            if made is not None:
+                black[i] = made
+        lit = [i for i in range(len(records)) if i not in black]
+        if lit and (self.options.effort != 0 or self.options.layered):
             from brdfcodec.codec.encoding import layer_records
 
             with codec_threads():  # refinement and rate control: thousands of small torch operations
-                records = layer_records(records, self.decoder, inputs, masks, sources, self.options)
+                layered = layer_records([records[i] for i in lit], self.decoder, inputs[lit], masks[lit],
+                                        [sources[i] for i in lit], self.options)
+            for i, record in zip(lit, layered, strict=True):
+                records[i] = record
+        for i, made in black.items():
+            records[i] = made
         if self.options.store_sigma:
             return records
         # σ left out (format 2.2): a plain record becomes μ alone (rate control already left σ out of its own).
@@ -311,8 +326,10 @@ def measure(record: Record, decoder: BrdfDecoder, source: MerlBRDF) -> LatentRec
     the record's (``source_kind`` is left out for a MERL file).
 
     The RelAE (mapped and linear) is measured against the source as
-    :func:`prepare_source` gives it. A material that reflects nothing (all
-    0) has no RelAE (0/0): ``relae`` is then left out, with a warning.
+    :func:`prepare_source` gives it. A near-black material (every valid
+    entry below ``NEAR_BLACK_REFLECTANCE``, 1e-6 /sr) has no meaningful RelAE:
+    ``relae`` is then left out, with a warning (its absolute error:
+    :func:`~brdfcodec.representation.metrics.mean_absolute_error`).
     """
     source = prepare_source(source, warn=False)
     estimate = decoder.decode(record, masked="keep").astype(np.float64)
@@ -326,8 +343,8 @@ def measure(record: Record, decoder: BrdfDecoder, source: MerlBRDF) -> LatentRec
         meta["relae"] = relae
     else:
         where = os.fspath(source.path) if source.path is not None else (source.name or record.name)
-        warnings.warn(f"{where}: RelAE is undefined for a material that reflects nothing (black); not stored",
-                      stacklevel=2)
+        warnings.warn(f"{where}: RelAE is undefined for a near-black material (every reflectance below "
+                      f"{NEAR_BLACK_REFLECTANCE:g} /sr); not stored", stacklevel=2)
     if isinstance(record, GraftRecord):
         return GraftRecord(record.name, record.mu, record.sigma, record.graft_dims, record.graft_values, meta)
     return replace(record, meta=meta)  # the same kind: a layered record keeps its layers

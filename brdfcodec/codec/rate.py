@@ -361,10 +361,10 @@ def encode_layers(
         only = None if without is None else without.meeting(relae, max_relae, None, tried)
         if only is not None and without is not None:
             return RateResult(without.record(only), without.size(only), tried)
-        best = min(errors.values())
-        raise RateTargetError(
-            f"{base.name}: RelAE ({metric}) {max_relae} is not reachable; the finest step reaches {best:.4g}"
-        )
+        finite = [e for e in errors.values() if np.isfinite(e)]
+        reached = (f"the best RelAE reached is {min(finite):.4g}" if finite else
+                   "its RelAE is undefined (a near-black source: every reflectance below 1e-06 /sr)")
+        raise RateTargetError(f"{base.name}: RelAE ({metric}) {max_relae} is not reachable; {reached}")
     failing, meeting = bracket
     if failing is not None and failing[2] is not None and meeting[2] is not None:
         # between two rungs: look for a coarser step that still meets X

@@ -183,6 +183,8 @@ def interpolate(a: Record, b: Record, t: float, *, name: str | None = None) -> R
     ``a`` is the material edited: a layered ``a`` keeps its layers, so its code moves towards b's while its
     residual stays (at t = 1 the result is b's code with a's layers); b's layers are not used.
     """
+    if not np.isfinite(t):
+        raise ValueError(f"interpolation weight t must be finite, got {t}")
     _check_compatible(a, b)
     pa, pb = parameter_vector(a), parameter_vector(b)
     values = pa if t == 0 else pb if t == 1 else (1 - t) * pa + t * pb

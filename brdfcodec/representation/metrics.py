@@ -22,6 +22,12 @@ Cosine-weighted RMSE::
 
 with ρ physical and θi the incoming direction's elevation at the entry's
 representative angles.
+
+A RelAE is a ratio to the reference's magnitude, so it means nothing for a
+near-black reference: where every compared entry's physical reflectance is
+below :data:`NEAR_BLACK_REFLECTANCE` (1e-6 /sr; all zeros, denormals,
+1e-30 …), the RelAE (overall, or of that channel) is NaN, undefined, and
+:func:`mean_absolute_error` is the error to report instead.
 """
 
 from __future__ import annotations
@@ -40,6 +46,7 @@ from brdfcodec.representation.coords import grid_direction_cosines
 from brdfcodec.representation.mask import validity_mask
 
 __all__ = [
+    "NEAR_BLACK_REFLECTANCE",
     "ChannelErrors",
     "ErrorReport",
     "RelaeAgainst",
@@ -47,9 +54,16 @@ __all__ = [
     "relae_both",
     "cosine_weighted_rmse",
     "error_report",
+    "mean_absolute_error",
+    "near_black",
     "relae_linear",
     "relae_mapped",
 ]
+
+#: Largest physical reflectance (1/sr) of a near-black reference: below it on every compared entry, RelAE is
+#: undefined (NaN) and an absolute error is reported instead (``spec/conventions.md`` §8).
+NEAR_BLACK_REFLECTANCE: Final = 1e-6
+
 
 @dataclass(frozen=True)
 class ChannelErrors:
@@ -142,18 +156,72 @@ def _magnitude_sums(transform: Transform, reference: np.ndarray, invalid: np.nda
     return sums
 
 
-def _channel_errors(error_sums: np.ndarray, magnitude_sums: np.ndarray) -> ChannelErrors:
-    per_channel = np.divide(error_sums, magnitude_sums, out=np.full(3, np.nan), where=magnitude_sums > 0)
-    total = magnitude_sums.sum()
-    overall = float(error_sums.sum() / total) if total > 0 else float("nan")
+def _channel_errors(error_sums: np.ndarray, magnitude_sums: np.ndarray,
+                    defined: np.ndarray | None = None) -> ChannelErrors:
+    """Ratios per channel and overall; NaN where the magnitude is 0 or (``defined``, per channel) near black."""
+    usable = magnitude_sums > 0 if defined is None else (magnitude_sums > 0) & defined
+    with np.errstate(all="ignore"):  # a denormal magnitude would overflow the ratio: such channels are near black
+        per_channel = np.divide(error_sums, magnitude_sums, out=np.full(3, np.nan), where=usable)
+        total = magnitude_sums.sum()  # every channel's error counts once one channel makes the ratio meaningful
+        overall = float(error_sums.sum() / total) if usable.any() and total > 0 else float("nan")
+    if not np.isfinite(overall):
+        overall = float("nan")
+    per_channel[~np.isfinite(per_channel)] = np.nan
+    return ChannelErrors(overall, *(float(v) for v in per_channel))
+
+
+def _defined_channels(ref: np.ndarray, valid: np.ndarray) -> np.ndarray:
+    """Per channel: is the reference's largest compared physical reflectance at least NEAR_BLACK_REFLECTANCE?"""
+    peak = np.where(valid, np.abs(ref), 0.0).reshape(3, -1).max(axis=1)
+    return np.asarray(reflectance_from_stored(peak[:, None, None, None])).reshape(3) >= NEAR_BLACK_REFLECTANCE
+
+
+def near_black(reference: npt.ArrayLike, mask: npt.ArrayLike | None = None) -> bool:
+    """Whether a table is near black: every valid entry's physical reflectance below :data:`NEAR_BLACK_REFLECTANCE`.
+
+    Parameters
+    ----------
+    reference : array_like, shape (3, 90, 90, 180)
+        Stored MERL values.
+    mask : array_like of bool, shape (3, 90, 90, 180), optional
+        Entries to look at; the reference's validity mask by default.
+
+    Returns
+    -------
+    bool
+        True for all zeros, denormals or 1e-30; its RelAE is then undefined (NaN).
+    """
+    ref, _, valid = _prepare(reference, reference, mask)
+    return not _defined_channels(ref, valid).any()
+
+
+def mean_absolute_error(
+    reference: npt.ArrayLike, estimate: npt.ArrayLike, mask: npt.ArrayLike | None = None
+) -> ChannelErrors:
+    """Mean absolute difference of physical reflectance over the valid entries (the error of a near-black source).
+
+    Parameters and arrays as :func:`relae_linear`.
+
+    Returns
+    -------
+    ChannelErrors
+        In 1/sr, ≥ 0 and finite; NaN only for a channel without a valid entry.
+    """
+    ref, est, valid = _prepare(reference, estimate, mask)
+    sums = _error_sums(reflectance_from_stored, ref, est, ~valid)
+    counts = valid.reshape(3, -1).sum(axis=1)
+    per_channel = np.divide(sums, counts, out=np.full(3, np.nan), where=counts > 0)
+    overall = float(sums.sum() / counts.sum()) if counts.sum() else float("nan")
     return ChannelErrors(overall, *(float(v) for v in per_channel))
 
 
 def _relative_absolute(ref: np.ndarray, est: np.ndarray, valid: np.ndarray,
                        transform: Transform = _identity) -> ChannelErrors:
-    """RelAE of ``transform``-ed values (the identity for tables already mapped)."""
+    """RelAE of ``transform``-ed values (the identity for tables already mapped: no near-black rule there)."""
     invalid = ~valid
-    return _channel_errors(_error_sums(transform, ref, est, invalid), _magnitude_sums(transform, ref, invalid))
+    defined = None if transform is _identity else _defined_channels(ref, valid)
+    return _channel_errors(_error_sums(transform, ref, est, invalid), _magnitude_sums(transform, ref, invalid),
+                           defined)
 
 
 class RelaeAgainst:
@@ -186,6 +254,7 @@ class RelaeAgainst:
         ref, _, valid = _prepare(reference, reference, mask)
         self._transform = map_values if metric == "mapped" else reflectance_from_stored
         self._valid, self._invalid = valid, ~valid
+        self._defined = _defined_channels(ref, valid)
         self._reference = self._transform(ref)
         self._magnitude_sums = _magnitude_sums(_identity, self._reference, self._invalid)
 
@@ -197,7 +266,12 @@ class RelaeAgainst:
         if (self._valid & ~np.isfinite(est)).any():
             raise ValueError("estimate holds NaN or infinite values at valid entries")
         error_sums = _error_sums(self._transform, self._reference, est, self._invalid, reference_done=True)
-        return _channel_errors(error_sums, self._magnitude_sums)
+        return _channel_errors(error_sums, self._magnitude_sums, self._defined)
+
+    @property
+    def defined(self) -> bool:
+        """False for a near-black reference (:func:`near_black`): every RelAE against it is NaN."""
+        return bool(self._defined.any())
 
 
 def relae_linear(
@@ -216,7 +290,8 @@ def relae_linear(
     -------
     ChannelErrors
         Dimensionless, ≥ 0 (0 for a perfect reconstruction); NaN where the
-        reference is zero on every compared entry.
+        reference is near black (every compared entry below
+        :data:`NEAR_BLACK_REFLECTANCE` /sr: zero, denormal, 1e-30 …).
     """
     return _relae_linear(*_prepare(reference, estimate, mask))
 
