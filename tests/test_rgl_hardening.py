@@ -247,3 +247,87 @@ def test_red_team_construction_on_the_real_file(shared_dir: Path, tmp_path: Path
         assert "brdfcodec reads no" in capsys.readouterr().out, label
         assert main(["compress", str(path), "-o", str(tmp_path / "x.bvae")]) == 1, label
         assert str(path) in capsys.readouterr().err
+
+
+# --------------------------------------------------------------------------- the writer (R3-09)
+
+
+def test_writer_resolution_is_bounded_by_the_file_size() -> None:
+    """Each size within its range, together beyond the largest file: a ValueError naming the size, before any
+    work (the red-team's 512/512/2048 asked for a 16 GiB float64 array)."""
+    from brdfcodec.io.rgl_writer import MAX_FILE_BYTES, RglResolution
+
+    largest = RglResolution(theta_i=32, ndf=2048, vndf=2048, luminance=32)  # the red-team's --bsdf-vndf 2048
+    assert largest.nbytes <= MAX_FILE_BYTES
+    for sizes in ({"theta_i": 512, "ndf": 2048, "vndf": 2048, "luminance": 512},
+                  {"theta_i": 65, "ndf": 2048, "vndf": 2048}, {"theta_i": 512, "luminance": 512}):
+        with pytest.raises(ValueError, match="GiB"):
+            RglResolution(**sizes)  # type: ignore[arg-type]
+
+
+def test_written_file_size_is_what_the_resolution_says(tmp_path: Path, analytic_tables: dict) -> None:
+    from brdfcodec.io.rgl_writer import RglResolution, write_rgl_bsdf
+
+    resolution = RglResolution(theta_i=5, ndf=33, vndf=37, luminance=7)
+    path = write_rgl_bsdf(tmp_path / "r.bsdf", analytic_tables["red-plastic"].values, name="r",
+                          resolution=resolution, description="")  # empty: the default one
+    header = read_rgl_header(path)
+    tables = sum(field.nbytes for name, field in header.fields.items() if name not in ("version", "description"))
+    assert tables == resolution.nbytes
+    check_supported(header)  # the writer's files pass the reader's checks
+
+
+def test_writer_output_does_not_depend_on_the_chunk_size(tmp_path: Path, analytic_tables: dict,
+                                                         monkeypatch: pytest.MonkeyPatch) -> None:
+    """The writer works a θi slice at a time and its lookups and warps in chunks: the bytes are those of one
+    pass over everything (chunks of 97 points against the default)."""
+    from brdfcodec.io import rgl_writer
+
+    resolution = rgl_writer.RglResolution(theta_i=4, ndf=40, vndf=48, luminance=12)
+    table = analytic_tables["gold"].values
+    whole = rgl_writer.write_rgl_bsdf(tmp_path / "whole.bsdf", table, name="g", resolution=resolution)
+    monkeypatch.setattr(rgl_writer, "_CHUNK", 97)
+    chunked = rgl_writer.write_rgl_bsdf(tmp_path / "chunked.bsdf", table, name="g", resolution=resolution)
+    assert whole.read_bytes() == chunked.read_bytes()
+    reflectance, valid = rgl_writer._checked_reflectance(whole, table, "g")
+    fields = rgl_writer.rgl_fields(reflectance, valid, resolution=resolution, description="g (brdfcodec export)")
+    assert rgl_writer.tensor_file_bytes(fields) == whole.read_bytes()  # the in-memory API writes the same file
+
+
+@pytest.mark.slow
+def test_writer_memory_does_not_grow_with_the_elevations(tmp_path: Path, analytic_tables: dict) -> None:
+    """Memory is a θi slice's worth, not the file's: peak traced memory for 24 elevations stays within a few MB
+    of that for 3 (before: two float64 V × V tables per elevation and two copies of the file's bytes)."""
+    import tracemalloc
+
+    from brdfcodec.io.rgl_writer import RglResolution, write_rgl_bsdf
+
+    table = analytic_tables["white-matte"].values
+    peaks = []
+    for theta_i in (3, 24):
+        resolution = RglResolution(theta_i=theta_i, ndf=64, vndf=384, luminance=8)
+        tracemalloc.start()
+        write_rgl_bsdf(tmp_path / f"t{theta_i}.bsdf", table, name="w", resolution=resolution)
+        peaks.append(tracemalloc.get_traced_memory()[1])
+        tracemalloc.stop()
+    growth = peaks[1] - peaks[0]
+    per_elevation = 384 * 384 * 8  # one float64 VNDF table (before: 21 more elevations grew the peak by 20 MB)
+    assert growth < 4 * per_elevation, (peaks, growth)
+
+
+@pytest.mark.slow
+def test_decompress_refuses_a_resolution_beyond_the_largest_file(tmp_path: Path,
+                                                                 capsys: pytest.CaptureFixture[str]) -> None:
+    """R3-09: the red-team's settings end in a usage error (exit 2), not MemoryError (exit 3); nothing written."""
+    from brdfcodec.codec import MaterialLibrary
+    from brdfcodec.examples import example_library
+
+    with MaterialLibrary(example_library()) as library:
+        name = library.names[0]
+    target = tmp_path / "x.bsdf"
+    code = main(["decompress", str(example_library()), "--material", name, "-o", str(target), "--bsdf-theta-i",
+                 "512", "--bsdf-grid", "512", "--bsdf-vndf", "2048"])
+    assert code == 2
+    err = capsys.readouterr().err
+    assert "GiB" in err and "--bsdf-vndf" in err and "internal error" not in err
+    assert not target.exists() and list(tmp_path.iterdir()) == []

@@ -173,7 +173,11 @@ def _rgl_resolution(args: argparse.Namespace) -> RglResolution:
                                ("--bsdf-vndf", args.bsdf_vndf, 2048)):
         if not 2 <= value <= upper:
             raise UsageError(f"{flag} must lie in [2, {upper}], got {value}")
-    return RglResolution(theta_i=args.bsdf_theta_i, ndf=args.bsdf_vndf, vndf=args.bsdf_vndf, luminance=args.bsdf_grid)
+    try:  # each size in range, but together more than the writer's largest file (issue 49, R3-09)
+        return RglResolution(theta_i=args.bsdf_theta_i, ndf=args.bsdf_vndf, vndf=args.bsdf_vndf,
+                             luminance=args.bsdf_grid)
+    except ValueError as error:
+        raise UsageError(f"--bsdf-theta-i, --bsdf-vndf, --bsdf-grid: {error}") from None
 
 
 def _stored_error_note(meta: dict) -> str:

@@ -47,6 +47,7 @@ Only isotropic RGB materials are written (the MERL grid is isotropic):
 
 from __future__ import annotations
 
+import math
 import os
 import struct
 from collections.abc import Mapping
@@ -66,6 +67,7 @@ from brdfcodec.representation.mask import horizon_mask
 
 __all__ = [
     "LUMINANCE_WEIGHTS",
+    "MAX_FILE_BYTES",
     "RglResolution",
     "RglWriteError",
     "power_iteration_ndf",
@@ -87,6 +89,11 @@ _OUTLIER_FACTOR = 4.0
 # Share of each VNDF table given to the data's own reflected lobe (the rest: the NDF's visible normals).
 _DATA_WARP_SHARE = 0.5
 _EPSILON32 = float(np.finfo(np.float32).eps)
+#: Largest file the writer makes, bytes (1 GiB: the RGL database's files are below 2 MB; a VNDF of 2048² at the
+#: default 32 elevations is 0.5 GiB). Memory while writing is a few θi slices' worth, whatever the file's size.
+MAX_FILE_BYTES = 1 << 30
+# Values per chunk of the vectorised steps (sample warps, lookups): bounds their temporaries to tens of MB.
+_CHUNK = 1 << 18
 
 
 class RglWriteError(FileFormatError):
@@ -128,6 +135,19 @@ class RglResolution:
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int | np.integer) or not 2 <= value <= upper:
                 raise ValueError(f"RGL resolution {name} must be an integer in [2, {upper}], got {value!r}")
+        if self.nbytes > MAX_FILE_BYTES:
+            raise ValueError(
+                f"RGL resolution theta_i {self.theta_i}, vndf {self.vndf}, luminance {self.luminance} makes a file "
+                f"of {self.nbytes / 2**30:.1f} GiB, more than the {MAX_FILE_BYTES / 2**30:g} GiB written at most "
+                "(the VNDF tables hold theta_i × vndf² values, the RGB tables 3 × theta_i × luminance²): "
+                "lower one of them"
+            )
+
+    @property
+    def nbytes(self) -> int:
+        """Bytes of the tables' data in a written file (float32; the header and descriptions excluded)."""
+        t, n, v, g = int(self.theta_i), int(self.ndf), int(self.vndf), int(self.luminance)
+        return 4 * (1 + t + 4 * n + t * v * v + 4 * t * g * g) + 1 + -(-t * g * g // 8)
 
 
 def _theta_from_u(u: np.ndarray) -> np.ndarray:
@@ -217,6 +237,18 @@ def _sample_marginal(density: np.ndarray, samples: np.ndarray) -> np.ndarray:
     marginal[1:] = np.cumsum(0.5 * (rows[1:] + rows[:-1]))
     scale = 1.0 / marginal[-1]
     data, conditional, rows, marginal = data * scale, conditional * scale, rows * scale, marginal * scale
+    points = np.asarray(samples, dtype=np.float64)
+    step = max(1, _CHUNK // nx)  # the conditional CDFs of a chunk: step × nx values
+    return np.concatenate([
+        _warp_chunk(data, conditional, rows, marginal, points[start : start + step])
+        for start in range(0, points.shape[0], step)
+    ]) if points.shape[0] else np.zeros((0, 2))
+
+
+def _warp_chunk(data: np.ndarray, conditional: np.ndarray, rows: np.ndarray, marginal: np.ndarray,
+                samples: np.ndarray) -> np.ndarray:
+    """:func:`_sample_marginal` of some samples, given the normalised density and its CDFs."""
+    ny, nx = data.shape
     s = np.clip(samples, _EPSILON32, 1.0 - _EPSILON32)
     sx, sy = s[:, 0].copy(), s[:, 1].copy()
     row = np.clip(np.searchsorted(marginal, sy, side="left") - 1, 0, ny - 2)
@@ -278,6 +310,137 @@ def _cap_outliers(value: np.ndarray, up: np.ndarray) -> np.ndarray:
     return value * scale[:, None]
 
 
+@dataclass(frozen=True)
+class _Slice:
+    """The tables of one incident elevation θi: VNDF (V, V), luminance (L, L), RGB (3, L, L), float32, and
+    which of the L × L sample points reflect above the horizon."""
+
+    vndf: np.ndarray
+    luminance: np.ndarray
+    rgb: np.ndarray
+    above: np.ndarray
+
+
+class _Tabulation:
+    """The NDF, σ and incident elevations of a material, and its tables one θi at a time (:meth:`slice`).
+
+    Memory: the material's table plus a few V × V and L × L arrays of float64 (V, L the resolution's VNDF
+    and sample grid sizes); lookups and warps run in chunks of :data:`_CHUNK` points.
+    """
+
+    def __init__(self, reflectance: np.ndarray, valid: np.ndarray, res: RglResolution) -> None:
+        self.values, self.mask, self.res = reflectance, valid, res
+        # 1-2. NDF from the retro-reflection, and its projected area.
+        u_ndf = np.linspace(0.0, 1.0, res.ndf)
+        theta_ndf = np.minimum(_theta_from_u(u_ndf), _GRAZING_LIMIT)
+        retro_dir = np.stack([np.sin(theta_ndf), np.zeros_like(theta_ndf), np.cos(theta_ndf)], axis=1)
+        retro = self._brdf(retro_dir, retro_dir) @ np.asarray(LUMINANCE_WEIGHTS)
+        self.ndf, _ = power_iteration_ndf(retro, u_ndf)
+        kernel_theta = _theta_from_u(u_ndf)
+        self.theta_i = np.linspace(0.0, np.pi / 2, res.theta_i)
+        self.theta_eval = np.minimum(self.theta_i, _GRAZING_LIMIT)  # the grazing node: the grid's last elevation
+        weights = _trapezoid_weights(u_ndf)
+        self.sigma_i = _azimuthal_integral(self.theta_eval[:, None], kernel_theta[None, :]) @ (weights * self.ndf)
+        self.sigma = _azimuthal_integral(kernel_theta[:, None], kernel_theta[None, :]) @ (weights * self.ndf)
+        # The VNDF's unit square (x: u_θ, y: u_φ with φ relative to φi) and the sample grid.
+        u_v = np.linspace(0.0, 1.0, res.vndf)
+        self.theta_m = _theta_from_u(u_v)[None, :]
+        self.phi_m = ((2.0 * u_v - 1.0) * np.pi)[:, None]
+        self.ndf_v = _interpolate_profile(self.ndf, u_v)[None, :]
+        self.jac = 2.0 * np.pi**2 * u_v[None, :] * np.sin(self.theta_m)
+        grid = np.linspace(0.0, 1.0, res.luminance)
+        sx, sy = np.meshgrid(grid, grid)  # [y, x]
+        self.samples = np.stack([sx.ravel(), sy.ravel()], axis=1)
+
+    def _brdf(self, wi: np.ndarray, wo: np.ndarray, mode: str = "trilinear") -> np.ndarray:
+        """f(ωi, ωo) (N, 3) in 1/sr, looked up :data:`_CHUNK` direction pairs at a time."""
+        out = np.empty((wo.shape[0], 3))
+        for first in range(0, wo.shape[0], _CHUNK):
+            part = slice(first, first + _CHUNK)
+            out[part] = lookup(self.values, wi[part], wo[part], mode=mode, mask=self.mask)
+        return out
+
+    def slice(self, k: int) -> _Slice:
+        """The tables of the k-th incident elevation."""
+        th = float(self.theta_eval[k])
+        vndf, visible = self._vndf(k, th)
+        rgb, luminance, above = self._samples(k, th, vndf, visible)
+        return _Slice(vndf.astype("<f4"), luminance.astype("<f4"), rgb.astype("<f4"), above)
+
+    def _vndf(self, k: int, th: float) -> tuple[np.ndarray, np.ndarray]:
+        """3. The VNDF table at θi (half visible normals, half the data's own lobe) and the visible normals."""
+        theta_m, phi_m = self.theta_m, self.phi_m
+        cosine = np.sin(th) * np.sin(theta_m) * np.cos(phi_m) + np.cos(th) * np.cos(theta_m)
+        visible = self.ndf_v * np.maximum(cosine, 0.0) * self.jac / self.sigma_i[k]
+        visible = visible / visible.sum()
+        table = visible
+        if _DATA_WARP_SHARE > 0:  # the data's own lobe for this θi: f cos θo in the same unit square
+            wi_k = np.array([np.sin(th), 0.0, np.cos(th)])
+            m_grid = np.stack(np.broadcast_arrays(np.cos(phi_m) * np.sin(theta_m), np.sin(phi_m) * np.sin(theta_m),
+                                                  np.cos(theta_m)), axis=-1).reshape(-1, 3)
+            dot = m_grid @ wi_k
+            lum_f = np.zeros(dot.shape)
+            for first in range(0, dot.size, _CHUNK):
+                part = slice(first, first + _CHUNK)
+                wo_k = 2.0 * dot[part, None] * m_grid[part] - wi_k
+                ok = (wo_k[:, 2] > 0) & (dot[part] > 0)
+                if ok.any():
+                    # a sampling density only: the nearest bin suffices and costs an eighth of the trilinear lookup
+                    lum_f[first + np.flatnonzero(ok)] = self._brdf(
+                        np.broadcast_to(wi_k, wo_k[ok].shape), wo_k[ok], mode="nearest") @ np.asarray(LUMINANCE_WEIGHTS)
+            del m_grid
+            lum_f = np.maximum(lum_f, 0.0)
+            if (lum_f > 0).any():  # grazing spikes (f = eval / cos θo of a tabulated file) must not own the warp
+                lum_f = np.minimum(lum_f, _OUTLIER_FACTOR * float(np.percentile(lum_f[lum_f > 0], 99)))
+            data = (lum_f * 4.0 * np.maximum(dot, 0.0)).reshape(visible.shape) * self.jac
+            if data.sum() > 0:
+                table = (1.0 - _DATA_WARP_SHARE) * visible + _DATA_WARP_SHARE * data / data.sum()
+        return table, visible
+
+    def _samples(self, k: int, th: float, vndf: np.ndarray, visible: np.ndarray
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """4-5. RGB (3, L, L), luminance (L, L) and above-horizon flags at the warped vertices of the sample grid."""
+        n = self.res.luminance
+        u_m = _sample_marginal(vndf, self.samples)
+        tm = _theta_from_u(u_m[:, 0])
+        pm = (2.0 * u_m[:, 1] - 1.0) * np.pi
+        m = np.stack([np.cos(pm) * np.sin(tm), np.sin(pm) * np.sin(tm), np.cos(tm)], axis=1)
+        wi = np.array([np.sin(th), 0.0, np.cos(th)])
+        wo = 2.0 * (m @ wi)[:, None] * m - wi
+        up = wo[:, 2] > 0.0
+        d_m = _interpolate_profile(self.ndf, u_m[:, 0])
+        value = np.zeros((self.samples.shape[0], 3))
+        if up.any():
+            factor = wo[up, 2] * 4.0 * self.sigma_i[k] / np.maximum(d_m[up], 1e-30)
+            value[up] = self._brdf(np.broadcast_to(wi, wo[up].shape), wo[up]) * factor[:, None]
+        value = _cap_outliers(np.maximum(value, 0.0), up)
+        rgb = value.T.reshape(3, n, n)
+        # Readers sample luminance, then the VNDF table; weighting by visible / table density makes the
+        # product follow the luminance of f cos θo (the table's data half only moves the grid's vertices).
+        table_density, visible_density = _bilinear(vndf, u_m), _bilinear(visible, u_m)
+        ratio = np.divide(visible_density, table_density, out=np.ones_like(table_density), where=table_density > 0)
+        luminance = np.tensordot(np.asarray(LUMINANCE_WEIGHTS), rgb, axes=([0], [0])) * ratio.reshape(n, n)
+        return rgb, luminance, up.reshape(n, n)
+
+    def leading_fields(self, description: str) -> dict[str, np.ndarray]:
+        """The fields before the per-θi tables, in file order."""
+        res = self.res
+        return {
+            "version": np.array([1, 0], dtype="<u4"),
+            "description": np.frombuffer(description.encode("utf-8"), dtype="u1").copy(),
+            "phi_i": np.zeros(1, dtype="<f4"),
+            "theta_i": self.theta_i.astype("<f4"),
+            "sigma": np.ascontiguousarray(np.broadcast_to(self.sigma, (2, res.ndf)), dtype="<f4"),
+            "ndf": np.ascontiguousarray(np.broadcast_to(self.ndf, (2, res.ndf)), dtype="<f4"),
+        }
+
+    def table_shapes(self) -> dict[str, tuple[int, ...]]:
+        """Shapes of the per-θi fields, then ``jacobian`` and ``valid``, in file order."""
+        t, v, n = self.res.theta_i, self.res.vndf, self.res.luminance
+        return {"vndf": (1, t, v, v), "luminance": (1, t, n, n), "rgb": (1, t, 3, n, n), "jacobian": (1,),
+                "valid": (-(-t * n * n // 8),)}
+
+
 def rgl_fields(
     reflectance: npt.ArrayLike,
     valid: npt.ArrayLike,
@@ -286,6 +449,8 @@ def rgl_fields(
     description: str = "",
 ) -> dict[str, np.ndarray]:
     """The fields of an isotropic RGB ``.bsdf`` file for a MERL-layout reflectance table.
+
+    All fields in memory at once; :func:`write_rgl_bsdf` writes them a θi slice at a time instead.
 
     Parameters
     ----------
@@ -310,105 +475,38 @@ def rgl_fields(
         direction lies above the horizon, as packed bits).
     """
     res = resolution or RglResolution()
-    values = np.asarray(reflectance, dtype=np.float64)
-    mask = np.asarray(valid, dtype=bool)
-
-    def brdf(wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
-        return lookup(values, wi, wo, mode="trilinear", mask=mask)
-
-    # 1-2. NDF from the retro-reflection, and its projected area.
-    u_ndf = np.linspace(0.0, 1.0, res.ndf)
-    theta_ndf = np.minimum(_theta_from_u(u_ndf), _GRAZING_LIMIT)
-    retro_dir = np.stack([np.sin(theta_ndf), np.zeros_like(theta_ndf), np.cos(theta_ndf)], axis=1)
-    retro = brdf(retro_dir, retro_dir) @ np.asarray(LUMINANCE_WEIGHTS)
-    ndf, _ = power_iteration_ndf(retro, u_ndf)
-    kernel_theta = _theta_from_u(u_ndf)
-    theta_i = np.linspace(0.0, np.pi / 2, res.theta_i)
-    theta_eval = np.minimum(theta_i, _GRAZING_LIMIT)  # the grazing node: the last elevation the grid holds
-    weights = _trapezoid_weights(u_ndf)
-    sigma_i = _azimuthal_integral(theta_eval[:, None], kernel_theta[None, :]) @ (weights * ndf)
-    sigma = _azimuthal_integral(kernel_theta[:, None], kernel_theta[None, :]) @ (weights * ndf)
-
-    # 3. VNDF per incident elevation, in the unit square (x: u_θ, y: u_φ with φ relative to φi).
-    u_v = np.linspace(0.0, 1.0, res.vndf)
-    theta_m = _theta_from_u(u_v)[None, :]
-    phi_m = ((2.0 * u_v - 1.0) * np.pi)[:, None]
-    ndf_v = _interpolate_profile(ndf, u_v)[None, :]
-    jac = 2.0 * np.pi**2 * u_v[None, :] * np.sin(theta_m)
-    vndf = np.empty((res.theta_i, res.vndf, res.vndf))
-    visible = np.empty_like(vndf)  # the NDF's visible normals alone, for the luminance tables
-    m_grid = np.stack(np.broadcast_arrays(np.cos(phi_m) * np.sin(theta_m), np.sin(phi_m) * np.sin(theta_m),
-                                          np.cos(theta_m)), axis=-1).reshape(-1, 3)
-    for k, th in enumerate(theta_eval):
-        cosine = np.sin(th) * np.sin(theta_m) * np.cos(phi_m) + np.cos(th) * np.cos(theta_m)
-        slice_ = ndf_v * np.maximum(cosine, 0.0) * jac / sigma_i[k]
-        slice_ = slice_ / slice_.sum()
-        visible[k] = slice_
-        if _DATA_WARP_SHARE > 0:  # the data's own lobe for this θi: f cos θo in the same unit square
-            wi_k = np.array([np.sin(th), 0.0, np.cos(th)])
-            dot = m_grid @ wi_k
-            wo_k = 2.0 * dot[:, None] * m_grid - wi_k
-            ok = (wo_k[:, 2] > 0) & (dot > 0)
-            lum_f = np.zeros(dot.shape)
-            if ok.any():
-                # a sampling density only: the nearest bin suffices and costs an eighth of the trilinear lookup
-                lum_f[ok] = lookup(values, np.broadcast_to(wi_k, wo_k[ok].shape), wo_k[ok], mode="nearest",
-                                   mask=mask) @ np.asarray(LUMINANCE_WEIGHTS)
-            lum_f = np.maximum(lum_f, 0.0)
-            if (lum_f > 0).any():  # grazing spikes (f = eval / cos θo of a tabulated file) must not own the warp
-                lum_f = np.minimum(lum_f, _OUTLIER_FACTOR * float(np.percentile(lum_f[lum_f > 0], 99)))
-            data = lum_f * 4.0 * np.maximum(dot, 0.0)
-            data = data.reshape(slice_.shape) * jac
-            if data.sum() > 0:
-                slice_ = (1.0 - _DATA_WARP_SHARE) * slice_ + _DATA_WARP_SHARE * data / data.sum()
-        vndf[k] = slice_
-
-    # 4-5. RGB and luminance at the warped vertices of the sample grid.
-    n = res.luminance
-    grid = np.linspace(0.0, 1.0, n)
-    sx, sy = np.meshgrid(grid, grid)  # [y, x]
-    samples = np.stack([sx.ravel(), sy.ravel()], axis=1)
-    rgb = np.zeros((res.theta_i, 3, n, n))
-    weight = np.ones((res.theta_i, n, n))
-    above = np.zeros((res.theta_i, n, n), dtype=bool)
-    for k, th in enumerate(theta_eval):
-        u_m = _sample_marginal(vndf[k], samples)
-        tm = _theta_from_u(u_m[:, 0])
-        pm = (2.0 * u_m[:, 1] - 1.0) * np.pi
-        m = np.stack([np.cos(pm) * np.sin(tm), np.sin(pm) * np.sin(tm), np.cos(tm)], axis=1)
-        wi = np.array([np.sin(th), 0.0, np.cos(th)])
-        wo = 2.0 * (m @ wi)[:, None] * m - wi
-        up = wo[:, 2] > 0.0
-        d_m = _interpolate_profile(ndf, u_m[:, 0])
-        value = np.zeros((samples.shape[0], 3))
-        if up.any():
-            factor = wo[up, 2] * 4.0 * sigma_i[k] / np.maximum(d_m[up], 1e-30)
-            value[up] = brdf(np.broadcast_to(wi, wo[up].shape), wo[up]) * factor[:, None]
-        value = _cap_outliers(np.maximum(value, 0.0), up)
-        rgb[k] = value.T.reshape(3, n, n)
-        above[k] = up.reshape(n, n)
-        # Readers sample luminance, then the VNDF table; weighting by visible / table density makes the
-        # product follow the luminance of f cos θo (the table's data half only moves the grid's vertices).
-        table_density, visible_density = _bilinear(vndf[k], u_m), _bilinear(visible[k], u_m)
-        ratio = np.divide(visible_density, table_density, out=np.ones_like(table_density), where=table_density > 0)
-        weight[k] = ratio.reshape(n, n)
-    luminance = np.tensordot(np.asarray(LUMINANCE_WEIGHTS), rgb, axes=([0], [1])) * weight
-
-    sigma2 = np.broadcast_to(sigma, (2, res.ndf))
-    ndf2 = np.broadcast_to(ndf, (2, res.ndf))
+    tab = _Tabulation(np.asarray(reflectance, dtype=np.float64), np.asarray(valid, dtype=bool), res)
+    slices = [tab.slice(k) for k in range(res.theta_i)]
     return {
-        "version": np.array([1, 0], dtype="<u4"),
-        "description": np.frombuffer(description.encode("utf-8"), dtype="u1").copy(),
-        "phi_i": np.zeros(1, dtype="<f4"),
-        "theta_i": theta_i.astype("<f4"),
-        "sigma": np.ascontiguousarray(sigma2, dtype="<f4"),
-        "ndf": np.ascontiguousarray(ndf2, dtype="<f4"),
-        "vndf": vndf[None].astype("<f4"),
-        "luminance": luminance[None].astype("<f4"),
-        "rgb": rgb[None].astype("<f4"),
+        **tab.leading_fields(description),
+        "vndf": np.stack([part.vndf for part in slices])[None],
+        "luminance": np.stack([part.luminance for part in slices])[None],
+        "rgb": np.stack([part.rgb for part in slices])[None],
         "jacobian": np.ones(1, dtype="u1"),
-        "valid": np.packbits(above.ravel()),
+        "valid": np.packbits(np.stack([part.above for part in slices]).ravel()),
     }
+
+
+def _tensor_file_header(specs: list[tuple[str, np.dtype, tuple[int, ...]]]) -> tuple[bytes, list[int]]:
+    """The header of a tensor file holding fields (name, dtype, shape), padded to the first field's offset, and
+    each field's offset (data 8-byte aligned, in the list's order)."""
+    header_size = len(TENSOR_FILE_MAGIC) + 2 + 4
+    header_size += sum(2 + len(name.encode("ascii")) + 2 + 1 + 8 + 8 * len(shape) for name, _, shape in specs)
+    offset = -(-header_size // _ALIGNMENT) * _ALIGNMENT
+    header = [TENSOR_FILE_MAGIC, struct.pack("<BBI", 1, 0, len(specs))]
+    offsets = []
+    for name, dtype, shape in specs:
+        code = _DTYPE_CODES.get(dtype.newbyteorder("<") if dtype.byteorder == ">" else dtype)
+        if code is None:
+            raise ValueError(f"tensor-file field {name!r}: unsupported dtype {dtype}")
+        encoded = name.encode("ascii")
+        header.append(struct.pack("<H", len(encoded)) + encoded + struct.pack("<HBQ", len(shape), code, offset))
+        header.append(struct.pack(f"<{len(shape)}Q", *shape))
+        offsets.append(offset)
+        size = dtype.itemsize * math.prod(shape)
+        offset += size + (-size % _ALIGNMENT)
+    head = b"".join(header)
+    return head + b"\x00" * (offsets[0] - len(head) if offsets else -len(head) % _ALIGNMENT), offsets
 
 
 def tensor_file_bytes(fields: Mapping[str, np.ndarray]) -> bytes:
@@ -423,25 +521,42 @@ def tensor_file_bytes(fields: Mapping[str, np.ndarray]) -> bytes:
     -------
     bytes
     """
-    arrays = []
-    for name, array in fields.items():
-        value = np.ascontiguousarray(array)
-        code = _DTYPE_CODES.get(value.dtype.newbyteorder("<") if value.dtype.byteorder == ">" else value.dtype)
-        if code is None:
-            raise ValueError(f"tensor-file field {name!r}: unsupported dtype {value.dtype}")
-        arrays.append((name.encode("ascii"), code, value.astype(value.dtype.newbyteorder("<"), copy=False)))
-    header_size = len(TENSOR_FILE_MAGIC) + 2 + 4
-    header_size += sum(2 + len(name) + 2 + 1 + 8 + 8 * value.ndim for name, _, value in arrays)
-    offset = -(-header_size // _ALIGNMENT) * _ALIGNMENT
-    header = [TENSOR_FILE_MAGIC, struct.pack("<BBI", 1, 0, len(arrays))]
+    arrays = {name: np.ascontiguousarray(array) for name, array in fields.items()}
+    head, _ = _tensor_file_header([(name, value.dtype, value.shape) for name, value in arrays.items()])
     body = bytearray()
-    for name, code, value in arrays:
-        header.append(struct.pack("<H", len(name)) + name + struct.pack("<HBQ", value.ndim, code, offset + len(body)))
-        header.append(struct.pack(f"<{value.ndim}Q", *value.shape))
-        body += value.tobytes()
+    for value in arrays.values():
+        body += value.astype(value.dtype.newbyteorder("<"), copy=False).tobytes()
         body += b"\x00" * (-len(body) % _ALIGNMENT)
-    head = b"".join(header)
-    return head + b"\x00" * (offset - len(head)) + bytes(body)
+    return head + bytes(body)
+
+
+def _write_tensor_file(path: Path, tab: _Tabulation, description: str) -> None:
+    """Write the material's tensor file to ``path``, one θi slice at a time (each table written in place)."""
+    leading = tab.leading_fields(description)
+    shapes = tab.table_shapes()
+    f32, u8 = np.dtype("<f4"), np.dtype("u1")
+    specs = [(name, value.dtype, value.shape) for name, value in leading.items()]
+    specs += [(name, u8 if name in ("jacobian", "valid") else f32, shape) for name, shape in shapes.items()]
+    head, offsets = _tensor_file_header(specs)
+    at = dict(zip([name for name, _, _ in specs], offsets, strict=True))
+    n_theta = tab.res.theta_i
+    above = np.zeros((n_theta, tab.res.luminance, tab.res.luminance), dtype=bool)
+    with open(path, "wb") as stream:
+        stream.write(head)
+        for name, value in leading.items():
+            stream.seek(at[name])
+            stream.write(value.tobytes())
+        for k in range(n_theta):
+            part = tab.slice(k)
+            for name, table in (("vndf", part.vndf), ("luminance", part.luminance), ("rgb", part.rgb)):
+                stream.seek(at[name] + k * table.nbytes)
+                stream.write(table.tobytes())
+            above[k] = part.above
+        stream.seek(at["jacobian"])
+        stream.write(b"\x01")
+        stream.seek(at["valid"])
+        valid = np.packbits(above.ravel()).tobytes()
+        stream.write(valid + b"\x00" * (-len(valid) % _ALIGNMENT))
 
 
 def _checked_reflectance(path: Path, table: npt.ArrayLike, name: str) -> tuple[np.ndarray, np.ndarray]:
@@ -485,7 +600,8 @@ def write_rgl_bsdf(
     name : str
         Material name, for messages and the default description.
     description : str, optional
-        The file's ``description`` field; ``"NAME (brdfcodec export)"`` by default.
+        The file's ``description`` field; ``"NAME (brdfcodec export)"`` when absent or empty (Mitsuba's
+        ``measured`` plugin refuses an empty one).
     resolution : RglResolution, optional
         Table sizes (:class:`RglResolution`'s defaults when absent).
     overwrite : bool, default False
@@ -506,8 +622,8 @@ def write_rgl_bsdf(
     """
     target = check_output_path(path, overwrite=overwrite)
     reflectance, valid = _checked_reflectance(target, table, name)
-    text = description if description is not None else f"{name or target.stem} (brdfcodec export)"
-    data = tensor_file_bytes(rgl_fields(reflectance, valid, resolution=resolution, description=text))
+    text = description or f"{name or target.stem} (brdfcodec export)"  # readers refuse an empty description
+    tab = _Tabulation(reflectance, valid, resolution or RglResolution())
     with atomic_output(target, overwrite=overwrite) as tmp:
-        tmp.write_bytes(data)
+        _write_tensor_file(tmp, tab, text)
     return target
