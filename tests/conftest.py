@@ -11,6 +11,20 @@ from brdfcodec.datasets.analytic import ANALYTIC_PRESETS
 from brdfcodec.io.merl import MerlBRDF, write_merl
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
+#: The earlier default models, no longer in the wheel (issue 52): the package brdfcodec-legacy-models in this
+#: source tree. Registered for the whole test run, so that the tests that decode their files (the spec's
+#: vectors among them) run whether or not that package is installed.
+LEGACY_MODELS = REPO_ROOT / "packages" / "brdfcodec-legacy-models" / "brdfcodec_legacy_models" / "models"
+
+
+def _register_legacy_models() -> None:
+    from brdfcodec.models.registry import register_model_folder
+
+    for folder in sorted(LEGACY_MODELS.glob("*/model.json")):
+        register_model_folder(folder.parent)
+
+
+_register_legacy_models()
 
 
 def shared_root() -> Path:

@@ -102,7 +102,7 @@ def _depth(value: object) -> int:
 def _sha256_field(data: dict[str, Any], key: str) -> str:
     value = data[key]
     if not is_sha256_hex(value):
-        raise ValueError(f"{key} must be 64 lower-case hex digits, got {str(value)[:80]!r}")
+        raise ValueError(f"{key} must be 64 lower-case hex digits, got {repr(value)[:80]}")
     return str(value)
 
 
@@ -136,7 +136,7 @@ def parse_manifest(text: bytes, folder: str | os.PathLike[str]) -> ModelManifest
         raise ValueError(f"missing {', '.join(missing)}")
     name = data["name"]
     if not isinstance(name, str) or not 1 <= len(name) <= MAX_NAME_LENGTH:
-        raise ValueError(f"name must be a string of 1 to {MAX_NAME_LENGTH} characters, got {str(name)[:80]!r}")
+        raise ValueError(f"name must be a string of 1 to {MAX_NAME_LENGTH} characters, got {repr(name)[:80]}")
     basis = data.get("basis_sha256")
     return ModelManifest(
         name=name,

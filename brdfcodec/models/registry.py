@@ -8,7 +8,10 @@ in ``$BRDFCODEC_MODEL_PATH`` (``os.pathsep``-separated; each a model folder
 or a folder of model folders), the folders saved by ``bvae model register``
 (one per line in ``model-folders.txt`` of the user configuration folder:
 ``$BRDFCODEC_CONFIG_DIR``, else ``$XDG_CONFIG_HOME/brdfcodec``, else
-``~/.config/brdfcodec``), then the models shipped in the package.
+``~/.config/brdfcodec``), the folders of installed model packages (entry point group
+``brdfcodec.models``: each names a function that returns a folder of model folders; the package
+``brdfcodec-legacy-models`` holds the earlier defaults so), then the model shipped in the package (one: the
+default).
 """
 
 from __future__ import annotations
@@ -34,6 +37,7 @@ __all__ = [
     "package_model_folder",
     "find_model",
     "config_file",
+    "installed_model_folders",
     "register_model_folder",
     "save_model_folder",
     "saved_model_folders",
@@ -41,6 +45,16 @@ __all__ = [
 
 #: Folder name (under ``brdfcodec/data/models``) of the model used when none is named.
 DEFAULT_MODEL_NAME = "default"
+#: Entry point group under which installed packages name a function returning a folder of model folders.
+MODEL_ENTRY_POINTS = "brdfcodec.models"
+#: The package that holds the models the wheel no longer ships, and where it lies in a source tree.
+LEGACY_PACKAGE = "brdfcodec-legacy-models"
+LEGACY_SOURCE = "packages/brdfcodec-legacy-models"
+#: Earlier defaults, moved out of the wheel into :data:`LEGACY_PACKAGE`: decoder SHA-256 → model name.
+RETIRED_MODELS = {
+    "e1e3ed1e24dc5a8746abbfb9194725e1a9d02808c2e81125c64f3d9e37b39491": "bvae-nbrdf-proxy-small-v1",
+    "cebebb8f40dec066843e927cab29f548ef4d93c235b4db8443738af086a2b794": "bvae-nbrdf-proxy-small-v2",
+}
 
 
 
@@ -92,19 +106,51 @@ def _package_models() -> Path:
 
 
 def package_model_folder(name: str) -> Path:
-    """Folder of a model shipped in the package (``brdfcodec/data/models/NAME``): ``"default"``, or an earlier
-    default kept so that the files made with it still decode (``"nbrdf-proxy-small-v1"``, ``"nbrdf-proxy-small-v2"``).
+    """Folder of a model by its folder name: ``"default"``, shipped in the package (``brdfcodec/data/models``),
+    or an earlier default kept so that the files made with it still decode (``"nbrdf-proxy-small-v1"``,
+    ``"nbrdf-proxy-small-v2"``), found among the searched folders (installed model packages first of all:
+    ``brdfcodec-legacy-models`` holds these two).
 
     Raises
     ------
     ModelNotFoundError
-        The package ships no model of that name.
+        No folder of that name is found; for an earlier default the message names what to install.
     """
     folder = _package_models() / name
-    if not (folder / MANIFEST).is_file():
-        shipped = sorted(p.name for p in _package_models().iterdir() if (p / MANIFEST).is_file())
-        raise ModelNotFoundError(f"{folder}: the package ships no model {name!r} (it ships {', '.join(shipped)})")
-    return folder
+    if (folder / MANIFEST).is_file():
+        return folder
+    for candidate in _candidate_folders():
+        if candidate.name == name:
+            return candidate
+    if name in {retired.removeprefix("bvae-") for retired in RETIRED_MODELS.values()}:
+        raise ModelNotFoundError(f"model {name!r} is no longer in the brdfcodec wheel; {_legacy_remedy()}")
+    shipped = sorted(p.name for p in _package_models().iterdir() if (p / MANIFEST).is_file())
+    raise ModelNotFoundError(f"{folder}: the package ships no model {name!r} (it ships {', '.join(shipped)})")
+
+
+def _legacy_remedy() -> str:
+    return (f"install the package that holds the earlier defaults, {LEGACY_PACKAGE} (from a brdfcodec source "
+            f"tree: pip install {LEGACY_SOURCE}), or set BRDFCODEC_MODEL_PATH to a folder that holds its model "
+            f"folders ({LEGACY_SOURCE}/brdfcodec_legacy_models/models, or a copy of it)")
+
+
+def installed_model_folders() -> list[Path]:
+    """Folders of model folders named by installed packages (entry point group :data:`MODEL_ENTRY_POINTS`).
+
+    A package whose entry point cannot be loaded, or does not return a folder, is skipped with a warning.
+    """
+    from importlib.metadata import entry_points
+
+    roots = []
+    for point in entry_points(group=MODEL_ENTRY_POINTS):
+        try:
+            provided = point.load()
+            root = Path(provided() if callable(provided) else provided)
+        except Exception as error:  # noqa: BLE001 - another package's failure breaks no model of this one
+            warnings.warn(f"model package {point.value!r} skipped: {type(error).__name__}: {error}", stacklevel=2)
+            continue
+        roots.append(root)
+    return roots
 
 
 def default_model_folder() -> Path:
@@ -165,6 +211,7 @@ def _candidate_folders() -> list[Path]:
     roots = list(_PROCESS_REGISTRY.folders)
     roots += [Path(p) for p in os.environ.get("BRDFCODEC_MODEL_PATH", "").split(os.pathsep) if p]
     roots += saved_model_folders()
+    roots += installed_model_folders()
     roots.append(_package_models())
     folders: list[Path] = []
     for root in roots:
@@ -241,6 +288,11 @@ def find_model(decoder_sha256: str) -> ModelManifest:
             claimed = found[1]
     if claimed is not None:
         raise claimed
+    if wanted in RETIRED_MODELS:
+        raise ModelNotFoundError(
+            f"decoder {wanted} is that of {RETIRED_MODELS[wanted]}, an earlier default no longer in the brdfcodec "
+            f"wheel: {_legacy_remedy()}"
+        )
     known = ", ".join(f"{m.decoder_sha256} ({m.name})" for m in models) or "none"
     raise ModelNotFoundError(
         f"no decoder with SHA-256 {wanted}; available: {known}. Register the model folder that made the file "
