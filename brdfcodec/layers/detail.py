@@ -239,22 +239,24 @@ def decode_detail(layer: DetailLayer, slots: Sequence[int] | None = None) -> npt
     n_h, n_d = _SHAPE[2], _SHAPE[3]
     rows = n_h - np.argmax(rows_used[planes, ::-1], axis=1)
     cols = n_d - np.argmax(cols_used[planes, ::-1], axis=1)
-    inverse_h, inverse_d = _dct_matrix_f32(n_h).T, _dct_matrix_f32(n_d)
+    # binary64 products (issue 49): with |q| up to 2^15 and large steps, binary32 sums drift by 1e-3 mapped, beyond
+    # the conformance tolerance (§4.4, §9); the result is rounded to float32 once.
+    inverse_h, inverse_d = _dct_matrix_f64(n_h).T, _dct_matrix_f64(n_d)
     sparse_work = int(np.sum(rows * n_h * (np.minimum(rows, cols) + n_d)))
     if sparse_work > _DENSE_SHARE * len(planes) * 2 * n_h * n_h * n_d:
-        x = np.matmul(inverse_h, np.matmul(q[planes].astype(np.float32), inverse_d))
+        x = np.matmul(inverse_h, np.matmul(q[planes].astype(np.float64), inverse_d))
     else:
-        x = np.empty((len(planes), n_h, n_d), dtype=np.float32)
+        x = np.empty((len(planes), n_h, n_d), dtype=np.float64)
         for i, (plane, h, d) in enumerate(zip(planes, rows, cols, strict=True)):
-            block = q[plane, :h, :d].astype(np.float32)
+            block = q[plane, :h, :d].astype(np.float64)
             if h <= d:  # the cheaper order of the two products
                 np.matmul(inverse_h[:, :h], block @ inverse_d[:d], out=x[i])
             else:
                 np.matmul(inverse_h[:, :h] @ block, inverse_d[:d], out=x[i])
     # The slice inverse of each colour over its used slice frequencies, then the colour inverse and the step.
     n_slots = len(chosen)
-    slice_inverse = _dct_matrix_f32(_SHAPE[1])[:, chosen].T  # (slots, slice frequencies)
-    by_colour = np.zeros((N_CHANNELS, n_slots * n_h * n_d), dtype=np.float32)
+    slice_inverse = _dct_matrix_f64(_SHAPE[1])[:, chosen].T  # (slots, slice frequencies)
+    by_colour = np.zeros((N_CHANNELS, n_slots * n_h * n_d), dtype=np.float64)
     flat = x.reshape(len(planes), -1)
     colour_of_plane, frequency_of_plane = np.divmod(planes, _SHAPE[1])
     for colour in range(N_CHANNELS):
@@ -262,14 +264,14 @@ def decode_detail(layer: DetailLayer, slots: Sequence[int] | None = None) -> npt
         if len(mine):
             target = by_colour[colour].reshape(n_slots, -1)
             np.matmul(slice_inverse[:, frequency_of_plane[mine]], flat[mine], out=target)
-    colour_inverse = (COLOUR_MATRIX.T * layer.step).astype(np.float32)
-    np.matmul(colour_inverse, by_colour, out=out.reshape(N_CHANNELS, -1))
+    colour_inverse = COLOUR_MATRIX.T.astype(np.float64) * layer.step
+    out.reshape(N_CHANNELS, -1)[...] = colour_inverse @ by_colour
     return out
 
 
 @functools.cache
-def _dct_matrix_f32(n: int) -> np.ndarray:
-    """:func:`_dct_matrix` in float32 (the decoder's precision)."""
-    matrix = _dct_matrix(n).astype(np.float32)
+def _dct_matrix_f64(n: int) -> np.ndarray:
+    """:func:`_dct_matrix` in float64 (the detail layer's inverse is computed in binary64)."""
+    matrix = _dct_matrix(n).astype(np.float64)
     matrix.setflags(write=False)
     return matrix
