@@ -271,7 +271,7 @@ def test_rate_control_picks_no_latent_where_better_and_is_never_worse(encoder: A
     rubber at 16 B, where the latent's 8 bytes buy more than the packed coefficients they would hold)."""
     picked = []
     for name, budget in (("green-satin", 32), ("blue-rubber", 16), ("gold", 32)):
-        auto, auto_error = _encode(encoder, analytic_tables[name], bytes_budget=budget)
+        auto, auto_error = _encode(encoder, analytic_tables[name], bytes_budget=budget, latent="auto")
         always, always_error = _encode(encoder, analytic_tables[name], bytes_budget=budget, latent="always")
         assert getattr(always, "has_latent", True) and auto.meta["rate"]["record_bytes"] <= budget
         assert auto_error <= always_error * (1 + 1e-6), (name, budget, auto_error, always_error)
@@ -288,8 +288,9 @@ def test_an_error_target_takes_a_smaller_record_without_a_latent_where_it_meets_
     from brdfcodec.codec import measure
 
     brdf = analytic_tables["green-satin"]
-    auto, _ = _encode(encoder, brdf, max_relae=0.045)
-    always, _ = _encode(encoder, brdf, max_relae=0.045, latent="always")
+    auto, _ = _encode(encoder, brdf, max_relae=0.045, latent="auto")
+    always, _ = _encode(encoder, brdf, max_relae=0.045)  # the default (issue 48): a latent in every record
+    assert always.has_latent
     assert not getattr(auto, "has_latent", True)  # without a latent, 0.045 is met in fewer bytes than with one
     assert auto.meta["rate"]["record_bytes"] < always.meta["rate"]["record_bytes"]
     assert measure(auto, encoder.decoder, brdf).meta["relae"]["mapped"] <= 0.045
@@ -341,13 +342,15 @@ def test_cli_latent_flag_and_the_bytes_floor(red_plastic_file: Path, tmp_path: P
     from brdfcodec.cli.main import main
 
     small = tmp_path / "small.bvae"  # below every record with a latent: one without it (a name of 11 bytes)
-    assert main(["compress", str(red_plastic_file), "-o", str(small), "--bytes", "10", "--effort", "0"]) == 0
+    assert main(["compress", str(red_plastic_file), "-o", str(small), "--bytes", "10", "--effort", "0",
+                 "--latent", "auto"]) == 0
     assert "(no latent: basis only, not editable)" in capsys.readouterr().out
     (entry,) = parse_bvae(small.read_bytes()).header.entries
     assert entry.layers["mu"] == "none" and entry.layers["basis"]["count"] >= 5  # packed: at least as many
     assert entry.length + entry.descriptor_bytes <= 10
-    for flags, message in ((["--bytes", "5"], "--bytes 5 is below the smallest record"),
+    for flags, message in ((["--bytes", "5", "--latent", "auto"], "--bytes 5 is below the smallest record"),
                            (["--bytes", "10", "--latent", "always"], "--bytes 10 is below the smallest record"),
+                           (["--bytes", "10"], "--bytes 10 is below the smallest record"),  # always, the default
                            (["--latent", "always"], "--latent chooses between the records of rate control")):
         bad = tmp_path / "bad.bvae"
         assert main(["compress", str(red_plastic_file), "-o", str(bad), *flags]) == 2

@@ -52,9 +52,12 @@ def test_manifest_covers_what_the_spec_asks_for() -> None:
     # Packed basis layers (2.3): the padding, the widths the count needs, the top width, the layer bit's pairing.
     assert {"packed-padding-bits", "packed-too-many", "packed-top-zero", "packed-top-range", "packed-without-basis",
             "packed-short"} <= invalid
-    assert {"basis-only", "version-2.0", "packed-basis"} <= valid
+    # Entropy-coded basis layers (2.4): the shortest coding, the escape's bound, the layer bits' pairing, the length.
+    assert {"coded-trailing-zero", "coded-escape-prefix", "coded-and-packed", "coded-without-basis",
+            "coded-length-zero"} <= invalid
+    assert {"basis-only", "version-2.0", "packed-basis", "coded-basis"} <= valid
     without = [r for v in MANIFEST["valid"] for r in v["records"] if r.get("layers", {}).get("mu") == "none"]
-    assert len(without) == 5 and all(r["mu"] is None and r["layers"]["sigma"] == "none" for r in without)
+    assert len(without) == 6 and all(r["mu"] is None and r["layers"]["sigma"] == "none" for r in without)
     assert {"reference.basis-only", "reference.basis-only-detail"} <= set(MANIFEST["decode_layers"]["values"])
     projected = [r for v in MANIFEST["valid"] for r in v["records"]
                  if "project" in r.get("layers", {}).get("basis", {})]
@@ -71,7 +74,7 @@ def test_manifest_covers_what_the_spec_asks_for() -> None:
 def test_valid_vector_reads_as_listed(vector: dict[str, Any]) -> None:
     parsed = parse_bvae((VECTORS / vector["file"]).read_bytes(), vector["file"])
     header = parsed.header
-    assert (FORMAT_MAJOR, FORMAT_MINOR) == (2, 3) and MANIFEST["format_version"] == "2.3"
+    assert (FORMAT_MAJOR, FORMAT_MINOR) == (2, 4) and MANIFEST["format_version"] == "2.4"
     assert f"{header.major}.{header.minor}" == vector["format_version"]  # the lowest version that holds the file
     assert header.decoder.sha256 == vector["decoder_sha256"]
     assert header.basis_sha256 == vector["basis_sha256"]

@@ -81,20 +81,22 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
                         "a basis layer (format 1.6): auto (default: per material, where it lowers the error, in "
                         "records without a detail layer), always (the flag alone) or never; projecting usually lowers "
                         "the error on materials the model was not trained on, at some decode time")
-    parser.add_argument("--latent", choices=("auto", "always"), default=None,
-                        help="with --bytes/--max-relae: auto (default) may write a record without a latent code "
-                        "where that is better (format 2.1: the model's mean plus basis coefficients; from 6 B): it "
-                        "decodes like any other, but cannot be edited; always keeps a latent code in every record, "
-                        "so that every record can be edited")
+    parser.add_argument("--latent", choices=("always", "auto"), default=None,
+                        help="with --bytes/--max-relae: always (default) keeps an editable latent code in every "
+                        "record; auto may write a record without a latent code where its error is lower (format "
+                        "2.1: the model's mean plus basis coefficients; from 6 B), giving up the latent: such a "
+                        "record decodes like any other, but cannot be edited, traversed, interpolated or grafted, "
+                        "nor shown on the studio's sliders")
     parser.add_argument("--sigma", action="store_true",
                         help="also store the posterior width σ (by default a record stores μ alone, format 2.2, and "
                         "reads back with σ = 1; under --bytes σ's bytes go to the layers instead): the shipped "
                         "model's σ carries no information, see its model card")
-    parser.add_argument("--basis-coding", choices=("packed", "int8"), default="packed",
+    parser.add_argument("--basis-coding", choices=("packed", "coded", "int8"), default="packed",
                         help="with --bytes/--max-relae: how records without a detail layer store basis "
                         "coefficients: packed (default, format 2.3: later vectors get fewer bits at one step, "
-                        "more coefficients in the same bytes) or int8 (one byte each, readable by "
-                        "format 2.2 readers)")
+                        "more coefficients in the same bytes), coded (format 2.4: one step, the integers "
+                        "arithmetic-coded under a Laplace prior whose spread falls with the vector's rank) or int8 "
+                        "(one byte each, readable by format 2.2 readers)")
     parser.set_defaults(handler=run)
 
 
@@ -222,7 +224,7 @@ def run(args: argparse.Namespace) -> int:
                          "without --no-basis")
     if args.latent is not None and args.bytes is None and args.max_relae is None:
         raise UsageError("--latent chooses between the records of rate control: give --bytes or --max-relae")
-    latent = args.latent or "auto"
+    latent = args.latent or "always"
     dtype = "float16" if args.float16 else "float32"
     if args.bytes is not None:  # the floor, from the model's manifest: before loading the model or any input
         _check_bytes_floor(args.bytes, args.model, 2 if args.float16 else 4, not args.no_basis, latent == "auto",

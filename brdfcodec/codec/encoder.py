@@ -109,19 +109,22 @@ class BrdfEncoder:
         ``"auto"`` fits both and keeps
         the better per material; ``True``/``False`` mean ``"always"``/``"never"``. Ignored where the model's
         decoder has no linear path to centre the projection on.
-    latent : {"auto", "always"}, default "auto"
-        With ``bytes`` or ``max_relae``: ``"auto"`` lets rate control pick a record without a latent (format 2.1,
-        the decoder's linear-path mean plus basis coefficients) where its error is lower; it decodes like any
-        other but cannot be edited. ``"always"``: every record keeps a latent code that edits can move.
+    latent : {"always", "auto"}, default "always"
+        With ``bytes`` or ``max_relae``: ``"always"`` (the default, issue 48): every record keeps a latent code
+        that edits can move. ``"auto"`` lets rate control pick a record without a latent (format 2.1, the
+        decoder's linear-path mean plus basis coefficients) where its error is lower; it decodes like any other
+        but cannot be edited.
     store_sigma : bool, default False
         Store the posterior width σ. By default a record stores μ alone (format 2.2, ``layers.sigma = "none"``:
         half a plain record's payload; under a size budget its bytes go to the layers) and reads back with
         σ = 1: the shipped model's σ says nothing about how certain an encoding is (its model card, "The
         posterior width σ").
-    basis_coding : {"packed", "int8"}, default "packed"
+    basis_coding : {"packed", "coded", "int8"}, default "packed"
         With ``bytes`` or ``max_relae``: how records without a detail layer store their basis
         coefficients. ``"packed"`` (format 2.3) gives later basis vectors fewer bits at one step, so a
-        budget holds more coefficients; ``"int8"`` stores one byte each (readable by 2.2 readers).
+        budget holds more coefficients; ``"coded"`` (format 2.4) arithmetic-codes them at one step under a
+        Laplace prior whose spread falls with the vector's rank; ``"int8"`` stores one byte each (readable by
+        2.2 readers).
     """
 
     manifest: ModelManifest | None
@@ -139,7 +142,7 @@ class BrdfEncoder:
         latent_dtype: LatentDtype = "float32",
         basis: bool = True,
         project_base: ProjectBase | bool = "auto",
-        latent: LatentChoice = "auto",
+        latent: LatentChoice = "always",
         store_sigma: bool = False,
         basis_coding: BasisCoding = "packed",
     ) -> None:

@@ -31,6 +31,8 @@ from brdfcodec.layers.basis import (
     packed_coefficients,
     quantise_coefficients,
 )
+from brdfcodec.layers.basis_layer import coded_coefficients
+from brdfcodec.layers.coded_basis import choose_coding
 from brdfcodec.layers.packed import choose_packing, packed_widths
 
 if TYPE_CHECKING:
@@ -73,18 +75,26 @@ PROJECTED_BASE_VECTORS = 50
 ProjectBase = Literal["auto", "always", "never"]
 _PROJECT_BASE_CHOICES: tuple[str, ...] = get_args(ProjectBase)
 
-#: Whether rate control may write records without a latent (format 2.1, :class:`EncodeOptions`): ``"auto"`` makes
-#: them candidates beside the latent ones wherever the model has a shared basis and a linear path covering it,
-#: and keeps whichever has the lower error (a latent on a tie); ``"always"`` writes a latent in every record, so
-#: every record can be edited.
+#: Whether rate control may write records without a latent (format 2.1, :class:`EncodeOptions`): ``"always"`` (the
+#: default since issue 48) writes a latent in every record, so every record can be edited; ``"auto"`` makes records
+#: without one candidates beside the latent ones wherever the model has a shared basis and a linear path covering
+#: it, and keeps whichever has the lower error (a latent on a tie): those records cannot be edited.
 LatentChoice = Literal["auto", "always"]
 _LATENT_CHOICES: tuple[str, ...] = get_args(LatentChoice)
 
 #: How the records of rate control without a detail layer store their basis coefficients (:class:`EncodeOptions`):
-#: ``"packed"`` (format 2.3, ``spec/bvae-format.md`` §4.7: one step, fewer bits for later vectors, so the bytes
+#: ``"coded"`` (format 2.4, ``spec/bvae-format.md`` §4.8: one step, integers arithmetic-coded under the form's
+#: Laplace prior, :data:`CODED_PRIOR`), ``"packed"`` (format 2.3, ``spec/bvae-format.md`` §4.7: one step, fewer bits for later vectors, so the bytes
 #: of k int8 coefficients hold more of them) or ``"int8"`` (a float16 step and one byte each, as before
 #: 2.3). Records with a detail layer store int8.
-BasisCoding = Literal["packed", "int8"]
+BasisCoding = Literal["coded", "packed", "int8"]
+
+#: The Laplace prior a coded layer declares (amplitude A, decay d: vector n's spread 2^(A/16 − 4)·n^(−d/32) mapped
+#: units), by whether the record has a latent: a latent base leaves a smaller residual on the vectors past the
+#: decoder's linear path (spread about 2^5.7·n^−0.86) than the linear-path mean leaves on the basis' first vectors
+#: (2^7.9·n^−1.27): power laws fitted to the least-squares coefficients of the seven analytic presets' residuals
+#: (with a refined latent: vectors 9 to 75; without: 1 to 75) on the shipped model.
+CODED_PRIOR: dict[bool, tuple[int, int]] = {True: (156, 28), False: (190, 41)}
 _BASIS_CODINGS: tuple[str, ...] = get_args(BasisCoding)
 
 def _most_packed(k: int) -> int:
@@ -131,16 +141,17 @@ class EncodeOptions:
         and keeps the lower error, in records without a detail layer (with one, a projected record decodes
         past the 1.5× decode-time target of the ``decode-layered`` benchmark);
         it doubles the basis layer's fitting time. ``True`` and ``False`` mean ``"always"`` and ``"never"``.
-    latent : {"auto", "always"}
-        ``"auto"`` (the default): a size budget or an error target may pick a record without a latent (format
-        2.1: the decoder's linear-path mean plus basis coefficients from the first vector), where its error is
-        lower (:data:`LatentChoice`); such a record decodes but cannot be edited. ``"always"``: every record
-        keeps a latent code. Nothing changes without a target, or without a shared basis.
+    latent : {"always", "auto"}
+        ``"always"`` (the default, issue 48): every record keeps an editable latent code. ``"auto"``: a size
+        budget or an error target may pick a record without a latent (format 2.1: the decoder's linear-path mean
+        plus basis coefficients from the first vector), where its error is lower (:data:`LatentChoice`); such a
+        record decodes but cannot be edited, traversed, interpolated or grafted. Nothing changes without a
+        target, or without a shared basis.
     store_sigma : bool
         Store σ (False, the default: μ alone, format 2.2; rate control gives σ's bytes to the layers).
-    basis_coding : {"packed", "int8"}
+    basis_coding : {"coded", "packed", "int8"}
         How the records of rate control (a size budget or an error target) without a detail layer store basis
-        coefficients (:data:`BasisCoding`; default ``"packed"``, format 2.3).
+        coefficients (:data:`BasisCoding`; default ``"packed"``, format 2.3; ``"coded"``: entropy-coded, format 2.4).
     """
 
     effort: int = 1
@@ -151,7 +162,7 @@ class EncodeOptions:
     latent_itemsize: int = 4
     basis: bool = True
     project_base: ProjectBase = "auto"
-    latent: LatentChoice = "auto"
+    latent: LatentChoice = "always"
     store_sigma: bool = False
     basis_coding: BasisCoding = "packed"
 
@@ -180,7 +191,12 @@ class EncodeOptions:
     def packed(self) -> bool:
         """Whether records without a detail layer pack their basis layer (``"packed"`` under a size budget or an
         error target)."""
-        return self.basis_coding == "packed" and (self.bytes_budget is not None or self.max_relae is not None)
+        return self.basis_coding != "int8" and (self.bytes_budget is not None or self.max_relae is not None)
+
+    @property
+    def coded(self) -> bool:
+        """Whether those records entropy-code their basis layer (format 2.4) rather than pack it."""
+        return self.packed and self.basis_coding == "coded"
 
     @property
     def layered(self) -> bool:
@@ -283,12 +299,18 @@ def _basis_only_fit(
     def fit_packed(k: int) -> tuple[BasisLayer, np.ndarray]:
         # in the bytes of k int8 coefficients: the count the least-squares coefficients pack to, then those fitted
         # (Adam) and packed, and the integers polished within their fields
-        max_bytes = STEP_BYTES + k
+        max_bytes = STEP_BYTES + k - (1 if options.coded else 0)  # a coded layer's length takes a descriptor byte
         available = min(basis.count, _most_packed(k))
         least_squares = fit_basis_only_coefficients(target, weights, centre, basis.vectors(0, available), 0)
-        count = _packed_count(least_squares, 0, max_bytes)
+        prior = CODED_PRIOR[False]
+        count = _coded_count(least_squares, 0, max_bytes, prior) if options.coded else (
+            _packed_count(least_squares, 0, max_bytes))
         components = basis.vectors(0, count)
         coefficients = fit_basis_only_coefficients(target, weights, centre, components, options.effort)
+        if options.coded:
+            coded = coded_coefficients(basis.sha256, coefficients, max_bytes, prior)
+            assert coded is not None
+            return coded, basis.on_grid(centre + basis.weighted_sum(coded.coefficients()))
         layer = packed_coefficients(basis.sha256, coefficients, max_bytes)
         assert layer is not None
         if POLISH_PASSES[options.effort]:
@@ -319,14 +341,15 @@ def _basis_fit(
 
     def fit_one(k: int, mu_storage: MuStorage, p: int, packed: bool) -> tuple[LatentRecord, BasisLayer, np.ndarray]:
         projection = None if not p else (basis.vectors(0, p), decoder.projection_centre)
-        max_bytes = STEP_BYTES + k
+        max_bytes = STEP_BYTES + k - (1 if packed and options.coded else 0)  # a coded layer's length: 1 byte
         if packed:  # in the bytes of k int8 coefficients: as many as the least-squares coefficients pack to
             first = min(linear_rank, basis.count - 1)
             available = min(basis.count - first, _most_packed(k))
             _, least_squares = fit_basis_coefficients(
                 decoder.network, base.mu[None], inputs[None], masks[None], basis.vectors(first, available),
                 basis.entries, 0, projection=projection)
-            k = _packed_count(least_squares[0], first, max_bytes)
+            k = (_coded_count(least_squares[0], first, max_bytes, CODED_PRIOR[True]) if options.coded
+                 else _packed_count(least_squares[0], first, max_bytes))
         else:
             first = basis_offset(linear_rank, basis.count, k)
         components = basis.vectors(first, k)
@@ -346,7 +369,11 @@ def _basis_fit(
             )
         else:
             code = _as_stored(codes, options.latent_itemsize)[0]
-        if packed:
+        if packed and options.coded:
+            coded = coded_coefficients(basis.sha256, coefficients[0], max_bytes, CODED_PRIOR[True], first, p)
+            assert coded is not None
+            layer = coded
+        elif packed:
             packed_layer = packed_coefficients(basis.sha256, coefficients[0], max_bytes, first, p)
             assert packed_layer is not None
             layer = packed_layer
@@ -376,6 +403,14 @@ def _basis_fit(
         return min(fits, key=lambda candidate: kept_slice_error(candidate[2]))
 
     return fit
+
+
+def _coded_count(coefficients: np.ndarray, first: int, max_bytes: int, prior: tuple[int, int]) -> int:
+    """How many of these coefficients (of vectors ``first``, …) the best coded layer of ``max_bytes`` keeps."""
+    choice = choose_coding(coefficients, first, max_bytes, *prior)
+    if choice is None:
+        raise ValueError(f"no coded basis layer fits in {max_bytes} bytes")
+    return len(choice.q)
 
 
 def _packed_count(coefficients: np.ndarray, first: int, max_bytes: int) -> int:

@@ -122,7 +122,7 @@ def encode(
     max_relae: float | None = None,
     metric: Literal["mapped", "linear"] = "mapped",
     provenance: bool = False,
-    latent: LatentChoice = "auto",
+    latent: LatentChoice = "always",
 ) -> bytes:
     """Encode MERL tables into the bytes of one ``.bvae`` file (one material, or a library of many).
 
@@ -144,7 +144,7 @@ def encode(
     provenance : bool, default False
         Store each record's provenance in the file (``spec/bvae-format.md`` §5: source SHA-256 and kind,
         RelAE, encoder, effort, rate control). By default the file holds names and records only.
-    latent : {"auto", "always"}, default "auto"
+    latent : {"always", "auto"}, default "always"
         Whether rate control may write records without a latent, as for :class:`BrdfEncoder`.
 
     Returns
@@ -211,7 +211,7 @@ def compress(
     max_relae: float | None = None,
     metric: Literal["mapped", "linear"] = "mapped",
     provenance: bool = False,
-    latent: LatentChoice = "auto",
+    latent: LatentChoice = "always",
 ) -> int:
     """Write :func:`encode` of the sources to a ``.bvae`` file, atomically (options as for :func:`encode`).
 

@@ -186,11 +186,14 @@ class _Candidates:
             return self.plain_bytes
         detail = None if s is None else self.detail(k, s).nbytes
         return (self.layered_bytes + (0 if basis is None else basis.nbytes) + (detail or 0)
-                + self.overhead(None if basis is None else basis.count, detail))
+                + self.overhead(None if basis is None else basis.count, detail, _coded_bytes(basis)))
 
-    def overhead(self, basis_count: int | None, detail_bytes: int | None = None) -> int:
-        """The record's descriptor in the file's index (what a budget counts besides the payload)."""
-        return record_overhead(self.base.name, basis_count=basis_count, detail_bytes=detail_bytes)
+    def overhead(self, basis_count: int | None, detail_bytes: int | None = None,
+                 basis_bytes: int | None = None) -> int:
+        """The record's descriptor in the file's index (what a budget counts besides the payload; an entropy-coded
+        basis layer, format 2.4, states its length there)."""
+        return record_overhead(self.base.name, basis_count=basis_count, detail_bytes=detail_bytes,
+                               basis_bytes=basis_bytes)
 
     def most_coefficients(self, bytes_budget: int, most: int) -> int:
         """The most basis coefficients (at most ``most``) whose record without a detail layer fits the budget
@@ -404,7 +407,8 @@ class _WithoutLatent:
         a packed layer's own size once fitted, which is at most that)."""
         if k in self.fits:
             layer = self.fits[k][0]
-            return layer.nbytes + record_overhead(self.base.name, basis_count=layer.count)
+            return layer.nbytes + record_overhead(self.base.name, basis_count=layer.count,
+                                                  basis_bytes=_coded_bytes(layer))
         return STEP_BYTES + k + record_overhead(self.base.name, basis_count=k)
 
     def for_budget(self, bytes_budget: int) -> int | None:
@@ -442,6 +446,11 @@ class _WithoutLatent:
 
         bracket = _bisect(meets, len(counts), [(True, n, None) for n in counts])
         return None if bracket is None else bracket[1][1]
+
+
+def _coded_bytes(layer: BasisLayer | None) -> int | None:
+    """An entropy-coded basis layer's bytes (its descriptor states them, format 2.4); None for any other."""
+    return layer.nbytes if layer is not None and layer.prior is not None else None
 
 
 def error_target_sequence(basis_count: int) -> list[_Candidate]:

@@ -43,8 +43,9 @@ FORMAT_MAJOR = 2
 #: 2.1: basis-only layered records (``layers.mu`` and ``layers.sigma`` ``"none"``: no latent, spec §4.6).
 #: 2.2: a latent without σ (``layers.sigma`` ``"none"`` beside a stored μ), which may hold no layer (spec §4.4).
 #: 2.3: packed basis layers (form layer bit 2 and a top width: spec §4.7).
-#: A writer states the lowest minor version a file needs (2.1 unless a record leaves σ out or packs its basis).
-FORMAT_MINOR = 3
+#: 2.4: entropy-coded basis layers (form layer bit 3, a prior of two bytes, a length per record: spec §4.8).
+#: A writer states the lowest minor version a file needs (2.1 unless a record leaves σ out, packs or codes its basis).
+FORMAT_MINOR = 4
 #: Largest stored header (binary index and stored metadata block), in bytes.
 MAX_HEADER_BYTES = 1 << 24
 #: Largest metadata block, decompressed, in bytes.
@@ -78,6 +79,8 @@ LatentDtype = Literal["float32", "float16"]
 _DTYPES: dict[str, np.dtype] = {"float32": np.dtype("<f4"), "float16": np.dtype("<f2")}
 #: Layer bits of a form (§3.2); bit 2: the basis layer is packed (2.3, §4.7).
 _LAYER_BASIS, _LAYER_DETAIL, _LAYER_PACKED = 1, 2, 4
+#: Form layer bit 3 (format 2.4): the basis layer is entropy-coded under the form's prior (spec §4.8).
+_LAYER_CODED = 8
 
 _DTYPE_CODES = {"float32": 0, "float16": 1}
 _SHA256 = re.compile(r"^[0-9a-f]{64}$")

@@ -38,6 +38,7 @@ from brdfcodec.layers.basis import (
     int8_with_step,
 )
 from brdfcodec.layers.detail import _DTYPES, DETAIL_TRANSFORM, MAX_STEP, MIN_STEP, DetailLayer, check_detail_frame
+from brdfcodec.layers.coded_basis import MAX_CODED_BYTES
 from brdfcodec.layers.packed import MAX_TOP_WIDTH, packed_bytes, packed_widths
 
 __all__ = [
@@ -404,7 +405,7 @@ def layers_length(layers: object, where: str, latent_dim: int = 0) -> int:
 def _basis_length(basis: object, where: str) -> int:
     if not isinstance(basis, Mapping):
         raise ValueError(f"{where} layers.basis is not a JSON object")
-    unknown = sorted(set(basis) - {"sha256", "count", "first", "project", "top"})
+    unknown = sorted(set(basis) - {"sha256", "count", "first", "project", "top", "prior", "length"})
     if unknown:
         raise UnsupportedLayerError(
             f"{where} basis layer has fields {unknown}, unknown to this reader; upgrade brdfcodec"
@@ -421,6 +422,8 @@ def _basis_length(basis: object, where: str) -> int:
         )
     if not isinstance(project, int) or isinstance(project, bool) or not 1 <= project <= MAX_BASIS_COUNT:
         raise ValueError(f"{where} basis project {project!r} is not an integer in [1, {MAX_BASIS_COUNT}]")
+    if "prior" in basis or "length" in basis:  # entropy-coded (format 2.4, spec §4.8)
+        return _coded_length(basis, where)
     if "top" in basis:
         top = basis["top"]
         if not isinstance(top, int) or isinstance(top, bool) or not 1 <= top <= MAX_TOP_WIDTH:
@@ -430,6 +433,20 @@ def _basis_length(basis: object, where: str) -> int:
                              "more than it holds (every field needs at least 1 bit)")
         return packed_bytes(top, first, count)
     return STEP_BYTES + count
+
+
+def _coded_length(basis: Mapping[str, Any], where: str) -> int:
+    """An entropy-coded basis layer's ``prior`` (two integers 0 … 255) and ``length`` (its bytes, step code
+    included), checked; returns the length."""
+    prior, length = basis.get("prior"), basis.get("length")
+    if "top" in basis:
+        raise ValueError(f"{where} basis layer is both packed and entropy-coded")
+    if not isinstance(prior, list | tuple) or len(prior) != 2 or any(
+            not isinstance(v, int) or isinstance(v, bool) or not 0 <= v <= 255 for v in prior):
+        raise ValueError(f"{where} coded basis prior {prior!r} is not two integers in [0, 255]")
+    if not isinstance(length, int) or isinstance(length, bool) or not 1 <= length <= MAX_CODED_BYTES:
+        raise ValueError(f"{where} coded basis length {length!r} is not an integer in [1, {MAX_CODED_BYTES}]")
+    return length
 
 
 def _detail_length(detail: object, where: str) -> int:

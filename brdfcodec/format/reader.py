@@ -24,6 +24,7 @@ from brdfcodec.format.container import (
     _DTYPE_CODES,
     _DTYPES,
     _LAYER_BASIS,
+    _LAYER_CODED,
     _LAYER_DETAIL,
     _LAYER_PACKED,
     _PREAMBLE,
@@ -160,7 +161,8 @@ def _parse_form(path: str, cursor: _Cursor, i: int, latent_dim: int, basis_sha: 
     mu_code, sigma_code, layer_bits = cursor.u8(f"{where}'s mu"), cursor.u8(f"{where}'s sigma"), cursor.u8(where)
     mus = {v: k for k, v in _MU_CODES.items()}
     sigmas = {v: k for k, v in _SIGMA_CODES.items()}
-    if mu_code not in mus or sigma_code not in sigmas or layer_bits & ~(_LAYER_BASIS | _LAYER_DETAIL | _LAYER_PACKED):
+    if mu_code not in mus or sigma_code not in sigmas or layer_bits & ~(
+            _LAYER_BASIS | _LAYER_DETAIL | _LAYER_PACKED | _LAYER_CODED):
         raise UnsupportedVersionError(
             path, f"{where} stores mu, sigma or layers in a way unknown to this reader (codes {mu_code}, {sigma_code}, "
             f"{layer_bits}); upgrade brdfcodec")
@@ -176,6 +178,9 @@ def _parse_form(path: str, cursor: _Cursor, i: int, latent_dim: int, basis_sha: 
         raise _fail(path, f"{where} stores no latent and no basis layer: a record without a latent needs one")
     if layer_bits & _LAYER_PACKED and not layer_bits & _LAYER_BASIS:
         raise _fail(path, f"{where} packs a basis layer it does not have (layer bit 2 without bit 0)")
+    if layer_bits & _LAYER_CODED and (not layer_bits & _LAYER_BASIS or layer_bits & _LAYER_PACKED):
+        raise _fail(path, f"{where} entropy-codes a basis layer it does not have, or one it packs (layer bit 3 "
+                    "needs bit 0 and excludes bit 2)")
     layers: dict[str, Any] = {}
     if mus[mu_code] is not None:
         layers["mu"] = mus[mu_code]
@@ -193,10 +198,14 @@ def _parse_form(path: str, cursor: _Cursor, i: int, latent_dim: int, basis_sha: 
             top = cursor.u8(f"{where}'s packed top width")
             if not 1 <= top <= MAX_TOP_WIDTH:
                 raise _fail(path, f"{where} packs its basis layer with top width {top}, outside 1 to {MAX_TOP_WIDTH}")
+        coded = {}
+        if layer_bits & _LAYER_CODED:  # format 2.4: the prior's amplitude and decay (spec §4.8)
+            coded = {"prior": [cursor.u8(f"{where}'s prior amplitude"), cursor.u8(f"{where}'s prior decay")],
+                     "length": 1}
         # as brdfcodec.format.layered_record.layers_entry writes it: ``first``, ``project`` and ``top`` only when
         # not 0
         layers["basis"] = {"sha256": basis_sha, "count": 1, **({"first": first} if first else {}),
-                           **({"project": project} if project else {}), **({"top": top} if top else {})}
+                           **({"project": project} if project else {}), **({"top": top} if top else {}), **coded}
     if layer_bits & _LAYER_DETAIL:
         dtypes = {v: k for k, v in _DETAIL_CODES.items()}
         code = cursor.u8(f"{where}'s detail form")
@@ -265,6 +274,8 @@ def _parse_header(path: str, stored: bytes, preamble_fields: tuple[int, ...], fi
             layers = {key: dict(value) if isinstance(value, dict) else value for key, value in form.layers.items()}
             if "basis" in layers:
                 layers["basis"]["count"] = cursor.varint(f"{label}'s basis count")
+                if "prior" in layers["basis"]:
+                    layers["basis"]["length"] = cursor.varint(f"{label}'s coded basis length")
             if "detail" in layers:
                 layers["detail"]["step"] = struct.unpack("<d", cursor.take(8, f"{label}'s detail step"))[0]
                 layers["detail"]["length"] = cursor.varint(f"{label}'s detail length")

@@ -20,6 +20,7 @@ from brdfcodec.format.container import (
     _DTYPE_CODES,
     _DTYPES,
     _LAYER_BASIS,
+    _LAYER_CODED,
     _LAYER_DETAIL,
     _LAYER_PACKED,
     _PREAMBLE,
@@ -68,7 +69,8 @@ def _varint_size(value: int) -> int:
     return max(1, (int(value).bit_length() + 6) // 7)
 
 
-def record_overhead(name: str, *, basis_count: int | None = None, detail_bytes: int | None = None) -> int:
+def record_overhead(name: str, *, basis_count: int | None = None, detail_bytes: int | None = None,
+                    basis_bytes: int | None = None) -> int:
     """Bytes a record's descriptor takes in the index beyond its name's UTF-8 bytes (§3.3).
 
     This is what ``--bytes N`` counts besides the payload: the name's length
@@ -85,6 +87,8 @@ def record_overhead(name: str, *, basis_count: int | None = None, detail_bytes: 
         Basis coefficients, when the record has a basis layer.
     detail_bytes : int, optional
         Bytes of the detail layer, when the record has one.
+    basis_bytes : int, optional
+        Bytes of an entropy-coded basis layer (format 2.4), whose descriptor states its length (a varint).
 
     Returns
     -------
@@ -93,6 +97,8 @@ def record_overhead(name: str, *, basis_count: int | None = None, detail_bytes: 
     size = _varint_size(len(name.encode("utf-8"))) + 1
     if basis_count is not None:
         size += _varint_size(basis_count)
+    if basis_bytes is not None:
+        size += _varint_size(basis_bytes)
     if detail_bytes is not None:
         size += 8 + _varint_size(detail_bytes)
     return size
@@ -101,8 +107,10 @@ def record_overhead(name: str, *, basis_count: int | None = None, detail_bytes: 
 def descriptor_size(record: Record) -> int:
     """:func:`record_overhead` of a record: its descriptor's bytes beyond its name's."""
     basis, detail = getattr(record, "basis", None), getattr(record, "detail", None)
+    coded = basis is not None and getattr(basis, "prior", None) is not None
     return record_overhead(record.name, basis_count=None if basis is None else basis.count,
-                           detail_bytes=None if detail is None else detail.nbytes)
+                           detail_bytes=None if detail is None else detail.nbytes,
+                           basis_bytes=basis.nbytes if coded else None)
 
 
 def record_size(record: Record, latent_dtype: LatentDtype = "float32") -> int:
@@ -136,7 +144,8 @@ def _form_of(record: Record) -> tuple[Any, ...]:
     basis, detail = layers.get("basis"), layers.get("detail")
     return ("layered", layers.get("mu"), layers.get("sigma"),
             None if basis is None else (int(basis.get("first", 0)), int(basis.get("project", 0)),
-                                        int(basis.get("top", 0))),
+                                        int(basis.get("top", 0)),
+                                        tuple(basis["prior"]) if "prior" in basis else None),
             None if detail is None else str(detail["dtype"]))
 
 
@@ -150,21 +159,27 @@ def _form_bytes(form: tuple[Any, ...]) -> bytes:
         layers = (_LAYER_BASIS if basis is not None else 0) | (_LAYER_DETAIL if detail is not None else 0)
         if basis is not None and basis[2]:
             layers |= _LAYER_PACKED
+        if basis is not None and basis[3] is not None:
+            layers |= _LAYER_CODED
         out += bytes([_MU_CODES[mu], _SIGMA_CODES[sigma], layers])
         if basis is not None:
             out += _varint(basis[0]) + _varint(basis[1])
             if basis[2]:
                 out += bytes([basis[2]])
+            if basis[3] is not None:  # the coded layer's prior (format 2.4): amplitude, decay
+                out += bytes(basis[3])
         if detail is not None:
             out += bytes([_DETAIL_CODES[detail]])
     return out
 
 
 def _minor_needed(records: Sequence[Record]) -> int:
-    """The lowest minor version that holds these records (§2): 3 once a basis layer is packed, 2 once a record
-    stores a latent without σ, else 1."""
-    if any(getattr(getattr(r, "basis", None), "top", 0) for r in records):
+    """The lowest minor version that holds these records (§2): 4 once a basis layer is entropy-coded, 3 once one
+    is packed, 2 once a record stores a latent without σ, else 1."""
+    if any(getattr(getattr(r, "basis", None), "prior", None) is not None for r in records):
         return FORMAT_MINOR
+    if any(getattr(getattr(r, "basis", None), "top", 0) for r in records):
+        return 3
     without_sigma = any(getattr(r, "has_latent", False) and not getattr(r, "store_sigma", True) for r in records)
     return 2 if without_sigma else 1
 
@@ -243,6 +258,8 @@ def encode_bvae(
         basis, detail = getattr(record, "basis", None), getattr(record, "detail", None)
         if basis is not None:
             descriptor += _varint(basis.count)
+            if getattr(basis, "prior", None) is not None:  # an entropy-coded layer states its length (2.4, §3.3)
+                descriptor += _varint(basis.nbytes)
         if detail is not None:
             descriptor += struct.pack("<d", detail.step) + _varint(detail.nbytes)
         descriptors.append(descriptor)

@@ -25,7 +25,8 @@ This module does not import torch (the encoder's joint fit is in
 :mod:`brdfcodec.codec.refine`).
 
 The parts: :mod:`~brdfcodec.layers.quantise`, :mod:`~brdfcodec.layers.shared_basis`,
-:mod:`~brdfcodec.layers.basis_layer`, :mod:`~brdfcodec.layers.basis_storage`.
+:mod:`~brdfcodec.layers.basis_layer`, :mod:`~brdfcodec.layers.basis_storage`; packed and entropy-coded
+coefficients (formats 2.3, 2.4): :mod:`~brdfcodec.layers.packed`, :mod:`~brdfcodec.layers.coded_basis`.
 This module gathers their names.
 """
 
@@ -36,6 +37,7 @@ from brdfcodec.layers.basis_layer import (
     basis_layer_from_bytes,
     check_basis_layers,
     check_records_without_latent,
+    coded_coefficients,
     packed_coefficients,
     quantise_coefficients,
 )

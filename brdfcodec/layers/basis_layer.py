@@ -5,6 +5,7 @@ Part of :mod:`brdfcodec.layers.basis`, which gathers the names of its parts.
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -14,6 +15,15 @@ import numpy.typing as npt
 
 from brdfcodec.errors import BasisError, BasisMismatchError
 from brdfcodec.io.hashing import is_sha256_hex
+from brdfcodec.layers.coded_basis import (
+    CODED_HEADER_BYTES,
+    MAX_CODED_BYTES,
+    MAX_MAGNITUDE,
+    choose_coding,
+    decode_integers,
+    encode_integers,
+    prior_codes,
+)
 from brdfcodec.layers.packed import (
     MAX_TOP_WIDTH,
     PACKED_HEADER_BYTES,
@@ -40,6 +50,7 @@ __all__ = [
     "basis_layer_from_bytes",
     "check_basis_layers",
     "check_records_without_latent",
+    "coded_coefficients",
     "packed_coefficients",
     "quantise_coefficients",
 ]
@@ -70,6 +81,10 @@ class BasisLayer:
     top : int, default 0
         T > 0: a packed layer (format 2.3, :mod:`brdfcodec.layers.packed`), coefficient i a field of
         T − round(log₂(first + i + 1)) bits; 0: int8 coefficients.
+    prior : (int, int) or None, default None
+        An entropy-coded layer (format 2.4, :mod:`brdfcodec.layers.coded_basis`): the form's Laplace prior
+        (amplitude A, decay d, 0 … 255 each; vector n's spread 2^(A/16 − 4)·n^(−d/32) mapped units); the step
+        is a packed step. None: not coded.
     """
 
     sha256: str
@@ -78,12 +93,15 @@ class BasisLayer:
     first: int = 0
     project: int = 0
     top: int = 0
+    prior: tuple[int, int] | None = None
 
     def __post_init__(self) -> None:
         if not is_sha256_hex(self.sha256):
             raise ValueError(f"basis sha256 must be 64 lower-case hex digits, got {self.sha256!r}")
         q = np.asarray(self.q)
-        if self.top:
+        if self.prior is not None:
+            self._check_coded(q)
+        elif self.top:
             self._check_packed(q)
         else:
             step = np.float16(self.step)
@@ -100,6 +118,28 @@ class BasisLayer:
             0 <= self.project <= MAX_BASIS_COUNT
         ):
             raise ValueError(f"basis projection must be an integer in [0, {MAX_BASIS_COUNT}], got {self.project!r}")
+
+    def _check_coded(self, q: np.ndarray) -> None:
+        """The coded layer's own rules: a prior of two bytes, a packed step, integers within the coder's range."""
+        prior = self.prior
+        if (not isinstance(prior, tuple) or len(prior) != 2 or any(
+                isinstance(v, bool) or not isinstance(v, int | np.integer) or not 0 <= v <= 255 for v in prior)):
+            raise ValueError(f"a coded basis layer's prior must be two integers in [0, 255], got {prior!r}")
+        if self.top:
+            raise ValueError("a basis layer is either packed or entropy-coded, not both")
+        packed_step_code(self.step)
+        if q.ndim != 1 or not np.issubdtype(q.dtype, np.integer) or not 1 <= len(q) <= MAX_BASIS_COUNT:
+            raise ValueError(f"basis coefficients must be 1 to {MAX_BASIS_COUNT} integers")
+        if int(np.abs(q.astype(np.int64)).max()) > MAX_MAGNITUDE:
+            raise ValueError(f"a coded basis coefficient exceeds ±{MAX_MAGNITUDE}")
+
+    @functools.cached_property
+    def _coded(self) -> bytes:
+        """A coded layer's bytes: the step code, then the coder's bytes (§4.8)."""
+        assert self.prior is not None
+        code = packed_step_code(self.step)
+        codes = prior_codes(self.prior[0], self.prior[1], code, self.first, self.count)
+        return bytes([code]) + encode_integers(self.q, codes)
 
     def _check_packed(self, q: np.ndarray) -> None:
         """The packed layer's own rules: top width, step code, integer fields of width ≥ 1 that hold q."""
@@ -127,7 +167,10 @@ class BasisLayer:
 
     @property
     def nbytes(self) -> int:
-        """Stored size: the float16 step and k bytes; packed, the step code and the fields' bytes."""
+        """Stored size: the float16 step and k bytes; packed, the step code and the fields' bytes; coded, the step
+        code and the coder's bytes."""
+        if self.prior is not None:
+            return len(self._coded)
         if self.top:
             return packed_bytes(self.top, self.first, self.count)
         return STEP_BYTES + self.count
@@ -135,7 +178,9 @@ class BasisLayer:
     @property
     def data(self) -> bytes:
         """Payload bytes: the step as little-endian float16, then the k int8 coefficients; packed, the step
-        code, then the fields (§4.7)."""
+        code, then the fields (§4.7); coded, the step code, then the coder's bytes (§4.8)."""
+        if self.prior is not None:
+            return self._coded
         if self.top:
             widths = packed_widths(self.top, self.first, self.count)
             return bytes([packed_step_code(self.step)]) + pack_fields(self.q, widths)
@@ -154,6 +199,9 @@ class BasisLayer:
             entry["project"] = int(self.project)
         if self.top:
             entry["top"] = int(self.top)
+        if self.prior is not None:
+            entry["prior"] = [int(self.prior[0]), int(self.prior[1])]
+            entry["length"] = self.nbytes
         return entry
 
 def quantise_coefficients(sha256: str, coefficients: npt.ArrayLike, first: int = 0, project: int = 0) -> BasisLayer:
@@ -172,6 +220,17 @@ def packed_coefficients(sha256: str, coefficients: npt.ArrayLike, max_bytes: int
     if choice is None:
         return None
     return BasisLayer(sha256, packed_step(choice.step_code), choice.q, int(first), int(project), choice.top)
+
+def coded_coefficients(sha256: str, coefficients: npt.ArrayLike, max_bytes: int, prior: tuple[int, int],
+                       first: int = 0, project: int = 0, *, count: int | None = None) -> BasisLayer | None:
+    """An entropy-coded basis layer (format 2.4) of at most ``max_bytes`` closest to ``coefficients`` (of vectors
+    ``first``, …; the leading ones that fit, or exactly ``count`` of them), under the form's ``prior``; None when
+    not even one coefficient fits (:func:`~brdfcodec.layers.coded_basis.choose_coding`)."""
+    choice = choose_coding(coefficients, int(first), int(max_bytes), int(prior[0]), int(prior[1]), count=count)
+    if choice is None:
+        return None
+    return BasisLayer(sha256, packed_step(choice.step_code), choice.q, int(first), int(project),
+                      prior=(int(prior[0]), int(prior[1])))
 
 def check_basis_layers(
     entries: Sequence[Any], basis_named: Callable[[str], SharedBasis | None], where: str, own: str | None
@@ -261,6 +320,17 @@ def basis_layer_from_bytes(entry: Mapping[str, Any], data: bytes) -> BasisLayer:
     """A basis layer from its validated index entry and its payload bytes."""
     count = int(entry["count"])
     top, first = int(entry.get("top", 0)), int(entry.get("first", 0))
+    if "prior" in entry:
+        prior = (int(entry["prior"][0]), int(entry["prior"][1]))
+        if not CODED_HEADER_BYTES <= len(data) <= MAX_CODED_BYTES:
+            raise ValueError(f"coded basis layer holds {len(data)} bytes, expected 1 to {MAX_CODED_BYTES}")
+        codes = prior_codes(prior[0], prior[1], data[0], first, count)
+        q = decode_integers(data[CODED_HEADER_BYTES:], codes)
+        layer = BasisLayer(str(entry["sha256"]), packed_step(data[0]), q, first, int(entry.get("project", 0)),
+                           prior=prior)
+        if layer.data != bytes(data):
+            raise ValueError("a coded basis layer's bytes are not the shortest coding of its integers (§4.8)")
+        return layer
     if top:
         if len(data) != packed_bytes(top, first, count):
             raise ValueError(f"packed basis layer holds {len(data)} bytes, expected {packed_bytes(top, first, count)}")

@@ -244,8 +244,9 @@ def invalid_vectors() -> dict[str, tuple[bytes, str, str]]:
     lay = {"step": 0.1, "detail_length": len(detail)}
     add("layered-unknown-detail-form", one("l", lay_payload, layered_form(detail=2), **lay), "unsupported",
         "detail form code 2 (a transform or coefficient type this reader does not know)")
-    add("layered-unknown-layer", one("l", lay_payload, layered_form(detail=0, layer_bits=2 | 8), **lay),
-        "unsupported", "layer bit 3 set besides the detail layer's (bit 2, a packed basis layer, is known since 2.3)")
+    add("layered-unknown-layer", one("l", lay_payload, layered_form(detail=0, layer_bits=2 | 16), **lay),
+        "unsupported", "layer bit 4 set besides the detail layer's (bits 2 and 3, a packed and an entropy-coded "
+        "basis layer, are known since 2.3 and 2.4)")
     add("layered-no-layer", one("l", good, layered_form(layer_bits=0)), "malformed",
         "a layered form with neither a basis nor a detail layer")
     add("detail-step-range", one("l", lay_payload, layered_form(detail=0), step=1000.0,
@@ -343,6 +344,27 @@ def invalid_vectors() -> dict[str, tuple[bytes, str, str]]:
         "malformed", "layer bit 2 (a packed basis layer) without bit 0 (a basis layer)")
     add("packed-short", basis_file(packed_form, packed[:3]), "malformed",
         "widths 9, 8, 7 take 3 bytes after the step code, the file holds 2")
+    # Entropy-coded basis layers (2.4, §4.8): form bit 3 and a prior (A, d) = (64, 32); the descriptor's count,
+    # then the layer's length; the step code 128, then the coder's bytes. q = 3, -3, 0 from vector 0: prior codes
+    # 0, -16, -26, coded as bf 1b a8.
+    coded = bytes([128, 0xBF, 0x1B, 0xA8])
+    coded_form = bytes([2, 3, 3, 1 | 8]) + varint(0) + varint(0) + bytes([64, 32])
+
+    def coded_file(form: bytes, payload: bytes, count: int = 3, length: int | None = None) -> bytes:
+        entry = descriptor("b", 0, count=count) + varint(len(payload) if length is None else length)
+        return assemble(header([form], [entry], payload, basis=basis_sha), payload, flags=2)
+
+    add("coded-trailing-zero", coded_file(coded_form, coded + b"\x00"), "malformed",
+        "the coder's bytes followed by a 0 byte: they decode to the same integers, but are not the shortest coding")
+    add("coded-escape-prefix", coded_file(coded_form, bytes([128]) + b"\xff" * 8, count=1), "malformed",
+        "coder bytes all ones: an Exp-Golomb escape prefix longer than 20 bits")
+    add("coded-and-packed", coded_file(bytes([2, 3, 3, 1 | 4 | 8]) + varint(0) + varint(0) + bytes([9, 64, 32]),
+                                       coded), "malformed", "layer bits 2 and 3 together (packed and entropy-coded)")
+    add("coded-without-basis", one("l", detail, layered_form(0, 1, detail=0, layer_bits=2 | 8), step=0.1,
+                                   detail_length=len(detail)),
+        "malformed", "layer bit 3 (an entropy-coded basis layer) without bit 0 (a basis layer)")
+    add("coded-length-zero", coded_file(coded_form, b"", length=0), "malformed",
+        "a coded basis layer of length 0 (it holds at least the step code)")
     for label, name, why in [
         ("name-parent", "../UP", "a name holding '/' and '..'"),
         ("name-absolute", "/tmp/ESCAPED", "an absolute path as a name"),
@@ -466,6 +488,28 @@ def no_sigma_records() -> tuple[list, DecoderReference, str, bool | None]:
              LatentRecord("gold", mu(), sigma)], TEST_DECODER, "float32", False)
 
 
+def coded_records() -> tuple[list, DecoderReference, str, bool | None]:
+    """Records whose basis layer is entropy-coded (since 2.4): one without a latent, one on a compact base from
+    vector 8, one on a float32 base, and one whose integers are all 0 (no coder bytes)."""
+    from brdfcodec.format.layered_record import LayeredRecord
+    from brdfcodec.layers.basis import BasisLayer
+    from brdfcodec.layers.packed import packed_step
+
+    rng = np.random.default_rng(2030)  # its own draws: the other vectors keep their values
+    mu = lambda: (np.round(rng.normal(size=8) * 8) / 8).astype(np.float32)  # noqa: E731 - exact on the grid
+    sigma = (2.0 ** -rng.integers(1, 6, size=8)).astype(np.float32)
+    sha = "cd" * 32
+    only = BasisLayer(sha, packed_step(128), np.array([200, -90, 41, -7, 0, 3, -1, 40000]), 0, 0, prior=(160, 40))
+    after = BasisLayer(sha, packed_step(100), np.array([25, -17, 0, 9, -2, 1]), 8, 0, prior=(128, 32))
+    zeros = BasisLayer(sha, packed_step(90), np.zeros(4, dtype=np.int64), 8, 0, prior=(128, 32))
+    return ([LayeredRecord.without_latent("gold.coded-basis-only", 8, only),
+             LayeredRecord("gold.coded-compact", mu(), sigma, {"effort": 1}, basis=after, compact_mu=True,
+                           fixed_mu_grid=True, store_sigma=False),
+             LayeredRecord("gold.coded", mu(), sigma, {"effort": 1}, basis=after, compact_sigma=True),
+             LayeredRecord("gold.coded-zeros", mu(), sigma, basis=zeros, store_sigma=False)],
+            TEST_DECODER, "float32", False)
+
+
 def packed_records() -> tuple[list, DecoderReference, str, bool | None]:
     """Records whose basis layer is packed (since 2.3): one without a latent, one on a compact base from vector 8,
     and one on a float32 base, beside an int8 layer (written as 2.3)."""
@@ -550,6 +594,7 @@ def valid_records() -> dict[str, tuple[list, DecoderReference, str, bool | None]
                     TEST_DECODER, "float32", False),
         "no-sigma": no_sigma_records(),
         "packed-basis": packed_records(),
+        "coded-basis": coded_records(),
     }
 
 
@@ -585,7 +630,7 @@ def generate(folder: Path, *, with_reference: bool = True) -> dict[str, Any]:
     (folder / "valid").mkdir(parents=True, exist_ok=True)
     (folder / "invalid").mkdir(parents=True, exist_ok=True)
     manifest: dict[str, Any] = {
-        "format_version": "2.3",
+        "format_version": "2.4",
         "error_classes": {
             "malformed": "BvaeFormatError",
             "checksum": "BvaeChecksumError",

@@ -1,0 +1,322 @@
+"""Entropy-coded basis coefficients under declared Laplace priors (``spec/bvae-format.md`` §4.8, format 2.4).
+
+A transform coder spends its bits where the variance is: every coefficient is
+quantised with one step s, and the integers are arithmetic-coded under a
+zero-mean Laplace prior whose spread falls with the basis vector's rank, as
+the shared basis' training spread does. The prior is a power law declared
+once per record form — the spread of vector n (1-based) is
+
+    σₙ = 2^(A/16 − 4) · n^(−d/32)        (mapped units)
+
+for the form's two bytes A (amplitude) and d (decay) — so a decoder needs no
+table beside the file: decoding is exact integer arithmetic.
+
+- *Prior code* of coefficient i (vector n = f + i + 1) at step code e
+  (s = 2^(e/16 − 8), as a packed layer's, :func:`~brdfcodec.layers.packed.packed_step`):
+  cᵢ = A − e + 64 − ⌊(d·L(n) + 32) / 64⌋, L(n) = round(32·log₂ n) computed exactly in integers
+  (16·log₂(σₙ/s) rounded), clipped to ``[-PRIOR_CODE_LIMIT, PRIOR_CODE_LIMIT]``.
+- *Binarisation* of an integer q under prior code c: a bit "q ≠ 0" with probability
+  ``ZERO_PROBABILITY[c]`` of 0; if set, a sign bit (1: negative) at 128, then the magnitude m = |q| as
+  bits "m > j" for j = 1 … 14 with probability ``STOP_PROBABILITY[c]`` of 0, stopping at the first 0; at
+  m ≥ 15 the rest m − 15 in Exp-Golomb order 0 at probability 128 (a prefix of at most
+  ``MAX_ESCAPE_PREFIX`` ones, then a 0, then the prefix's count of low bits of m − 14, most significant first).
+- *Coder*: the boolean entropy coder of RFC 6386 §7 (8-bit probabilities of the bit being 0); the decoder
+  reads zero bytes past the layer's end, so the writer keeps the shortest byte string that decodes to the
+  same bits (:func:`encode_integers`).
+
+Probabilities (in 1/256, of the bit being 0) come from the prior: with b = σ / (√2 s) the Laplace scale in
+steps, P(q = 0) = 1 − exp(−1/(2b)) and P(m = j | m ≥ j) = 1 − exp(−1/b), each rounded to the nearest
+integer of 256·P and clipped to 1 … 255 (:data:`ZERO_PROBABILITY`, :data:`STOP_PROBABILITY`; no entry lies
+within 10⁻⁶ of a rounding boundary, so every binary64 ``exp`` gives these tables; the spec lists them).
+
+Part of :mod:`brdfcodec.layers.basis`, which gathers the names of its parts.
+"""
+
+from __future__ import annotations
+
+from typing import Final
+
+import numpy as np
+import numpy.typing as npt
+
+from brdfcodec.layers.packed import packed_step
+
+__all__ = [
+    "CODED_HEADER_BYTES",
+    "MAX_CODED_BYTES",
+    "MAX_ESCAPE_PREFIX",
+    "PRIOR_CODE_LIMIT",
+    "STOP_PROBABILITY",
+    "ZERO_PROBABILITY",
+    "CodedChoice",
+    "choose_coding",
+    "decode_integers",
+    "encode_integers",
+    "prior_codes",
+]
+
+#: Bytes of a coded layer before the coder's bytes: the step code.
+CODED_HEADER_BYTES: Final = 1
+#: Largest coded layer, bytes (step code included).
+MAX_CODED_BYTES: Final = 1 << 20
+#: Prior codes are clipped to ±80 (σ/s from 2⁻⁵ to 2⁵).
+PRIOR_CODE_LIMIT: Final = 80
+#: Unary magnitude bits before the escape.
+_UNARY: Final = 14
+#: Longest Exp-Golomb prefix of an escaped magnitude (m ≤ 15 + 2²¹ − 2).
+MAX_ESCAPE_PREFIX: Final = 20
+#: Largest magnitude a coded layer holds.
+MAX_MAGNITUDE: Final = _UNARY + (1 << (MAX_ESCAPE_PREFIX + 1)) - 1
+
+
+def _probability_tables() -> tuple[tuple[int, ...], tuple[int, ...]]:
+    codes = np.arange(-PRIOR_CODE_LIMIT, PRIOR_CODE_LIMIT + 1, dtype=np.float64)
+    b = 2.0 ** (codes / 16) / np.sqrt(2.0)  # Laplace scale in steps
+    zero = 256 * -np.expm1(-1 / (2 * b))
+    stop = 256 * -np.expm1(-1 / b)
+    return (tuple(int(v) for v in np.clip(np.floor(zero + 0.5), 1, 255)),
+            tuple(int(v) for v in np.clip(np.floor(stop + 0.5), 1, 255)))
+
+
+#: Probability (/256) that q = 0, by prior code c + :data:`PRIOR_CODE_LIMIT`.
+#: Probability (/256) that the magnitude stops at j, by prior code c + :data:`PRIOR_CODE_LIMIT`.
+ZERO_PROBABILITY, STOP_PROBABILITY = _probability_tables()
+
+
+def _round_32_log2(n: int) -> int:
+    """round(32·log₂ n) for an integer n ≥ 1, exactly: with t = ⌊log₂ n⁶⁴⌋, ⌊(t + 1) / 2⌋ (never halfway)."""
+    return (int(n) ** 64).bit_length() // 2
+
+
+def prior_codes(amplitude: int, decay: int, step_code: int, first: int, count: int) -> npt.NDArray[np.int64]:
+    """Prior codes cᵢ of coefficients i = 0 … k − 1 (vectors n = first + i + 1), clipped to ±80."""
+    n = range(int(first) + 1, int(first) + int(count) + 1)
+    codes = [int(amplitude) - int(step_code) + 64 - (int(decay) * _round_32_log2(v) + 32) // 64 for v in n]
+    return np.clip(np.array(codes, dtype=np.int64), -PRIOR_CODE_LIMIT, PRIOR_CODE_LIMIT)
+
+
+def _binarise(q: npt.NDArray[np.int64], codes: npt.NDArray[np.int64]) -> list[tuple[int, int]]:
+    """The (bit, probability of 0) sequence of integers under their prior codes."""
+    out: list[tuple[int, int]] = []
+    for value, code in zip(q.tolist(), codes.tolist(), strict=True):
+        zero, stop = ZERO_PROBABILITY[code + PRIOR_CODE_LIMIT], STOP_PROBABILITY[code + PRIOR_CODE_LIMIT]
+        out.append((int(value != 0), zero))
+        if not value:
+            continue
+        out.append((int(value < 0), 128))
+        m = abs(value)
+        for j in range(1, _UNARY + 1):
+            out.append((int(m > j), stop))
+            if m <= j:
+                break
+        if m > _UNARY:
+            rest = m - _UNARY  # ≥ 1: Exp-Golomb order 0 of rest − 1
+            prefix = rest.bit_length() - 1
+            out.extend((1, 128) for _ in range(prefix))
+            out.append((0, 128))
+            out.extend(((rest >> b) & 1, 128) for b in range(prefix - 1, -1, -1))
+    return out
+
+
+def encode_integers(q: npt.ArrayLike, codes: npt.ArrayLike) -> bytes:
+    """The shortest coder bytes that :func:`decode_integers` turns back into ``q``.
+
+    Raises
+    ------
+    ValueError
+        A magnitude above :data:`MAX_MAGNITUDE`, or ``q`` and ``codes`` of different lengths.
+    """
+    values = np.asarray(q, dtype=np.int64).reshape(-1)
+    prior = np.asarray(codes, dtype=np.int64).reshape(-1)
+    if values.shape != prior.shape:
+        raise ValueError(f"{len(values)} integers for {len(prior)} prior codes")
+    if len(values) and int(np.abs(values).max()) > MAX_MAGNITUDE:
+        raise ValueError(f"a coded integer exceeds ±{MAX_MAGNITUDE}")
+    low, span, shifts = 0, 255, 0
+    for bit, probability in _binarise(values, prior):
+        split = 1 + (((span - 1) * probability) >> 8)
+        if bit:
+            low += split
+            span -= split
+        else:
+            span = split
+        while span < 128:
+            span <<= 1
+            low <<= 1
+            shifts += 1
+    # The decoder follows the real number X (the bytes as a binary fraction, zeros after them) and needs
+    # low ≤ X·2^(8 + shifts) < low + span: the fewest bytes m whose value y·2^(8 + shifts − 8m) lies there.
+    total = 8 + shifts
+    for m in range((total + 7) // 8 + 1):
+        exponent = total - 8 * m
+        if exponent >= 0:
+            scale = 1 << exponent
+            y = -(-low // scale)
+            if y * scale < low + span:
+                return y.to_bytes(m, "big") if m else b""
+        else:
+            return (low << -exponent).to_bytes(m, "big")
+    raise AssertionError("unreachable: the last length holds low exactly")
+
+
+class _BoolDecoder:
+    """RFC 6386 §7.3's boolean decoder; bytes past the end read as 0."""
+
+    def __init__(self, data: bytes) -> None:
+        self.data, self.position = data, 2
+        self.value = (self._byte(0) << 8) | self._byte(1)
+        self.span, self.bit_count = 255, 0
+
+    def _byte(self, i: int) -> int:
+        return self.data[i] if i < len(self.data) else 0
+
+    def read(self, probability: int) -> int:
+        split = 1 + (((self.span - 1) * probability) >> 8)
+        big_split = split << 8
+        if self.value >= big_split:
+            bit, self.span, self.value = 1, self.span - split, self.value - big_split
+        else:
+            bit, self.span = 0, split
+        while self.span < 128:
+            self.value <<= 1
+            self.span <<= 1
+            self.bit_count += 1
+            if self.bit_count == 8:
+                self.bit_count = 0
+                self.value |= self._byte(self.position)
+                self.position += 1
+        return bit
+
+
+def decode_integers(data: bytes, codes: npt.ArrayLike) -> npt.NDArray[np.int64]:
+    """Inverse of :func:`encode_integers`: one integer per prior code.
+
+    Raises
+    ------
+    ValueError
+        An escape prefix longer than :data:`MAX_ESCAPE_PREFIX` ones (malformed bytes).
+    """
+    prior = np.asarray(codes, dtype=np.int64).reshape(-1)
+    reader = _BoolDecoder(bytes(data))
+    out = np.zeros(len(prior), dtype=np.int64)
+    for i, code in enumerate(prior.tolist()):
+        if not reader.read(ZERO_PROBABILITY[code + PRIOR_CODE_LIMIT]):
+            continue
+        negative = reader.read(128)
+        stop = STOP_PROBABILITY[code + PRIOR_CODE_LIMIT]
+        m = 1
+        while m <= _UNARY and reader.read(stop):
+            m += 1
+        if m > _UNARY:
+            prefix = 0
+            while reader.read(128):
+                prefix += 1
+                if prefix > MAX_ESCAPE_PREFIX:
+                    raise ValueError(f"a coded basis layer escapes with more than {MAX_ESCAPE_PREFIX} prefix bits")
+            rest = 1
+            for _ in range(prefix):
+                rest = (rest << 1) | reader.read(128)
+            m = _UNARY + rest
+        out[i] = -m if negative else m
+    return out
+
+
+class CodedChoice:
+    """A coded layer chosen for some coefficients: step code, integers and their coder bytes.
+
+    Attributes
+    ----------
+    step_code : int
+    q : ndarray of int64, shape (k,)
+    data : bytes
+        The coder's bytes (without the step code).
+    error : float
+        Squared error in coefficient space: the kept coefficients' rounding plus the dropped ones.
+    """
+
+    __slots__ = ("data", "error", "q", "step_code")
+
+    def __init__(self, step_code: int, q: npt.NDArray[np.int64], data: bytes, error: float) -> None:
+        self.step_code, self.q, self.data, self.error = step_code, q, data, error
+
+
+#: Rounding offsets tried by :func:`choose_coding`: q = sign(c)·⌊|c|/s + θ⌋; below ½ a dead zone (more zeros and
+#: smaller magnitudes, fewer bits, so a finer step fits the same bytes).
+ROUNDING_OFFSETS: Final = (0.5, 0.4, 0.3)
+
+
+def _quantise(c: npt.NDArray[np.float64], s: float, offset: float) -> npt.NDArray[np.int64]:
+    q = np.sign(c) * np.floor(np.abs(c) / s + offset)
+    return np.clip(q, -MAX_MAGNITUDE, MAX_MAGNITUDE).astype(np.int64)
+
+
+def choose_coding(coefficients: npt.ArrayLike, first: int, max_bytes: int, amplitude: int, decay: int,
+                  *, count: int | None = None) -> CodedChoice | None:
+    """The coded layer of at most ``max_bytes`` (step code included) closest to the coefficients.
+
+    For each rounding offset of :data:`ROUNDING_OFFSETS`, finds by bisection the finest step code whose integers
+    (up to the last non-zero one) fit, then tries the 12 step codes around it, each keeping the most leading
+    integers that fit; measures the squared error of the kept coefficients' rounding plus the dropped ones'
+    energy (the basis is orthonormal: the squared error of the layer's sum) and returns the lowest — the step,
+    rounding and count that minimise distortion at this rate. None when not even one coefficient fits.
+
+    Parameters
+    ----------
+    coefficients : array_like, shape (K,)
+        Coefficients of vectors ``first``, ``first + 1``, … (mapped units).
+    first : int
+    max_bytes : int
+    amplitude, decay : int
+        The form's prior (0 … 255 each).
+    count : int, optional
+        Keep at most this many coefficients.
+    """
+    c = np.asarray(coefficients, dtype=np.float64).reshape(-1)
+    if not np.isfinite(c).all():
+        raise ValueError("basis coefficients must be finite")
+    if count is not None:
+        c = c[: int(count)]
+    budget = int(max_bytes) - CODED_HEADER_BYTES
+    if budget < 0 or not len(c):
+        return None
+    energy_after = np.concatenate([np.cumsum((c ** 2)[::-1])[::-1], [0.0]])
+    codes_of = {e: prior_codes(amplitude, decay, e, first, len(c)) for e in range(256)}
+    best: CodedChoice | None = None
+
+    def size(q: npt.NDArray[np.int64], e: int) -> int:
+        nonzero = np.flatnonzero(q)
+        k = int(nonzero[-1]) + 1 if len(nonzero) else 0
+        return len(encode_integers(q[:k], codes_of[e][:k])) if k else 0
+
+    for offset in ROUNDING_OFFSETS:
+        lo, hi = 0, 255  # bisect the finest step code whose whole layer fits (sizes fall as the step grows)
+        if size(_quantise(c, packed_step(hi), offset), hi) > budget:
+            continue
+        while hi - lo > 1:
+            mid = (lo + hi) // 2
+            if size(_quantise(c, packed_step(mid), offset), mid) <= budget:
+                hi = mid
+            else:
+                lo = mid
+        for e in range(max(0, hi - 8), min(256, hi + 4)):
+            s = packed_step(e)
+            q = _quantise(c, s, offset)
+            nonzero = np.flatnonzero(q)
+            k = int(nonzero[-1]) + 1 if len(nonzero) else 0
+            data = encode_integers(q[:k], codes_of[e][:k]) if k else b""
+            if len(data) > budget:  # fewer coefficients: bisect the most that fit
+                low, high = 0, k
+                while high - low > 1:
+                    mid = (low + high) // 2
+                    if len(encode_integers(q[:mid], codes_of[e][:mid])) <= budget:
+                        low = mid
+                    else:
+                        high = mid
+                k = low
+                data = encode_integers(q[:k], codes_of[e][:k])
+            if k == 0:
+                continue
+            error = float(((c[:k] - q[:k] * s) ** 2).sum() + energy_after[k])
+            if best is None or error < best.error:
+                best = CodedChoice(e, q[:k].copy(), data, error)
+    return best
