@@ -49,11 +49,15 @@ def browser_missing_reason() -> str | None:
 
 
 @contextlib.contextmanager
-def running_studio(app: Any) -> Iterator[str]:
-    """Serve a Starlette app with uvicorn on a free localhost port in a thread; yields its base URL."""
+def running_studio(app: Any, *, header_timeout: float | None = None) -> Iterator[str]:
+    """Serve a Starlette app with uvicorn on a free localhost port in a thread, configured as ``bvae studio``
+    serves it (:func:`brdfcodec.studio.http_guard.server_config`); yields its base URL."""
     import uvicorn
 
-    config = uvicorn.Config(app, host="127.0.0.1", port=0, log_level="warning", access_log=False, lifespan="off")
+    from brdfcodec.studio.http_guard import HEADER_TIMEOUT_S, server_config
+
+    config = server_config(app, host="127.0.0.1", port=0, lifespan="off",
+                           header_timeout=HEADER_TIMEOUT_S if header_timeout is None else header_timeout)
     server = uvicorn.Server(config)
     thread = threading.Thread(target=server.run, name="studio-test-server", daemon=True)
     thread.start()

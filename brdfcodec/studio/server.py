@@ -82,21 +82,22 @@ class StudioServer:
     Parameters
     ----------
     catalogue : Catalogue
-    save_dir : path-like
-        Folder where saved and exported files go.
+    save_dir : path-like or None
+        Folder where saved and exported files go; ``None`` turns saving off (``/api/save`` answers 403), as
+        ``bvae studio`` does on a public address without ``--save-dir``.
     environment : path-like, optional
         A lat-long EXR offered as the "map" environment besides the built-in sky.
     manifold_cache : path-like, optional
         Folder of the UMAP cache (default: the user cache folder).
     """
 
-    def __init__(self, catalogue: Catalogue, *, save_dir: str | Path = ".", environment: str | Path | None = None,
-                 manifold_cache: str | Path | None = None) -> None:
+    def __init__(self, catalogue: Catalogue, *, save_dir: str | Path | None = ".",
+                 environment: str | Path | None = None, manifold_cache: str | Path | None = None) -> None:
         from brdfcodec.render.preview import Environment, sky_environment
 
         self.catalogue = catalogue
-        self.save_dir = Path(save_dir).resolve()  # shown to the user: absolute, never "."
-        if not self.save_dir.is_dir():
+        self.save_dir = None if save_dir is None else Path(save_dir).resolve()  # shown: absolute, never "."
+        if self.save_dir is not None and not self.save_dir.is_dir():
             raise NotADirectoryError(f"{self.save_dir}: the save folder does not exist")
         self.environments: dict[str, Any] = {"sky": sky_environment()}
         if environment is not None:
@@ -192,6 +193,10 @@ class StudioServer:
         """Write the edited material: ``.bvae`` (record with provenance), MERL ``.binary``, ``.png`` or ``.exr``."""
         from brdfcodec.format.bvae import GraftRecord, LatentRecord
 
+        if self.save_dir is None:
+            raise StudioError("saving is off: this studio was started on a public address without --save-dir "
+                              "(start it with --save-dir FOLDER to save)", status=403)
+
         file_name = body.get("file")
         if not isinstance(file_name, str) or not _FILE_NAME.fullmatch(file_name):  # fullmatch: "$" allows a "\n"
             raise StudioError("file must be a plain name (letters, digits, . _ -) ending in .bvae, .binary, .png or "
@@ -280,11 +285,17 @@ def _exposure(value: object) -> float:
 
 
 def _light(value: object) -> tuple[float, float, float]:
+    """A light direction as a unit vector: any non-zero list of 3 finite numbers, normalised without overflow
+    or underflow (scaled by its largest component first: [1e308, 1e308, 1e308] and [1e-320, 0, 0] are
+    directions like any other)."""
     if (not isinstance(value, list) or len(value) != 3
-            or not all(isinstance(v, int | float) and not isinstance(v, bool) and np.isfinite(v) for v in value)
+            or not all(isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v) for v in value)
             or not any(value)):
-        raise StudioError("light must be a non-zero list of 3 numbers")
-    return (float(value[0]), float(value[1]), float(value[2]))
+        raise StudioError("light must be a non-zero list of 3 finite numbers (a direction towards the light)")
+    vector = np.array([float(v) for v in value])
+    vector = vector / np.abs(vector).max()  # components in [-1, 1], one of them ±1: the norm is in [1, √3]
+    vector = vector / np.linalg.norm(vector)
+    return (float(vector[0]), float(vector[1]), float(vector[2]))
 
 
 _EDIT_KEYS = {"source": str, "b": str, "t": (int, float), "dims_from_a": list, "sampled": bool, "graft": bool,
@@ -334,9 +345,23 @@ def _exact_int(text: str) -> int:
     return int(text)
 
 
+def _unique_keys(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
+    """An object's members, refusing a key given twice (I-JSON; otherwise the last one silently wins)."""
+    result = dict(pairs)
+    if len(result) != len(pairs):
+        seen: set[str] = set()
+        for key, _ in pairs:
+            if key in seen:
+                raise ValueError(f"duplicate key {key[:40]!r} in an object")
+            seen.add(key)
+    return result
+
+
 def _parse_json(data: bytes) -> Any:
-    """JSON as I-JSON (RFC 7493) has it: finite numbers, integers exact in binary64, at most
-    :data:`MAX_JSON_DEPTH` levels of nesting (checked before parsing, so a deep body cannot exhaust the stack)."""
+    """JSON as I-JSON (RFC 7493) has it: finite numbers, integers exact in binary64, no key twice in an object,
+    no lone surrogate escape (``"\\ud800"``: not Unicode text), at most :data:`MAX_JSON_DEPTH` levels of
+    nesting (checked before parsing, so a deep body cannot exhaust the stack); the rules of the ``.bvae``
+    metadata reader (:mod:`brdfcodec.format.strict_json`)."""
     depth = 0
     in_string = escaped = False
     for byte in data:  # counting brackets outside strings is exact for valid JSON
@@ -355,7 +380,13 @@ def _parse_json(data: bytes) -> Any:
                 raise ValueError(f"nested deeper than {MAX_JSON_DEPTH} levels")
         elif byte in (0x5D, 0x7D):
             depth -= 1
-    return json.loads(data, parse_constant=_refuse_constant, parse_float=_finite_float, parse_int=_exact_int)
+    value = json.loads(data, parse_constant=_refuse_constant, parse_float=_finite_float, parse_int=_exact_int,
+                       object_pairs_hook=_unique_keys)
+    try:  # lone surrogates are valid JSON escapes but not Unicode text (linear: one serialisation)
+        json.dumps(value, ensure_ascii=False).encode("utf-8")
+    except UnicodeEncodeError:
+        raise ValueError("a string holds a lone surrogate escape (not Unicode text)") from None
+    return value
 
 
 async def _json_body(request: Request) -> dict[str, Any]:
@@ -402,7 +433,7 @@ def create_app(server: StudioServer, *, allowed_hosts: list[str] | None = None) 
         info = server.catalogue.describe()
         info["environments"] = ["sky", *(["map"] if "map" in server.environments else [])]
         info["environment_name"] = server.environment_name
-        info["save_dir"] = str(server.save_dir)
+        info["save_dir"] = None if server.save_dir is None else str(server.save_dir)
         return JSONResponse(info)
 
     async def mask(request: Request) -> Response:

@@ -597,7 +597,8 @@ async function start() {
     ]);
     const mask = new Uint8Array(maskBuffer);
     $("model-info").textContent = `${info.materials.length} materials (${info.libraries.join(", ")}), ` +
-      `model ${info.model.name} ${info.model.decoder_sha256.slice(0, 12)}…, saving to ${info.save_dir}`;
+      `model ${info.model.name} ${info.model.decoder_sha256.slice(0, 12)}…, ` +
+      (info.save_dir ? `saving to ${info.save_dir}` : "saving off (the studio was started without --save-dir)");
     const lighting = $("lighting");
     for (const env of info.environments) {
       const option = document.createElement("option");
@@ -623,9 +624,10 @@ async function start() {
     const explorer = new Explorer(info, explorerPreview, editor);
     window.studio = { info, editor, explorer, previews: { editor: editorPreview, explorer: explorerPreview }, ready: true };
     const skipped = info.without_latent || [];  // basis-only records (format 2.1): no latent code to edit
-    setStatus(skipped.length ? `ready; not shown, no latent code to edit (re-encode with bvae compress --latent ` +
-      `always): ${skipped.slice(0, 5).join(", ")}${skipped.length > 5 ? `, … (${skipped.length} in all)` : ""}`
-      : "ready");
+    const total = info.materials.length + skipped.length;
+    setStatus(skipped.length ? `ready; ${skipped.length} of ${total} materials left out: no latent code to edit ` +
+      `(basis-only records; re-encode with bvae compress --latent always): ` +
+      `${skipped.slice(0, 5).join(", ")}${skipped.length > 5 ? ", …" : ""}` : "ready");
     window.dispatchEvent(new CustomEvent("studio-ready"));
   } catch (error) {
     setStatus(`could not start: ${error.message}`, true);
