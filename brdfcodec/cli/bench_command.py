@@ -64,6 +64,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     table.add_argument("-o", "--output", type=Path, help="also write the table to this Markdown file")
     table.add_argument("--plot", type=Path, help="also draw the rate–distortion panels (PNG), one per family")
     table.set_defaults(handler=run_table)
+    from brdfcodec.cli.fuzz_campaign import register_fuzz
+
+    register_fuzz(ops)  # bvae bench fuzz (issue 49)
 
 
 def run_rd(args: argparse.Namespace) -> int:
