@@ -184,3 +184,18 @@ def test_the_cli_writes_coded_layers_within_the_budget_and_they_decode_as_writte
     assert entry.length + entry.descriptor_bytes <= 32 and entry.layers["basis"]["length"] == record.basis.nbytes
     table = BrdfDecoder().decode(record)
     assert np.isfinite(table).all()
+
+
+def test_info_names_a_coded_layer_and_its_prior(tmp_path, capsys) -> None:
+    import json
+
+    from brdfcodec.cli.main import main
+
+    path = tmp_path / "coded.bvae"
+    path.write_bytes(encode_bvae([_coded_record("pca", latent=False)], DECODER))
+    assert main(["info", str(path)]) == 0
+    out = capsys.readouterr().out
+    assert "format 2.4" in out and "entropy-coded, prior 128/40" in out
+    assert main(["info", "--json", str(path)]) == 0
+    (item,) = json.loads(capsys.readouterr().out)["materials"]
+    assert item["basis"]["coded_prior"] == [128, 40] and item["basis"]["coded_bytes"] <= 20

@@ -153,6 +153,8 @@ def _record_summary(entry: RecordEntry, latent_dtype: str) -> dict[str, Any]:
         basis = layers["basis"]
         item["basis"] = {"count": basis["count"], "first": basis.get("first", 0), "project": basis.get("project", 0),
                          "packed_top": basis.get("top", 0)}
+        if "prior" in basis:  # entropy-coded (format 2.4): the form's prior and the layer's bytes
+            item["basis"].update({"coded_prior": list(basis["prior"]), "coded_bytes": basis["length"]})
     if "detail" in layers:
         item["detail_bytes"] = layers["detail"]["length"]
     item.update({k: v for k, v in entry.meta.items()
@@ -171,7 +173,9 @@ def _stored_forms(item: dict[str, Any], latent_dtype: str) -> str:
         count, first, project = item["basis"]["count"], item["basis"]["first"], item["basis"]["project"]
         vectors = f"vector {first + 1}" if count == 1 else f"vectors {first + 1}–{first + count}"
         top = item["basis"].get("packed_top", 0)
-        parts.append(f"basis {count} ({vectors}{f'; packed, top width {top}' if top else ''})"
+        coded = item["basis"].get("coded_prior")
+        how = f"; packed, top width {top}" if top else (f"; entropy-coded, prior {coded[0]}/{coded[1]}" if coded else "")
+        parts.append(f"basis {count} ({vectors}{how})"
                      + (f", base projected on {project}" if project else ""))
     if "detail_bytes" in item:
         parts.append(f"detail {item['detail_bytes']:,} B")
