@@ -159,7 +159,12 @@ class Seeds:
     def __init__(self, run: Path, plan: dict[str, Any]) -> None:
         self.bvae = {name: (run / "seeds" / file).read_bytes() for name, file in sorted(plan["bvae_seeds"].items())}
         self.bsdf = Path(plan["bsdf_seed"]).read_bytes() if plan.get("bsdf_seed") else None
-        self.model_folder = Path(plan["model_seed"]) if plan.get("model_seed") else None
+        model = plan.get("model_seed")
+        if model == "default":  # the shipped model of the checkout that runs the plan
+            from brdfcodec.models.registry import default_model_folder
+
+            model = str(default_model_folder())
+        self.model_folder = Path(model) if model else None
         self._model_files: dict[str, bytes] | None = None
 
     def model_files(self) -> dict[str, bytes]:
@@ -446,14 +451,12 @@ def run_campaign(run: Path, *, inputs: int, batch_size: int = 500, workers: int 
     if plan_path.exists():
         plan = json.loads(plan_path.read_text())
     else:
-        from brdfcodec.models.registry import default_model_folder
-
         bsdf = (shared / RGL_SEED) if shared is not None and (shared / RGL_SEED).is_file() else None
         plan = {"seed": seed, "batch_size": batch_size,
                 "bvae_seeds": make_seeds(run / "seeds", cli=cli_seeds, log=say),
                 "bsdf_seed": str(bsdf.resolve()) if bsdf else None,
                 "bsdf_skipped": None if bsdf else "no shared data folder with " + str(RGL_SEED),
-                "model_seed": str(default_model_folder())}
+                "model_seed": "default"}
         plan_path.write_text(json.dumps(plan, indent=1) + "\n")
     batches_path = run / "batches.jsonl"
     done = {json.loads(line)["batch"] for line in batches_path.read_text().splitlines()} \
