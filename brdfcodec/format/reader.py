@@ -484,6 +484,10 @@ class BvaeReader:
             while chunk := self._handle.read(1 << 20):
                 crc = zlib.crc32(chunk, crc)
             _check_payload_crc(os.fspath(path), self.header, crc)
+            # §7: every record's values (step 9) are checked before the file is used, so that a reader that opens it
+            # for decoding (step 10 next) refuses a file for the same reason as one that reads it whole (info).
+            for entry in self.header.entries:
+                self._read_entry(entry)
         except BaseException:
             self._handle.close()
             raise
@@ -495,10 +499,6 @@ class BvaeReader:
         self.close()
 
     def close(self) -> None:
-            # §7: every record's values (step 9) are checked before the file is used, so that a reader that opens it
-            # for decoding (step 10 next) refuses a file for the same reason as one that reads it whole (info).
-            for entry in self.header.entries:
-                self._read_entry(entry)
         """Close the file."""
         self._handle.close()
 
