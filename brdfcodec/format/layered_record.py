@@ -143,13 +143,13 @@ class LayeredRecord(LatentRecord):
         False: σ is not stored (``layers.sigma = "none"`` with a latent, format 2.2); ``sigma`` then holds 1 in
         every dimension, the prior's width: nothing is claimed about the posterior. Such a record may hold no
         layer at all: it is then the base alone, μ in the form's storage (``spec/bvae-format.md`` §4.4).
-    has_latent : bool
     stored_mu : (float, ndarray of int8) or None
         With ``compact_mu``: the code as stored, ``(t, q)`` with μ = t · q (t = 1/32 on the fixed grid), which
         ``mu`` then holds exactly (``spec/bvae-format.md`` §4.5). A reader passes the stored code, so a record is
         never re-quantised when it is read (q = −128 and any positive finite binary16 step included); None (a
         writer's record): the code is made from ``mu`` (:func:`compact_mu_code`), and ``mu`` holds its values. A
         code that does not give ``mu`` (a record copied with a new ``mu``) is made anew from ``mu`` too.
+    has_latent : bool
         False: a basis-only record (format 2.1, ``layers.mu = layers.sigma = "none"``; make one with
         :meth:`without_latent`). It stores neither μ nor σ; its base is the decoder's linear-path mean
         (``spec/bvae-format.md`` §4.6). It needs a basis layer whose base is not projected; ``mu`` and ``sigma``
@@ -166,8 +166,8 @@ class LayeredRecord(LatentRecord):
     fixed_mu_grid: bool = False
     has_latent: bool = True
     store_sigma: bool = True
-
     stored_mu: tuple[float, np.ndarray] | None = field(default=None, compare=False, repr=False)
+
     @classmethod
     def without_latent(
         cls, name: str, latent_dim: int, basis: BasisLayer, *, detail: DetailLayer | None = None,
@@ -500,6 +500,7 @@ def layered_from_payload(
         return LayeredRecord.without_latent(name, d, coefficients, detail=residual, meta=meta)
     compact_mu = layers.get("mu") in _MU_MODES
     fixed_mu_grid = layers.get("mu") == MU_INT8_FIXED
+    stored_mu = None  # a compact μ is μ = t·q exactly as stored (§4.5): the record keeps the code, never re-quantised
     if fixed_mu_grid:
         stored_mu = (FIXED_MU_STEP, np.frombuffer(tail[:d], dtype=np.int8).copy())
         tail = tail[d:]
@@ -508,6 +509,8 @@ def layered_from_payload(
         tail = tail[STEP_BYTES + d :]
     else:
         mu, values = values[:d], values[d:]
+    if stored_mu is not None:
+        mu = dequantise_int8(*stored_mu)
     compact = layers.get("sigma") == SIGMA_LOG2_U8
     shared = layers.get("sigma") == SIGMA_LOG2_U8_SHARED
     store_sigma = layers.get("sigma") != SIGMA_NONE
@@ -517,7 +520,6 @@ def layered_from_payload(
         sigma = sigma_from_codes(np.frombuffer(tail[:d], dtype=np.uint8))
         tail = tail[d:]
     elif shared:
-    stored_mu = None  # a compact μ is μ = t·q exactly as stored (§4.5): the record keeps the code, never re-quantised
         sigma = np.repeat(sigma_from_codes(np.frombuffer(tail[:1], dtype=np.uint8)), d)
         tail = tail[1:]
     else:
@@ -526,8 +528,6 @@ def layered_from_payload(
              "fixed_mu_grid": fixed_mu_grid, "store_sigma": store_sigma, "stored_mu": stored_mu}
     basis = None
     if "basis" in layers:
-    if stored_mu is not None:
-        mu = dequantise_int8(*stored_mu)
         size = _basis_length(layers["basis"], name)
         basis = basis_layer_from_bytes(layers["basis"], bytes(tail[:size]))
         tail = tail[size:]

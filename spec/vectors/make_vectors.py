@@ -389,6 +389,9 @@ def invalid_vectors() -> dict[str, tuple[bytes, str, str]]:
     add("name-case-twins", assemble(header([latent_form()], [descriptor("Gold", 0), descriptor("gold", 0)],
                                            good + good), good + good), "malformed",
         "names 'Gold' and 'gold' (equal after case folding)")
+    add("name-file-twins", assemble(header([latent_form()], [descriptor("a\u200bb", 0), descriptor("A[U+200B]B", 0)],
+                                           good + good), good + good), "malformed",
+        "names 'a' U+200B 'b' and 'A[U+200B]B' (one file name once format characters are written [U+XXXX])")
     add("name-duplicate", assemble(header([latent_form()], [descriptor("a", 0), descriptor("a", 0)], good + good),
                                    good + good), "malformed", "the name 'a' twice")
     return out
@@ -411,9 +414,6 @@ def _last_block(block: bytes) -> bytes:
     return bytes([block[0] | 1]) + block[1:]
 
 
-    add("name-file-twins", assemble(header([latent_form()], [descriptor("a\u200bb", 0), descriptor("A[U+200B]B", 0)],
-                                           good + good), good + good), "malformed",
-        "names 'a' U+200B 'b' and 'A[U+200B]B' (one file name once format characters are written [U+XXXX])")
 def detail_frame(head: list[int], total: int) -> bytes:
     """A zstandard frame written by hand (independent of the zstandard library's version): int16 ``head``
     as a raw block, then zeros as RLE blocks, ``total`` int16 values in all; the frame declares its content size."""
