@@ -131,3 +131,27 @@ def test_a_sharp_edit_decodes_within_the_bound_by_the_dense_reference() -> None:
     rows = np.argsort(directional_albedo(raw).max(axis=1))[-3:]
     for row in rows:
         assert float(dense_albedo(bounded, ALBEDO_THETA_I_DEG[row], per_part=1000).max()) <= 1.001
+
+
+@pytest.mark.slow  # computes the quadrature (several seconds of CPU)
+def test_the_shipped_quadrature_is_the_computed_one() -> None:
+    """The package ships the quadrature so that no process spends seconds building it before its first bounded
+    decode; the file must hold exactly what the rule computes (``python -m brdfcodec.representation.energy``
+    writes it anew after a change of the rule)."""
+    from brdfcodec.representation import energy
+
+    shipped = energy._shipped_quadrature()
+    assert shipped is not None, f"brdfcodec/{energy.QUADRATURE_FILE} is missing or not of the current rule"
+    for name, stored, computed in zip(("h", "d", "p", "weight", "row"), shipped, energy._computed_quadrature(),
+                                      strict=True):
+        np.testing.assert_array_equal(stored, computed, err_msg=f"shipped quadrature's {name} differs")
+
+
+def test_the_quadrature_in_use_is_the_shipped_file() -> None:
+    """A decode reads the shipped file instead of computing (the first bounded decode took seconds)."""
+    from brdfcodec.representation import energy
+
+    shipped = energy._shipped_quadrature()
+    assert shipped is not None
+    for stored, used in zip(shipped, energy._quadrature(), strict=True):
+        np.testing.assert_array_equal(stored, used)

@@ -103,9 +103,49 @@ def _nodes_for(theta_i: float) -> tuple[np.ndarray, np.ndarray]:
     return bins, np.bincount(where, weights=weight, minlength=len(bins))
 
 
+#: The quadrature as shipped (``brdfcodec/data/energy-quadrature.npz``): :func:`_computed_quadrature`'s arrays,
+#: stored exactly (float64 weights), so that a process does not spend seconds building them before its first
+#: bounded decode. ``tests/test_energy_quadrature.py`` recomputes them and compares (slow); ``python -m
+#: brdfcodec.representation.energy`` writes the file anew after a change of the rule.
+QUADRATURE_FILE = "data/energy-quadrature.npz"
+
+
+def _shipped_quadrature() -> tuple[np.ndarray, ...] | None:
+    """The shipped quadrature's arrays (h, d, p, weight, row), or None where the file is absent or not as expected."""
+    from importlib import resources
+
+    try:
+        with resources.files("brdfcodec").joinpath(QUADRATURE_FILE).open("rb") as handle:
+            with np.load(handle, allow_pickle=False) as stored:
+                arrays = tuple(np.asarray(stored[key]) for key in ("h", "d", "p", "weight", "row"))
+                rule = stored["rule"].tolist()
+    except (OSError, KeyError, ValueError):
+        return None
+    if rule != [_SUB_ROWS, _N_PHI_H, *ALBEDO_THETA_I_DEG] or len({len(a) for a in arrays}) != 1:
+        return None
+    h, d, p, weight, row = arrays
+    return (h.astype(np.intp), d.astype(np.intp), p.astype(np.intp), weight.astype(np.float64), row.astype(np.intp))
+
+
+def write_quadrature(path: str) -> None:
+    """Write :func:`_computed_quadrature`'s arrays to ``path`` (an ``.npz``), as the package ships them."""
+    h, d, p, weight, row = _computed_quadrature()
+    rule = np.asarray([_SUB_ROWS, _N_PHI_H, *ALBEDO_THETA_I_DEG], dtype=np.float64)
+    np.savez_compressed(path, h=h.astype(np.uint8), d=d.astype(np.uint8), p=p.astype(np.uint8), weight=weight,
+                        row=row.astype(np.uint8), rule=rule)
+
+
 @functools.cache
 def _quadrature() -> tuple[np.ndarray, ...]:
-    """The quadrature, built once (read-only arrays of equal length n, sorted by row).
+    """The quadrature (read-only arrays of equal length n, sorted by row): the shipped file, else computed."""
+    out = _shipped_quadrature() or _computed_quadrature()
+    for array in out:
+        array.setflags(write=False)
+    return out
+
+
+def _computed_quadrature() -> tuple[np.ndarray, ...]:
+    """The quadrature, computed (a few seconds of CPU; arrays of equal length n, sorted by row).
 
     The integrand is piecewise constant on the MERL bins (each direction reads its bin, as a lookup does), so
     the integral is exactly ``Σ ρ_bin · W_bin`` with ``W_bin`` the cosine-weighted solid angle of the outgoing
@@ -132,10 +172,7 @@ def _quadrature() -> tuple[np.ndarray, ...]:
     key = np.concatenate(keys)
     h, rest = np.divmod(key, N_THETA_D * N_PHI_D)
     d, p = np.divmod(rest, N_PHI_D)
-    out = tuple(np.ascontiguousarray(a) for a in (h, d, p, np.concatenate(weights), np.concatenate(rows)))
-    for array in out:
-        array.setflags(write=False)
-    return out
+    return tuple(np.ascontiguousarray(a) for a in (h, d, p, np.concatenate(weights), np.concatenate(rows)))
 
 
 @functools.cache
@@ -269,3 +306,12 @@ def scale_mapped(mapped: npt.ArrayLike, scale: float) -> np.ndarray:
     dtype = values.dtype if values.dtype == np.float32 else np.float64
     out = np.log1p(scale * np.expm1(values.astype(np.float64) * LOG_RANGE)) / LOG_RANGE
     return out.astype(dtype)
+
+
+if __name__ == "__main__":  # python -m brdfcodec.representation.energy [PATH]: write the shipped quadrature
+    import sys
+    from pathlib import Path
+
+    target = sys.argv[1] if len(sys.argv) > 1 else str(Path(__file__).resolve().parents[1] / QUADRATURE_FILE)
+    write_quadrature(target)
+    print(f"wrote {target}")
