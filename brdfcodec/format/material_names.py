@@ -62,8 +62,8 @@ def shown_name(name: str) -> str:
 
     Examples
     --------
-    >>> shown_name("gold\u202egnp.exe")
-    'gold\\u202egnp.exe'
+    >>> print(shown_name("gold\u202egnp.exe"))
+    gold\\u202egnp.exe
     """
     if name.isprintable():
         return name
