@@ -368,3 +368,23 @@ def test_detail_inverse_meets_the_conformance_tolerance_for_large_integers() -> 
     small = np.abs(exact) < 1000.0
     assert small.sum() > 100
     assert np.abs(got - exact)[small].max() <= 1e-3, np.abs(got - exact)[small].max()
+
+
+_SPEC_READER = Path(__file__).resolve().parents[1].parent / "shared" / "spec-reader-2.3" / "crafted"
+
+
+@pytest.mark.shared
+@pytest.mark.parametrize("name", ["order-first5000-then-kind3.bvae", "order-project4097-then-kind3.bvae"])
+def test_a_forms_basis_fields_out_of_range_are_malformed_before_a_later_forms_kind(name: str) -> None:
+    """§3.2 and §7 step 5: form 0's ``first`` 5000 (or ``project`` 4097) is malformed when form 0 is read, before
+    form 3's unknown record kind (unsupported) is seen — the independent reader's order."""
+    path = _SPEC_READER / name
+    if not path.exists():
+        pytest.skip(f"the spec-reader's crafted files are not at {path.parent} (../shared absent)")
+    from brdfcodec.errors import BvaeFormatError, UnsupportedVersionError
+    from brdfcodec.format.bvae import read_bvae
+
+    with pytest.raises(BvaeFormatError) as caught:
+        read_bvae(path)
+    assert not isinstance(caught.value, UnsupportedVersionError)
+    assert "form 0" in str(caught.value)

@@ -57,6 +57,7 @@ from brdfcodec.format.records import MAX_LATENT_DIM as MAX_LATENT_DIM  # re-expo
 from brdfcodec.format.records import GraftRecord, LatentRecord, meta_problem
 from brdfcodec.format.strict_json import _check_json_text
 from brdfcodec.format.writer import _DETAIL_CODES, _KIND_CODES, _MU_CODES, _SIGMA_CODES
+from brdfcodec.layers.basis import MAX_BASIS_COUNT
 from brdfcodec.layers.packed import MAX_TOP_WIDTH
 
 __all__ = ["BvaeReader", "parse_bvae", "read_bvae", "read_header"]
@@ -188,6 +189,11 @@ def _parse_form(path: str, cursor: _Cursor, i: int, latent_dim: int, basis_sha: 
         layers["sigma"] = sigmas[sigma_code]
     if layer_bits & _LAYER_BASIS:
         first, project = cursor.varint(f"{where}'s basis first"), cursor.varint(f"{where}'s basis projection")
+        # §3.2's ranges, checked as the fields are read (§7 step 5), before any later form's kind
+        if first >= MAX_BASIS_COUNT:
+            raise _fail(path, f"{where}'s basis first is {first}, outside 0 to {MAX_BASIS_COUNT - 1}")
+        if project > MAX_BASIS_COUNT:
+            raise _fail(path, f"{where}'s basis projection is {project}, outside 0 to {MAX_BASIS_COUNT}")
         if basis_sha is None:
             raise _fail(path, f"{where} has a basis layer, but the header names no shared basis")
         if project and mus[mu_code] == "none":
