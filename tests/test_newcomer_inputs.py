@@ -46,6 +46,9 @@ def test_file_kinds_follow_the_project_magics() -> None:
     assert ".bvae" in (sniff_file_kind(BVAE_MAGIC + b"\0" * 4) or "")
     assert "RGL" in (sniff_file_kind(TENSOR_FILE_MAGIC) or "")
     assert sniff_file_kind(np.array([90, 90, 180], "<i4").tobytes()) is None  # a MERL header is no other kind
+    # binary bytes whose first one happens to be '[' or '{' are not called JSON text
+    assert sniff_file_kind(bytes.fromhex("5b77dc928ce62077a11c574c09bfb044")) is None
+    assert sniff_file_kind(b"{\x00\x01\x02") is None
 
 
 @pytest.mark.parametrize(

@@ -51,16 +51,15 @@ def sniff_file_kind(head: bytes) -> str | None:
     for magic, kind in _MAGICS:
         if head.startswith(magic):
             return kind
-    text = head.lstrip(b" \t\r\n\xef\xbb\xbf")
-    if text[:1] in (b"{", b"["):
-        return "a text file (JSON?; an NBRDF fit's NAME.json describes the network, its weights are NAME.h5)"
     try:
         decoded = head.decode("utf-8")
     except UnicodeDecodeError:  # binary, or a multi-byte character cut at the end: not worth telling apart
         return None
-    if all(c.isprintable() or c in "\t\r\n" for c in decoded):
-        return "a text file"
-    return None
+    if not all(c.isprintable() or c in "\t\r\n" or c == "\ufeff" for c in decoded):
+        return None  # binary bytes, even where the first one happens to be '{' or '['
+    if decoded.lstrip(" \t\r\n\ufeff")[:1] in ("{", "["):
+        return "a text file (JSON?; an NBRDF fit's NAME.json describes the network, its weights are NAME.h5)"
+    return "a text file"
 
 
 def describe_file_kind(path: str | os.PathLike[str]) -> str | None:
