@@ -91,7 +91,7 @@ def test_unknown_layers_and_transforms_are_unsupported_and_bad_fields_malformed(
 
     assert parse_bvae(layered_file(writer.layered_form(detail=0))).records[0].detail == record.detail
     with pytest.raises(UnsupportedVersionError, match="layers"):
-        parse_bvae(layered_file(writer.layered_form(detail=0, layer_bits=2 | 8)))  # an unknown layer
+        parse_bvae(layered_file(writer.layered_form(detail=0, layer_bits=2 | 16)))  # an unknown layer (bit 3: 2.4)
     with pytest.raises(UnsupportedVersionError, match="detail form 7"):
         parse_bvae(layered_file(writer.layered_form(detail=7)))  # an unknown transform or coefficient type
     with pytest.raises(BvaeFormatError, match="neither"):
