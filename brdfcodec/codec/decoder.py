@@ -560,6 +560,52 @@ class BrdfDecoder:
                     table = _apply_mask(_table(mapped, None, is_edited(record)), None, masked)
                 yield table
 
+    def decode_many_tensor(
+        self,
+        records: Sequence[Record] | torch.Tensor | npt.ArrayLike,
+        *,
+        masked: MaskedEntries = "unmeasured",
+        energy_bound: bool | None = None,
+        batch_size: int = 16,
+    ) -> torch.Tensor:
+        """Full tables of many records (or latent codes) as one torch tensor on the decoder's device.
+
+        The tables of :meth:`decode_many`, stacked, with the work after the network (clamp, layers, slice
+        interpolation, unmapping in float64, energy bound, mask) done as tensor operations where the network
+        runs (:mod:`brdfcodec.codec.device_decode`): on a GPU nothing passes through the host. Hand the result
+        to Dr.Jit/Mitsuba, JAX or CuPy without a copy through DLPack (``torch.utils.dlpack.to_dlpack(tables)``
+        or ``tables.__dlpack__()``); ``tables.cpu().numpy()`` is what :meth:`decode_many` yields, up to float32
+        rounding (the device's float64 ``exp``).
+
+        Parameters
+        ----------
+        records : sequence of Record, or array_like / torch.Tensor of shape (N, latent_dim)
+            Records (any kind: grafts, projected bases and records without a latent take their mapped slices
+            from the NumPy path, then continue on the device; layers are decoded on the host and added on the
+            device), or finite latent codes of plain materials (a tensor already on the device is not copied).
+        masked : {"unmeasured", "zero", "keep"}, default "unmeasured"
+            Below-horizon bins: ``-1`` (MERL's unmeasured marker), ``0``, or the decoded value.
+        energy_bound : bool, optional
+            The energy bound (``spec/bvae-format.md`` §6 step 5) for every table (True) or none (False); by
+            default, exactly for edited records (:func:`is_edited`), never for bare codes.
+        batch_size : int, default 16
+            Codes run through the network at once.
+
+        Returns
+        -------
+        torch.Tensor of float32, shape (N, 3, 90, 90, 180)
+            Stored MERL units, on :attr:`device` (17.5 MB a table: ask for as many as the device holds).
+
+        Raises
+        ------
+        ValueError
+            Codes of the wrong width or not finite, a bad ``masked`` or ``batch_size``, or a record of another
+            latent size.
+        """
+        from brdfcodec.codec.device_decode import decode_many_tensor
+
+        return decode_many_tensor(self, records, masked=masked, energy_bound=energy_bound, batch_size=batch_size)
+
     def _check_record(self, record: Record) -> None:
         if record.latent_dim != self.latent_dim:
             raise ValueError(f"{record.name}: latent dimension {record.latent_dim}, decoder needs {self.latent_dim}")

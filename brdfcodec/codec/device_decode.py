@@ -1,0 +1,298 @@
+"""Full tables decoded as torch tensors on the decoder's device (issue 51, item 1).
+
+Part of :mod:`brdfcodec.codec`; reached through :meth:`BrdfDecoder.decode_many_tensor
+<brdfcodec.codec.BrdfDecoder.decode_many_tensor>`.
+
+The steps of ``spec/bvae-format.md`` §6 after the network — clamp, layers, interpolation of the 21 kept φd
+slices to 180 bins, unmapping to stored MERL units, the energy bound of edited records, the horizon mask —
+run as tensor operations where the network ran, and the tables stay there: a renderer on a GPU takes them
+without a copy through the host (DLPack: ``torch.utils.dlpack.to_dlpack(tables)`` or the tensor's
+``__dlpack__``, which ``drjit``, ``jax.dlpack.from_dlpack`` and ``cupy.from_dlpack`` accept).
+
+The unmapping is the NumPy path's (:func:`~brdfcodec.representation.network_io.table_from_mapped`) in the same
+order and precision: float64, one exponential per kept slice and one per gap between kept slices, then a product
+per bin, rounded to float32 once (``spec/bvae-format.md`` §9). The device's float64 ``exp`` may differ from
+NumPy's in the last bit, so the two decodes agree to float32 rounding (far within §9's 1e-3 mapped), not bit
+for bit. The energy bound's albedo is the NumPy path's quadrature (``representation/energy.py``), summed on the
+device in another order (a relative difference of about 1e-15 in the factor).
+
+What stays on the host: records that are not a plain latent decode — grafts (two codes), records whose base is
+projected on the shared basis (format 1.6), records without a latent (format 2.1) — get their mapped slices
+from the NumPy path (:meth:`BrdfDecoder._mapped_record`), moved to the device (2 MB each) for the table; a
+layered record's layers (basis sum, inverse DCT of the detail layer) are decoded on the host and added to the
+network output on the device, before the one clamp (§4.4).
+"""
+
+from __future__ import annotations
+
+import functools
+from collections.abc import Sequence
+from typing import TYPE_CHECKING
+
+import numpy as np
+import numpy.typing as npt
+import torch
+
+from brdfcodec.conventions import (
+    EPSILON,
+    KEPT_PHI_D_SLICES,
+    MAPPED_MAX,
+    MERL_COLOR_SCALE,
+    N_CHANNELS,
+    N_KEPT_SLICES,
+    N_PHI_D,
+    N_THETA_D,
+    N_THETA_H,
+    UNMEASURED_VALUE,
+)
+from brdfcodec.format.bvae import LatentRecord, Record
+from brdfcodec.representation.energy import _quadrature
+from brdfcodec.representation.layout import interpolation_plan
+from brdfcodec.representation.mapping import LOG_RANGE
+from brdfcodec.representation.mask import horizon_mask
+from brdfcodec.runtime.threads import codec_threads
+
+if TYPE_CHECKING:
+    from brdfcodec.codec.decoder import BrdfDecoder
+    from brdfcodec.codec.prepare import MaskedEntries
+
+__all__ = ["clamp_mapped_tensor", "decode_many_tensor", "energy_bound_scales_tensor", "tables_from_mapped_tensor"]
+
+#: Bins from one kept slice to the next (the last gap, 171 → 179, holds 8).
+_GAP = KEPT_PHI_D_SLICES[1] - KEPT_PHI_D_SLICES[0]
+#: ε / S_c per channel: stored units per unit of ``expm1`` (as in ``representation/network_io.py``).
+_STORED_PER_EXPM1 = EPSILON / np.asarray(MERL_COLOR_SCALE, dtype=np.float64)
+#: Records unmapped at once on the CPU: their float64 working arrays (about 35 MB a record) stay small.
+_CPU_CHUNK = 1
+#: Records unmapped at once on other devices (float64 working arrays of about 35 MB a record).
+_DEVICE_CHUNK = 16
+
+
+def clamp_mapped_tensor(mapped: torch.Tensor) -> torch.Tensor:
+    """Clamp mapped values to ``[0, MAPPED_MAX]`` in place, NaN to 0, ±inf to the bounds (as ``clamp_mapped``).
+
+    Parameters
+    ----------
+    mapped : torch.Tensor of float32, any shape
+        Mapped values (network output, or base plus layers).
+
+    Returns
+    -------
+    torch.Tensor
+        ``mapped`` itself, every entry finite in ``[0, MAPPED_MAX]``.
+    """
+    torch.nan_to_num_(mapped, nan=0.0, posinf=MAPPED_MAX, neginf=0.0)
+    return mapped.clamp_(0.0, MAPPED_MAX)
+
+
+@functools.cache
+def _constants(device: torch.device) -> dict[str, torch.Tensor]:
+    """Per-device constants: the below-horizon bins, the gap lengths, ε / S_c (built once per device)."""
+    return {
+        "invalid": torch.from_numpy(~horizon_mask()).to(device),  # (90, 90, 180) bool
+        "steps": torch.from_numpy(np.diff(np.asarray(KEPT_PHI_D_SLICES)).astype(np.float64)).to(device),  # (20,)
+        "stored": torch.from_numpy(_STORED_PER_EXPM1.copy()).to(device),  # (3,) float64
+    }
+
+
+@functools.cache
+def _quadrature_on(device: torch.device) -> dict[str, torch.Tensor]:
+    """The energy bound's quadrature on a device: flat kept-slice indices of each node's two neighbours, the
+    right one's interpolation weight, the node's weight and its incident-elevation row (float64 / int64)."""
+    h, d, p, weight, row = _quadrature()
+    left, right, t = interpolation_plan()
+    plane = N_THETA_H * N_THETA_D
+    return {
+        "left": torch.from_numpy((left[p] * plane + h * N_THETA_D + d).astype(np.int64)).to(device),
+        "right": torch.from_numpy((right[p] * plane + h * N_THETA_D + d).astype(np.int64)).to(device),
+        "t": torch.from_numpy(np.array(t[p], dtype=np.float64)).to(device),
+        "weight": torch.from_numpy(np.array(weight, dtype=np.float64)).to(device),
+        "row": torch.from_numpy(np.array(row, dtype=np.int64)).to(device),
+        "rows": torch.tensor(int(row.max()) + 1),
+    }
+
+
+def energy_bound_scales_tensor(mapped: torch.Tensor) -> torch.Tensor:
+    """The energy bound's factors ``min(1, 1 / max a)`` of clamped mapped slices, on their device.
+
+    The same quadrature as :func:`~brdfcodec.representation.energy.energy_bound_scale_mapped`: each node
+    reads its φd bin as the interpolation makes it, unmapped to reflectance, in float64.
+
+    Parameters
+    ----------
+    mapped : torch.Tensor of float32, shape (B, 63, 90, 90)
+        Clamped mapped slices (network layout).
+
+    Returns
+    -------
+    torch.Tensor of float64, shape (B,)
+        Factors on reflectance, in (0, 1], on ``mapped``'s device.
+    """
+    q = _quadrature_on(mapped.device)
+    flat = mapped.reshape(mapped.shape[0], N_CHANNELS, -1)  # (B, 3, 21·90·90), kept slot major
+    low = flat[:, :, q["left"]].double()
+    high = flat[:, :, q["right"]].double()
+    value = (1.0 - q["t"]) * low + q["t"] * high
+    albedo = torch.expm1(value.mul_(LOG_RANGE)).mul_(EPSILON).mul_(q["weight"])  # (B, 3, n)
+    sums = value.new_zeros((mapped.shape[0], N_CHANNELS, int(q["rows"]))).index_add_(2, q["row"], albedo)
+    largest = sums.amax(dim=(1, 2))
+    return torch.where(largest > 1.0, 1.0 / largest.clamp(min=1.0), torch.ones_like(largest))
+
+
+def _unmap_chunk(kept: torch.Tensor, factor: torch.Tensor) -> torch.Tensor:
+    """``factor_c · expm1(L · m)`` at all 180 bins of kept slices (C, 3, 90, 90, 21): (C, 3, 90, 90, 180) float32.
+
+    The operations of ``representation/network_io.py:_scaled_expm1_all`` in the same order: ``x = L · m`` in
+    float64, ``q = exp((x_b − x_a) / n)`` per gap, ``factor · exp(x_a)`` per kept slice, then for each offset
+    j of the gaps ``current − factor`` rounded to float32 and ``current ·= q``; bin 179 is the last kept slice.
+    """
+    x = kept.double().mul_(LOG_RANGE)
+    ratio = torch.exp((x[..., 1:] - x[..., :-1]).div_(_constants(kept.device)["steps"]))
+    scale = factor.reshape(*factor.shape, 1, 1, 1)  # (C, 3, 1, 1, 1)
+    start = torch.exp(x).mul_(scale)
+    current = start[..., :-1].clone()
+    offsets = []
+    for j in range(_GAP):
+        offsets.append((current - scale).float())
+        if j + 1 < _GAP:
+            current.mul_(ratio)
+    out = torch.stack(offsets, dim=-1).reshape(*kept.shape[:-1], (N_KEPT_SLICES - 1) * _GAP)
+    out[..., N_PHI_D - 1] = (start[..., -1] - scale[..., 0]).float()  # bin 179, a kept slice of its own
+    return out
+
+
+def tables_from_mapped_tensor(
+    mapped: torch.Tensor, scales: torch.Tensor | None = None, *, masked: MaskedEntries = "unmeasured"
+) -> torch.Tensor:
+    """Full tables in stored MERL units from clamped mapped slices, on their device.
+
+    Parameters
+    ----------
+    mapped : torch.Tensor of float32, shape (B, 63, 90, 90)
+        Clamped mapped slices (network layout), values in ``[0, MAPPED_MAX]``.
+    scales : torch.Tensor of float64, shape (B,), optional
+        Factor ≥ 0 on reflectance per table (the energy bound, ``spec/bvae-format.md`` §6 step 5), applied to
+        the interpolated table; 1 by default.
+    masked : {"unmeasured", "zero", "keep"}, default "unmeasured"
+        Below-horizon bins: −1, 0, or the decoded value.
+
+    Returns
+    -------
+    torch.Tensor of float32, shape (B, 3, 90, 90, 180)
+        On ``mapped``'s device; finite, ≥ 0 above the horizon.
+    """
+    fill = _mask_fill(masked)
+    count = mapped.shape[0]
+    constants = _constants(mapped.device)
+    factors = constants["stored"].expand(count, N_CHANNELS).clone()
+    if scales is not None:
+        factors *= scales.to(mapped.device, torch.float64).reshape(count, 1)
+    kept = mapped.reshape(count, N_CHANNELS, N_KEPT_SLICES, N_THETA_H, N_THETA_D).permute(0, 1, 3, 4, 2)
+    out = torch.empty((count, N_CHANNELS, N_THETA_H, N_THETA_D, N_PHI_D), dtype=torch.float32, device=mapped.device)
+    chunk = _CPU_CHUNK if mapped.device.type == "cpu" else _DEVICE_CHUNK
+    for start in range(0, count, chunk):
+        out[start : start + chunk] = _unmap_chunk(kept[start : start + chunk], factors[start : start + chunk])
+    if fill is not None:
+        out.masked_fill_(constants["invalid"], fill)
+    return out
+
+
+def _mask_fill(masked: str) -> float | None:
+    if masked == "keep":
+        return None
+    if masked not in ("unmeasured", "zero"):
+        raise ValueError(f"masked must be 'unmeasured', 'zero' or 'keep', got {masked!r}")
+    return float(UNMEASURED_VALUE) if masked == "unmeasured" else 0.0
+
+
+def _network_mapped(decoder: BrdfDecoder, codes: torch.Tensor, batch_size: int) -> torch.Tensor:
+    """Clamped network output (B, 63, 90, 90) float32 of codes, on the decoder's device."""
+    if not len(codes):
+        return torch.empty((0, N_CHANNELS * N_KEPT_SLICES, N_THETA_H, N_THETA_D), device=decoder.device)
+    outputs = []
+    network, was_training = decoder.network, decoder.network.training
+    network.eval()  # under the caller's no_grad (inference tensors would refuse the in-place clamp), mode restored
+    try:
+        for start in range(0, len(codes), batch_size):
+            outputs.append(network(codes[start : start + batch_size].to(decoder.dtype)).float())
+    finally:
+        network.train(was_training)
+    return clamp_mapped_tensor(torch.cat(outputs) if len(outputs) > 1 else outputs[0])
+
+
+def _codes_tensor(decoder: BrdfDecoder, codes: torch.Tensor | npt.ArrayLike) -> torch.Tensor:
+    """Latent codes (B, latent_dim) as float32 on the decoder's device; ValueError for a bad shape or value."""
+    if isinstance(codes, np.ndarray) and not codes.flags.writeable:
+        codes = codes.copy()  # torch warns on read-only arrays (records' codes are)
+    tensor = torch.as_tensor(codes, dtype=torch.float32, device=decoder.device)
+    if tensor.ndim != 2 or tensor.shape[-1] != decoder.latent_dim:
+        raise ValueError(f"codes must have shape (B, {decoder.latent_dim}), got {tuple(tensor.shape)}")
+    if not bool(torch.isfinite(tensor).all()):
+        raise ValueError("latent codes must be finite")
+    return tensor
+
+
+def _is_plain_latent(record: Record) -> bool:
+    """Whether a record's base is the network's decode of its one latent (batched on the device)."""
+    from brdfcodec.codec.projection import _has_latent, _projected_vectors
+
+    return isinstance(record, LatentRecord) and not _projected_vectors(record) and _has_latent(record)
+
+
+def _records_mapped(decoder: BrdfDecoder, records: Sequence[Record], batch_size: int) -> torch.Tensor:
+    """Clamped mapped slices (N, 63, 90, 90) of records on the decoder's device (layers added, §4.4)."""
+    plain = [i for i, record in enumerate(records) if _is_plain_latent(record)]
+    on_network = set(plain)
+    mapped = torch.empty((len(records), N_CHANNELS * N_KEPT_SLICES, N_THETA_H, N_THETA_D), device=decoder.device)
+    if plain:
+        codes = _codes_tensor(decoder, np.stack([np.asarray(records[i].mu, dtype=np.float32) for i in plain]))
+        mapped[plain] = _network_mapped(decoder, codes, batch_size)
+    for i, record in enumerate(records):
+        if i in on_network:
+            residuals = decoder._layer_residuals(record)  # host: basis sum, inverse DCT (empty without layers)
+            if residuals:
+                for residual in residuals:
+                    mapped[i] += torch.from_numpy(residual).to(decoder.device)
+                clamp_mapped_tensor(mapped[i])
+        else:  # grafts, projected bases, records without a latent: the NumPy path's mapped slices
+            mapped[i] = torch.from_numpy(decoder._mapped_record(record)).to(decoder.device)
+    return mapped
+
+
+def decode_many_tensor(
+    decoder: BrdfDecoder,
+    records: Sequence[Record] | torch.Tensor | npt.ArrayLike,
+    *,
+    masked: MaskedEntries = "unmeasured",
+    energy_bound: bool | None = None,
+    batch_size: int = 16,
+) -> torch.Tensor:
+    """:meth:`BrdfDecoder.decode_many_tensor <brdfcodec.codec.BrdfDecoder.decode_many_tensor>` (see there)."""
+    if batch_size < 1:
+        raise ValueError(f"batch_size must be at least 1, got {batch_size}")
+    _mask_fill(masked)  # a bad value is refused before any work
+    given = list(records) if isinstance(records, Sequence) and not isinstance(records, str | bytes) else None
+    as_records = given is not None and len(given) > 0 and any(isinstance(r, Record) for r in given)
+    if as_records and not all(isinstance(r, Record) for r in given):  # type: ignore[union-attr]
+        raise TypeError("records must be a sequence of records, or latent codes of shape (B, latent_dim)")
+    if given is not None and not given:
+        return torch.empty((0, N_CHANNELS, N_THETA_H, N_THETA_D, N_PHI_D), device=decoder.device)
+    with codec_threads(), torch.no_grad():
+        if as_records:
+            for record in given:  # type: ignore[union-attr]
+                decoder._check_record(record)
+            mapped = _records_mapped(decoder, given, batch_size)  # type: ignore[arg-type]
+            # By default the bound is for edits (records whose metadata holds "edit": decoder.is_edited).
+            bounded = [energy_bound if energy_bound is not None else "edit" in r.meta for r in given]  # type: ignore[union-attr]
+        else:
+            mapped = _network_mapped(decoder, _codes_tensor(decoder, records), batch_size)
+            bounded = [bool(energy_bound)] * len(mapped)
+        scales = None
+        if any(bounded):
+            scales = torch.ones(len(mapped), dtype=torch.float64, device=mapped.device)
+            chunk = _CPU_CHUNK if mapped.device.type == "cpu" else _DEVICE_CHUNK
+            which = [i for i, bound in enumerate(bounded) if bound]
+            for start in range(0, len(which), chunk):
+                part = which[start : start + chunk]
+                scales[part] = energy_bound_scales_tensor(mapped[part])
+        return tables_from_mapped_tensor(mapped, scales, masked=masked)
