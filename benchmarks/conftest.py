@@ -55,6 +55,9 @@ TARGETS = {
     "record-limit-round-trip": 16.0,
     # decode_many of 32 random latents (full tables) vs the decoder network alone on them, paired (issue 51, 2)
     "decode-many-32": 1.5,
+    # decode_many_tensor (torch on the decoder's device) of the same 32 latents vs the network alone, paired, on the
+    # CPU: reported (5.7-6.9 on 2 busy cores); its real target is on a GPU (issue 51, 1: ≥ 15 % of the network alone)
+    "decode-many-tensor-32": 10.0,
 }
 
 #: Largest acceptable candidate median, in seconds, on 2 CPU cores (issue 4 targets).

@@ -1,16 +1,19 @@
-"""``decode_many`` against the network alone (issue 51, 2): the host path after the network costs little.
+"""``decode_many`` and ``decode_many_tensor`` against the network alone (issue 51, 1-2): the work after the network
+costs little.
 
 32 random latents, CPU, one process: ``BrdfDecoder.decode_many`` (full tables, below-horizon entries −1, every
-table consumed) against the decoder network alone on the same latents, in batches of the same size, on the same
-torch threads (``codec_threads``). Paired: each round times both, alternating, so that a shared machine's drift
-falls on both; the ratio checked is the median of the per-round ratios (target in ``conftest.TARGETS``,
-"decode-many-32").
+table consumed), and ``BrdfDecoder.decode_many_tensor`` (the same tables as one torch tensor, computed with torch
+on the decoder's device), each against the decoder network alone on the same latents, in batches of the same
+size, on the same torch threads (``codec_threads``). Paired: each round times both, alternating, so that a shared
+machine's drift falls on both; the ratio checked is the median of the per-round ratios (targets in
+``conftest.TARGETS``, "decode-many-32" and "decode-many-tensor-32").
 """
 
 from __future__ import annotations
 
 import statistics
 import time
+from collections.abc import Callable
 
 import numpy as np
 import torch
@@ -24,8 +27,9 @@ _BATCH = 16
 _ROUNDS = 5
 
 
-def test_decode_many_against_the_network_alone(benchmark) -> None:
-    benchmark.group = "decode-many-32"
+def _paired_against_the_network(benchmark, group: str, label: str,  # noqa: ANN001 - pytest-benchmark's fixture
+                                candidate: Callable[[BrdfDecoder, np.ndarray, list[LatentRecord]], None]) -> None:
+    benchmark.group = group
     benchmark.extra_info["role"] = "candidate"
     decoder = BrdfDecoder()
     codes = np.random.default_rng(0).standard_normal((_COUNT, decoder.latent_dim)).astype(np.float32)
@@ -36,12 +40,11 @@ def test_decode_many_against_the_network_alone(benchmark) -> None:
             for start in range(0, _COUNT, _BATCH):
                 decoder.network(torch.from_numpy(codes[start : start + _BATCH])).numpy()
 
-    def decode_many() -> None:
-        for table in decoder.decode_many(records, batch_size=_BATCH):
-            assert table.shape == (3, 90, 90, 180)
+    def decode() -> None:
+        candidate(decoder, codes, records)
 
     network_alone()  # warm-up: first-call allocations, cached plans and masks
-    decode_many()
+    decode()
     baseline: list[float] = []
     ratios: list[float] = []
 
@@ -52,11 +55,27 @@ def test_decode_many_against_the_network_alone(benchmark) -> None:
 
     def timed_decode() -> None:
         start = time.perf_counter()
-        decode_many()
+        decode()
         ratios.append((time.perf_counter() - start) / baseline[-1])
 
     benchmark.pedantic(timed_decode, setup=time_the_network, rounds=_ROUNDS, iterations=1)
     benchmark.extra_info["paired_baseline_s"] = statistics.median(baseline)
     benchmark.extra_info["paired_ratio"] = statistics.median(ratios)
-    benchmark.extra_info["summary"] = (f"decode_many / network alone, {_COUNT} latents: per-round ratios "
+    benchmark.extra_info["summary"] = (f"{label} / network alone, {_COUNT} latents: per-round ratios "
                                        + ", ".join(f"{r:.2f}" for r in ratios))
+
+
+def test_decode_many_against_the_network_alone(benchmark) -> None:  # noqa: ANN001
+    def decode_many(decoder: BrdfDecoder, codes: np.ndarray, records: list[LatentRecord]) -> None:
+        for table in decoder.decode_many(records, batch_size=_BATCH):
+            assert table.shape == (3, 90, 90, 180)
+
+    _paired_against_the_network(benchmark, "decode-many-32", "decode_many", decode_many)
+
+
+def test_decode_many_tensor_against_the_network_alone(benchmark) -> None:  # noqa: ANN001
+    def decode_many_tensor(decoder: BrdfDecoder, codes: np.ndarray, records: list[LatentRecord]) -> None:
+        tables = decoder.decode_many_tensor(records, batch_size=_BATCH)
+        assert tables.shape == (_COUNT, 3, 90, 90, 180)
+
+    _paired_against_the_network(benchmark, "decode-many-tensor-32", "decode_many_tensor", decode_many_tensor)

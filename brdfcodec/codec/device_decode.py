@@ -62,8 +62,10 @@ __all__ = ["clamp_mapped_tensor", "decode_many_tensor", "energy_bound_scales_ten
 _GAP = KEPT_PHI_D_SLICES[1] - KEPT_PHI_D_SLICES[0]
 #: ε / S_c per channel: stored units per unit of ``expm1`` (as in ``representation/network_io.py``).
 _STORED_PER_EXPM1 = EPSILON / np.asarray(MERL_COLOR_SCALE, dtype=np.float64)
-#: Records unmapped at once on the CPU: their float64 working arrays (about 35 MB a record) stay small.
+#: Records and θh rows unmapped at once on the CPU: the float64 working arrays (about 0.4 MB) stay in cache, as
+#: in ``representation/network_io.py`` (whole tables at once were several times slower: memory traffic).
 _CPU_CHUNK = 1
+_CPU_ROWS = 10
 #: Records unmapped at once on other devices (float64 working arrays of about 35 MB a record).
 _DEVICE_CHUNK = 16
 
@@ -139,8 +141,8 @@ def energy_bound_scales_tensor(mapped: torch.Tensor) -> torch.Tensor:
     return torch.where(largest > 1.0, 1.0 / largest.clamp(min=1.0), torch.ones_like(largest))
 
 
-def _unmap_chunk(kept: torch.Tensor, factor: torch.Tensor) -> torch.Tensor:
-    """``factor_c · expm1(L · m)`` at all 180 bins of kept slices (C, 3, 90, 90, 21): (C, 3, 90, 90, 180) float32.
+def _unmap_chunk(kept: torch.Tensor, factor: torch.Tensor, target: torch.Tensor) -> None:
+    """``factor_c · expm1(L · m)`` at all 180 bins of kept slices (C, 3, R, 90, 21), into ``target`` (C, 3, R, 90, 180).
 
     The operations of ``representation/network_io.py:_scaled_expm1_all`` in the same order: ``x = L · m`` in
     float64, ``q = exp((x_b − x_a) / n)`` per gap, ``factor · exp(x_a)`` per kept slice, then for each offset
@@ -156,9 +158,8 @@ def _unmap_chunk(kept: torch.Tensor, factor: torch.Tensor) -> torch.Tensor:
         offsets.append((current - scale).float())
         if j + 1 < _GAP:
             current.mul_(ratio)
-    out = torch.stack(offsets, dim=-1).reshape(*kept.shape[:-1], (N_KEPT_SLICES - 1) * _GAP)
-    out[..., N_PHI_D - 1] = (start[..., -1] - scale[..., 0]).float()  # bin 179, a kept slice of its own
-    return out
+    target.copy_(torch.stack(offsets, dim=-1).reshape(target.shape))  # one interleaving copy, φd in order
+    target[..., N_PHI_D - 1] = (start[..., -1] - scale[..., 0]).float()  # bin 179, a kept slice of its own
 
 
 def tables_from_mapped_tensor(
@@ -189,9 +190,13 @@ def tables_from_mapped_tensor(
         factors *= scales.to(mapped.device, torch.float64).reshape(count, 1)
     kept = mapped.reshape(count, N_CHANNELS, N_KEPT_SLICES, N_THETA_H, N_THETA_D).permute(0, 1, 3, 4, 2)
     out = torch.empty((count, N_CHANNELS, N_THETA_H, N_THETA_D, N_PHI_D), dtype=torch.float32, device=mapped.device)
-    chunk = _CPU_CHUNK if mapped.device.type == "cpu" else _DEVICE_CHUNK
+    on_cpu = mapped.device.type == "cpu"
+    chunk, rows = (_CPU_CHUNK, _CPU_ROWS) if on_cpu else (_DEVICE_CHUNK, N_THETA_H)
     for start in range(0, count, chunk):
-        out[start : start + chunk] = _unmap_chunk(kept[start : start + chunk], factors[start : start + chunk])
+        records = slice(start, start + chunk)
+        for row in range(0, N_THETA_H, rows):
+            block = slice(row, row + rows)
+            _unmap_chunk(kept[records, :, block].contiguous(), factors[records], out[records, :, block])
     if fill is not None:
         out.masked_fill_(constants["invalid"], fill)
     return out
