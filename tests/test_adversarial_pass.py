@@ -111,7 +111,9 @@ def test_every_invalid_vector_fails_cleanly_in_every_command(
     for argv in commands:
         code, out, err = run(capsys, *argv)
         if vector.get("when") == "decode" and argv[0] == "info":
-            assert code == 0, err  # well-formed bytes: described, refused only when decoded
+            # well-formed bytes, refused when decoded; info refuses them too where the named decoder is installed
+            # (§7: info "refuses what a decoder would", R3-04), as it is here (the vectors name installed models)
+            assert code == 1 and str(path) in err and "internal error" not in err, err
             continue
         assert code == 1, (argv, err)
         assert str(path) in err and err.count("\n") == 1 and "internal error" not in err, err
