@@ -367,3 +367,19 @@ def test_bvae_model_list_survives_a_broken_folder(model: Path, tmp_path: Path, m
 
 if __name__ == "__main__":  # pragma: no cover
     sys.exit(pytest.main([__file__, "-q"]))
+
+
+def test_a_basis_tensor_of_a_dtype_numpy_lacks_is_a_typed_error(tmp_path: Path) -> None:
+    """Found by the fuzz campaign (reports/fuzz): a basis file whose tensor is bfloat16 made safetensors.numpy
+    raise KeyError('BF16'); it is a BasisError naming the file."""
+    import hashlib
+
+    from brdfcodec.layers.basis import BasisError
+    from brdfcodec.layers.basis_storage import load_shared_basis
+
+    path = tmp_path / "basis.safetensors"
+    save_file({"components": torch.zeros((2, 4), dtype=torch.bfloat16),
+               "entries": torch.arange(4, dtype=torch.int64)}, str(path))
+    sha = hashlib.sha256(path.read_bytes()).hexdigest()
+    with pytest.raises(BasisError, match="basis.safetensors: a tensor NumPy cannot read"):
+        load_shared_basis(path, sha)

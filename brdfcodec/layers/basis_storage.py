@@ -72,6 +72,9 @@ def load_shared_basis(path: str | os.PathLike[str], expected_sha256: str) -> Sha
         tensors = load(data)
     except SafetensorError as error:
         raise BasisError(f"{path}: not a readable safetensors file ({error})") from None
+    except (KeyError, ValueError, TypeError) as error:  # safetensors.numpy: a dtype NumPy has not (BF16), …
+        raise BasisError(f"{path}: a tensor NumPy cannot read ({type(error).__name__}: {error}); a basis file "
+                         "holds float16/float32 and int64 tensors") from None
     if "factors" in tensors:
         factorised = _factorised(tensors, str(path))
         return SharedBasis(None, factorised.entries(), actual, factorised)
@@ -81,6 +84,7 @@ def load_shared_basis(path: str | os.PathLike[str], expected_sha256: str) -> Sha
                          "'colours', 'factor_of' and 'colour_entries'")
     _validate(components, entries, str(path))
     return SharedBasis(components, entries.astype(np.int64), actual)
+
 
 def write_factorised_basis(path: str | os.PathLike[str], basis: FactorisedBasis) -> str:
     """Write a factorised basis file atomically and return its SHA-256."""
