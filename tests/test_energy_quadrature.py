@@ -101,9 +101,11 @@ def test_the_quadrature_matches_a_denser_reference_at_every_angle(name: str) -> 
     table = SHARP[name]()
     reflectance = reflectance_from_stored(table)
     albedo = directional_albedo(table)
-    for row, theta_i in enumerate(ALBEDO_THETA_I_DEG):
-        reference = dense_albedo(reflectance, theta_i, per_part=1000, seed=1)
-        scale = max(float(reference.max()), 1e-12)
+    references = [dense_albedo(reflectance, theta_i, per_part=1000, seed=1) for theta_i in ALBEDO_THETA_I_DEG]
+    # the bound reads the largest albedo over the angles: each angle's error is measured against it (the spike's
+    # albedo at 87.5° is 1e-5, where the reference's own 0.4 % sampling spread is 1e-4 of the largest)
+    scale = max(max(float(reference.max()) for reference in references), 1e-12)
+    for row, (theta_i, reference) in enumerate(zip(ALBEDO_THETA_I_DEG, references, strict=True)):
         np.testing.assert_allclose(albedo[row], reference, rtol=0, atol=RELATIVE * scale, err_msg=f"θi = {theta_i}°")
 
 

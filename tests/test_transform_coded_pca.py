@@ -81,6 +81,22 @@ def test_entropy_coding_stays_within_the_budget_at_the_finest_step_that_fits() -
                 assert len(coder._code(c, payload[0] + 1)) > budget
 
 
+def test_a_material_far_outside_the_training_spread_keeps_the_leading_coefficients_that_fit() -> None:
+    """A held-out material whose trailing coefficients are far beyond their training spread: the coarsest step
+    does not fit the budget (the bench run of a fold stopped with "no step fits 32 bytes"); the leading
+    coefficients that fit are coded, the rest as 0, within the budget."""
+    coder = EntropyCodedPca(SPREADS, 16)
+    c = np.where(np.arange(len(SPREADS)) < 10, SPREADS, 1e3 * SPREADS.max())
+    assert len(coder._code(c, 0)) > 16  # the case: even the coarsest step overflows
+    payload = coder.encode(c)
+    assert len(payload) <= 16 and payload[0] == 0
+    decoded = coder.decode(payload)
+    kept = int(np.flatnonzero(decoded)[-1]) + 1 if np.any(decoded) else 0
+    assert kept >= 1 and np.all(decoded[kept:] == 0)
+    assert np.allclose(decoded[:kept], np.clip(np.rint(c[:kept] / coder.step(0)), -coder._bounds(coder.step(0))[:kept],
+                                               coder._bounds(coder.step(0))[:kept]) * coder.step(0))
+
+
 def test_entropy_coding_beats_fixed_rate_coding_on_laplacian_coefficients() -> None:
     materials = _materials(laplace=True, seed=2)
     for budget in (32, 128):

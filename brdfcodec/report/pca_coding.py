@@ -267,14 +267,15 @@ class EntropyCodedPca:
         Raises
         ------
         ValueError
-            Coefficients of another shape or not finite; no step fits the budget.
+            Coefficients of another shape or not finite; not even all-zero coefficients fit the budget. (Where
+            the coarsest step does not fit, the leading coefficients that fit are kept and the rest coded as 0.)
         """
         c = np.asarray(coefficients, dtype=np.float64)
         if c.shape != self.spreads.shape or not np.all(np.isfinite(c)):
             raise ValueError(f"coefficients must be finite of shape {self.spreads.shape}, got {c.shape}")
         best = self._code(c, 0)
         if len(best) > self.budget_bytes:
-            raise ValueError(f"no step fits {self.budget_bytes} bytes")
+            return self._truncated(c)
         # lo fits; find the largest code that fits (bytes grow with the code, nearly always), among the codes
         # whose bounds all stay below MAX_BOUND (finer steps would clip the largest coefficients).
         lo, hi = 0, self.finest_code
@@ -286,6 +287,23 @@ class EntropyCodedPca:
         while hi - lo > 1:
             mid = (lo + hi) // 2
             trial = self._code(c, mid)
+            if len(trial) <= self.budget_bytes:
+                lo, best = mid, trial
+            else:
+                hi = mid
+        return best
+
+    def _truncated(self, c: npt.NDArray[np.float64]) -> bytes:
+        """At the coarsest step, the most leading coefficients that fit, the rest coded as 0 (a material far
+        outside the training spread, whose clipped coefficients cost more than the budget: rare, at small N)."""
+        zeros = np.zeros_like(c)
+        best = self._code(zeros, 0)
+        if len(best) > self.budget_bytes:
+            raise ValueError(f"no step fits {self.budget_bytes} bytes")
+        lo, hi = 0, len(c)  # lo leading coefficients fit; all of them do not
+        while hi - lo > 1:
+            mid = (lo + hi) // 2
+            trial = self._code(np.concatenate([c[:mid], zeros[mid:]]), 0)
             if len(trial) <= self.budget_bytes:
                 lo, best = mid, trial
             else:
