@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import functools
 from collections.abc import Sequence
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 import numpy.typing as npt
@@ -53,8 +53,23 @@ from brdfcodec.representation.mask import horizon_mask
 from brdfcodec.runtime.threads import codec_threads
 
 if TYPE_CHECKING:
-    from brdfcodec.codec.decoder import BrdfDecoder
     from brdfcodec.codec.prepare import MaskedEntries
+
+
+class BrdfDecoder(Protocol):
+    """What this module reads of :class:`brdfcodec.codec.BrdfDecoder` (named here, not imported: the decoder
+    imports this module)."""
+
+    device: torch.device
+    dtype: torch.dtype
+    network: torch.nn.Module
+    latent_dim: int
+
+    def _layer_residuals(self, record: Record) -> list[np.ndarray]: ...
+
+    def _mapped_record(self, record: Record) -> np.ndarray: ...
+
+    def _check_record(self, record: Record) -> None: ...
 
 __all__ = ["clamp_mapped_tensor", "decode_many_tensor", "energy_bound_scales_tensor", "tables_from_mapped_tensor"]
 
