@@ -149,11 +149,17 @@ def test_the_shipped_quadrature_is_the_computed_one() -> None:
         np.testing.assert_array_equal(stored, computed, err_msg=f"shipped quadrature's {name} differs")
 
 
-def test_the_quadrature_in_use_is_the_shipped_file() -> None:
+def test_the_quadrature_in_use_is_the_shipped_file(monkeypatch: pytest.MonkeyPatch) -> None:
     """A decode reads the shipped file instead of computing (the first bounded decode took seconds)."""
     from brdfcodec.representation import energy
 
-    shipped = energy._shipped_quadrature()
-    assert shipped is not None
-    for stored, used in zip(shipped, energy._quadrature(), strict=True):
-        np.testing.assert_array_equal(stored, used)
+    def computing() -> None:
+        raise AssertionError("the quadrature was computed, not read from the shipped file")
+
+    monkeypatch.setattr(energy, "_computed_quadrature", computing)
+    energy._quadrature.cache_clear()
+    try:
+        used = energy._quadrature()
+    finally:
+        energy._quadrature.cache_clear()  # the next caller builds it again, from the file
+    assert len(used) == 5 and len({len(array) for array in used}) == 1 and len(used[0]) > 0
