@@ -59,9 +59,13 @@ def test_rows_compare_file_bytes_with_pca_of_the_same_training_materials(fold_mo
     # Plain PCA of 2/3 of 14 materials has at most 8 components: k is capped at the basis' rank.
     plain = [row for row in rows if row["point"] == "pca-int8" and row["budget_bytes"] == 64]
     assert plain[0]["coefficients"] <= 8
+    # Every point, brdfcodec's and each PCA's, carries its decode time per material and the machine's name.
+    assert all(row["decode_ms_median"] > 0 and row["decode_ms_mean"] > 0 for row in rows)
+    assert all(row["decode_machine"].startswith("CPU: ") for row in rows)
     assert main(["bench", "table", str(tmp_path / "rows.jsonl"), "-o", str(tmp_path / "table.md"),
-                 "--plot", str(tmp_path / "rd.png")]) == 0
+                 "--plot", str(tmp_path / "rd.png"), "--time-plot", str(tmp_path / "time.png")]) == 0
     assert (tmp_path / "rd.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert (tmp_path / "time.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     table = (tmp_path / "table.md").read_text()
     assert "**cv, held-out analytic**" in table and "| 64 B |" in table
 
@@ -106,3 +110,21 @@ def test_summary_pools_the_folds_of_a_group_and_takes_the_best_pca(tmp_path: Pat
     rows += [_row("cv", "pca-int8", 128, [0.01], 128)]
     assert "| 128 B | — | — |" in summary_markdown(rows)
     assert rd_plot(rows, tmp_path / "q.png").read_bytes()[:4] == b"\x89PNG"
+
+
+def test_decode_time_plot_draws_every_timed_point_and_refuses_rows_without_times(tmp_path: Path) -> None:
+    from brdfcodec.cli.main import main
+    from brdfcodec.report.rd_markdown import write_decode_time_plot
+    from brdfcodec.report.rows import write_rows
+
+    rows = [_row("cv", "bvae", 16, [0.03], 15.0), _row("cv", "pca-tc", 16, [0.04], 16.0),
+            _row("cv", "bvae", 64, [0.02], 60.0)]
+    with pytest.raises(ValueError, match="no row has a decode time"):
+        write_decode_time_plot(rows, tmp_path / "none.png")
+    assert not (tmp_path / "none.png").exists()
+    write_rows(tmp_path / "old.jsonl", rows)
+    assert main(["bench", "table", str(tmp_path / "old.jsonl"), "--time-plot", str(tmp_path / "cli.png")]) == 1
+    assert not (tmp_path / "cli.png").exists()
+    for k, row in enumerate(rows):
+        row.update(decode_ms_median=10.0 + k, decode_machine="CPU: test")
+    assert write_decode_time_plot(rows, tmp_path / "t.png").read_bytes()[:4] == b"\x89PNG"

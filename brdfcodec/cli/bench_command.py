@@ -63,6 +63,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     table.add_argument("rows", type=Path, nargs="+", help="row files (.jsonl)")
     table.add_argument("-o", "--output", type=Path, help="also write the table to this Markdown file")
     table.add_argument("--plot", type=Path, help="also draw the rate–distortion panels (PNG), one per family")
+    table.add_argument("--time-plot", type=Path,
+                       help="also draw error against decode time, every point (PNG), one panel per family")
+    table.add_argument("--results-table", type=Path,
+                       help="also write one Markdown table, a line per group, family and budget naming the model's "
+                       "decoder hash and the commit (the Results page's table)")
     table.set_defaults(handler=run_table)
     from brdfcodec.cli.fuzz_campaign import register_fuzz
 
@@ -93,6 +98,15 @@ def run_table(args: argparse.Namespace) -> int:
     text = summary_markdown(rows)
     if args.plot is not None:
         rd_plot(rows, args.plot)
+    if args.time_plot is not None:
+        from brdfcodec.report.rd_markdown import write_decode_time_plot
+
+        write_decode_time_plot(rows, args.time_plot)
+    if args.results_table is not None:
+        from brdfcodec.report.rd_markdown import results_table
+
+        with atomic_output(args.results_table, overwrite=True) as tmp:
+            Path(tmp).write_text(results_table(rows), encoding="utf-8")
     if args.output is not None:
         with atomic_output(args.output, overwrite=True) as tmp:
             Path(tmp).write_text(text + "\n", encoding="utf-8")

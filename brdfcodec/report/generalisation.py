@@ -32,7 +32,11 @@ materials, :func:`run_experiment` measures
   (:mod:`brdfcodec.report.pca_coding`, issue 48).
 
 Errors are the mean mapped and linear RelAE on the full table over valid
-entries (``spec/conventions.md``). Every row carries the commit, the model's
+entries (``spec/conventions.md``). Every point's row also carries its decode
+time per material (``decode_ms_median``, ``decode_ms_mean``: brdfcodec from
+the library's record to the full table, PCA from the stored coefficients or
+payload to the full table, one process, after a warm-up decode) and the
+machine it was measured on (``decode_machine``). Every row carries the commit, the model's
 decoder hash and the data it came from (:mod:`brdfcodec.report.rows`).
 """
 
@@ -41,6 +45,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -48,7 +53,8 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["DEFAULT_BUDGETS", "Experiment", "RdConfig", "load_config", "run_config", "run_experiment"]
+__all__ = ["DEFAULT_BUDGETS", "Experiment", "RdConfig", "decode_machine", "load_config", "run_config",
+           "run_experiment"]
 
 #: Bytes of a file's header besides the records' descriptors (preamble, decoder and basis hashes, a few forms,
 #: the payload CRC): a first guess of what the materials share, corrected by measuring the file.
@@ -178,14 +184,41 @@ def _pca_rows(name: str, basis: Any, inputs: np.ndarray, references: Sequence[An
     for budget in budgets:
         for storage, k in _pca_payload_counts(budget, basis.n_components).items():
             coefficients = _pack_pca(flat @ basis.components[:k].T, storage)
-            errors = []
+            errors, seconds = [], []
             for c, reference in zip(coefficients, references, strict=True):
+                start = time.perf_counter()  # timed: the (dequantised) coefficients to the full table
                 mapped = np.clip(c @ basis.components[:k] + basis.mean, 0.0, MAPPED_MAX).reshape(63, 90, 90)
-                errors.append(error(reference, table_from_network_output(mapped)))
+                table = table_from_network_output(mapped)
+                seconds.append(time.perf_counter() - start)
+                errors.append(error(reference, table))
             payload = k + 2 if storage == "int8" else 2 * k
             rows.append({"point": f"{name}-{storage}", "budget_bytes": budget, "coefficients": k,
-                         "bytes_per_material": float(payload), **_error_summary(errors)})
+                         "bytes_per_material": float(payload), **_error_summary(errors), **_decode_time(seconds)})
     return rows
+
+
+def _decode_time(seconds: Sequence[float]) -> dict[str, Any]:
+    """Decode time per material (ms): median and mean, from the stored bytes to the full table."""
+    return {"decode_ms_median": 1e3 * float(np.median(seconds)), "decode_ms_mean": 1e3 * float(np.mean(seconds))}
+
+
+def decode_machine() -> str:
+    """The machine decode times were measured on, in words (CPU model, cores, torch's thread count)."""
+    import platform
+
+    model = platform.processor() or platform.machine()
+    try:
+        with open("/proc/cpuinfo", encoding="utf-8") as info:
+            model = next((line.split(":", 1)[1].strip() for line in info if line.startswith("model name")), model)
+    except OSError:
+        pass
+    try:
+        import torch
+
+        threads = f", torch {torch.get_num_threads()} threads"
+    except ImportError:  # pragma: no cover - torch is a dependency of the decoder
+        threads = ""
+    return f"CPU: {model}, {os.cpu_count()} logical cores{threads}"
 
 
 def _error_summary(errors: Sequence[tuple[float, float]]) -> dict[str, Any]:
@@ -224,15 +257,23 @@ def _bvae_rows(model: Path, names: Sequence[str], families: Sequence[str], input
         entries = {entry.name: entry for entry in library.header.entries}
         record_bytes = {n: entries[n].length + entries[n].descriptor_bytes for n in names}
         header_share = (len(data) - name_bytes - sum(record_bytes.values())) / len(names)
+        library[names[0]].table(masked="unmeasured")  # warm-up (lazy imports, thread pools), not timed
+        library.forget()
         for family in rows:
             chosen = [i for i, f in enumerate(families) if f == family]
-            errors = [error(references[i], library[names[i]].table(masked="unmeasured")) for i in chosen]
+            errors, seconds = [], []
+            for i in chosen:  # the full decode of a record to its table, timed per material (CPU)
+                start = time.perf_counter()
+                table = library[names[i]].table(masked="unmeasured")
+                seconds.append(time.perf_counter() - start)
+                errors.append(error(references[i], table))
             without = sum(not getattr(library.record(names[i]), "has_latent", True) for i in chosen)
             rows[family].append({
                 "point": "bvae", "budget_bytes": budget, "bytes_flag": max(flag, 1), "file_bytes": len(data),
                 "library_materials": len(names), "header_share_bytes": header_share,
                 "bytes_per_material": sum(record_bytes[names[i]] for i in chosen) / len(chosen) + header_share,
-                "latent": latent, "records_without_latent": without, **_error_summary(errors)})
+                "latent": latent, "records_without_latent": without, **_error_summary(errors),
+                **_decode_time(seconds)})
     return rows
 
 
@@ -277,6 +318,7 @@ def run_experiment(config: RdConfig, experiment: Experiment,
                  "pca-perm": fit_pca_colour_orders(train_inputs, 5 * len(train_rows) - 1)}
         del train_inputs
         common = {"experiment": experiment.label, "group": experiment.group or experiment.label,
+                  "decode_machine": decode_machine(),
                   "model": manifest.name, "decoder_sha256": manifest.decoder_sha256,
                   "trained_materials": len(train_rows), "dataset_description": dataset.description}
         families = sorted({dataset.families[i] for i in held})

@@ -9,7 +9,7 @@ from typing import Any
 from brdfcodec.io.atomic import atomic_output
 from brdfcodec.report.styles import distinct_colour_index, distinct_line_style
 
-__all__ = ["TARGET_SIZES", "rd_markdown", "write_rd_plots"]
+__all__ = ["TARGET_SIZES", "rd_markdown", "results_table", "write_decode_time_plot", "write_rd_plots"]
 
 #: Payload sizes at which the report compares brdfcodec with the best baseline.
 TARGET_SIZES = (16, 32, 64, 128, 1024, 16384, 262144)
@@ -106,3 +106,118 @@ def write_rd_plots(records: Sequence[dict[str, Any]], folder: str | Path) -> lis
         plt.close(fig)
         written.append(path)
     return written
+
+
+def write_decode_time_plot(rows: Sequence[dict[str, Any]], path: str | Path) -> Path:
+    """Error against decode time, every point: one panel per group and family of ``bvae bench rd`` rows.
+
+    Each row with a decode time (``decode_ms_median``, per material, from the stored bytes to the full
+    table) is one marker: x its decode time (ms, log scale), y its mean mapped RelAE over the row's
+    materials; marker and colour name the point (``bvae``, ``pca-tc``, …), the label beside it the budget.
+    Rows of one group, point and budget (the folds of a cross-validation) are pooled: material-weighted
+    mean error, median of their decode times. The machine the times were measured on
+    (``decode_machine``) is in the title.
+
+    Raises
+    ------
+    ValueError
+        No row has a decode time.
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    timed = [r for r in rows if r.get("decode_ms_median") is not None]
+    if not timed:
+        raise ValueError("no row has a decode time (decode_ms_median): rows made before decode times were measured")
+    panels = sorted({(r["group"], r["family"]) for r in timed})
+    kinds = sorted({r["point"] for r in timed}, key=lambda k: (k != "bvae", k))
+    markers = "*osD^v<>phX"
+    figure, axes = plt.subplots(1, len(panels), figsize=(5.2 * len(panels), 4.4), squeeze=False)
+    for axis, (group, family) in zip(axes[0], panels, strict=True):
+        chosen = [r for r in timed if r["group"] == group and r["family"] == family]
+        for k, kind in enumerate(kinds):
+            points = []
+            for budget in sorted({r["budget_bytes"] for r in chosen if r["point"] == kind}):
+                at = [r for r in chosen if r["point"] == kind and r["budget_bytes"] == budget]
+                errors = [v for r in at for v in r["per_material_mapped"]]
+                points.append((float(np.median([r["decode_ms_median"] for r in at])), float(np.mean(errors)),
+                               budget))
+            if not points:
+                continue
+            ours = kind == "bvae"
+            axis.scatter([p[0] for p in points], [p[1] for p in points], marker=markers[k % len(markers)],
+                         s=90 if ours else 28, zorder=3 if ours else 2, label=kind,
+                         color=plt.get_cmap("tab20").colors[distinct_colour_index(k)])
+            for x, y, budget in points:
+                axis.annotate(_size(budget), (x, y), fontsize=6, xytext=(3, 2), textcoords="offset points")
+        axis.set_xscale("log")
+        axis.set_yscale("log")
+        axis.set_title(f"{group}: {family}", fontsize=10)
+        axis.set_xlabel("decode time per material (ms, median)")
+        axis.grid(True, which="both", alpha=0.3)
+    axes[0][0].set_ylabel("mean mapped RelAE")
+    axes[0][-1].legend(loc="center left", bbox_to_anchor=(1.01, 0.5), fontsize=7, frameon=False)
+    machines = sorted({str(r.get("decode_machine", "machine not recorded")) for r in timed})
+    figure.suptitle("Error against decode time, every point (labels: budget per material); " + "; ".join(machines),
+                    fontsize=8)
+    figure.tight_layout()
+    with atomic_output(path, overwrite=True) as tmp:
+        figure.savefig(tmp, dpi=110, format="png")
+    plt.close(figure)
+    return Path(path)
+
+
+def _pooled(rows: Sequence[dict[str, Any]]) -> tuple[float, float, float | None]:
+    """Material-weighted mean error and bytes of rows (the folds of a group), and their median decode time."""
+    import numpy as np
+
+    errors = [v for r in rows for v in r["per_material_mapped"]]
+    counts = [len(r["per_material_mapped"]) for r in rows]
+    size = float(np.average([r["bytes_per_material"] for r in rows], weights=counts))
+    times = [r["decode_ms_median"] for r in rows if r.get("decode_ms_median") is not None]
+    return float(np.mean(errors)), size, float(np.median(times)) if times else None
+
+
+def _ms(value: float | None) -> str:
+    return "—" if value is None else f"{value:.3g}"
+
+
+def results_table(rows: Sequence[dict[str, Any]]) -> str:
+    """One Markdown table of ``bvae bench rd`` rows for the Results page: a line per group, family and budget.
+
+    Each line names what measured it — the model, the first 12 hex digits of its decoder's SHA-256, the
+    commit (first 7) — and compares brdfcodec (pooled over the group's rows) with the best of every PCA
+    variant at that budget (lowest pooled mean mapped RelAE), each with its bytes per material and its
+    median decode time per material (ms, from the stored bytes to the full table; "—" in rows made before
+    decode times were measured). "brdfcodec below?" is "yes" when brdfcodec's error is lower and its bytes
+    within the budget.
+    """
+    lines = ["| group | family (materials) | model (decoder sha256) | commit | latent | budget | brdfcodec | bytes "
+             "| decode ms | best PCA | PCA point | bytes | decode ms | brdfcodec below? |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    for group, family in sorted({(r["group"], r["family"]) for r in rows}):
+        chosen = [r for r in rows if r["group"] == group and r["family"] == family]
+        ours_rows = [r for r in chosen if r["point"] == "bvae"]
+        models = sorted({f"{r['model']} ({r['decoder_sha256'][:12]})" for r in ours_rows})
+        commits = sorted({str(r["commit"])[:7] for r in chosen})
+        latent = sorted({str(r.get("latent", "auto")) for r in ours_rows})
+        for budget in sorted({r["budget_bytes"] for r in chosen}):
+            at = [r for r in chosen if r["budget_bytes"] == budget]
+            mine = [r for r in at if r["point"] == "bvae"]
+            points = sorted({r["point"] for r in at if r["point"].startswith("pca")})
+            if not mine or not points:
+                continue
+            materials = sum(len(r["per_material_mapped"]) for r in mine)
+            ours = _pooled(mine)
+            best, pca = min(((p, _pooled([r for r in at if r["point"] == p])) for p in points),
+                            key=lambda item: item[1][0])
+            below = "yes" if ours[0] < pca[0] and ours[1] <= budget else "**no**"
+            if not any(p.endswith(("-tc", "-ec-laplace", "-ec-gaussian")) for p in points):
+                best += " (int8/f16 only: rows made before the coded PCA)"
+            lines.append(f"| {group} | {family} ({materials}) | {', '.join(models)} | {', '.join(commits)} | "
+                         f"{', '.join(latent)} | {_size(budget)} | {ours[0]:.4f} | {ours[1]:.1f} | {_ms(ours[2])} | "
+                         f"{pca[0]:.4f} | {best} | {pca[1]:.0f} | {_ms(pca[2])} | {below} |")
+    return "\n".join(lines) + "\n"
