@@ -39,6 +39,7 @@ from brdfcodec.representation import (
     validate_phi_d_bins,
 )
 from brdfcodec.representation.energy import energy_bound_scale_mapped, scale_mapped
+from brdfcodec.representation.highlight_guard import guard_highlight
 from brdfcodec.runtime.threads import codec_threads
 
 if TYPE_CHECKING:
@@ -54,6 +55,12 @@ __all__ = ["BrdfDecoder"]
 def is_edited(record: Record) -> bool:
     """Whether a record is an edit (its metadata holds ``edit``, ``spec/bvae-format.md`` §5): its decode is bounded."""
     return "edit" in record.meta
+
+
+def _guarded(record: Record, mapped: np.ndarray) -> np.ndarray:
+    """An edited record's clamped mapped slices after the highlight guard (``spec/bvae-format.md`` §6 step 6;
+    :mod:`brdfcodec.representation.highlight_guard`); any other record's as they are, the same array."""
+    return guard_highlight(mapped) if is_edited(record) else mapped
 
 
 def _table(mapped: np.ndarray, bins: Sequence[int] | None, energy_bound: bool) -> npt.NDArray[np.float32]:
@@ -262,7 +269,7 @@ class BrdfDecoder:
         else:
             channels = network_channels_for_slots(slots)
             out[channels] = self._with_layers(record, self.decode_channels(record.mu, channels), slots)
-        return out
+        return _guarded(record, out)  # the guard acts on each kept slot's columns alone (§6 step 6)
 
     @functools.cached_property
     def shared_basis(self) -> SharedBasis | None:
@@ -488,6 +495,10 @@ class BrdfDecoder:
         return energy_bound_scale_mapped(self._mapped_record(record))
 
     def _mapped_record(self, record: Record) -> npt.NDArray[np.float32]:
+        """Clamped mapped slices of a record, layers added; an edit's after the highlight guard (§6 step 6)."""
+        return _guarded(record, self._unguarded_mapped(record))
+
+    def _unguarded_mapped(self, record: Record) -> npt.NDArray[np.float32]:
         with codec_threads():
             if not _has_latent(record):
                 return self._with_layers(record, self._mean_base(record))
@@ -554,7 +565,7 @@ class BrdfDecoder:
             for record in chunk:  # grafts need two codes each: decoded on their own
                 with codec_threads():
                     if isinstance(record, LatentRecord) and not _projected_vectors(record) and _has_latent(record):
-                        mapped = self._with_layers(record, next(batch))
+                        mapped = _guarded(record, self._with_layers(record, next(batch)))
                     else:
                         mapped = self._mapped_record(record)
                     table = _apply_mask(_table(mapped, None, is_edited(record)), None, masked)

@@ -253,10 +253,12 @@ def _codes_tensor(decoder: BrdfDecoder, codes: torch.Tensor | npt.ArrayLike) -> 
 
 
 def _is_plain_latent(record: Record) -> bool:
-    """Whether a record's base is the network's decode of its one latent (batched on the device)."""
+    """Whether a record's base is the network's decode of its one latent (batched on the device); an edit is not:
+    its slices take the highlight guard on the NumPy path (``spec/bvae-format.md`` §6 step 6)."""
     from brdfcodec.codec.projection import _has_latent, _projected_vectors
 
-    return isinstance(record, LatentRecord) and not _projected_vectors(record) and _has_latent(record)
+    return (isinstance(record, LatentRecord) and not _projected_vectors(record) and _has_latent(record)
+            and "edit" not in record.meta)
 
 
 def _records_mapped(decoder: BrdfDecoder, records: Sequence[Record], batch_size: int) -> torch.Tensor:

@@ -23,6 +23,16 @@ source decode at μ and against the library:
     Every θd bin 0–89 counts where the five entries are above the horizon at
     that slot. A decode is flagged when some cell is inverted and the same
     cell of the source decode is not.
+``inverted_wide``
+    An *inverted highlight* as the judge of issue 50 sees it, on the decoded
+    table (stored units, the kept φd bins, where the table is exactly the
+    decoded slices): in some column (colour, θd bin, kept φd bin) the
+    specular peak, the largest value at θh < 2° (bins 0–13,
+    :data:`JUDGE_PEAK_BINS`), is darker than ``JUDGE_RATIO`` (½) of the body,
+    the mean at θh 40–60° (bins 60–73, :data:`JUDGE_BODY_BINS`), where the
+    source decode's peak in that column is not (:func:`inverted_highlights`).
+    The ratio does not depend on the energy bound's factor. ``inverted`` is the
+    narrower, older figure (bins 0–1 against 4–6), kept beside it.
 ``energetic``
     The decode's white-sky albedo (:func:`white_sky_albedo`, largest channel)
     exceeds the largest over the library's μ decodes by more than the
@@ -47,7 +57,10 @@ source decode at μ and against the library:
 By default the traversal decodes are judged as an editor shows them: with the
 energy bound of ``spec/bvae-format.md`` §6.3 (a decode whose directional
 albedo exceeds 1 is scaled down to 1), so ``unphysical`` checks that the bound
-holds; ``energy_bound=False`` judges the network's raw decodes.
+holds; ``energy_bound=False`` judges the network's raw decodes. ``highlight_guard=True`` applies the
+highlight guard of edited records first (``spec/bvae-format.md`` §6 step 6,
+:mod:`brdfcodec.representation.highlight_guard`), as edits decode since revision 2.5; the default judges the
+network's decodes without it, which is what a training objective has to fix.
 
 Examples
 --------
@@ -91,6 +104,7 @@ from brdfcodec.representation.highlight import (
     outer_maximum,
     window_valid_mask,
 )
+from brdfcodec.representation.highlight_guard import guard_highlight
 from brdfcodec.representation.mapping import LOG_RANGE
 
 __all__ = [
@@ -108,6 +122,11 @@ __all__ = [
     "cell_valid_mask",
     "entry_valid_mask",
     "inverted_cells",
+    "inverted_highlights",
+    "JUDGE_BODY_BINS",
+    "JUDGE_PEAK_BINS",
+    "JUDGE_RATIO",
+    "peak_body",
     "measure_plausibility",
     "new_holes",
     "pit_cells",
@@ -122,7 +141,13 @@ DEFAULT_STEPS: tuple[float, ...] = (-3.0, -2.0, -1.0, 1.0, 2.0, 3.0)
 #: How far above 1 a directional albedo may be before ``unphysical`` flags it (float32 rounding of the bound).
 UNPHYSICAL_TOLERANCE = 1e-4
 #: The kinds of implausibility, in report order.
-KINDS: tuple[str, ...] = ("invalid", "inverted", "energetic", "unphysical", "holes", "pits")
+KINDS: tuple[str, ...] = ("invalid", "inverted", "inverted_wide", "energetic", "unphysical", "holes", "pits")
+#: θh bins of the judge's specular peak (issue 50): θh < 2°, bins 0–13 by the MERL index ⌊90·√(θh/90°)⌋.
+JUDGE_PEAK_BINS: tuple[int, ...] = tuple(range(0, 14))
+#: θh bins of the judge's body: θh 40–60°, bins 60–73.
+JUDGE_BODY_BINS: tuple[int, ...] = tuple(range(60, 74))
+#: A peak darker than this fraction of the body is inverted.
+JUDGE_RATIO = 0.5
 #: Unions of kinds that a report counts too: ``highlight`` (inverted or holes, a broken highlight) and ``any``.
 SUMMARY_KINDS: tuple[str, ...] = ("highlight", "any")
 
@@ -205,6 +230,65 @@ def inverted_cells(mapped: npt.ArrayLike, tolerance: float = 0.1) -> BoolArray:
     broken = ~np.isfinite(rows).all(axis=-2) & cell_valid_mask()
     with np.errstate(invalid="ignore"):
         return (deficit > tolerance) | broken
+
+
+@functools.cache
+def _judge_valid(n_bins: int) -> BoolArray:
+    """(θd 90, K): columns whose peak and body entries are all above the horizon; K = 21 (kept bins) or 180."""
+    from brdfcodec.representation.mask import horizon_mask, kept_slice_horizon_mask
+
+    mask = kept_slice_horizon_mask() if n_bins == N_KEPT_SLICES else horizon_mask()
+    if mask.shape[-1] != n_bins:
+        raise ValueError(f"expected tables of the 21 kept φd bins or all 180, got {n_bins} bins")
+    valid = mask[list(JUDGE_PEAK_BINS + JUDGE_BODY_BINS)].all(axis=0)
+    valid.setflags(write=False)
+    return valid
+
+
+def peak_body(table: npt.ArrayLike) -> tuple[FloatArray, FloatArray]:
+    """The judge's specular peak and body of every column of decoded tables (issue 50).
+
+    Parameters
+    ----------
+    table : array_like, shape (..., 3, 90, 90, K)
+        Decoded tables in stored units (:meth:`~brdfcodec.codec.BrdfDecoder.decode`), K = 21 (the kept φd
+        bins, in order) or 180.
+
+    Returns
+    -------
+    peak, body : ndarray of float64, shape (..., 3, 90, K)
+        Per colour, θd bin and φd bin: the largest value at θh < 2° and the mean at θh 40–60° (stored units);
+        NaN where an entry of either lies below the horizon.
+    """
+    values = np.asarray(table, dtype=np.float64)
+    valid = _judge_valid(values.shape[-1])
+    peak = values[..., list(JUDGE_PEAK_BINS), :, :].max(axis=-3)
+    body = values[..., list(JUDGE_BODY_BINS), :, :].mean(axis=-3)
+    return np.where(valid, peak, np.nan), np.where(valid, body, np.nan)
+
+
+def inverted_highlights(source: npt.ArrayLike, edited: npt.ArrayLike, ratio: float = JUDGE_RATIO) -> BoolArray:
+    """Columns whose peak is darker than ``ratio`` × body in ``edited`` but not in ``source`` (issue 50's judge).
+
+    Parameters
+    ----------
+    source : array_like, shape (3, 90, 90, K)
+        The unedited decode's table (stored units).
+    edited : array_like, shape (..., 3, 90, 90, K)
+        Tables of edits of it.
+    ratio : float, default 0.5
+
+    Returns
+    -------
+    ndarray of bool, shape (..., 3, 90, K)
+        Colour, θd bin, φd bin; False below the horizon. A non-finite edited peak or body counts as inverted.
+    """
+    src_peak, src_body = peak_body(source)
+    peak, body = peak_body(edited)
+    with np.errstate(invalid="ignore"):
+        source_ok = src_peak >= ratio * src_body
+        broken = ~(np.isfinite(peak) & np.isfinite(body)) & _judge_valid(np.shape(edited)[-1])
+        return source_ok & ((peak < ratio * body) | broken)
 
 
 def pit_depth(mapped: npt.ArrayLike) -> FloatArray:
@@ -323,7 +407,8 @@ class Offender:
     """One implausible decode: which material, dimension (0-based) and step, and by how much.
 
     ``score`` depends on ``kind``: ``inverted``, the largest specular deficit
-    (mapped units) among new inversions, at ``where`` = (colour, φd bin, θd bin);
+    (mapped units) among new inversions, at ``where`` = (colour, φd bin, θd bin); ``inverted_wide``, the
+    number of columns the judge of issue 50 flags;
     ``holes``, the number of new zero entries near the peak; ``pits``, the largest new pit depth (mapped
     units); ``energetic``, the largest channel's
     white-sky albedo; ``unphysical``, the largest directional albedo; ``invalid``, the number of bad values.
@@ -362,6 +447,8 @@ class PlausibilityReport:
     criteria : PlausibilityCriteria
     energy_bound : bool
         Whether the decodes were judged with the energy bound applied.
+    highlight_guard : bool
+        Whether the decodes were judged after the highlight guard of edited records (§6 step 6).
     """
 
     materials: tuple[str, ...]
@@ -374,6 +461,7 @@ class PlausibilityReport:
     worst: tuple[Offender, ...]
     criteria: PlausibilityCriteria = field(default_factory=PlausibilityCriteria)
     energy_bound: bool = True
+    highlight_guard: bool = False
 
     def to_dict(self) -> dict[str, Any]:
         """A JSON-ready summary (dims 1-based, as on the command line)."""
@@ -386,6 +474,7 @@ class PlausibilityReport:
             "albedo_limit": self.albedo_limit,
             "library_albedo_max": self.library_albedo_max,
             "energy_bound": self.energy_bound,
+            "highlight_guard": self.highlight_guard,
             "criteria": {"inversion_tolerance": self.criteria.inversion_tolerance,
                          "energy_margin": self.criteria.energy_margin},
             "worst": [{"material": o.material, "dim": o.dim + 1, "step": o.step, "kind": o.kind, "score": o.score,
@@ -405,7 +494,8 @@ class PlausibilityReport:
         lines.append(f"All {len(self.materials)} materials × {len(self.dims)} dims × {len(self.steps)} steps: {totals}")
         lines.append(f"μ decodes with an inverted cell already: {self.source_inverted:.3f}; albedo limit "
                      f"{self.albedo_limit:.3f} (library max {self.library_albedo_max:.3f}); decodes judged "
-                     + ("with the energy bound (as edits decode)" if self.energy_bound else "raw (no energy bound)"))
+                     + ("with the energy bound (as edits decode)" if self.energy_bound else "raw (no energy bound)")
+                     + ("; after the highlight guard (§6 step 6)" if self.highlight_guard else ""))
         return "\n".join(lines)
 
 
@@ -429,6 +519,22 @@ def bounded(mapped: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return out.reshape(np.shape(mapped)), (largest * scales).reshape(lead)
 
 
+def _wide_inversions(source: np.ndarray, mapped: np.ndarray) -> np.ndarray:
+    """Per decode (lead shape of ``mapped``), how many columns :func:`inverted_highlights` flags, judged on the
+    tables at the kept φd bins (exactly the decoded slices, unmapped)."""
+    from brdfcodec.representation.network_io import table_from_mapped
+
+    src = table_from_mapped(source, phi_d_bins=KEPT_PHI_D_SLICES)
+    lead = mapped.shape[:-3]
+    flat = mapped.reshape(-1, *NETWORK_INPUT_SHAPE)
+    counts = np.zeros(len(flat), dtype=np.int64)
+    with np.errstate(invalid="ignore", over="ignore"):
+        for start in range(0, len(flat), 8):  # 8 tables of the kept bins at a time (16 MB)
+            tables = table_from_mapped(flat[start : start + 8], phi_d_bins=KEPT_PHI_D_SLICES)
+            counts[start : start + 8] = inverted_highlights(src, tables).reshape(len(tables), -1).sum(axis=-1)
+    return counts.reshape(lead)
+
+
 def _judge(
     source: np.ndarray, source_inv: np.ndarray, source_pits: np.ndarray, mapped: np.ndarray, limit: float, tol: float,
     directional: np.ndarray | None = None,
@@ -446,6 +552,7 @@ def _judge(
         depth = np.where((depth > tol) & ~source_pits, depth, -np.inf)  # new pits only, measured once
     deficit = np.where(new_inv, specular_deficit(mapped), -np.inf)
     holes = new_holes(source, mapped).reshape(*lead, -1).sum(axis=-1)
+    wide = _wide_inversions(source, mapped)
     albedo = white_sky_albedo(mapped).max(axis=-1)
     if directional is None:
         directional = directional_albedo_mapped(mapped.reshape(-1, *NETWORK_INPUT_SHAPE)).max(axis=(-2, -1))
@@ -453,12 +560,14 @@ def _judge(
     flags = {
         "invalid": bad > 0,
         "inverted": new_inv.reshape(*lead, -1).any(axis=-1),
+        "inverted_wide": wide > 0,
         "energetic": albedo > limit,
         "unphysical": directional > 1 + UNPHYSICAL_TOLERANCE,
         "holes": holes > 0,
         "pits": np.isfinite(depth).reshape(*lead, -1).any(axis=-1),
     }
-    scores = {"invalid": bad, "inverted": deficit.reshape(*lead, -1).max(axis=-1), "energetic": albedo,
+    scores = {"invalid": bad, "inverted": deficit.reshape(*lead, -1).max(axis=-1), "inverted_wide": wide,
+              "energetic": albedo,
               "unphysical": directional, "holes": holes, "pits": depth.reshape(*lead, -1).max(axis=-1)}
     return flags, scores, deficit
 
@@ -472,6 +581,7 @@ def plausible_range(
     albedo_limit: float | None = None,
     criteria: PlausibilityCriteria | None = None,
     energy_bound: bool = True,
+    highlight_guard: bool = False,
 ) -> tuple[float, float]:
     """How far a traversal of ``record`` along ``dim`` stays plausible, on each side.
 
@@ -488,6 +598,8 @@ def plausible_range(
     criteria : PlausibilityCriteria, optional
     energy_bound : bool, default True
         Judge the decodes with the energy bound applied, as edits decode.
+    highlight_guard : bool, default False
+        Judge the decodes after the highlight guard of edited records (``spec/bvae-format.md`` §6 step 6).
 
     Returns
     -------
@@ -504,6 +616,8 @@ def plausible_range(
     source = decoder.decode_mapped(np.asarray(record.mu, dtype=np.float32)[None])
     codes = np.stack([np.asarray(e.mu, dtype=np.float32) for e in traverse(record, dim, steps)])
     mapped, directional = decoder.decode_mapped(codes), None
+    if highlight_guard:
+        mapped = guard_highlight(mapped)
     if energy_bound:
         mapped, directional = bounded(mapped)
     flags, _, _ = _judge(source[0], inverted_cells(source[0], tol), pit_cells(source[0], tol), mapped,
@@ -532,6 +646,7 @@ def measure_plausibility(
     batch_size: int = 16,
     n_worst: int = 5,
     energy_bound: bool = True,
+    highlight_guard: bool = False,
 ) -> PlausibilityReport:
     """Traverse every record along every dimension and count implausible decodes.
 
@@ -556,6 +671,9 @@ def measure_plausibility(
     energy_bound : bool, default True
         Judge the traversal decodes with the energy bound applied (``spec/bvae-format.md`` §6.3), as
         :func:`~brdfcodec.edit.latent_edits.traverse`'s records decode; False judges the raw decodes.
+    highlight_guard : bool, default False
+        Judge the traversal decodes after the highlight guard (``spec/bvae-format.md`` §6 step 6), as edited
+        records decode; False judges the network's decodes (what a training objective has to fix).
 
     Returns
     -------
@@ -595,6 +713,8 @@ def measure_plausibility(
         codes = np.stack([np.asarray(e.mu, dtype=np.float32) for e in edits])
         mapped = decoder.decode_mapped(codes, batch_size=batch_size).reshape(*shape, *NETWORK_INPUT_SHAPE)
         directional = None
+        if highlight_guard:
+            mapped = guard_highlight(mapped)
         if energy_bound:
             mapped, directional = bounded(mapped)
         flags, scores, deficit = _judge(sources[m], source_inv[m], source_pits[m], mapped, limit, tol, directional)
@@ -615,5 +735,5 @@ def measure_plausibility(
         materials=names, dims=dims, steps=steps, fractions=fractions,
         source_inverted=float(source_inv.reshape(len(records), -1).any(axis=1).mean()),
         albedo_limit=limit, library_albedo_max=library_max, worst=worst, criteria=criteria,
-        energy_bound=energy_bound,
+        energy_bound=energy_bound, highlight_guard=highlight_guard,
     )

@@ -592,6 +592,12 @@ def valid_records() -> dict[str, tuple[list, DecoderReference, str, bool | None]
                      basis_record("gold.basis-projected", halves16(8), np.full(8, 0.125), "cd" * 32, first=8,
                                   compact_base=True, fixed_grid=True, project=50)],
                     TEST_DECODER, "float32", False),
+        # An edit whose decode the highlight guard changes (§6 step 6, issue 50): z1 at +3σ from the zero code.
+        "reference-decode-edits": ([LatentRecord("reference.z1+3", np.array([3, 0, 0, 0, 0, 0, 0, 0], np.float32),
+                                                 np.ones(8, np.float32),
+                                                 {"edit": {"op": "traverse", "source": "reference", "parameter": 1,
+                                                           "value": 3.0, "unit": "sigma"}})],
+                                    SHIPPED_DECODER, "float32", False),
         "no-sigma": no_sigma_records(),
         "packed-basis": packed_records(),
         "coded-basis": coded_records(),
@@ -623,6 +629,36 @@ def reference_values(records: list) -> dict[str, list[float]]:
         table = decoder.decode(record)
         values[record.name] = [float(table[tuple(e)]) for e in REFERENCE_ENTRIES]
     return values
+
+
+def guarded_entries(records: list, count: int = 6) -> list[list[int]]:
+    """REFERENCE_ENTRIES and, for the first record, the ``count`` entries above the horizon (at kept φd bins) where
+    the highlight guard (§6 step 6) raises the table most, with the shipped model."""
+    from brdfcodec.codec import BrdfDecoder
+    from brdfcodec.conventions import KEPT_PHI_D_SLICES
+    from brdfcodec.representation import table_from_mapped
+    from brdfcodec.representation.highlight_guard import guard_highlight
+    from brdfcodec.representation.mask import horizon_mask
+
+    decoder = BrdfDecoder(SHIPPED_FOLDER)
+    mapped = decoder.decode_mapped(records[0].mu[None])[0]
+    raised = (table_from_mapped(guard_highlight(mapped), phi_d_bins=KEPT_PHI_D_SLICES)
+              - table_from_mapped(mapped, phi_d_bins=KEPT_PHI_D_SLICES))
+    raised = np.where(horizon_mask()[..., list(KEPT_PHI_D_SLICES)], raised, 0)
+    order = np.argsort(raised, axis=None)[::-1][:count]
+    chosen = [[int(c), int(h), int(d), int(KEPT_PHI_D_SLICES[s])] for c, h, d, s in zip(*np.unravel_index(
+        order, raised.shape), strict=True) if raised[c, h, d, s] > 0]
+    assert len(chosen) == count, "the edit vector's record no longer has a highlight the guard changes"
+    return [*REFERENCE_ENTRIES, *chosen]
+
+
+def reference_values_at(records: list, entries: list[list[int]]) -> dict[str, list[float]]:
+    """Decoded values at ``entries`` for each record, with the shipped model (masked as -1)."""
+    from brdfcodec.codec import BrdfDecoder
+
+    decoder = BrdfDecoder(SHIPPED_FOLDER)
+    tables = {record.name: decoder.decode(record) for record in records}
+    return {name: [float(table[tuple(e)]) for e in entries] for name, table in tables.items()}
 
 
 def generate(folder: Path, *, with_reference: bool = True) -> dict[str, Any]:
@@ -657,6 +693,13 @@ def generate(folder: Path, *, with_reference: bool = True) -> dict[str, Any]:
                 "file": f"valid/{name}.bvae", "entries": REFERENCE_ENTRIES, "rtol": DECODE_RTOL, "atol": DECODE_ATOL,
                 "masked": "unmeasured", "units": "stored MERL units (float32)",
                 "values": reference_values(records),
+            }
+        if name == "reference-decode-edits" and with_reference:
+            entries = guarded_entries(records)
+            manifest["decode_edits"] = {
+                "file": f"valid/{name}.bvae", "entries": entries, "rtol": DECODE_RTOL, "atol": DECODE_ATOL,
+                "masked": "unmeasured", "units": "stored MERL units (float32)",
+                "values": reference_values_at(records, entries),
             }
         if name == "reference-decode-layers" and with_reference:
             manifest["decode_layers"] = {
