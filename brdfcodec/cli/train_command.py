@@ -56,6 +56,16 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     parser.add_argument("--linear-path-rate", type=float,
                         help="learning rate of the decoder's linear (PCA) path as a fraction of the network's "
                              "(0: frozen, the default)")
+    parser.add_argument("--factor-weight", type=float,
+                        help="weight of the factor supervision: each step also trains on analytic materials of "
+                        "known factors and pulls latent dimension j towards factor j (albedo, hue, specular, "
+                        "roughness, grazing, sheen, metallic; 0 beyond), standardised (0: none, the default)")
+    parser.add_argument("--factor-batch", type=int, help="analytic materials per step of that supervision (default 8)")
+    parser.add_argument("--factor-materials", type=int,
+                        help="size of its pool of analytic materials, tabulated at the start (default 256)")
+    parser.add_argument("--factor-seed", type=int,
+                        help="seed of that pool (default 100; keep it apart from the benchmark's and the "
+                        "alignment's seeds, 0 and 1)")
     parser.add_argument("--average-from-epoch", type=int,
                         help="average the weights of every step from this epoch on (stochastic weight averaging; "
                              "validation, best.pt and the export use the average; 0: never, the default)")

@@ -69,6 +69,23 @@ class TrainConfig:
         PCA fit; > 0 trains it in float32 (stored in float16 as before, so
         the decoder's size does not change) and needs a model with a linear
         path.
+    factor_weight : float
+        Weight of the factor supervision
+        (:mod:`brdfcodec.training.factor_supervision`): each step also
+        trains on ``factor_batch`` analytic materials of known factors and
+        pulls the encoder's mean of dimension j towards factor j
+        standardised (0 beyond the seventh). 0 (the default) builds no pool
+        and draws nothing, so runs without it keep their random stream.
+    factor_batch : int
+        Analytic materials per step (global, split across processes).
+    factor_materials : int
+        Size of the pool of analytic factor materials the steps draw from
+        (tabulated once at the start, about 0.1 s and 2.5 MB each).
+    factor_seed : int
+        Seed of the pool (:func:`brdfcodec.datasets.analytic.sample_factor_materials`);
+        keep it apart from the disentanglement benchmark's seeds (0 by
+        default) and the factor alignment's (1), so that a benchmark
+        measures materials the supervision never saw.
     average_from_epoch : int
         Stochastic weight averaging: from this epoch on (counted from 1; 0,
         the default, never) the weights after every optimiser step enter an
@@ -131,6 +148,10 @@ class TrainConfig:
     traversal_hole_margin: float = 0.0
     traversal_pit_weight: float = 0.0
     linear_path_rate: float = 0.0
+    factor_weight: float = 0.0
+    factor_batch: int = 8
+    factor_materials: int = 256
+    factor_seed: int = 100
     average_from_epoch: int = 0
     warmup_epochs: int = 2
     beta: float = 12.0
@@ -170,6 +191,11 @@ class TrainConfig:
             raise ValueError(f"traversal_directions must be 'axes' or 'any', got {self.traversal_directions!r}")
         if not 0 <= self.linear_path_rate < float("inf"):
             raise ValueError(f"linear_path_rate must be finite and ≥ 0, got {self.linear_path_rate}")
+        if not 0 <= self.factor_weight < float("inf"):
+            raise ValueError(f"factor_weight must be finite and ≥ 0, got {self.factor_weight}")
+        if self.factor_batch < 1 or self.factor_materials < 1:
+            raise ValueError(f"factor_batch and factor_materials must be ≥ 1, got {self.factor_batch}, "
+                             f"{self.factor_materials}")
         if not 0 <= self.average_from_epoch <= self.epochs:
             raise ValueError(f"average_from_epoch must be in [0, epochs={self.epochs}], got {self.average_from_epoch}")
         if self.folds == 1 or self.folds < 0 or not 0 <= self.fold < max(self.folds, 1):

@@ -44,6 +44,7 @@ from brdfcodec.training.checkpoint import load_checkpoint
 from brdfcodec.training.config import TrainConfig
 from brdfcodec.training.dropout import DecoderHiddenDropout
 from brdfcodec.training.evaluation import MappedReference, reconstruct_mapped
+from brdfcodec.training.factor_supervision import FactorPool, build_factor_pool, factor_supervision_loss
 from brdfcodec.training.traversal import TraversalPenalty, traversed_codes
 from brdfcodec.version import __version__
 
@@ -116,7 +117,9 @@ def _global_batches(
     penalty's dimensions and offsets last, and only when
     ``config.traversal_weight`` > 0: runs without them keep their stream
     (with ``traversal_directions = "any"`` a unit direction per sample is drawn
-    after them and replaces the dimension).
+    after them and replaces the dimension); the factor supervision's pool rows,
+    noise (and dropout mask) after everything else, and only when
+    ``config.factor_weight`` > 0.
     """
     generator = _epoch_generator(config.seed, epoch)
     order = torch.randperm(n_train, generator=generator)
@@ -139,6 +142,12 @@ def _global_batches(
             if config.traversal_directions == "any":
                 direction = torch.randn(size, latent_dim, generator=generator)
                 draw["traverse_dim"] = direction / direction.norm(dim=1, keepdim=True).clamp_min(1e-12)
+        if config.factor_weight > 0:
+            draw["factor_rows"] = torch.randint(0, config.factor_materials, (config.factor_batch,), generator=generator)
+            draw["factor_noise"] = torch.randn(config.factor_batch, latent_dim, generator=generator)
+            if config.decoder_dropout > 0:
+                draw["factor_keep"] = (torch.rand(config.factor_batch, dropout_width, generator=generator)
+                                       >= config.decoder_dropout)
         yield draw
 
 
@@ -177,6 +186,7 @@ class _TrainingData:
     train_reference: MappedReference | None
     info: dict[str, Any]
     traversal_penalty: TraversalPenalty | None = None
+    factor_pool: FactorPool | None = None
 
 
 def _resident(data: _TrainingData, device: torch.device) -> None:
@@ -188,6 +198,8 @@ def _resident(data: _TrainingData, device: torch.device) -> None:
     """
     data.inputs = data.inputs.to(device)
     data.masks = data.masks.to(device)
+    if data.factor_pool is not None:
+        data.factor_pool.to(device)
 
 
 @dataclass
@@ -362,14 +374,16 @@ def _train_epoch(model: BetaVAE, forward: torch.nn.Module, optimizer: torch.opti
     n_train = len(data.inputs)
     local = train_config.batch_size // world.size
     steps_per_epoch = max(1, n_train // train_config.batch_size)
-    # loss, recon, kl, traversal penalty (sums over samples), and the KL of each dimension
-    sums = torch.zeros(4, dtype=torch.float64, device=world.device)
+    # loss, recon, kl, traversal penalty, factor supervision (sums over samples), and the KL of each dimension
+    sums = torch.zeros(5, dtype=torch.float64, device=world.device)
     kl_dims = torch.zeros(model_config.latent_dim, dtype=torch.float64, device=world.device)
     count = 0
     dropout = (DecoderHiddenDropout(model.decoder, train_config.decoder_dropout)
                if train_config.decoder_dropout > 0 else None)
     width = dropout.width if dropout is not None else 0
     penalty = data.traversal_penalty  # built only when traversal_weight > 0
+    pool = data.factor_pool  # built only when factor_weight > 0
+    factor_local = train_config.factor_batch // world.size
     for draw in _global_batches(n_train, train_config, epoch, model_config.latent_dim, width):
         part = slice(world.rank * local, (world.rank + 1) * local)
         if dropout is not None:
@@ -384,9 +398,30 @@ def _train_epoch(model: BetaVAE, forward: torch.nn.Module, optimizer: torch.opti
         rate = _learning_rate(progress.step, steps_per_epoch, train_config)
         for group in optimizer.param_groups:
             group["lr"] = rate * group.get("lr_scale", 1.0)
-        recon, mu, logvar = forward(x, draw["noise"][part].to(world.device))
+        noise = draw["noise"][part].to(world.device)
+        factor = x.new_zeros(())
+        if pool is None:
+            recon, mu, logvar = forward(x, noise)
+        else:
+            # The analytic materials go through the same forward pass (one call: DistributedDataParallel allows
+            # one forward per backward); GroupNorm is per sample, so they do not change the others' outputs.
+            fpart = slice(world.rank * factor_local, (world.rank + 1) * factor_local)
+            frows = draw["factor_rows"][fpart].to(world.device)
+            if dropout is not None:
+                dropout.set_keep(torch.cat([draw["keep"][part], draw["factor_keep"][fpart]]))
+            recon_all, mu_all, logvar_all = forward(torch.cat([x, pool.inputs[frows]]),
+                                                    torch.cat([noise, draw["factor_noise"][fpart].to(world.device)]))
+            if dropout is not None:
+                dropout.set_keep(draw["keep"][part])  # the traversal's decode below has the real batch only
+            n_real = len(x)
+            recon, mu, logvar = recon_all[:n_real], mu_all[:n_real], logvar_all[:n_real]
+            analytic = beta_vae_loss(recon_all[n_real:], pool.inputs[frows], pool.masks[frows], mu_all[n_real:],
+                                     logvar_all[n_real:], beta=train_config.beta, recon=train_config.recon)
+            factor = factor_supervision_loss(mu_all[n_real:], pool.targets[frows])
         terms = beta_vae_loss(recon, x, m, mu, logvar, beta=train_config.beta, recon=train_config.recon)
         loss, traversal = terms.loss, terms.loss.new_zeros(())
+        if pool is not None:
+            loss = loss + analytic.loss + train_config.factor_weight * factor
         if penalty is not None:
             # Through the module, not the DDP wrapper: autograd adds this use of a weight to the wrapper's before
             # DDP reduces the gradient (reasoned, not yet tested under torchrun with the penalty).
@@ -402,7 +437,7 @@ def _train_epoch(model: BetaVAE, forward: torch.nn.Module, optimizer: torch.opti
         progress.step += 1
         n = len(rows)
         # Summed on the training device: no synchronisation per step.
-        sums += torch.stack([loss, terms.recon, terms.kl, traversal]).detach().double() * n
+        sums += torch.stack([loss, terms.recon, terms.kl, traversal, factor]).detach().double() * n
         kl_dims += kl_per_dimension(mu.detach(), logvar.detach()).sum(0).double()
         count += n
     if dropout is not None:
@@ -418,7 +453,8 @@ def _train_epoch(model: BetaVAE, forward: torch.nn.Module, optimizer: torch.opti
         "recon": totals[1].item() / count_all,
         "kl": totals[2].item() / count_all,
         "traversal": totals[3].item() / count_all,
-        "kl_per_dim": [v / count_all for v in totals[4:-1].tolist()],
+        "factor": totals[4].item() / count_all,
+        "kl_per_dim": [v / count_all for v in totals[5:-1].tolist()],
         "seconds": time.perf_counter() - epoch_start,
     }
 
@@ -498,6 +534,8 @@ def train(
     out = Path(run_dir)
     if train_config.batch_size % world.size:
         raise ValueError(f"batch_size {train_config.batch_size} is not divisible by {world.size} processes")
+    if train_config.factor_weight > 0 and train_config.factor_batch % world.size:
+        raise ValueError(f"factor_batch {train_config.factor_batch} is not divisible by {world.size} processes")
     if train_config.linear_path_rate > 0 and not model_config.linear_basis:
         raise ValueError("linear_path_rate > 0 needs a model with a linear path (ModelConfig.linear_basis)")
     run_info = _run_info(dataset_path, model_config, train_config, world)
@@ -508,6 +546,9 @@ def train(
         data.traversal_penalty = TraversalPenalty(
             data.inputs, hole_margin=train_config.traversal_hole_margin,
             pit_weight=train_config.traversal_pit_weight).to(world.device)
+    if train_config.factor_weight > 0:
+        data.factor_pool = build_factor_pool(train_config.factor_materials, train_config.factor_seed,
+                                             model_config.latent_dim)
     run_info["data"] = data.info
     model, optimizer, state, average = _build_model(model_config, train_config, data, world, out, resume, initial)
     _resident(data, world.device)
