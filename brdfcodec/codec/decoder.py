@@ -46,6 +46,7 @@ if TYPE_CHECKING:
     from brdfcodec.format.layered_record import LayeredRecord
     from brdfcodec.layers.basis import SharedBasis
 
+from brdfcodec.codec.device_decode import table_from_mapped_host
 from brdfcodec.codec.prepare import MaskedEntries, ModelSpec, _apply_mask, resolve_model
 from brdfcodec.codec.projection import _has_latent, _projected_vectors, _ProjectionPlan
 
@@ -63,14 +64,21 @@ def _guarded(record: Record, mapped: np.ndarray) -> np.ndarray:
     return guard_highlight(mapped) if is_edited(record) else mapped
 
 
-def _table(mapped: np.ndarray, bins: Sequence[int] | None, energy_bound: bool) -> npt.NDArray[np.float32]:
-    """The table of full mapped slices (only ``bins`` when given), times the energy bound's factor when asked.
+def _table(
+    mapped: np.ndarray, bins: Sequence[int] | None, energy_bound: bool, masked: MaskedEntries
+) -> npt.NDArray[np.float32]:
+    """The table of full mapped slices (only ``bins`` when given), times the energy bound's factor when asked,
+    below-horizon bins as ``masked`` says.
 
     The order of ``spec/bvae-format.md`` §6: the slices are interpolated to the bins and unmapped (step 2),
-    then multiplied by the factor (step 5), which is computed from the whole table.
+    then multiplied by the factor (step 5), which is computed from the whole table. A full table takes the
+    host decode (:func:`~brdfcodec.codec.device_decode.table_from_mapped_host`: the same steps, its
+    exponentials vectorised, the mask applied block by block).
     """
     scale = energy_bound_scale_mapped(mapped) if energy_bound else 1.0
-    return table_from_mapped(mapped, phi_d_bins=bins, scale=scale)
+    if bins is None:
+        return table_from_mapped_host(mapped, scale=scale, masked=masked)
+    return _apply_mask(table_from_mapped(mapped, phi_d_bins=bins, scale=scale), bins, masked)
 
 
 class _EvalMode:
@@ -544,7 +552,7 @@ class BrdfDecoder:
         with codec_threads():
             bins = None if phi_d_bins is None else validate_phi_d_bins(phi_d_bins)
             if bound or bins is None:  # the bound's factor needs the whole table
-                return _apply_mask(_table(self._mapped_record(record), bins, bound), bins, masked)
+                return _table(self._mapped_record(record), bins, bound, masked)
             return _apply_mask(table_from_mapped(self.mapped_for_bins(record, bins), phi_d_bins=bins), bins, masked)
 
     def decode_many(
@@ -568,7 +576,7 @@ class BrdfDecoder:
                         mapped = _guarded(record, self._with_layers(record, next(batch)))
                     else:
                         mapped = self._mapped_record(record)
-                    table = _apply_mask(_table(mapped, None, is_edited(record)), None, masked)
+                    table = _table(mapped, None, is_edited(record), masked)
                 yield table
 
     def decode_many_tensor(

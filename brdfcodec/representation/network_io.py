@@ -45,7 +45,10 @@ from brdfcodec.representation.layout import (
 from brdfcodec.representation.mapping import LOG_RANGE, clamp_mapped, map_values
 from brdfcodec.representation.mask import validity_mask
 
-__all__ = ["network_input_from_table", "reflectance_from_mapped", "table_from_mapped", "table_from_network_output"]
+__all__ = [
+    "network_input_from_table", "reflectance_from_mapped", "stepped_table", "table_from_mapped",
+    "table_from_network_output",
+]
 
 
 def network_input_from_table(
@@ -168,27 +171,73 @@ _ROWS_PER_BLOCK = 10
 
 
 def _scaled_expm1_all(kept: np.ndarray, scale: np.ndarray) -> np.ndarray:
-    """:func:`_scaled_expm1` of all 180 bins: the same operations, the gaps stepped together.
+    """:func:`_scaled_expm1` of all 180 bins: the exponentials of :func:`_kept_exponentials`, then
+    :func:`stepped_table`."""
+    start, ratio = _kept_exponentials(kept, scale)
+    return stepped_table(start, ratio, scale.reshape(-1))
 
-    Block by block of θh rows, each round writes one offset of every gap into a small contiguous float32
-    slab, and one transposed copy puts the slab in φd order: a strided write per round, or whole-table
-    passes, were several times slower (memory traffic, not arithmetic, is the cost).
+
+def _kept_exponentials(kept: np.ndarray, scale: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``scale · exp(x)`` at the kept slices and ``q = exp((x_b − x_a) / n)`` per gap, ``x = L · m`` (float64).
+
+    Parameters
+    ----------
+    kept : ndarray of float32, shape (..., 3, 90, 90, 21)
+    scale : ndarray of float64, shape (3, 1, 1, 1)
+
+    Returns
+    -------
+    start : ndarray of float64, shape (..., 3, 90, 90, 21)
+    ratio : ndarray of float64, shape (..., 3, 90, 90, 20)
     """
     x = kept.astype(np.float64)
     x *= LOG_RANGE
     ratio = x[..., 1:] - x[..., :-1]
-    ratio /= np.diff(np.asarray(KEPT_PHI_D_SLICES)).astype(np.float64)
+    ratio /= _GAP_LENGTHS
     ratio = np.exp(ratio, out=ratio)
     start = np.exp(x, out=x)
     start *= scale
-    lead = kept.shape[:-1]  # (..., 3, 90, 90)
+    return start, ratio
+
+
+def stepped_table(
+    start: np.ndarray, ratio: np.ndarray, factor: np.ndarray, *, invalid: np.ndarray | None = None, fill: float = 0.0
+) -> npt.NDArray[np.float32]:
+    """All 180 bins from the kept slices' exponentials: ``current − factor_c`` rounded to float32 once, ``current``
+    stepped by ``q`` through each gap (:func:`_scaled_expm1`'s geometric sequence), float64 throughout.
+
+    The exponentials may come from NumPy (:func:`_kept_exponentials`) or from another library (the codec's host
+    decode takes them from torch, whose float64 ``exp`` is vectorised): the steps, and so the rounding, are the same.
+    Block by block of θh rows, each round writes one offset of every gap into a small contiguous float32 slab, and
+    one transposed copy puts the slab in φd order, then the mask is applied while the block is in cache: a strided
+    write per round, or whole-table passes, were several times slower (memory traffic, not arithmetic, is the cost).
+
+    Parameters
+    ----------
+    start : ndarray of float64, shape (..., 3, 90, 90, 21)
+        ``factor_c · exp(L · m)`` at the kept slices.
+    ratio : ndarray of float64, shape (..., 3, 90, 90, 20)
+        ``exp((x_b − x_a) / n)`` per gap between kept slices.
+    factor : ndarray of float64, shape (3,)
+        The per-channel factor on ``expm1`` that ``start`` holds.
+    invalid : ndarray of bool, shape (90, 90, 180), optional
+        Bins set to ``fill`` (the below-horizon bins, :func:`~brdfcodec.representation.mask.horizon_mask`'s
+        complement); none by default.
+    fill : float, default 0.0
+        The value of the ``invalid`` bins.
+
+    Returns
+    -------
+    ndarray of float32, shape (..., 3, 90, 90, 180)
+    """
+    lead = start.shape[:-1]  # (..., 3, 90, 90)
     out = np.empty((*lead, N_PHI_D), dtype=np.float32)
     last = N_KEPT_SLICES - 1
-    out[..., -1] = start[..., last] - scale[..., 0]  # bin 179, a kept slice of its own
     split = KEPT_PHI_D_SLICES[-2]  # 171: the uniform gaps end here
-    blocks = np.ndindex(*lead[:-2])  # every leading index and channel
-    for index in blocks:
-        channel_scale = scale[index[-1], 0, 0]
+    filler = np.float32(fill)
+    scales = np.asarray(factor, dtype=np.float64).reshape(N_CHANNELS)
+    for index in np.ndindex(*lead[:-2]):  # every leading index and channel
+        channel_scale = scales[index[-1]]
         for row in range(0, lead[-2], _ROWS_PER_BLOCK):
             rows = (*index, slice(row, row + _ROWS_PER_BLOCK))
             current = start[(*rows, Ellipsis, slice(0, last))].copy()
@@ -201,7 +250,15 @@ def _scaled_expm1_all(kept: np.ndarray, scale: np.ndarray) -> np.ndarray:
             target = out[rows]  # (rows, 90, 180), a view
             target[:, :, :split].reshape(*target.shape[:2], last - 1, _GAP)[...] = slab[..., :-1].transpose(1, 2, 3, 0)
             target[:, :, split:-1] = slab[:_LAST_GAP, ..., -1].transpose(1, 2, 0)
+            # bin 179, a kept slice of its own
+            np.subtract(start[(*rows, Ellipsis, last)], channel_scale, out=target[..., -1], casting="same_kind")
+            if invalid is not None:
+                np.copyto(target, filler, where=invalid[row : row + _ROWS_PER_BLOCK])
     return out
+
+
+_GAP_LENGTHS = np.diff(np.asarray(KEPT_PHI_D_SLICES)).astype(np.float64)
+_GAP_LENGTHS.setflags(write=False)
 
 
 _STORED_PER_EXPM1 = EPSILON / np.asarray(MERL_COLOR_SCALE, dtype=np.float64)

@@ -1,0 +1,118 @@
+"""The host decode of full tables (issue 51, item 2): ``codec.device_decode.table_from_mapped_host``.
+
+``BrdfDecoder.decode`` (full tables) and ``decode_many`` take it: the float64 exponentials from torch, the steps
+through each gap and the mask from NumPy. It must give the reference path's table
+(``representation.table_from_mapped`` then the mask) up to the last bit of each library's float64 ``exp``, stay
+within 1e-6 mapped of a float64 decode (``spec/bvae-format.md`` §9; dark entries, saturated and extreme latents
+included), and stay finite.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from brdfcodec.codec import BrdfDecoder
+from brdfcodec.codec.device_decode import table_from_mapped_host
+from brdfcodec.codec.prepare import _apply_mask
+from brdfcodec.conventions import MAPPED_MAX, NETWORK_INPUT_SHAPE
+from brdfcodec.format.bvae import LatentRecord
+from brdfcodec.representation import map_values, table_from_mapped
+from brdfcodec.representation.layout import from_network_layout, interpolate_slices
+from brdfcodec.representation.mapping import LOG_RANGE
+from brdfcodec.representation.mask import horizon_mask
+
+_VALID = np.broadcast_to(horizon_mask(), (3, 90, 90, 180))
+#: One float32 rounding apart, at most (the libraries' float64 exp may differ in the last bit).
+_ONE_ROUNDING = 2.4e-7
+
+
+@pytest.fixture(scope="module")
+def decoder() -> BrdfDecoder:
+    return BrdfDecoder()
+
+
+@pytest.fixture(scope="module")
+def mapped(decoder: BrdfDecoder) -> np.ndarray:
+    """Clamped network output of random codes, codes far outside the prior (±1e3, 1e19, −1e23: saturated), and
+    a decode with dark rows (values × 1e-4, where the exponential amplifies rounding)."""
+    rng = np.random.default_rng(512)
+    dim = decoder.latent_dim
+    codes = np.stack([rng.standard_normal(dim), rng.standard_normal(dim), np.full(dim, 1e3), np.full(dim, -1e3),
+                      np.full(dim, 1e19), np.full(dim, -1e23)]).astype(np.float32)
+    out = decoder.decode_mapped(codes)
+    dark = out[0].copy()
+    dark[:, :30] *= 1e-4
+    return np.concatenate([out, dark[None]])
+
+
+def float64_mapped(mapped: np.ndarray) -> np.ndarray:
+    """§6 step 2 in float64: interpolate the kept slices, the mapped table (3, 90, 90, 180)."""
+    return interpolate_slices(from_network_layout(mapped.astype(np.float64)))
+
+
+@pytest.mark.parametrize("masked", ["unmeasured", "zero", "keep"])
+def test_the_host_decode_is_the_reference_path_s_table(mapped: np.ndarray, masked: str) -> None:
+    for slices in mapped:
+        got = table_from_mapped_host(slices, masked=masked)  # type: ignore[arg-type]
+        want = _apply_mask(table_from_mapped(slices), None, masked)  # type: ignore[arg-type]
+        assert got.dtype == np.float32 and got.shape == (3, 90, 90, 180)
+        assert np.isfinite(got).all()
+        np.testing.assert_allclose(got, want, rtol=_ONE_ROUNDING, atol=0)
+        if masked != "keep":
+            assert (got[~_VALID] == (-1.0 if masked == "unmeasured" else 0.0)).all()
+
+
+def test_the_host_decode_is_within_1e_6_mapped_of_float64(mapped: np.ndarray) -> None:
+    for slices in mapped[[0, 2, 5, 6]]:  # random, +1e3, -1e23, dark rows
+        got = map_values(table_from_mapped_host(slices, masked="keep").astype(np.float64))
+        assert float(np.abs(got - float64_mapped(slices))[_VALID].max()) <= 1e-6
+
+
+def test_the_energy_bound_s_factor_is_applied_after_the_interpolation(mapped: np.ndarray) -> None:
+    slices = mapped[0]
+    got = table_from_mapped_host(slices, scale=0.37, masked="keep")
+    np.testing.assert_allclose(got, table_from_mapped(slices, scale=0.37), rtol=_ONE_ROUNDING, atol=0)
+    reference = np.log1p(0.37 * np.expm1(float64_mapped(slices) * LOG_RANGE)) / LOG_RANGE
+    assert float(np.abs(map_values(got.astype(np.float64)) - reference)[_VALID].max()) <= 1e-6
+
+
+def test_the_domain_s_ends_and_float16_slices_decode(mapped: np.ndarray) -> None:
+    for value in (0.0, MAPPED_MAX):
+        slices = np.full(NETWORK_INPUT_SHAPE, value, dtype=np.float32)
+        got = table_from_mapped_host(slices, masked="keep")
+        assert np.isfinite(got).all()
+        np.testing.assert_allclose(got, table_from_mapped(slices), rtol=_ONE_ROUNDING, atol=0)
+    half = mapped[0].astype(np.float16)
+    got = table_from_mapped_host(half)  # type: ignore[arg-type]
+    np.testing.assert_allclose(got, _apply_mask(table_from_mapped(half.astype(np.float32)), None, "unmeasured"),
+                               rtol=_ONE_ROUNDING, atol=0)
+    read_only = mapped[1].copy()
+    read_only.setflags(write=False)
+    np.testing.assert_array_equal(table_from_mapped_host(read_only), table_from_mapped_host(mapped[1].copy()))
+
+
+@pytest.mark.parametrize(("kwargs", "message"), [
+    ({"masked": "nan"}, "masked must be"),
+    ({"scale": float("nan")}, "scale must be"),
+    ({"scale": -1.0}, "scale must be"),
+])
+def test_bad_arguments_are_refused(mapped: np.ndarray, kwargs: dict, message: str) -> None:
+    with pytest.raises(ValueError, match=message):
+        table_from_mapped_host(mapped[0], **kwargs)
+
+
+def test_a_wrong_shape_is_refused() -> None:
+    with pytest.raises(ValueError, match="mapped must have shape"):
+        table_from_mapped_host(np.zeros((3, 90, 90, 21), dtype=np.float32))
+
+
+def test_decode_and_decode_many_give_the_reference_path_s_table(decoder: BrdfDecoder) -> None:
+    codes = np.random.default_rng(7).standard_normal((3, decoder.latent_dim)).astype(np.float32)
+    records = [LatentRecord(f"m{i}", code, np.ones(decoder.latent_dim, np.float32)) for i, code in enumerate(codes)]
+    many = list(decoder.decode_many(records, batch_size=2))
+    for record, table, slices in zip(records, many, decoder.decode_mapped(codes, batch_size=2), strict=True):
+        want = _apply_mask(table_from_mapped(slices), None, "unmeasured")
+        np.testing.assert_allclose(table, want, rtol=_ONE_ROUNDING, atol=0)
+        alone = _apply_mask(table_from_mapped(decoder.decode_mapped(record.mu)), None, "unmeasured")
+        np.testing.assert_allclose(decoder.decode(record), alone, rtol=_ONE_ROUNDING, atol=0)  # a batch of one
