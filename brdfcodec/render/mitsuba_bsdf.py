@@ -13,9 +13,10 @@ Properties: ``filename`` (``.bvae`` or MERL ``.binary``, told apart by the
 file's first bytes; relative paths are resolved by Mitsuba's file resolver,
 i.e. against the scene's folder), ``material`` (for a library of several),
 ``precision`` (``"float32"``, default, or ``"float16"``: half the memory),
-``sampling`` (``"tabulated"``, default, or ``"cosine"``) and
-``cosine_fraction`` (share of cosine-weighted samples in the tabulated
-mixture; default from the material, :func:`~brdfcodec.render.mitsuba_tables.cosine_share`).
+``sampling`` (``"tabulated"``, default, ``"theta_h"`` or ``"cosine"``) and
+``cosine_fraction`` (share of cosine-weighted samples in the mixture;
+default :data:`WARP_COSINE_SHARE` for ``"tabulated"``, from the material for
+``"theta_h"``: :func:`~brdfcodec.render.mitsuba_tables.cosine_share`).
 
 The material is decoded once per process for every BSDF that names the same
 file, material and precision (:func:`brdfcodec.render.mitsuba_tables.material_tables`),
@@ -27,10 +28,16 @@ the variant (float32 in the ``*_rgb`` variants, so a direction pair within
 float32 rounding of a bin edge may land in the neighbouring bin).
 
 * ``llvm_*`` / ``cuda_*`` variants (:class:`VectorBvaeBSDF`, built per variant):
-  the table is one Dr.Jit array gathered for whole wavefronts. Sampling is a
-  mixture of cosine-weighted directions and half vectors drawn from the
+  the table is one Dr.Jit array gathered for whole wavefronts. Sampling
+  (``"tabulated"``) is that of Mitsuba's ``measured`` BSDF on the material's
+  RGL export: a point warped by the luminance density, then by the visible-normal
+  (VNDF) density to a microfacet normal, ωo the reflection of ωi about it
+  (:func:`~brdfcodec.render.mitsuba_tables.sampling_warps`, Mitsuba's
+  ``MarginalContinuous2D1`` over the incident elevation), mixed with a small
+  share of cosine-weighted directions; ``pdf`` inverts the same warps, so it is
+  the density ``sample`` draws from. ``"theta_h"``: half vectors drawn from the
   material's tabulated θh marginal (:func:`~brdfcodec.render.mitsuba_tables.theta_h_marginal`,
-  φh uniform, ωo the reflection of ωi), which follows glossy lobes. ``traverse``
+  φh uniform) mixed with cosine-weighted directions. ``traverse``
   exposes the table (``reflectance``, 1/sr ÷ ``scale``, channels last).
 * ``scalar_*`` variants (:class:`ScalarBvaeBSDF`): one Python call per sample,
   cosine-weighted sampling; slow but simple, kept as the reference.
@@ -50,6 +57,11 @@ __all__ = ["MERL_PLUGIN_NAME", "PLUGIN_NAME", "bsdf_class", "material_of", "near
 
 PLUGIN_NAME = "bvae"
 MERL_PLUGIN_NAME = "merl"
+#: Share of cosine-weighted directions mixed with the warps' (``sampling`` "tabulated"): it bounds the sample
+#: weights (by π f / share) where the warps' tables, coarser than the material's, give a low density. Small, because
+#: every cosine sample is one the lobe misses: chrome of the example library under a sky with a sun has 1.8× the
+#: relative MSE of Mitsuba's ``measured`` at a share of 0.1, 1.4× at 0.02 (benchmarks/test_bench_sampling.py).
+WARP_COSINE_SHARE = 0.01
 
 
 def _mitsuba() -> Any:
@@ -107,8 +119,8 @@ def _source_properties(props: Any, default_kind: str) -> dict[str, Any]:
     if precision not in ("float32", "float16"):
         raise ValueError(f"{filename}: 'precision' must be float32 or float16, got {precision!r}")
     sampling = str(props["sampling"]) if "sampling" in props else "tabulated"
-    if sampling not in ("tabulated", "cosine"):
-        raise ValueError(f"{filename}: 'sampling' must be tabulated or cosine, got {sampling!r}")
+    if sampling not in ("tabulated", "theta_h", "cosine"):
+        raise ValueError(f"{filename}: 'sampling' must be tabulated, theta_h or cosine, got {sampling!r}")
     fraction = float(props["cosine_fraction"]) if "cosine_fraction" in props else None
     if fraction is not None and not 0.0 < fraction <= 1.0:
         raise ValueError(f"{filename}: 'cosine_fraction' must be in (0, 1], got {fraction}")
@@ -264,6 +276,8 @@ def _vector_class(mi: Any, default_kind: str) -> type:
             self.sampling = options["sampling"]
             self.lookup = options["lookup"]
             variant = mi.variant()
+            if self.sampling == "tabulated":
+                self.tables.warps()  # built from the host table, before a renderer's copy replaces it
             device = self.tables.device.get(variant)
             if device is None:  # upload once per variant, shared by every BSDF using these tables
                 array_type = mi.Float16 if self.tables.precision == "float16" else mi.Float
@@ -272,11 +286,15 @@ def _vector_class(mi: Any, default_kind: str) -> type:
             self.m_values = device
             self.m_gather_type = array_module.Array3f16 if self.tables.precision == "float16" else mi.Color3f
             self.m_scale = float(self.tables.scale)
-            marginal = self.tables.marginal
+            self.m_warps = self._device_warps(variant) if self.sampling == "tabulated" else None
             fraction = options["cosine_fraction"]
-            self.m_cosine_fraction = cosine_share(marginal) if fraction is None else fraction
-            if not marginal.sum() > 0:
-                self.m_cosine_fraction = 1.0
+            marginal = self.tables.marginal
+            if self.m_warps is not None:
+                self.m_cosine_fraction = WARP_COSINE_SHARE if fraction is None else fraction
+            else:
+                self.m_cosine_fraction = cosine_share(marginal) if fraction is None else fraction
+                if self.sampling == "tabulated" or not marginal.sum() > 0:
+                    self.m_cosine_fraction = 1.0  # a black or non-finite material: nothing to sample by
             self.m_marginal = mi.Float(marginal)
             self.m_band = mi.Float(band)
             self.m_edges_sin2 = mi.Float(edges_sin2)
@@ -318,12 +336,57 @@ def _vector_class(mi: Any, default_kind: str) -> type:
             value = dr.select(weights > 0, total / dr.maximum(weights, 1e-30), 0.0) * self.m_scale
             return dr.select(active, value, 0.0)
 
+        def _device_warps(self, variant: str) -> tuple[Any, Any] | None:
+            """The material's luminance and VNDF warps as Mitsuba's Marginal2D (built once per variant)."""
+            key = (variant, "warps")
+            if key not in self.tables.device:
+                warps = self.tables.warps()
+                if warps is None:
+                    self.tables.device[key] = None
+                else:
+                    params = [[float(t) for t in warps.theta_i]]
+                    self.tables.device[key] = (mi.MarginalContinuous2D1(warps.luminance, params, normalize=True),
+                                               mi.MarginalContinuous2D1(warps.vndf, params, normalize=True))
+            return self.tables.device[key]
+
+        def _warp_pdf(self, wi: Any, wo: Any, active: Any) -> Any:
+            """Density over ωo (1/sr) of the luminance then VNDF warps (as Mitsuba's ``measured`` samples)."""
+            luminance, vndf = self.m_warps
+            m = dr.normalize(wi + wo)
+            cos_i = dr.dot(wi, m)
+            active = active & (cos_i > 0)
+            theta_i = dr.safe_acos(wi.z)
+            phi_i = dr.atan2(wi.y, wi.x)
+            sin_m = dr.sqrt(dr.fma(m.x, m.x, m.y * m.y))
+            theta_m = dr.atan2(sin_m, m.z)
+            u_phi = (dr.atan2(m.y, m.x) - phi_i) * (0.5 / math.pi) + 0.5
+            u_m = mi.Point2f(dr.sqrt(theta_m / half_pi), u_phi - dr.floor(u_phi))
+            params = [theta_i]
+            point, vndf_pdf = vndf.invert(u_m, params, active)
+            lum_pdf = luminance.eval(point, params, active)
+            jacobian = dr.maximum(2.0 * math.pi * math.pi * u_m.x * sin_m, 1e-6) * 4.0 * cos_i
+            return dr.select(active, vndf_pdf * lum_pdf / jacobian, 0.0)
+
+        def _warp_sample(self, wi: Any, sample2: Any, active: Any) -> Any:
+            """ωo drawn by the luminance then VNDF warps (the reflection of ωi about the warped normal)."""
+            luminance, vndf = self.m_warps
+            params = [dr.safe_acos(wi.z)]
+            point, _ = luminance.sample(mi.Point2f(sample2.y, sample2.x), params, active)
+            u_m, _ = vndf.sample(point, params, active)
+            theta_m = dr.square(u_m.x) * half_pi
+            phi_m = (2.0 * u_m.y - 1.0) * math.pi + dr.atan2(wi.y, wi.x)
+            sin_t, cos_t = dr.sincos(theta_m)
+            sin_p, cos_p = dr.sincos(phi_m)
+            return mi.reflect(wi, mi.Vector3f(sin_t * cos_p, sin_t * sin_p, cos_t))
+
         def _pdf(self, wi: Any, wo: Any, active: Any) -> Any:
             active = active & (wi.z > 0) & (wo.z > 0)
             cosine = mi.warp.square_to_cosine_hemisphere_pdf(wo)
             fraction = self.m_cosine_fraction
             if fraction >= 1.0:
                 return dr.select(active, cosine, 0.0)
+            if self.m_warps is not None:
+                return dr.select(active, fraction * cosine + (1.0 - fraction) * self._warp_pdf(wi, wo, active), 0.0)
             i_h, _, _, h = bins(wi, wo)
             p_bin = dr.gather(mi.Float, self.m_marginal, i_h, active)
             p_bin_band = dr.gather(mi.Float, self.m_band, i_h, active)
@@ -345,7 +408,9 @@ def _vector_class(mi: Any, default_kind: str) -> type:
             active = active & (wi.z > 0)
             wo = mi.warp.square_to_cosine_hemisphere(sample2)
             fraction = self.m_cosine_fraction
-            if fraction < 1.0:
+            if fraction < 1.0 and self.m_warps is not None:
+                wo = dr.select(sample1 < fraction, wo, self._warp_sample(wi, sample2, active))
+            elif fraction < 1.0:
                 use_cosine = sample1 < fraction
                 remapped = dr.clip((sample1 - fraction) / (1.0 - fraction), 0.0, 1.0)
                 index = self.m_distribution.sample(remapped, active)
@@ -376,8 +441,10 @@ def _vector_class(mi: Any, default_kind: str) -> type:
             pass
 
         def to_string(self) -> str:
-            return _describe(self.name, self.tables, "cosine" if self.m_cosine_fraction >= 1 else
-                             f"tabulated θh marginal + {self.m_cosine_fraction:g} cosine")
+            if self.m_cosine_fraction >= 1:
+                return _describe(self.name, self.tables, "cosine")
+            kind = "luminance and VNDF warps" if self.m_warps is not None else "θh marginal"
+            return _describe(self.name, self.tables, f"{kind} + {self.m_cosine_fraction:g} cosine")
 
     return VectorBvaeBSDF
 

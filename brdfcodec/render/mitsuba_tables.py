@@ -1,9 +1,11 @@
-"""Material tables for renderers: load once, share between shapes, float16 or float32, plus a sampling marginal.
+"""Material tables for renderers: load once, share between shapes, float16 or float32, plus sampling densities.
 
 A renderer's BSDF needs, per material, the reflectance table in the MERL
-layout (1/sr, channels last for gathering) and a distribution of the
-half-vector elevation θh to importance-sample with. :func:`material_tables`
-builds both from a ``.bvae`` material (decoded once) or a MERL ``.binary``
+layout (1/sr, channels last for gathering) and densities to importance-sample
+it with: the visible-normal and luminance warps of the material's RGL
+``.bsdf`` export (:func:`sampling_warps`, built on first use) and a
+distribution of the half-vector elevation θh (:func:`theta_h_marginal`).
+:func:`material_tables` builds them from a ``.bvae`` material (decoded once) or a MERL ``.binary``
 file, and keeps them in a per-process cache keyed by the file's identity, the
 material and the precision, so that every shape of a scene that names the
 same material shares one table (the cache holds weak references: a table
@@ -28,16 +30,21 @@ from typing import Any, Literal
 import numpy as np
 import numpy.typing as npt
 
-from brdfcodec.conventions import N_THETA_H, TABLE_SHAPE
+from brdfcodec.conventions import N_PHI_D, N_THETA_D, N_THETA_H, TABLE_SHAPE
+from brdfcodec.io.rgl_writer import RglResolution, rgl_fields
+from brdfcodec.representation.mask import horizon_mask
 
 __all__ = [
+    "SAMPLING_RESOLUTION",
     "SAMPLING_THETA_D_BINS",
     "MaterialTables",
     "Precision",
+    "SamplingWarps",
     "cache_info",
     "cosine_share",
     "load_physical",
     "material_tables",
+    "sampling_warps",
     "theta_h_edges",
     "theta_h_marginal",
 ]
@@ -48,6 +55,13 @@ FLOAT16_CEILING = 30000.0
 #: θd bins averaged for the θh marginal: θd < 60°, where the lobe's shape barely depends on θd.
 SAMPLING_THETA_D_BINS = 60
 _LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
+#: Resolution of the sampling warps: that of the ``.bsdf`` files ``bvae decompress -o x.bsdf`` writes, which Mitsuba's
+#: ``measured`` BSDF samples (32 incident elevations, luminance 32²), except the VNDF's 64² instead of 128²: half the
+#: time to build (about 1.5 s a material on 2 cores) for the same noise (benchmarks/test_bench_sampling.py).
+SAMPLING_RESOLUTION = RglResolution(vndf=64)
+# Share of a luminance slice's mean given to every vertex, so that no direction the table reflects into is left
+# with a vanishing density (a cosine-weighted share in the BSDF's mixture bounds the weights as well).
+_LUMINANCE_FLOOR = 1e-3
 
 
 def theta_h_edges() -> npt.NDArray[np.float64]:
@@ -105,6 +119,64 @@ def cosine_share(marginal: npt.ArrayLike) -> float:
     return float(np.clip(2.0 * beyond, 0.1, 1.0))
 
 
+@dataclass(frozen=True)
+class SamplingWarps:
+    """Densities on the unit square, per incident elevation, to importance-sample a material by.
+
+    Those of the material's RGL ``.bsdf`` export (:func:`brdfcodec.io.rgl_writer.rgl_fields`), sampled as
+    Mitsuba's ``measured`` BSDF samples them: a uniform point is warped by the luminance density, the result
+    by the VNDF density to a microfacet normal m = (u_θ, u_φ), and ωo is ωi reflected about m. Both
+    densities are interpolated linearly between incident elevations.
+
+    Attributes
+    ----------
+    theta_i : ndarray of float32, shape (T,)
+        Incident elevations, radians, uniform on [0, π/2].
+    vndf : ndarray of float32, shape (T, V, V)
+        Density of normals on the unit square (rows: u_φ = (φm − φi) / 2π + 1/2; columns:
+        u_θ = sqrt(θm / (π/2))), bilinear between vertices, positive sum per slice.
+    luminance : ndarray of float32, shape (T, L, L)
+        Density of the points the VNDF warp takes (rows: second coordinate), positive sum per slice.
+    """
+
+    theta_i: np.ndarray
+    vndf: np.ndarray
+    luminance: np.ndarray
+
+
+def sampling_warps(physical: npt.ArrayLike, resolution: RglResolution | None = None) -> SamplingWarps | None:
+    """The VNDF and luminance warps of a material, as its RGL ``.bsdf`` export holds them.
+
+    Parameters
+    ----------
+    physical : array_like, shape (3, 90, 90, 180)
+        Reflectance in 1/sr; negative entries are invalid (left out).
+    resolution : RglResolution, optional
+        Table sizes; :data:`SAMPLING_RESOLUTION` (the export's) by default.
+
+    Returns
+    -------
+    SamplingWarps or None
+        None for a material with no positive valid entry or non-finite values (nothing to sample by).
+    """
+    table = np.asarray(physical, dtype=np.float64)
+    valid = (table >= 0) & horizon_mask()[None]
+    reflectance = np.where(valid, table, 0.0)
+    if not np.isfinite(reflectance).all() or not (reflectance > 0).any():
+        return None
+    fields = rgl_fields(reflectance, valid, resolution=resolution or SAMPLING_RESOLUTION)
+    densities = []
+    for name in ("vndf", "luminance"):
+        density = np.maximum(fields[name][0].astype(np.float64), 0.0)
+        mean = density.mean(axis=(1, 2), keepdims=True)
+        if not (np.isfinite(density).all() and (mean > 0).all()):
+            return None
+        if name == "luminance":
+            density = density + _LUMINANCE_FLOOR * mean
+        densities.append(np.ascontiguousarray(density / mean, dtype=np.float32))
+    return SamplingWarps(fields["theta_i"].astype(np.float32), densities[0], densities[1])
+
+
 @dataclass(eq=False)
 class MaterialTables:
     """One material ready for a renderer.
@@ -136,6 +208,8 @@ class MaterialTables:
     precision: Precision
     device: dict[str, Any] = field(default_factory=dict)
     nbytes: int = 0  # bytes of one copy of the table: 8,748,000 in float16, 17,496,000 in float32
+    _warps: list[SamplingWarps | None] = field(default_factory=list, repr=False)
+    _warps_lock: Any = field(default_factory=threading.Lock, repr=False)
 
     def __post_init__(self) -> None:
         if self.values is not None:
@@ -152,6 +226,15 @@ class MaterialTables:
         """Drop the numpy copy once a renderer holds the table (halves the memory of vectorised variants)."""
         if self.device:
             self.values = None
+
+    def warps(self) -> SamplingWarps | None:
+        """The material's :func:`sampling_warps`, built on the first call (a few seconds) and kept."""
+        with self._warps_lock:
+            if not self._warps:
+                channels_last = self.host().astype(np.float32).reshape(N_THETA_H, N_THETA_D, N_PHI_D, 3)
+                physical = np.where(channels_last >= 0, channels_last * np.float32(self.scale), np.float32(-1.0))
+                self._warps.append(sampling_warps(np.moveaxis(physical, -1, 0)))
+            return self._warps[0]
 
 
 _CACHE: weakref.WeakValueDictionary[tuple[Any, ...], MaterialTables] = weakref.WeakValueDictionary()
