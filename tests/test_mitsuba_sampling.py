@@ -199,3 +199,19 @@ def test_a_black_material_is_sampled_by_cosine(llvm: str, tmp_path: Path) -> Non
 def test_bad_sampling_is_a_clear_error(llvm: str, merl_files: dict[str, Path]) -> None:
     with pytest.raises(Exception, match="'sampling' must be tabulated, theta_h or cosine"):
         mi.load_dict({"type": "merl", "filename": str(merl_files["gold"]), "sampling": "vndf"})
+
+
+def test_warps_built_after_the_host_table_is_dropped(llvm: str, merl_files: dict[str, Path]) -> None:
+    """A float16 material first loaded with cosine sampling (the numpy table dropped after upload), then tabulated:
+    the warps come from the renderer's copy (times its scale), and the numpy table stays dropped."""
+    from brdfcodec.render.mitsuba_bsdf import material_of
+    from brdfcodec.render.mitsuba_tables import load_physical, sampling_warps
+
+    bsdf = {"type": "merl", "filename": str(merl_files["red-plastic"]), "precision": "float16"}
+    cosine = mi.load_dict({**bsdf, "sampling": "cosine"})
+    assert "sampling=cosine" in str(cosine) and material_of(cosine).values is None
+    tabulated = mi.load_dict(bsdf)
+    tables = material_of(tabulated)
+    assert tables is material_of(cosine) and tables.values is None and "VNDF warps" in str(tabulated)
+    direct = sampling_warps(load_physical(merl_files["red-plastic"])[1])
+    np.testing.assert_allclose(tables.warps().luminance, direct.luminance, rtol=0.02, atol=1e-3)

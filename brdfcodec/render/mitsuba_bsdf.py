@@ -277,7 +277,7 @@ def _vector_class(mi: Any, default_kind: str) -> type:
             self.lookup = options["lookup"]
             variant = mi.variant()
             if self.sampling == "tabulated":
-                self.tables.warps()  # built from the host table, before a renderer's copy replaces it
+                self.tables.warps()  # built from the host table while it is there (no copy back from the device)
             device = self.tables.device.get(variant)
             if device is None:  # upload once per variant, shared by every BSDF using these tables
                 array_type = mi.Float16 if self.tables.precision == "float16" else mi.Float
@@ -338,16 +338,16 @@ def _vector_class(mi: Any, default_kind: str) -> type:
 
         def _device_warps(self, variant: str) -> tuple[Any, Any] | None:
             """The material's luminance and VNDF warps as Mitsuba's Marginal2D (built once per variant)."""
-            key = (variant, "warps")
-            if key not in self.tables.device:
+            built = self.tables.device_warps
+            if variant not in built:
                 warps = self.tables.warps()
                 if warps is None:
-                    self.tables.device[key] = None
+                    built[variant] = None
                 else:
                     params = [[float(t) for t in warps.theta_i]]
-                    self.tables.device[key] = (mi.MarginalContinuous2D1(warps.luminance, params, normalize=True),
-                                               mi.MarginalContinuous2D1(warps.vndf, params, normalize=True))
-            return self.tables.device[key]
+                    built[variant] = (mi.MarginalContinuous2D1(warps.luminance, params, normalize=True),
+                                      mi.MarginalContinuous2D1(warps.vndf, params, normalize=True))
+            return built[variant]
 
         def _warp_pdf(self, wi: Any, wo: Any, active: Any) -> Any:
             """Density over ωo (1/sr) of the luminance then VNDF warps (as Mitsuba's ``measured`` samples)."""

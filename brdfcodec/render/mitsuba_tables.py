@@ -196,8 +196,10 @@ class MaterialTables:
     marginal : ndarray, shape (90,)
         θh bin probabilities (:func:`theta_h_marginal`).
     precision : {"float32", "float16"}
-    device : Any
-        What the renderer built from ``values`` (a Dr.Jit array), set by the renderer.
+    device : dict
+        What the renderer built from ``values`` (a Dr.Jit array), per variant, set by the renderer.
+    device_warps : dict
+        What the renderer built from :meth:`warps` (Mitsuba warps), per variant, set by the renderer.
     """
 
     name: str
@@ -207,6 +209,7 @@ class MaterialTables:
     marginal: np.ndarray
     precision: Precision
     device: dict[str, Any] = field(default_factory=dict)
+    device_warps: dict[str, Any] = field(default_factory=dict)
     nbytes: int = 0  # bytes of one copy of the table: 8,748,000 in float16, 17,496,000 in float32
     _warps: list[SamplingWarps | None] = field(default_factory=list, repr=False)
     _warps_lock: Any = field(default_factory=threading.Lock, repr=False)
@@ -231,7 +234,8 @@ class MaterialTables:
         """The material's :func:`sampling_warps`, built on the first call (a few seconds) and kept."""
         with self._warps_lock:
             if not self._warps:
-                channels_last = self.host().astype(np.float32).reshape(N_THETA_H, N_THETA_D, N_PHI_D, 3)
+                values = self.values if self.values is not None else next(iter(self.device.values()))
+                channels_last = np.asarray(values, dtype=np.float32).reshape(N_THETA_H, N_THETA_D, N_PHI_D, 3)
                 physical = np.where(channels_last >= 0, channels_last * np.float32(self.scale), np.float32(-1.0))
                 self._warps.append(sampling_warps(np.moveaxis(physical, -1, 0)))
             return self._warps[0]
