@@ -116,3 +116,25 @@ def test_decode_and_decode_many_give_the_reference_path_s_table(decoder: BrdfDec
         np.testing.assert_allclose(table, want, rtol=_ONE_ROUNDING, atol=0)
         alone = _apply_mask(table_from_mapped(decoder.decode_mapped(record.mu)), None, "unmeasured")
         np.testing.assert_allclose(decoder.decode(record), alone, rtol=_ONE_ROUNDING, atol=0)  # a batch of one
+
+
+def test_stepped_table_fills_exactly_the_invalid_bins_it_is_given(mapped: np.ndarray) -> None:
+    """Any mask, not only the horizon's (whose invalid bins are a suffix of θd in each θh row): the blocks' spans
+    of invalid columns are found, and a writable mask is read afresh on each call."""
+    from brdfcodec.representation.network_io import _STORED_PER_EXPM1, _kept_exponentials, stepped_table
+
+    start, ratio = _kept_exponentials(from_network_layout(mapped[0]), _STORED_PER_EXPM1.reshape(3, 1, 1, 1))
+    whole = stepped_table(start, ratio, _STORED_PER_EXPM1)
+    invalid = np.zeros((90, 90, 180), dtype=bool)
+    invalid[3, 5, 7] = invalid[44, 0, 179] = invalid[89, 89, 0] = True
+    invalid[60:62, 10:12, 90:100] = True
+    got = stepped_table(start, ratio, _STORED_PER_EXPM1, invalid=invalid, fill=-1.0)
+    np.testing.assert_array_equal(got, np.where(invalid, np.float32(-1.0), whole))
+    invalid[:] = False
+    invalid[0, 0, 0] = True
+    got = stepped_table(start, ratio, _STORED_PER_EXPM1, invalid=invalid, fill=-1.0)
+    np.testing.assert_array_equal(got, np.where(invalid, np.float32(-1.0), whole))
+    invalid.setflags(write=False)
+    for _ in range(2):  # cached on the second call
+        got = stepped_table(start, ratio, _STORED_PER_EXPM1, invalid=invalid, fill=0.0)
+        np.testing.assert_array_equal(got, np.where(invalid, np.float32(0.0), whole))

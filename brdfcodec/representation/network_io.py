@@ -163,7 +163,8 @@ def _scaled_expm1(mapped: npt.ArrayLike, phi_d_bins: Sequence[int] | None, facto
 
 _ALL_BINS = tuple(range(N_PHI_D))
 _GAP = KEPT_PHI_D_SLICES[1] - KEPT_PHI_D_SLICES[0]  # 9 bins from one kept slice to the next, but the last gap
-_LAST_GAP = KEPT_PHI_D_SLICES[-1] - KEPT_PHI_D_SLICES[-2]  # 8: from bin 171 to bin 179
+# The last gap, 171 → 179, holds 8 bins and its end: 20 gaps of 9 fill the 180 bins (stepped_table relies on it).
+assert (N_KEPT_SLICES - 1) * _GAP == N_PHI_D and KEPT_PHI_D_SLICES[-1] == N_PHI_D - 1
 
 
 #: θh rows stepped at once by :func:`_scaled_expm1_all`: its working arrays (about 0.5 MB) stay in cache.
@@ -233,14 +234,14 @@ def stepped_table(
     lead = start.shape[:-1]  # (..., 3, 90, 90)
     out = np.empty((*lead, N_PHI_D), dtype=np.float32)
     last = N_KEPT_SLICES - 1
-    split = KEPT_PHI_D_SLICES[-2]  # 171: the uniform gaps end here
     filler = np.float32(fill)
     scales = np.asarray(factor, dtype=np.float64).reshape(N_CHANNELS)
+    spans = None if invalid is None else _invalid_spans(invalid)
     for index in np.ndindex(*lead[:-2]):  # every leading index and channel
         channel_scale = scales[index[-1]]
-        for row in range(0, lead[-2], _ROWS_PER_BLOCK):
+        for block, row in enumerate(range(0, lead[-2], _ROWS_PER_BLOCK)):
             rows = (*index, slice(row, row + _ROWS_PER_BLOCK))
-            current = start[(*rows, Ellipsis, slice(0, last))].copy()
+            current = start[(*rows, Ellipsis, slice(0, last))].copy()  # (rows, 90, 20)
             step = ratio[rows]
             slab = np.empty((_GAP, *current.shape), dtype=np.float32)
             for j in range(_GAP):
@@ -248,13 +249,37 @@ def stepped_table(
                 if j + 1 < _GAP:
                     current *= step
             target = out[rows]  # (rows, 90, 180), a view
-            target[:, :, :split].reshape(*target.shape[:2], last - 1, _GAP)[...] = slab[..., :-1].transpose(1, 2, 3, 0)
-            target[:, :, split:-1] = slab[:_LAST_GAP, ..., -1].transpose(1, 2, 0)
+            # every gap as if it held 9 bins: the last one's ninth lands on bin 179, written next
+            target.reshape(*target.shape[:2], last, _GAP)[...] = slab.transpose(1, 2, 3, 0)
             # bin 179, a kept slice of its own
             np.subtract(start[(*rows, Ellipsis, last)], channel_scale, out=target[..., -1], casting="same_kind")
-            if invalid is not None:
-                np.copyto(target, filler, where=invalid[row : row + _ROWS_PER_BLOCK])
+            if spans is not None and spans[block] is not None:
+                low, high = spans[block]  # the θd columns of the block's rows that hold any invalid bin
+                np.copyto(target[:, low:high], filler, where=invalid[row : row + _ROWS_PER_BLOCK, low:high])
     return out
+
+
+#: Per read-only ``invalid`` array (by identity, the array kept alive): for each block of θh rows, the θd columns
+#: that hold an invalid bin (the horizon's are a suffix, all but a third of the table is whole).
+_SPANS: dict[int, tuple[np.ndarray, list[tuple[int, int] | None]]] = {}
+
+
+def _invalid_spans(invalid: np.ndarray) -> list[tuple[int, int] | None]:
+    """For each block of :data:`_ROWS_PER_BLOCK` θh rows, ``(low, high)``: the θd columns from the first to the last
+    that hold an invalid bin, or None where none does (cached for a read-only array)."""
+    cached = _SPANS.get(id(invalid))
+    if cached is not None and cached[0] is invalid and len(cached[1]) == -(-invalid.shape[0] // _ROWS_PER_BLOCK):
+        return cached[1]
+    columns = invalid.any(axis=-1)  # (θh, θd)
+    spans: list[tuple[int, int] | None] = []
+    for row in range(0, invalid.shape[0], _ROWS_PER_BLOCK):
+        hit = np.flatnonzero(columns[row : row + _ROWS_PER_BLOCK].any(axis=0))
+        spans.append((int(hit[0]), int(hit[-1]) + 1) if len(hit) else None)
+    if not invalid.flags.writeable:
+        if len(_SPANS) > 8:
+            _SPANS.clear()
+        _SPANS[id(invalid)] = (invalid, spans)
+    return spans
 
 
 _GAP_LENGTHS = np.diff(np.asarray(KEPT_PHI_D_SLICES)).astype(np.float64)
