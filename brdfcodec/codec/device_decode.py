@@ -14,7 +14,9 @@ order and precision: float64, one exponential per kept slice and one per gap bet
 per bin, rounded to float32 once (``spec/bvae-format.md`` §9). The device's float64 ``exp`` may differ from
 NumPy's in the last bit, so the two decodes agree to float32 rounding (far within §9's 1e-3 mapped), not bit
 for bit. The energy bound's albedo is the NumPy path's quadrature (``representation/energy.py``), summed on the
-device in another order (a relative difference of about 1e-15 in the factor).
+device in another order (a relative difference of about 1e-15 in the factor). On the CPU the tables are the
+host decode's (:func:`table_from_mapped_host`, what ``BrdfDecoder.decode`` and ``decode_many`` use: torch's
+exponentials, NumPy's steps, written into the tensor), which takes fewer passes than the tensor steps.
 
 What stays on the host: records that are not a plain latent decode — grafts (two codes), records whose base is
 projected on the shared basis (format 1.6), records without a latent (format 2.1) — get their mapped slices
@@ -81,10 +83,8 @@ __all__ = [
 _GAP = KEPT_PHI_D_SLICES[1] - KEPT_PHI_D_SLICES[0]
 #: ε / S_c per channel: stored units per unit of ``expm1`` (as in ``representation/network_io.py``).
 _STORED_PER_EXPM1 = EPSILON / np.asarray(MERL_COLOR_SCALE, dtype=np.float64)
-#: Records and θh rows unmapped at once on the CPU: the float64 working arrays (about 0.4 MB) stay in cache, as
-#: in ``representation/network_io.py`` (whole tables at once were several times slower: memory traffic).
+#: Records whose energy bound is computed at once on the CPU (the float64 working arrays stay in cache).
 _CPU_CHUNK = 1
-_CPU_ROWS = 10
 #: Records unmapped at once on other devices (float64 working arrays of about 35 MB a record).
 _DEVICE_CHUNK = 16
 
@@ -203,14 +203,20 @@ def tables_from_mapped_tensor(
     """
     fill = _mask_fill(masked)
     count = mapped.shape[0]
+    if mapped.device.type == "cpu":  # the host decode, written into the tensor: the same steps, in fewer passes
+        out = torch.empty((count, N_CHANNELS, N_THETA_H, N_THETA_D, N_PHI_D), dtype=torch.float32)
+        tables, slices = out.numpy(), mapped.detach().numpy()
+        factors = [1.0] * count if scales is None else scales.detach().to(torch.float64).reshape(count).tolist()
+        for i in range(count):
+            table_from_mapped_host(slices[i], scale=factors[i], masked=masked, out=tables[i])  # type: ignore[arg-type]
+        return out
     constants = _constants(mapped.device)
     factors = constants["stored"].expand(count, N_CHANNELS).clone()
     if scales is not None:
         factors *= scales.to(mapped.device, torch.float64).reshape(count, 1)
     kept = mapped.reshape(count, N_CHANNELS, N_KEPT_SLICES, N_THETA_H, N_THETA_D).permute(0, 1, 3, 4, 2)
     out = torch.empty((count, N_CHANNELS, N_THETA_H, N_THETA_D, N_PHI_D), dtype=torch.float32, device=mapped.device)
-    on_cpu = mapped.device.type == "cpu"
-    chunk, rows = (_CPU_CHUNK, _CPU_ROWS) if on_cpu else (_DEVICE_CHUNK, N_THETA_H)
+    chunk, rows = _DEVICE_CHUNK, N_THETA_H
     for start in range(0, count, chunk):
         records = slice(start, start + chunk)
         for row in range(0, N_THETA_H, rows):
@@ -230,7 +236,11 @@ def _invalid_bins() -> np.ndarray:
 
 
 def table_from_mapped_host(
-    mapped: npt.NDArray[np.float32], *, scale: float = 1.0, masked: MaskedEntries = "unmeasured"
+    mapped: npt.NDArray[np.float32],
+    *,
+    scale: float = 1.0,
+    masked: MaskedEntries = "unmeasured",
+    out: npt.NDArray[np.float32] | None = None,
 ) -> npt.NDArray[np.float32]:
     """One full table in stored MERL units from clamped mapped slices, as a NumPy array (the host decode).
 
@@ -251,11 +261,13 @@ def table_from_mapped_host(
         interpolated table.
     masked : {"unmeasured", "zero", "keep"}, default "unmeasured"
         Below-horizon bins: −1, 0, or the decoded value.
+    out : ndarray of float32, shape (3, 90, 90, 180), optional
+        Where to write the table (C-contiguous; a CPU tensor's ``.numpy()``, say); a new array by default.
 
     Returns
     -------
     ndarray of float32, shape (3, 90, 90, 180)
-        Finite; ≥ 0 above the horizon.
+        Finite; ≥ 0 above the horizon. ``out`` when given.
     """
     fill = _mask_fill(masked)
     value = float(scale)
@@ -274,7 +286,7 @@ def table_from_mapped_host(
         ratio = torch.sub(x[..., 1:], x[..., :-1]).div_(_constants(torch.device("cpu"))["steps"]).exp_()
         start = x.exp_().mul_(torch.from_numpy(factor).reshape(N_CHANNELS, 1, 1, 1))
     return stepped_table(start.numpy(), ratio.numpy(), factor,
-                         invalid=None if fill is None else _invalid_bins(), fill=fill or 0.0)
+                         invalid=None if fill is None else _invalid_bins(), fill=fill or 0.0, out=out)
 
 
 def _mask_fill(masked: str) -> float | None:

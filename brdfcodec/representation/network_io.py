@@ -202,7 +202,13 @@ def _kept_exponentials(kept: np.ndarray, scale: np.ndarray) -> tuple[np.ndarray,
 
 
 def stepped_table(
-    start: np.ndarray, ratio: np.ndarray, factor: np.ndarray, *, invalid: np.ndarray | None = None, fill: float = 0.0
+    start: np.ndarray,
+    ratio: np.ndarray,
+    factor: np.ndarray,
+    *,
+    invalid: np.ndarray | None = None,
+    fill: float = 0.0,
+    out: np.ndarray | None = None,
 ) -> npt.NDArray[np.float32]:
     """All 180 bins from the kept slices' exponentials: ``current − factor_c`` rounded to float32 once, ``current``
     stepped by ``q`` through each gap (:func:`_scaled_expm1`'s geometric sequence), float64 throughout.
@@ -226,13 +232,20 @@ def stepped_table(
         complement); none by default.
     fill : float, default 0.0
         The value of the ``invalid`` bins.
+    out : ndarray of float32, shape (..., 3, 90, 90, 180), optional
+        Where to write the table (C-contiguous); a new array by default.
 
     Returns
     -------
     ndarray of float32, shape (..., 3, 90, 90, 180)
+        ``out`` when given.
     """
     lead = start.shape[:-1]  # (..., 3, 90, 90)
-    out = np.empty((*lead, N_PHI_D), dtype=np.float32)
+    if out is None:
+        out = np.empty((*lead, N_PHI_D), dtype=np.float32)
+    elif out.shape != (*lead, N_PHI_D) or out.dtype != np.float32 or not out.flags.c_contiguous:
+        raise ValueError(f"out must be a C-contiguous float32 array of shape {(*lead, N_PHI_D)}, got {out.dtype} "
+                         f"{out.shape}")
     last = N_KEPT_SLICES - 1
     filler = np.float32(fill)
     scales = np.asarray(factor, dtype=np.float64).reshape(N_CHANNELS)
