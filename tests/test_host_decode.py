@@ -138,3 +138,13 @@ def test_stepped_table_fills_exactly_the_invalid_bins_it_is_given(mapped: np.nda
     for _ in range(2):  # cached on the second call
         got = stepped_table(start, ratio, _STORED_PER_EXPM1, invalid=invalid, fill=0.0)
         np.testing.assert_array_equal(got, np.where(invalid, np.float32(0.0), whole))
+
+
+def test_the_table_is_written_where_asked(mapped: np.ndarray) -> None:
+    target = np.full((3, 90, 90, 180), np.nan, dtype=np.float32)
+    assert table_from_mapped_host(mapped[1], out=target) is target
+    np.testing.assert_array_equal(target, table_from_mapped_host(mapped[1]))
+    for wrong in (np.empty((3, 90, 90, 179), np.float32), np.empty((3, 90, 90, 180), np.float64),
+                  np.empty((3, 90, 90, 360), np.float32)[..., ::2]):
+        with pytest.raises(ValueError, match="out must be"):
+            table_from_mapped_host(mapped[1], out=wrong)
