@@ -5,6 +5,7 @@ difference is the project's mapping over the entries above the horizon."""
 from __future__ import annotations
 
 import importlib.util
+import json
 import subprocess
 import sys
 from pathlib import Path
@@ -108,6 +109,23 @@ def test_mapped_difference_is_the_mapping_above_the_horizon() -> None:
     expected = map_values(np.full((3, 1), 14.0))[2, 0] - map_values(np.full((3, 1), 7.0))[2, 0]
     assert delta[0] == 0.0
     assert delta[1] == pytest.approx(expected, rel=1e-9)
+
+
+def test_llvm_reference_is_used_only_at_the_same_size_and_spp(tmp_path: Path) -> None:
+    script = _script()
+    image = np.ones((14, 24, 3), np.float32)
+    reference = tmp_path / "renders.npz"
+    meta = json.dumps({"spp": 2, "width": 24, "height": 14})
+    np.savez_compressed(reference, meta=np.array(meta), llvm_ad_rgb_seed0=image, llvm_ad_rgb_seed1=image * 2)
+    args = script.parse_arguments(["--out", str(tmp_path), "--device", "cpu", "--quick",
+                                   "--llvm-reference", str(reference)])
+    renders: dict[str, np.ndarray] = {}
+    row = script._load_llvm_reference(args, renders)
+    assert row["status"] == "loaded" and sorted(renders) == ["llvm_ad_rgb_seed0", "llvm_ad_rgb_seed1"]
+    args.spp = 64
+    renders.clear()
+    row = script._load_llvm_reference(args, renders)
+    assert row["status"] == "skipped" and "'spp': 2" in row["reason"] and not renders
 
 
 @pytest.mark.slow
