@@ -453,8 +453,10 @@ def test_an_error_target_takes_the_smallest_candidate_that_meets_it(analytic_tab
     assert isinstance(chosen, LayeredRecord) and chosen.basis is not None and chosen.detail is None
     # a record without a detail layer stores its base compact, as a size budget does: at most 32 coefficients
     assert chosen.compact_mu and not chosen.store_sigma and chosen.fixed_mu_grid
-    # in the bytes of at most 32 int8 coefficients and their step (packed: more coefficients, format 2.3)
-    assert chosen.meta["rate"]["payload_bytes"] == 8 + chosen.basis.nbytes <= 42 and chosen.basis.top
+    # in the bytes of at most 32 int8 coefficients and their step (packed, format 2.3, or coded, format 2.4, the
+    # default --basis-coding auto's choice: more coefficients)
+    assert chosen.meta["rate"]["payload_bytes"] == 8 + chosen.basis.nbytes <= 42
+    assert chosen.basis.top or chosen.basis.prior is not None
     loose = BrdfEncoder(effort=0, max_relae=1.0, latent_dtype="float16", latent="always").encode(brdf, name="m")
     assert loose.compact_mu and loose.basis.count >= 4 and loose.meta["rate"]["payload_bytes"] == 8 + loose.basis.nbytes
     assert loose.basis.nbytes <= 2 + 4  # the smallest candidate: the bytes of 4 int8 coefficients

@@ -150,7 +150,7 @@ def test_an_edit_keeps_a_packed_layer_and_undoing_it_returns_the_decode(red_plas
 
     packed, edited, undone = tmp_path / "p.bvae", tmp_path / "e.bvae", tmp_path / "u.bvae"
     assert main(["compress", str(red_plastic_file), "-o", str(packed), "--bytes", "32", "--latent", "always",
-                 "--no-measure"]) == 0
+                 "--basis-coding", "packed", "--no-measure"]) == 0
     (source,) = read_bvae(packed).records
     assert source.basis is not None and source.basis.top
     assert main(["edit", "traverse", str(packed), "--dim", "2", "--values", "0.5", "-o", str(edited)]) == 0

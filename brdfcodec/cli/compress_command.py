@@ -91,9 +91,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
                         help="also store the posterior width σ (by default a record stores μ alone, format 2.2, and "
                         "reads back with σ = 1; under --bytes σ's bytes go to the layers instead): the shipped "
                         "model's σ carries no information, see its model card")
-    parser.add_argument("--basis-coding", choices=("packed", "coded", "int8"), default="packed",
+    parser.add_argument("--basis-coding", choices=("auto", "packed", "coded", "int8"), default="auto",
                         help="with --bytes/--max-relae: how records without a detail layer store basis "
-                        "coefficients: packed (default, format 2.3: later vectors get fewer bits at one step, "
+                        "coefficients: auto (default: rate control makes both packed and coded and keeps the lower "
+                        "error per material), packed (format 2.3: later vectors get fewer bits at one step, "
                         "more coefficients in the same bytes), coded (format 2.4: one step, the integers "
                         "arithmetic-coded under a Laplace prior whose spread falls with the vector's rank) or int8 "
                         "(one byte each, readable by format 2.2 readers)")

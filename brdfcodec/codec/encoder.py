@@ -119,10 +119,11 @@ class BrdfEncoder:
         half a plain record's payload; under a size budget its bytes go to the layers) and reads back with
         σ = 1: the shipped model's σ says nothing about how certain an encoding is (its model card, "The
         posterior width σ").
-    basis_coding : {"packed", "coded", "int8"}, default "packed"
+    basis_coding : {"auto", "packed", "coded", "int8"}, default "auto"
         With ``bytes`` or ``max_relae``: how records without a detail layer store their basis
-        coefficients. ``"packed"`` (format 2.3) gives later basis vectors fewer bits at one step, so a
-        budget holds more coefficients; ``"coded"`` (format 2.4) arithmetic-codes them at one step under a
+        coefficients. ``"auto"`` makes both a packed and a coded layer in the same bytes and keeps the one of
+        lower error (packed on a tie). ``"packed"`` (format 2.3) gives later basis vectors fewer bits at one
+        step, so a budget holds more coefficients; ``"coded"`` (format 2.4) arithmetic-codes them at one step under a
         Laplace prior whose spread falls with the vector's rank; ``"int8"`` stores one byte each (readable by
         2.2 readers).
     """
@@ -144,7 +145,7 @@ class BrdfEncoder:
         project_base: ProjectBase | bool = "auto",
         latent: LatentChoice = "always",
         store_sigma: bool = False,
-        basis_coding: BasisCoding = "packed",
+        basis_coding: BasisCoding = "auto",
     ) -> None:
         from brdfcodec.codec.encoding import EncodeOptions
 

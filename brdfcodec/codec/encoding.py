@@ -83,11 +83,13 @@ LatentChoice = Literal["auto", "always"]
 _LATENT_CHOICES: tuple[str, ...] = get_args(LatentChoice)
 
 #: How the records of rate control without a detail layer store their basis coefficients (:class:`EncodeOptions`):
-#: ``"coded"`` (format 2.4, ``spec/bvae-format.md`` §4.8: one step, integers arithmetic-coded under the form's
-#: Laplace prior, :data:`CODED_PRIOR`), ``"packed"`` (format 2.3, ``spec/bvae-format.md`` §4.7: one step, fewer bits for later vectors, so the bytes
-#: of k int8 coefficients hold more of them) or ``"int8"`` (a float16 step and one byte each, as before
+#: ``"auto"`` (the default) makes a packed and a coded layer in the same bytes (of one fit where they keep as many
+#: coefficients, else of a fit each) and keeps the one of lower kept-slice error (packed on a tie: readable by
+#: 2.3 readers); ``"coded"`` (format 2.4, ``spec/bvae-format.md`` §4.8: one step, integers arithmetic-coded under
+#: the form's Laplace prior, :data:`CODED_PRIOR`), ``"packed"`` (format 2.3, ``spec/bvae-format.md`` §4.7: one
+#: step, fewer bits for later vectors, so the bytes of k int8 coefficients hold more of them) or ``"int8"`` (a float16 step and one byte each, as before
 #: 2.3). Records with a detail layer store int8.
-BasisCoding = Literal["coded", "packed", "int8"]
+BasisCoding = Literal["auto", "coded", "packed", "int8"]
 
 #: The Laplace prior a coded layer declares (amplitude A, decay d: vector n's spread 2^(A/16 − 4)·n^(−d/32) mapped
 #: units), by whether the record has a latent: a latent base leaves a smaller residual on the vectors past the
@@ -149,9 +151,11 @@ class EncodeOptions:
         target, or without a shared basis.
     store_sigma : bool
         Store σ (False, the default: μ alone, format 2.2; rate control gives σ's bytes to the layers).
-    basis_coding : {"coded", "packed", "int8"}
+    basis_coding : {"auto", "coded", "packed", "int8"}
         How the records of rate control (a size budget or an error target) without a detail layer store basis
-        coefficients (:data:`BasisCoding`; default ``"packed"``, format 2.3; ``"coded"``: entropy-coded, format 2.4).
+        coefficients (:data:`BasisCoding`; default ``"auto"``: per record, packed, format 2.3, or coded, format
+        2.4, in the same bytes, whichever has the lower kept-slice error; ``"packed"`` or ``"coded"`` alone;
+        ``"int8"``).
     """
 
     effort: int = 1
@@ -164,7 +168,7 @@ class EncodeOptions:
     project_base: ProjectBase = "auto"
     latent: LatentChoice = "always"
     store_sigma: bool = False
-    basis_coding: BasisCoding = "packed"
+    basis_coding: BasisCoding = "auto"
 
     def __post_init__(self) -> None:
         if self.basis_coding not in _BASIS_CODINGS:
@@ -197,6 +201,14 @@ class EncodeOptions:
     def coded(self) -> bool:
         """Whether those records entropy-code their basis layer (format 2.4) rather than pack it."""
         return self.packed and self.basis_coding == "coded"
+
+    def variants(self, linear_rank: int) -> tuple[str, ...]:
+        """The first basis vectors whose packed or coded layers rate control compares: after the decoder's
+        linear path (``linear_rank``, which μ drives) and from vector 0 (where the decoder's output misses on
+        the leading components too; the fit tries it only where the bytes hold every vector past the linear path,
+        from about 64 B, and otherwise gives the first variant's record); none where there is no linear path or no
+        packed layer."""
+        return (str(linear_rank), "0") if self.packed and linear_rank > 0 else ()
 
     @property
     def layered(self) -> bool:
@@ -242,6 +254,8 @@ def layer_records(
             basis_count=0 if basis is None else basis.count,
             basis_only_fit=None if basis is None else _basis_only_fit(decoder, basis, inputs[i], masks[i], options),
             store_sigma=options.store_sigma,
+            basis_variants=() if basis is None else options.variants(
+                decoder.network.config.latent_dim if decoder.network.config.linear_basis else 0),
         )
         chosen = result.record
         # record_bytes: what the budget caps (payload and index descriptor); payload_bytes: the payload alone
@@ -337,70 +351,112 @@ def _basis_fit(
     project = projected_base_vectors(decoder, basis) if options.project_base != "never" else 0
     ways = [project] if options.project_base == "always" or not project else [0, project]
     target, weights = np.asarray(inputs, dtype=np.float32), np.asarray(masks, dtype=np.float32)
-    made: dict[tuple[int, MuStorage, int, bool], tuple[LatentRecord, BasisLayer, np.ndarray]] = {}
+    made: dict[tuple[int, MuStorage, int, bool, int], tuple[LatentRecord, BasisLayer, np.ndarray]] = {}
+    least_squares_of: dict[tuple[int, int, int], np.ndarray] = {}
+    projected_as: dict[tuple[int, MuStorage], int] = {}  # the projection the first variant kept, per size and μ
 
-    def fit_one(k: int, mu_storage: MuStorage, p: int, packed: bool) -> tuple[LatentRecord, BasisLayer, np.ndarray]:
-        projection = None if not p else (basis.vectors(0, p), decoder.projection_centre)
-        max_bytes = STEP_BYTES + k - (1 if packed and options.coded else 0)  # a coded layer's length: 1 byte
-        if packed:  # in the bytes of k int8 coefficients: as many as the least-squares coefficients pack to
-            first = min(linear_rank, basis.count - 1)
-            available = min(basis.count - first, _most_packed(k))
-            _, least_squares = fit_basis_coefficients(
+    def least_squares(first: int, available: int, p: int) -> np.ndarray:
+        if (first, available, p) not in least_squares_of:
+            projection = None if not p else (basis.vectors(0, p), decoder.projection_centre)
+            least_squares_of[first, available, p] = fit_basis_coefficients(
                 decoder.network, base.mu[None], inputs[None], masks[None], basis.vectors(first, available),
-                basis.entries, 0, projection=projection)
-            k = (_coded_count(least_squares[0], first, max_bytes, CODED_PRIOR[True]) if options.coded
-                 else _packed_count(least_squares[0], first, max_bytes))
+                basis.entries, 0, projection=projection)[1][0]
+        return least_squares_of[first, available, p]
+
+    def fit_one(k: int, mu_storage: MuStorage, p: int, packed: bool,
+                start: int) -> tuple[LatentRecord, BasisLayer, np.ndarray]:
+        projection = None if not p else (basis.vectors(0, p), decoder.projection_centre)
+        # Each coding asked for: the bytes of its layer and how many coefficients it keeps. --basis-coding auto makes
+        # a packed and a coded layer, of one fit where they keep as many coefficients (from about 64 B: all), else
+        # of a fit each, and keeps the lower error (packed first: kept on a tie, readable by 2.3 readers).
+        if packed:  # in the bytes of k int8 coefficients: as many as the least-squares coefficients pack to
+            first = min(start, basis.count - 1)
+            available = min(basis.count - first, _most_packed(k))
+            fitted = least_squares(first, available, p)
+            codings = ["packed", "coded"] if options.basis_coding == "auto" else [
+                "coded" if options.coded else "packed"]
+            max_bytes = {"packed": STEP_BYTES + k, "coded": STEP_BYTES + k - 1}  # a coded layer's length: 1 byte
+            count_of = {c: (_coded_count(fitted, first, max_bytes[c], CODED_PRIOR[True]) if c == "coded"
+                            else _packed_count(fitted, first, max_bytes[c])) for c in codings}
         else:
             first = basis_offset(linear_rank, basis.count, k)
-        components = basis.vectors(first, k)
-        if (first, k, p) not in joint:
-            joint[first, k, p] = fit_basis_coefficients(
-                decoder.network, base.mu[None], inputs[None], masks[None], components, basis.entries, options.effort,
-                projection=projection,
-            )
-        codes, coefficients = joint[first, k, p]
-        if mu_storage is not None:
-            # μ as a compact record stores it (int8 on the fixed grid or with a step), then the coefficients
-            # refitted to that code.
-            code = compact_mu_values(codes[0], mu_storage == MU_INT8_FIXED, f"{base.name}: mu")
-            _, coefficients = fit_basis_coefficients(
-                decoder.network, code[None], inputs[None], masks[None], components, basis.entries, options.effort,
-                fit_latent=False, projection=projection,
-            )
-        else:
-            code = _as_stored(codes, options.latent_itemsize)[0]
-        if packed and options.coded:
-            coded = coded_coefficients(basis.sha256, coefficients[0], max_bytes, CODED_PRIOR[True], first, p)
-            assert coded is not None
-            layer = coded
-        elif packed:
-            packed_layer = packed_coefficients(basis.sha256, coefficients[0], max_bytes, first, p)
-            assert packed_layer is not None
-            layer = packed_layer
-        else:
-            layer = quantise_coefficients(basis.sha256, coefficients[0], first, p)
-        record = LatentRecord(base.name, code, base.sigma, base.meta)
-        mapped = decoder.decode_mapped(code)
-        decoder.project_base(LayeredRecord(base.name, code, base.sigma, base.meta, basis=layer), mapped)
-        mapped += basis.residual(layer.coefficients(), first)
-        return record, layer, mapped
+            codings, count_of = ["int8"], {"int8": k}
+        made_layers = []
+        for count in dict.fromkeys(count_of.values()):
+            components = basis.vectors(first, count)
+            if (first, count, p) not in joint:
+                joint[first, count, p] = fit_basis_coefficients(
+                    decoder.network, base.mu[None], inputs[None], masks[None], components, basis.entries,
+                    options.effort, projection=projection,
+                )
+            codes, coefficients = joint[first, count, p]
+            if mu_storage is not None:
+                # μ as a compact record stores it (int8 on the fixed grid or with a step), then the coefficients
+                # refitted to that code.
+                code = compact_mu_values(codes[0], mu_storage == MU_INT8_FIXED, f"{base.name}: mu")
+                _, coefficients = fit_basis_coefficients(
+                    decoder.network, code[None], inputs[None], masks[None], components, basis.entries,
+                    options.effort, fit_latent=False, projection=projection,
+                )
+            else:
+                code = _as_stored(codes, options.latent_itemsize)[0]
+            record = LatentRecord(base.name, code, base.sigma, base.meta)
+            base_mapped: np.ndarray | None = None
+            for coding in (c for c in codings if count_of[c] == count):
+                if coding == "coded":
+                    layer = coded_coefficients(basis.sha256, coefficients[0], max_bytes[coding], CODED_PRIOR[True],
+                                               first, p)
+                elif coding == "packed":
+                    layer = packed_coefficients(basis.sha256, coefficients[0], max_bytes[coding], first, p)
+                else:
+                    layer = quantise_coefficients(basis.sha256, coefficients[0], first, p)
+                assert layer is not None
+                if base_mapped is None:
+                    base_mapped = decoder.decode_mapped(code)
+                    decoder.project_base(LayeredRecord(base.name, code, base.sigma, base.meta, basis=layer),
+                                         base_mapped)
+                made_layers.append((codings.index(coding),
+                                    (record, layer, base_mapped + basis.residual(layer.coefficients(), first))))
+        made_layers.sort(key=lambda made: made[0])
+        return min((made for _, made in made_layers), key=lambda made: kept_slice_error(made[2]))
+
+    def holds_all(k: int, p: int) -> bool:
+        """Whether a packed layer of k int8 coefficients' bytes after the linear path keeps every vector there
+        (then the coefficients may as well start at the first vector: from about 64 B)."""
+        first = min(linear_rank, basis.count - 1)
+        available = min(basis.count - first, _most_packed(k))
+        return available == basis.count - first and _packed_count(
+            least_squares(first, available, p), first, STEP_BYTES + k) == available
 
     def kept_slice_error(mapped: np.ndarray) -> float:
         """What rate control ranks candidates by: the clamped decode's L1 error over valid kept-slice entries."""
         return float((np.abs(np.clip(mapped, 0.0, MAPPED_MAX) - target) * weights).sum())
 
-    def fit(k: int, mu_storage: MuStorage, under_detail: bool) -> tuple[LatentRecord, BasisLayer, np.ndarray]:
+    def fit(k: int, mu_storage: MuStorage, under_detail: bool,
+            variant: str | None = None) -> tuple[LatentRecord, BasisLayer, np.ndarray]:
+        # variant: the first vector of a packed or coded layer (one of options.variants(...), rate control
+        # comparing them); None: after the decoder's linear path.
         # "auto" projects only records without a detail layer: with one, the projection's pass over the vectors
         # and the detail layer's inverse DCT both follow the network, and together they take the decode past the
         # 1.5x a base-only one that a layered decode may take (benchmark decode-layered).
         chosen = [0] if under_detail and options.project_base == "auto" else ways
-        fits = []
         packed = options.packed and not under_detail
+        start = linear_rank if variant is None else int(variant)
+        if packed and start != linear_rank:
+            if (k, mu_storage) not in projected_as:
+                fit(k, mu_storage, under_detail)  # the first variant chooses the projection
+            chosen = [projected_as[k, mu_storage]]  # a later variant: the projection the first one kept
+            if not holds_all(k, chosen[0]):
+                start = linear_rank  # too few bytes for every vector past the linear path: the first variant's
+        fits = []
         for p in chosen:
-            if (k, mu_storage, p, packed) not in made:
-                made[k, mu_storage, p, packed] = fit_one(k, mu_storage, p, packed)
-            fits.append(made[k, mu_storage, p, packed])
-        return min(fits, key=lambda candidate: kept_slice_error(candidate[2]))
+            if (k, mu_storage, p, packed, start) not in made:
+                made[k, mu_storage, p, packed, start] = fit_one(k, mu_storage, p, packed, start)
+            fits.append((made[k, mu_storage, p, packed, start], p))
+        best, p = min(fits, key=lambda candidate: kept_slice_error(candidate[0][2]))
+        if packed and start == linear_rank:
+            projected_as[k, mu_storage] = p
+        return best
 
     return fit
 

@@ -1,62 +1,69 @@
 """Layered encoding with rate control: a size budget or an error target per material.
 
 Given a material's base code, its decode and its source, :func:`encode_layers`
-chooses the enhancement layers: k coefficients on the model's shared basis
-(:mod:`brdfcodec.layers.basis`, when the model has one) and a detail layer
-whose quantisation step comes from a fixed ladder (:data:`STEP_LADDER`,
-halving every two rungs):
+chooses the enhancement layers among candidate records, each with a rate R
+(bytes beyond its name: payload and descriptor) and a distortion D:
 
-- ``bytes_budget=N``: as many coefficients as fit (up to the basis' size
-  K) without a detail layer, and at most :data:`DETAIL_BASIS_COUNT` under
-  one, with the finest rung whose record payload (μ, σ and the layers) fits
-  in N bytes; of those records, the base alone and (past the budgets that
-  store the base compact) the compact base with all K coefficients, the one
-  with the lowest kept-slice mapped L1 error (fewer coefficients on a tie).
-  No error is traded for decode time, so that a larger budget never returns
-  a worse record than a smaller one (the base alone stays a candidate of
-  every budget that holds it, the compact base's best of the budgets past
-  the compact ones unless a detail layer wins by far; more coefficients fit
-  no worse than fewer:
-  ``tests/test_rate_monotone.py``). The cap bounds
-  every layered record's
-  decode time; where a detail layer has room, the bytes of coefficients past
-  the first few dozen buy more as detail anyway
-  (documentation: Layers and rate control);
-- ``max_relae=X``: the first of 4, 8, 16, 32 and K basis coefficients on a
-  compact base, then (if K misses X) min(K, :data:`DETAIL_BASIS_COUNT`)
-  coefficients plus each rung from coarse to fine, whose decoded table has
-  a measured RelAE (mapped or linear, full table, valid entries) of at most
-  X — the smallest file that meets X (:func:`error_target_sequence`).
+- the base alone (μ in the latent dtype);
+- k coefficients on the model's shared basis (:mod:`brdfcodec.layers.basis`,
+  when the model has one), as many as fit, in each variant of the basis fit
+  (``basis_variants``: brdfcodec's writer starts the coefficients after
+  the decoder's linear path or at the first vector), on
+  the base stored compact (μ as int8, :func:`compact_mu_storage`) where the
+  budget cannot hold all K coefficients beside μ in the latent dtype
+  (:func:`compact_base_pays`), else on the full base and on a compact one;
+- min(k, :data:`DETAIL_BASIS_COUNT`) int8 coefficients under a detail layer
+  whose quantisation step comes from a fixed ladder (:data:`STEP_LADDER`,
+  halving every two rungs), bisected to the finest rungs that fit, then
+  refined between the two that bracket the budget.
 
-Both searches bisect (size falls and error rises along the sequence), then
-bisect the step in log space between the two rungs that bracket the target
-(3 rounds for a budget, 2 for an error target), and return the best of every
-candidate actually tried, so the answer is the smallest tried file that
-meets the target even where the curve is not monotonic. The achieved RelAE
-is measured on the returned record. A layered record stores σ compactly
-(one byte per dimension, ``spec/bvae-format.md`` §4.5); under a budget too
-small for all K coefficients beside μ in the latent dtype (and for an error
-target, in every record without a detail layer), the base itself is
-compact (μ as int8 on the fixed grid μ = q / 32 where it fits ±3.97, else
-with a float16 step; σ as one shared byte: 9 or 11 bytes for D = 8,
-:func:`compact_base_pays`, :func:`compact_mu_storage`), which makes budgets
-from 12 bytes possible.
+One rate–distortion rule chooses among them (minimise D + λR, λ set by the
+target):
+
+- ``bytes_budget=N``: D is the kept-slice mapped L1 error of the clamped
+  decode, and the record is the one of lowest D among the candidates of
+  R ≤ N (:func:`lowest_distortion`: the Lagrangian sweep over λ,
+  :func:`lagrangian_hull`, reaches the lower convex hull of the (R, D)
+  points; the best fitting point of all, hull or not, is never worse than the
+  best fitting hull point, and is what is kept; ties: fewer coefficients,
+  the full base, the variant listed first). Every candidate measured is
+  returned (:attr:`RateResult.points`). Within each kind of candidate more
+  bytes lower D, so each kind offers its largest fitting member; the compact
+  base's record stays a candidate past the budgets that store the base
+  compact, so that a larger budget never returns a worse record than a
+  smaller one (``tests/test_rate_monotone.py``). No error is traded for
+  decode time; the cap of :data:`DETAIL_BASIS_COUNT` coefficients under a
+  detail layer bounds every layered record's decode time (documentation:
+  Layers and rate control);
+- ``max_relae=X``: D is the measured RelAE (mapped or linear, full table,
+  valid entries), and the record is the one of smallest R among the
+  candidates measured with D ≤ X: the first of 4, 8, 16, 32 and K basis
+  coefficients on a compact base (in each variant), then, if K misses X,
+  min(K, :data:`DETAIL_BASIS_COUNT`) coefficients plus each rung from coarse
+  to fine (:func:`error_target_sequence`), bisected (size falls and error
+  rises along the sequence), the step then bisected in log space between the
+  two rungs that bracket X (2 rounds).
+
+The achieved RelAE is measured on the returned record. A layered record
+stores σ compactly (one byte per dimension, ``spec/bvae-format.md`` §4.5) or
+not at all (format 2.2); a compact base stores μ as int8 on the fixed grid
+μ = q / 32 where it fits ±3.97, else with a float16 step (σ, when stored, as
+one shared byte), which makes budgets from 12 bytes possible.
 
 Records without a latent (format 2.1, ``spec/bvae-format.md`` §4.6) are candidates too when a
 :data:`BasisOnlyFit` is given (``EncodeOptions.latent = "auto"``): k coefficients from the basis' first vector
 on the decoder's linear-path mean, as many as fit the budget beside the step and the descriptor (for an error
-target, the same counts as the compact base's). Rate control compares them with the latent candidates as it
-compares those: the lower kept-slice mapped L1 error for a budget (the latent record on a tie, since it can be
-edited), the smaller record meeting an error target. Budgets too small for any record with a latent (from
-6 bytes with a one-byte name) then hold one without.
+target, the same counts as the compact base's). They are kept where their D is strictly lower (a latent on a
+tie, since it can be edited), or for an error target where they are smaller. Budgets too small for any record
+with a latent (from 6 bytes with a one-byte name) then hold one without.
 """
 
 from __future__ import annotations
 
 import functools
-from collections.abc import Callable
-from dataclasses import dataclass
-from typing import Final, Literal
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import Any, Final, Literal
 
 import numpy as np
 import numpy.typing as npt
@@ -72,9 +79,9 @@ from brdfcodec.representation.network_io import table_from_network_output
 
 __all__ = [
     "DETAIL_BASIS_COUNT", "STEP_LADDER", "BasisFit", "BasisOnlyFit", "Metric", "MuStorage", "RateResult",
-    "compact_base_pays", "compact_mu_storage",
+    "RatePoint", "compact_base_pays", "compact_mu_storage",
     "encode_layers",
-    "error_target_sequence", "layered_mapped",
+    "error_target_sequence", "layered_mapped", "lagrangian_hull", "lowest_distortion",
 ]
 
 Metric = Literal["mapped", "linear"]
@@ -96,11 +103,54 @@ class RateResult:
         as stored, plus its descriptor in the file's index (:func:`~brdfcodec.format.bvae.record_overhead`).
     tried : list of (step or None, payload bytes, RelAE or None)
         Every candidate evaluated (None step: no detail layer).
+    points : list of RatePoint
+        Under a size budget: every candidate record whose rate and distortion were measured (what
+        :func:`lowest_distortion` chose from); empty otherwise.
     """
 
     record: LatentRecord
     payload_bytes: int
     tried: list[tuple[float | None, int, float | None]]
+    points: list[RatePoint] = field(default_factory=list)
+
+
+@dataclass(frozen=True)
+class RatePoint:
+    """One candidate record of a size budget: its rate R, its distortion D and how to build it.
+
+    Attributes
+    ----------
+    rate : int
+        Bytes the record adds to a file beyond its name (payload and descriptor).
+    distortion : float
+        Kept-slice mapped L1 error of its clamped decode (sum over valid entries of the 63 × 90 × 90 slices).
+    compact : bool
+        Whether the base is stored compact (μ as int8).
+    option : (int, float or None, str or None)
+        Basis coefficients k (in int8-equivalent bytes for a packed or coded layer), detail step (None: no
+        detail layer) and the basis fit's variant (None: its own).
+    pool : object
+        The candidates' builder (internal).
+    """
+
+    rate: int
+    distortion: float
+    compact: bool
+    option: tuple[int, float | None, str | None]
+    pool: Any = field(repr=False, compare=False)
+
+    @property
+    def label(self) -> str:
+        """A short name: ``compact-mu k=48 variant=0``, ``mu k=32 detail=0.5``, ``mu alone``."""
+        k, step, variant = self.option
+        if not k and step is None:
+            return "mu alone"  # the base record: μ in the latent dtype
+        parts = ["compact-mu" if self.compact else "mu", f"k={k}"]
+        if variant is not None:
+            parts.append(f"variant={variant}")
+        if step is not None:
+            parts.append(f"detail={step:.4g}")
+        return " ".join(parts)
 
 
 #: How a record stores μ: None in the file's latent dtype, else compact (``layers.mu``): ``"int8"`` (a float16
@@ -120,9 +170,6 @@ BasisOnlyFit = Callable[[int], tuple[BasisLayer, np.ndarray]]
 _BASIS_COUNTS: Final = (4, 8, 16, 32)
 #: A candidate of an error target: compact base or not, basis coefficients, detail step (None: no detail layer).
 _Candidate = tuple[bool, int, float | None]
-#: How much lower than all K coefficients on the full base another candidate's kept-slice error must be for a size
-#: budget to skip the compact base's best (how the two store μ moves the error by a fraction of that).
-_COMPACT_MARGIN: Final = 0.02
 #: The most basis coefficients a record with a detail layer carries, so that decoding any layered record stays
 #: within 1.5 times its base-only decode (the basis sum reads every factor its coefficients use: the leading
 #: coefficients use fewer of them than all K do). Where a detail layer has room, the bytes of further coefficients
@@ -152,16 +199,22 @@ class _Candidates:
         self.mu_storage = (MU_INT8_FIXED if fixed_grid else compact_mu_storage(base.mu)) if compact else None
         self.layered_bytes = _layered_base_bytes(d, latent_itemsize, self.mu_storage, store_sigma)
         self.basis_fit = basis_fit
-        self.stages: dict[tuple[int, bool], tuple[LatentRecord, BasisLayer | None, np.ndarray]] = {
-            (0, False): (base, None, base_mapped), (0, True): (base, None, base_mapped)}
+        self.stages: dict[tuple[int, bool, str | None], tuple[LatentRecord, BasisLayer | None, np.ndarray]] = {}
+        self.base_mapped = base_mapped
         self.details: dict[tuple[int, float], DetailLayer] = {}
 
-    def stage(self, k: int, under_detail: bool = False) -> tuple[LatentRecord, BasisLayer | None, np.ndarray]:
-        """Base and k basis coefficients, for a record without a detail layer or (``under_detail``) with one."""
-        if (k, under_detail) not in self.stages:
-            assert self.basis_fit is not None and k > 0
-            self.stages[k, under_detail] = self.basis_fit(k, self.mu_storage, under_detail)
-        return self.stages[k, under_detail]
+    def stage(self, k: int, under_detail: bool = False,
+              variant: str | None = None) -> tuple[LatentRecord, BasisLayer | None, np.ndarray]:
+        """Base and k basis coefficients, for a record without a detail layer or (``under_detail``) with one;
+        ``variant`` names the way of fitting the basis layer asked for (``basis_variants``; None: the fit's own)."""
+        if k == 0:
+            return self.base, None, self.base_mapped
+        if (k, under_detail, variant) not in self.stages:
+            assert self.basis_fit is not None
+            fitted = (self.basis_fit(k, self.mu_storage, under_detail) if variant is None
+                      else self.basis_fit(k, self.mu_storage, under_detail, variant))  # type: ignore[call-arg]
+            self.stages[k, under_detail, variant] = fitted
+        return self.stages[k, under_detail, variant]
 
     def detail(self, k: int, s: float) -> DetailLayer:
         if (k, s) not in self.details:
@@ -169,8 +222,8 @@ class _Candidates:
             self.details[k, s] = encode_detail((self.inputs - mapped) * self.masks, s)
         return self.details[k, s]
 
-    def record(self, k: int, s: float | None) -> LatentRecord:
-        base, basis, _ = self.stage(k, s is not None)
+    def record(self, k: int, s: float | None, variant: str | None = None) -> LatentRecord:
+        base, basis, _ = self.stage(k, s is not None, variant)
         if basis is None and s is None:
             return base
         detail = None if s is None else self.detail(k, s)
@@ -180,8 +233,8 @@ class _Candidates:
                        **({"shared_sigma": True} if self.store_sigma else {"store_sigma": False})}
         return LayeredRecord(base.name, base.mu, base.sigma, base.meta, detail=detail, basis=basis, **storage)
 
-    def size(self, k: int, s: float | None) -> int:
-        _, basis, _ = self.stage(k, s is not None)
+    def size(self, k: int, s: float | None, variant: str | None = None) -> int:
+        _, basis, _ = self.stage(k, s is not None, variant)
         if basis is None and s is None:
             return self.plain_bytes
         detail = None if s is None else self.detail(k, s).nbytes
@@ -204,8 +257,8 @@ class _Candidates:
             k -= 1
         return max(k, 0)
 
-    def mapped(self, k: int, s: float | None) -> np.ndarray:
-        _, _, mapped = self.stage(k, s is not None)
+    def mapped(self, k: int, s: float | None, variant: str | None = None) -> np.ndarray:
+        _, _, mapped = self.stage(k, s is not None, variant)
         return mapped if s is None else mapped + decode_detail(self.detail(k, s)).reshape(mapped.shape)
 
 
@@ -226,6 +279,7 @@ def encode_layers(
     basis_count: int = 0,
     basis_only_fit: BasisOnlyFit | None = None,
     store_sigma: bool = True,
+    basis_variants: Sequence[str] = (),
 ) -> RateResult:
     """A base record, layered to a size budget, an error target or a fixed step.
 
@@ -260,6 +314,11 @@ def encode_layers(
     store_sigma : bool, default True
         Store σ in the records (compact: one byte per dimension, or one shared byte beside a compact μ); False
         leaves it out (format 2.2) and gives its bytes to the layers.
+    basis_variants : sequence of str, default ()
+        Ways ``basis_fit`` can make the basis layer of a record without a detail layer (brdfcodec's writer: the
+        first basis vector, ``("8", "0")``; any labels the fit understands, a coding for instance), each a
+        candidate of its own: ``basis_fit`` is then called with the variant as a fourth argument. Empty:
+        ``basis_fit`` takes three arguments. On a tie in error the variant listed first is kept.
 
     Raises
     ------
@@ -290,6 +349,7 @@ def encode_layers(
         return RateResult(cands.record(count, float(step)), cands.size(count, float(step)),
                           [(float(step), cands.size(count, float(step)), None)])
     tried: list[tuple[float | None, int, float | None]] = []
+    variants: tuple[str | None, ...] = tuple(basis_variants) or (None,)
     without = None
     if basis_only_fit is not None and basis_count > 0:
         without = _WithoutLatent(base, basis_only_fit, basis_count, target, weights)
@@ -301,41 +361,14 @@ def encode_layers(
             smallest = base_bytes if without is None else min(base_bytes, without.size(1))
             what = "base record's" if smallest == base_bytes else "smallest record's"
             raise RateTargetError(f"{base.name}: {bytes_budget} bytes is below the {what} {smallest} bytes")
-        k = cands.most_coefficients(bytes_budget, full)
-        under_detail = min(k, DETAIL_BASIS_COUNT)
-        fitting: set[tuple[int, float | None]] = {c for c in ((0, None), (k, None)) if cands.size(*c) <= bytes_budget}
-        # A detail layer only where it fits beside its coefficients (no room at 64 B: 48 coefficients, no detail).
-        empty = _empty_detail_bytes()
-        smallest_detail = (cands.layered_bytes + (STEP_BYTES + under_detail if under_detail else 0) + empty
-                           + cands.overhead(under_detail or None, empty))
-        if smallest_detail <= bytes_budget:
-            fitting |= {(under_detail, s) for s in _finest_fitting_steps(cands, under_detail, bytes_budget, tried)}
-
-        pools = {compact: cands}
-        options = {(compact, *c) for c in fitting}
-
-        # Among the candidates, the lowest kept-slice L1 error (a very coarse layer can be worse than none), fewer
-        # coefficients on a tie. No error is traded for decode time: a budget whose smaller neighbours cannot hold
-        # the base alone would otherwise return the base alone, worse than what they return (issue 39).
-        def slice_error(candidate: _Candidate) -> float:
-            mapped = np.clip(pools[candidate[0]].mapped(*candidate[1:]), 0.0, MAPPED_MAX)
-            return float((np.abs(mapped - target) * weights).sum())
-
-        errors = {c: slice_error(c) for c in options}
-        # Past the budgets that store the base compact, their best record (the compact base with all K coefficients)
-        # stays a candidate wherever nothing beats all K on the full base by more than what μ's storage can change
-        # (_COMPACT_MARGIN), so that one byte more never loses what the compact base gave (a refit of the
-        # coefficients to the compact μ; a large budget, whose detail layer wins by far, does not pay it).
-        full_plain = (False, full, None)
-        if full and not compact and full_plain in errors and (
-                min(errors.values()) > (1 - _COMPACT_MARGIN) * errors[full_plain]):
-            pools[True] = candidates(base, base_mapped, target, weights, latent_itemsize, basis_fit, compact=True)
-            if pools[True].size(full, None) <= bytes_budget:
-                errors[True, full, None] = slice_error((True, full, None))
-        chosen = min(errors, key=lambda c: (errors[c], c[1], c[0]))
-        if only is not None and without is not None and without.error(only) < errors[chosen]:
-            return RateResult(without.record(only), without.size(only), tried)  # strictly lower: a latent on a tie
-        return RateResult(pools[chosen[0]].record(*chosen[1:]), pools[chosen[0]].size(*chosen[1:]), tried)
+        points = _budget_points(cands, bytes_budget, full, compact, variants, tried,
+                                lambda: candidates(base, base_mapped, target, weights, latent_itemsize, basis_fit,
+                                                   compact=True))
+        chosen = lowest_distortion(points, bytes_budget)
+        pool, option = points[chosen].pool, points[chosen].option
+        if only is not None and without is not None and without.error(only) < points[chosen].distortion:
+            return RateResult(without.record(only), without.size(only), tried, points)  # strictly lower: a latent
+        return RateResult(pool.record(*option), pool.size(*option), tried, points)
     assert max_relae is not None
     if values is None or mask is None:
         raise ValueError(f"{base.name}: max_relae needs the source table to measure the error")
@@ -344,23 +377,27 @@ def encode_layers(
     # An error target's candidates: (compact base?, k coefficients, detail step or None).
     pools = {False: cands, True: candidates(base, base_mapped, target, weights, latent_itemsize, basis_fit,
                                              compact=True)}
-    errors: dict[_Candidate, float] = {}
+    errors: dict[tuple[bool, int, float | None, str | None], float] = {}
     relae = RelaeAgainst(values, mask, metric)  # the source mapped and summed once for all candidates
 
-    def error(candidate: _Candidate) -> float:
-        if candidate not in errors:
-            compact_base, k, s = candidate
-            errors[candidate] = relae(table_from_network_output(pools[compact_base].mapped(k, s))).overall
-            tried.append((s, pools[compact_base].size(k, s), errors[candidate]))
-        return errors[candidate]
+    def error(candidate: _Candidate, variant: str | None = None) -> float:
+        key = (*candidate, variant if candidate[2] is None else None)
+        if key not in errors:
+            compact_base, k, s, code = key
+            errors[key] = relae(table_from_network_output(pools[compact_base].mapped(k, s, code))).overall
+            tried.append((s, pools[compact_base].size(k, s, code), errors[key]))
+        return errors[key]
 
     sequence = error_target_sequence(full)
-    # Records without a detail layer first, then the detail ladder: the error falls along each part, but the
-    # coarsest rung (at most DETAIL_BASIS_COUNT coefficients) can be worse than all K without detail.
+    # Records without a detail layer first (in each variant), then the detail ladder: the error falls along each
+    # part, but the coarsest rung (at most DETAIL_BASIS_COUNT coefficients) can be worse than all K without detail.
     plain = sum(1 for candidate in sequence if candidate[2] is None)
-    search = sequence[:plain] if error(sequence[plain - 1]) <= max_relae else sequence[plain:]
-    bracket = _bisect(lambda c: error(c) <= max_relae, len(search), search)
-    if bracket is None:
+    meeting_variants = [variant for variant in variants if error(sequence[plain - 1], variant) <= max_relae]
+    brackets = []
+    for variant in meeting_variants or [None]:
+        search = sequence[:plain] if meeting_variants else sequence[plain:]
+        brackets.append(_bisect(lambda c, variant=variant: error(c, variant) <= max_relae, len(search), search))
+    if all(bracket is None for bracket in brackets):
         only = None if without is None else without.meeting(relae, max_relae, None, tried)
         if only is not None and without is not None:
             return RateResult(without.record(only), without.size(only), tried)
@@ -368,7 +405,7 @@ def encode_layers(
         reached = (f"the best RelAE reached is {min(finite):.4g}" if finite else
                    "its RelAE is undefined (a near-black source: every reflectance below 1e-06 /sr)")
         raise RateTargetError(f"{base.name}: RelAE ({metric}) {max_relae} is not reachable; {reached}")
-    failing, meeting = bracket
+    failing, meeting = next(bracket for bracket in brackets if bracket is not None)
     if failing is not None and failing[2] is not None and meeting[2] is not None:
         # between two rungs: look for a coarser step that still meets X
         low, high = failing[2], meeting[2]
@@ -378,13 +415,115 @@ def encode_layers(
                 high = mid_step
             else:
                 low = mid_step
+    # the smallest R with D <= X among every candidate measured
     candidates = [c for c in errors if errors[c] <= max_relae]
-    chosen = min(candidates, key=lambda c: pools[c[0]].size(*c[1:]))
+    chosen = min(candidates, key=lambda c: (pools[c[0]].size(*c[1:]), errors[c]))
     size = pools[chosen[0]].size(*chosen[1:])
     only = None if without is None else without.meeting(relae, max_relae, size, tried)
     if only is not None and without is not None:  # a smaller record without a latent meets the target too
         return RateResult(without.record(only), without.size(only), tried)
     return RateResult(pools[chosen[0]].record(*chosen[1:]), size, tried)
+
+
+def _budget_points(cands: _Candidates, bytes_budget: int, full: int, compact: bool,
+                   variants: tuple[str | None, ...], tried: list[tuple[float | None, int, float | None]],
+                   compact_pool: Callable[[], _Candidates]) -> list[RatePoint]:
+    """Every candidate record of a size budget that fits it, with its rate and kept-slice distortion.
+
+    The candidates, each the largest of its kind that fits (within a kind, more bytes lower the error): the base
+    alone; the most basis coefficients that fit, in each of ``variants``, on the base ``cands`` stores (compact or
+    not, :func:`compact_base_pays`) and, where that base is the full one, on a compact base too (so that a byte
+    more never loses what the compact base gave, issue 39); and min(k, :data:`DETAIL_BASIS_COUNT`) int8
+    coefficients under a detail layer at each step of the ladder search that fits (where a detail layer has room).
+    """
+    pools = {compact: cands}
+    options: list[tuple[bool, int, float | None, str | None]] = [(compact, 0, None, None)]
+    k = cands.most_coefficients(bytes_budget, full)
+    if k:
+        options += [(compact, k, None, variant) for variant in variants]
+    if full and not compact:
+        pools[True] = compact_pool()
+        most = pools[True].most_coefficients(bytes_budget, full)
+        if most:
+            options += [(True, most, None, variant) for variant in variants]
+    under_detail = min(k, DETAIL_BASIS_COUNT)
+    # A detail layer only where it fits beside its coefficients (no room at 64 B: 48 coefficients, no detail).
+    empty = _empty_detail_bytes()
+    smallest_detail = (cands.layered_bytes + (STEP_BYTES + under_detail if under_detail else 0) + empty
+                       + cands.overhead(under_detail or None, empty))
+    if smallest_detail <= bytes_budget:
+        options += [(compact, under_detail, s, None)
+                    for s in _finest_fitting_steps(cands, under_detail, bytes_budget, tried)]
+    points = []
+    seen: set[int] = set()  # a variant the fit declines gives the same layer as another: one point
+    for c, n, s, coding in dict.fromkeys(options):
+        pool = pools[c]
+        size = pool.size(n, s, coding)
+        layer = pool.stage(n, s is not None, coding)[1]
+        if layer is not None and s is None and id(layer) in seen:
+            continue
+        seen.add(id(layer))
+        if size <= bytes_budget:
+            mapped = np.clip(pool.mapped(n, s, coding), 0.0, MAPPED_MAX)
+            points.append(RatePoint(size, float((np.abs(mapped - pool.inputs) * pool.masks).sum()), c,
+                                    (n, s, coding), pool))
+    return points
+
+
+def lowest_distortion(points: Sequence[RatePoint], bytes_budget: int) -> int:
+    """Index of the point of lowest distortion D among those of rate R ≤ ``bytes_budget``: the solution of
+    min D + λR over the candidates for the λ that the budget calls for.
+
+    The Lagrangian sweep (:func:`lagrangian_hull`) reaches only the lower convex hull of the (R, D) points; the
+    best hull point that fits is never better than the best fitting point, which is what this returns (so a
+    point inside the hull that fits the budget better is not lost). Ties: fewer basis coefficients, then the full
+    base, then the variant listed first.
+
+    Raises
+    ------
+    ValueError
+        No point fits the budget.
+    """
+    fitting = [i for i, p in enumerate(points) if p.rate <= bytes_budget]
+    if not fitting:
+        raise ValueError(f"no candidate fits {bytes_budget} bytes")
+    return min(fitting, key=lambda i: (points[i].distortion, points[i].option[0], points[i].compact, i))
+
+
+def lagrangian_hull(points: Sequence[tuple[float, float]]) -> list[tuple[int, float, float]]:
+    """The points a sweep of λ over min D + λR reaches: the lower convex hull of (R, D), by rising R.
+
+    Parameters
+    ----------
+    points : sequence of (rate, distortion)
+
+    Returns
+    -------
+    list of (index, λ low, λ high)
+        Each hull point's index in ``points`` and the range of λ (distortion per byte, ≥ 0) for which it
+        minimises D + λR: λ high of a point is λ low of the next smaller one; the largest point's λ low is 0
+        and the smallest's λ high infinite.
+    """
+    order = sorted(range(len(points)), key=lambda i: (points[i][0], points[i][1]))
+    hull: list[int] = []
+    for i in order:
+        r, d = points[i]
+        if hull and d >= points[hull[-1]][1]:
+            continue  # no lower than a smaller point: never optimal for λ ≥ 0
+        while len(hull) >= 2:
+            (r1, d1), (r2, d2) = points[hull[-2]], points[hull[-1]]
+            if (d2 - d1) * (r - r1) >= (d - d1) * (r2 - r1):  # the middle point lies on or above the chord
+                hull.pop()
+            else:
+                break
+        hull.append(i)
+    out = []
+    for j, i in enumerate(hull):
+        high = np.inf if j == 0 else (points[hull[j - 1]][1] - points[i][1]) / (points[i][0] - points[hull[j - 1]][0])
+        low = 0.0 if j == len(hull) - 1 else (points[i][1] - points[hull[j + 1]][1]) / (
+            points[hull[j + 1]][0] - points[i][0])
+        out.append((i, float(low), float(high)))
+    return out
 
 
 class _WithoutLatent:
