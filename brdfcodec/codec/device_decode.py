@@ -49,6 +49,7 @@ from brdfcodec.conventions import (
 )
 from brdfcodec.format.bvae import LatentRecord, Record
 from brdfcodec.representation.energy import _quadrature
+from brdfcodec.representation.highlight_guard import guard_highlight
 from brdfcodec.representation.layout import interpolation_plan
 from brdfcodec.representation.mapping import LOG_RANGE
 from brdfcodec.representation.mask import horizon_mask
@@ -325,12 +326,19 @@ def _codes_tensor(decoder: BrdfDecoder, codes: torch.Tensor | npt.ArrayLike) -> 
 
 
 def _is_plain_latent(record: Record) -> bool:
-    """Whether a record's base is the network's decode of its one latent (batched on the device); an edit is not:
-    its slices take the highlight guard on the NumPy path (``spec/bvae-format.md`` §6 step 6)."""
+    """Whether a record's base is the network's decode of its one latent (batched on the device, in the same
+    batches as :meth:`BrdfDecoder.decode_many`'s, so that both see the same network output); an edit is one too,
+    its slices then take the highlight guard (``spec/bvae-format.md`` §6 step 6)."""
     from brdfcodec.codec.projection import _has_latent, _projected_vectors
 
-    return (isinstance(record, LatentRecord) and not _projected_vectors(record) and _has_latent(record)
-            and "edit" not in record.meta)
+    return isinstance(record, LatentRecord) and not _projected_vectors(record) and _has_latent(record)
+
+
+def _guard_edit(mapped: torch.Tensor) -> None:
+    """The highlight guard of an edited record's clamped mapped slices (63, 90, 90), in place (§6 step 6; the
+    NumPy guard's running maximum, on the host: edits are few)."""
+    guarded = guard_highlight(mapped.cpu().numpy())
+    mapped.copy_(torch.from_numpy(np.ascontiguousarray(guarded)).to(mapped.device))
 
 
 def _records_mapped(decoder: BrdfDecoder, records: Sequence[Record], batch_size: int) -> torch.Tensor:
@@ -348,6 +356,8 @@ def _records_mapped(decoder: BrdfDecoder, records: Sequence[Record], batch_size:
                 for residual in residuals:
                     mapped[i] += torch.from_numpy(residual).to(decoder.device)
                 clamp_mapped_tensor(mapped[i])
+            if "edit" in record.meta:
+                _guard_edit(mapped[i])
         else:  # grafts, projected bases, records without a latent: the NumPy path's mapped slices
             mapped[i] = torch.from_numpy(decoder._mapped_record(record)).to(decoder.device)
     return mapped
