@@ -99,6 +99,7 @@ def test_typed_but_wrong_metadata_fails_cleanly_before_writing(
 
 
 @pytest.mark.parametrize("vector", MANIFEST["invalid"], ids=lambda v: Path(v["file"]).stem)
+@pytest.mark.slow
 def test_every_invalid_vector_fails_cleanly_in_every_command(
     capsys: pytest.CaptureFixture[str], sandbox: Path, vector: dict
 ) -> None:
@@ -134,6 +135,7 @@ def test_valid_vectors_give_strict_json_from_info(capsys: pytest.CaptureFixture[
     [("black", 0.0, 0, "RelAE undefined"), ("nothing-measured", -1.0, 1, "no measured entry"),
      ("denormal", 5e-324, 0, "wrote"), ("huge", 1e308, 0, "clamped"), ("big", 1e30, 0, "clamped")],
 )
+@pytest.mark.slow
 def test_degenerate_tables(
     capsys: pytest.CaptureFixture[str], sandbox: Path, label: str, value: float, code: int, expect: str
 ) -> None:

@@ -61,6 +61,7 @@ def test_rotation_refuses_what_cannot_define_one(codes: np.ndarray, factors: np.
         factor_rotation(codes, factors)
 
 
+@pytest.mark.slow
 def test_a_rotated_model_decodes_the_rotated_code_as_before(model: BetaVAE) -> None:
     rotated = BetaVAE(model.config).eval()
     rotated.load_state_dict(model.state_dict())
@@ -97,6 +98,7 @@ def test_rotate_latent_refuses_a_matrix_that_is_not_a_rotation(model: BetaVAE) -
         rotate_latent(None, model.decoder, np.eye(dims + 1))
 
 
+@pytest.mark.slow
 def test_alignment_makes_the_first_dimensions_follow_the_factors(model: BetaVAE) -> None:
     aligned = BetaVAE(model.config).eval()
     aligned.load_state_dict(model.state_dict())
@@ -110,6 +112,7 @@ def test_alignment_makes_the_first_dimensions_follow_the_factors(model: BetaVAE)
         align_to_factors(aligned, materials=8)
 
 
+@pytest.mark.slow
 def test_measuring_without_turning_keeps_the_weights_and_reports_the_present_axes(model: BetaVAE) -> None:
     kept = BetaVAE(model.config).eval()
     kept.load_state_dict(model.state_dict())

@@ -220,6 +220,7 @@ def test_colour_permutations_exchange_whole_colour_blocks() -> None:
         with_colour_permutations(inputs[:, :62])
 
 
+@pytest.mark.slow
 def test_a_basis_fitted_with_colour_permutations_spans_the_permuted_materials() -> None:
     inputs, masks = coloured_inputs(3)
     permuted = with_colour_permutations(inputs)
@@ -272,6 +273,7 @@ def test_fit_basis_keeps_a_models_basis_unless_told_to_replace_it(tmp_path, caps
     assert ((folder / "basis.safetensors").read_bytes(), (folder / "model.json").read_bytes()) == before
 
 
+@pytest.mark.slow
 def test_fit_basis_replace_fits_a_new_basis_and_names_it(analytic_training_set, tmp_path, capsys) -> None:
     import json
     import shutil
@@ -305,6 +307,7 @@ def test_fit_basis_replace_fits_a_new_basis_and_names_it(analytic_training_set, 
         decoder.decode(old)
 
 
+@pytest.mark.slow
 def test_fit_basis_fits_on_the_materials_the_model_lists_as_trained_on(analytic_training_set, tmp_path) -> None:
     import json
     import shutil
@@ -395,6 +398,7 @@ def test_the_encoder_skips_the_vectors_its_linear_path_spans(linear_rank: int, k
     assert basis_offset(linear_rank, 75, k) == first
 
 
+@pytest.mark.slow
 def test_the_basis_layer_follows_the_decoder_output_it_was_fitted_on(analytic_tables) -> None:
     """Rate control at a small budget spends the bytes on basis coefficients, and they help."""
     from brdfcodec.codec import BrdfEncoder, measure
@@ -439,6 +443,7 @@ def test_the_basis_layer_follows_the_decoder_output_it_was_fitted_on(analytic_ta
     assert getattr(no_basis, "basis", None) is None
 
 
+@pytest.mark.slow
 def test_an_error_target_takes_the_smallest_candidate_that_meets_it(analytic_tables) -> None:
     from brdfcodec.codec import BrdfEncoder, measure
 
@@ -473,6 +478,7 @@ def test_an_error_target_tries_candidates_from_small_to_large() -> None:
     assert error_target_sequence(0) == [(False, 0, None), *((False, 0, s) for s in STEP_LADDER)]
 
 
+@pytest.mark.slow
 def test_cli_bytes_writes_the_basis_layer(red_plastic_file, tmp_path, capsys) -> None:
     from brdfcodec.cli.main import main
 
@@ -518,6 +524,7 @@ def test_extreme_basis_coefficients_decode_finite_and_in_range(step: float) -> N
         assert np.isfinite(table).all() and table.min() >= 0.0
 
 
+@pytest.mark.slow
 def test_float16_decoding_of_a_basis_record_stays_close(analytic_tables) -> None:
     import torch
 
@@ -534,6 +541,7 @@ def test_float16_decoding_of_a_basis_record_stays_close(analytic_tables) -> None
 
 
 @pytest.mark.parametrize("name", ["chrome", "black-obsidian"])
+@pytest.mark.slow
 def test_extreme_materials_layered_within_budget(analytic_tables, name: str) -> None:
     from brdfcodec.codec import BrdfEncoder, measure
 
@@ -546,6 +554,7 @@ def test_extreme_materials_layered_within_budget(analytic_tables, name: str) -> 
     assert np.isfinite(record.meta["relae"]["mapped"]) and record.meta["relae"]["mapped"] <= base_error + 1e-9
 
 
+@pytest.mark.slow
 def test_coefficients_fitted_to_a_fixed_code_leave_it_and_lower_the_error(analytic_tables) -> None:
     """``fit_latent=False`` (a compact μ): the code is kept as given, and the Adam steps on the coefficients never
     end above the least-squares start."""
@@ -573,6 +582,7 @@ def test_coefficients_fitted_to_a_fixed_code_leave_it_and_lower_the_error(analyt
     assert l1(fitted[0]) < l1(start)
 
 
+@pytest.mark.slow
 def test_a_fit_minimises_the_error_it_is_given(analytic_tables) -> None:
     """``error=``: the fit keeps, of the pairs it visits, the best under the objective it was given (here L2),
     which need not be the default L1's best."""
@@ -609,6 +619,7 @@ def test_a_fit_minimises_the_error_it_is_given(analytic_tables) -> None:
     assert l1_fit != l2_fit
 
 
+@pytest.mark.slow
 def test_a_factorised_basis_file_expands_to_the_dense_basis_it_stands_for(tmp_path) -> None:
     from brdfcodec.layers.basis import fit_factorised_basis, write_factorised_basis
     from brdfcodec.layers.colour_orders_pca import COLOUR_VECTORS

@@ -265,6 +265,7 @@ def _encode(encoder: Any, brdf: Any, **options: Any) -> tuple[Any, float]:
     return record, _slice_error(encoder.decoder.mapped_record(record), inputs, mask)
 
 
+@pytest.mark.slow
 def test_rate_control_picks_no_latent_where_better_and_is_never_worse(encoder: Any, analytic_tables) -> None:
     """Materials the model never saw: ``auto`` is at least as good as ``always`` on the error rate control ranks
     by, and picks a record without a latent where that is lower (green satin at 32 B), not elsewhere (blue
@@ -283,6 +284,7 @@ def test_rate_control_picks_no_latent_where_better_and_is_never_worse(encoder: A
     assert ("green-satin", 32) in picked and ("blue-rubber", 16) not in picked
 
 
+@pytest.mark.slow
 def test_an_error_target_takes_a_smaller_record_without_a_latent_where_it_meets_it(encoder: Any,
                                                                                       analytic_tables) -> None:
     from brdfcodec.codec import measure
@@ -337,6 +339,7 @@ def test_cli_edit_info_and_decompress(decoder: Any, tmp_path: Path, capsys: pyte
     assert np.load(decoded).shape == (3, 90, 90, 2)
 
 
+@pytest.mark.slow
 def test_cli_latent_flag_and_the_bytes_floor(red_plastic_file: Path, tmp_path: Path,
                                             capsys: pytest.CaptureFixture[str]) -> None:
     from brdfcodec.cli.main import main

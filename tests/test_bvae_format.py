@@ -383,6 +383,7 @@ def test_fuzz_mutations_of_a_valid_file(changes: list[tuple[int, int]]) -> None:
                     lambda c: st.lists(c, max_size=3) | st.dictionaries(st.text(max_size=4), c, max_size=3)),
                     max_size=4)
 )
+@pytest.mark.slow
 def test_fuzz_metadata_json_content(extra: dict) -> None:
     """Arbitrary JSON substituted for metadata fields only raises format errors."""
     def edit(stored: bytes) -> bytes:

@@ -128,6 +128,7 @@ def test_fuzz_name_twins_on_read(first: str, second: str) -> None:
 
 @fuzz(200)
 @given(defined_meta, st.dictionaries(st.text(max_size=5), json_values, max_size=3))
+@pytest.mark.slow
 def test_fuzz_metadata_write_round_trip(meta: dict, extra: dict) -> None:
     combined = {**extra, **meta}
     try:
@@ -189,6 +190,7 @@ def _shipped_decoder():  # noqa: ANN202 - loaded once for the whole run
 @fuzz(40)
 @given(st.integers(0, 2 * MAX_HEADER_CONTAINERS), st.sampled_from([b"[]", b"{}", b"[[]]"]),
        st.booleans())
+@pytest.mark.slow
 def test_fuzz_header_object_counts(count: int, item: bytes, compress: bool) -> None:
     base = file_with()
     index = base[24:-16]

@@ -23,6 +23,7 @@ def run(capsys: pytest.CaptureFixture[str], *argv: str) -> tuple[int, str, str]:
     return code, captured.out, captured.err
 
 
+@pytest.mark.slow
 def test_info_describes_a_merl_file(capsys: pytest.CaptureFixture[str], red_plastic_file: Path) -> None:
     code, out, err = run(capsys, "info", str(red_plastic_file))
     assert code == 0, err
@@ -124,6 +125,7 @@ def test_entry_point_runs_without_traceback(tmp_path: Path) -> None:
 
 
 @pytest.mark.shared
+@pytest.mark.slow
 def test_dataset_build_from_proxy(capsys: pytest.CaptureFixture[str], nbrdf_zip: Path, tmp_path: Path) -> None:
     out = tmp_path / "proxy.h5"
     code, stdout, err = run(capsys, "dataset", "build", "--nbrdf-zip", str(nbrdf_zip), "--materials",

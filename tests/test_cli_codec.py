@@ -34,6 +34,7 @@ def tiny_model_registered(tiny_model_folder: Path, monkeypatch: pytest.MonkeyPat
     monkeypatch.setenv("BRDFCODEC_MODEL_PATH", str(tiny_model_folder))
 
 
+@pytest.mark.slow
 def test_compress_decompress_round_trip(capsys, merl_folder: Path, tmp_path: Path, tiny_model_folder: Path) -> None:
     lib = tmp_path / "lib.bvae"
     code, out, err = run(capsys, "compress", str(merl_folder), "-o", str(lib), "--model", str(tiny_model_folder))
@@ -75,6 +76,7 @@ def test_compress_decompress_round_trip(capsys, merl_folder: Path, tmp_path: Pat
     np.testing.assert_allclose(parts["phid090"], np.moveaxis(expected, 0, -1), rtol=1e-6)
 
 
+@pytest.mark.slow
 def test_extract_copies_records_unchanged(capsys, merl_folder: Path, tmp_path: Path) -> None:
     lib = tmp_path / "lib.bvae"
     assert run(capsys, "compress", str(merl_folder), "-o", str(lib), "--no-measure", "--float16")[0] == 0
@@ -93,6 +95,7 @@ def test_extract_copies_records_unchanged(capsys, merl_folder: Path, tmp_path: P
     assert code == 1 and "missing" in err and not (tmp_path / "x.bvae").exists()
 
 
+@pytest.mark.slow
 def test_refusals_leave_nothing_behind(capsys, merl_folder: Path, tmp_path: Path) -> None:
     lib = tmp_path / "lib.bvae"
     assert run(capsys, "compress", str(merl_folder / "gold.binary"), "-o", str(lib))[0] == 0

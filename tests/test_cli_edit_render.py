@@ -58,6 +58,7 @@ def test_edit_operations(capsys, library: Path, tmp_path: Path) -> None:
     assert code == 2 and "--material" in err  # usage errors exit 2 (README)
 
 
+@pytest.mark.slow
 def test_render_outputs(capsys, library: Path, tmp_path: Path) -> None:
     code, out, err = run(capsys, "render", str(library), "--material", "gold", "-o", str(tmp_path / "s.png"),
                          "--size", "48")

@@ -40,6 +40,7 @@ def _colour_values(library: Path) -> str:
     return ",".join(["0.5"] * count)
 
 
+@pytest.mark.slow
 def test_a_graft_is_named_the_same_way_with_values_and_with_fit(capsys, library: Path, tmp_path: Path,
                                                                monkeypatch: pytest.MonkeyPatch) -> None:
     code, _, err = run(capsys, "edit", "graft", str(library), "--material", "gold",

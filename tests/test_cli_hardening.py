@@ -38,6 +38,7 @@ def test_thread_count_defaults_and_overrides(monkeypatch: pytest.MonkeyPatch) ->
     assert configure_threads({"BVAE_NUM_THREADS": "many"}) == default_thread_count()
 
 
+@pytest.mark.slow
 def test_a_command_line_run_sizes_torch_threads() -> None:
     code = ("import sys, torch; from brdfcodec.cli.main import main; sys.argv = ['bvae', 'model', 'list']; "
             "main(); print('THREADS', torch.get_num_threads())")

@@ -73,6 +73,7 @@ def test_a_value_list_may_start_with_a_minus_sign(capsys, library: Path, tmp_pat
     assert len(read_bvae(tmp_path / "t.bvae").records) == 3
 
 
+@pytest.mark.slow
 def test_relae_figures_come_with_a_legend_once(capsys, tmp_path: Path, tiny_model_folder: Path,
                                                analytic_tables: dict[str, MerlBRDF],
                                                monkeypatch: pytest.MonkeyPatch) -> None:

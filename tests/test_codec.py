@@ -101,6 +101,7 @@ def test_slices_equal_the_full_table(decoder: BrdfDecoder) -> None:
         decoder.decode(graft, phi_d_bins=[180])
 
 
+@pytest.mark.slow
 def test_library_decodes_only_what_is_used(decoder: BrdfDecoder, tmp_path: Path) -> None:
     path = tmp_path / "lib.bvae"
     write_bvae(path, records(100, decoder.latent_dim), decoder.reference)
@@ -170,6 +171,7 @@ def test_graft_with_equal_codes_copies_red_into_green(decoder: BrdfDecoder) -> N
     assert not np.allclose(other[1], grafted[1])
 
 
+@pytest.mark.slow
 def test_encode_and_decode_are_inverse_on_bytes(tiny_model_folder: Path, analytic_tables: dict[str, MerlBRDF],
                                                 tmp_path: Path) -> None:
     gold, chrome = analytic_tables["gold"], analytic_tables["chrome"]

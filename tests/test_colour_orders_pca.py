@@ -52,6 +52,7 @@ def test_grey_materials_have_no_chroma_and_their_extra_components_are_unused_dir
         colour_orders_pca(grey[:, :2])
 
 
+@pytest.mark.slow
 def test_the_report_baseline_equals_pca_of_the_permuted_inputs() -> None:
     rng = np.random.default_rng(5)
     inputs = rng.random((3, 63, 90, 90)).astype(np.float32)

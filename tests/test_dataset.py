@@ -35,6 +35,7 @@ def merl_dataset(merl_folder: Path, tmp_path_factory: pytest.TempPathFactory) ->
     return out
 
 
+@pytest.mark.slow
 def test_dataset_holds_inputs_masks_tables_and_provenance(merl_dataset: Path, merl_folder: Path) -> None:
     with BrdfDataset(merl_dataset) as dataset:
         assert len(dataset) == 5
@@ -65,6 +66,7 @@ def test_dataset_holds_inputs_masks_tables_and_provenance(merl_dataset: Path, me
         assert all(g == b"" for g in handle["genuine_merl"][()])
 
 
+@pytest.mark.slow
 def test_rows_in_any_order(merl_dataset: Path) -> None:
     with BrdfDataset(merl_dataset) as dataset:
         all_inputs = dataset.inputs()
@@ -113,6 +115,7 @@ def test_folder_errors(tmp_path: Path) -> None:
         merl_folder_sources(tmp_path / "f")
 
 
+@pytest.mark.slow
 def test_no_tables_option_and_existing_output(tmp_path: Path) -> None:
     out = tmp_path / "small.h5"
     sources = analytic_sources(["white-matte"], random_count=1)
@@ -154,6 +157,7 @@ def test_network_inputs_zero_invalid_entries(analytic_tables: dict[str, MerlBRDF
 
 
 @pytest.mark.shared
+@pytest.mark.slow
 def test_proxy_dataset_subset(nbrdf_zip: Path, tmp_path: Path) -> None:
     out = tmp_path / "proxy.h5"
     sources = nbrdf_zip_sources(nbrdf_zip, ["green-acrylic", "brass", "black-obsidian"])

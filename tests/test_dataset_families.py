@@ -40,6 +40,7 @@ def merl_folder(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return folder
 
 
+@pytest.mark.slow
 def test_mixed_dataset_records_family_and_kind(merl_folder: Path, tmp_path: Path) -> None:
     presets = ["white-matte", "black-obsidian", "green-satin", "blue-rubber"]
     sources = merl_folder_sources(merl_folder) + analytic_sources(presets)
@@ -58,6 +59,7 @@ def test_mixed_dataset_records_family_and_kind(merl_folder: Path, tmp_path: Path
             dataset.indices(family="rgl")
 
 
+@pytest.mark.slow
 def test_duplicate_names_across_sources_are_refused(merl_folder: Path, tmp_path: Path) -> None:
     sources = merl_folder_sources(merl_folder) + analytic_sources(["gold"])
     with pytest.raises(ValueError, match="two sources give the material name 'gold'"):
@@ -76,6 +78,7 @@ def test_datasets_without_families_read_as_one_family(merl_folder: Path, tmp_pat
         assert dataset.source_kinds == ["nbrdf-proxy"] * 4
 
 
+@pytest.mark.slow
 def test_cli_builds_from_several_sources(merl_folder: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     folder = tmp_path / "measured"
     folder.mkdir()
@@ -119,6 +122,7 @@ def test_both_proxy_archives_give_two_families(shared_dir: Path) -> None:
         assert nbrdf_zip_family(data / "rgl-nbrdf-30.zip") == "rgl"
 
 
+@pytest.mark.slow
 def test_records_encoded_from_a_dataset_keep_the_sources_provenance(tmp_path: Path) -> None:
     """A dataset row of an RGL measurement encodes (with --provenance) to the same source_kind and source_sha256 as its file would."""
     from dataclasses import replace

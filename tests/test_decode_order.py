@@ -76,6 +76,7 @@ def test_the_edit_is_one_the_bound_changes(decoder: BrdfDecoder, edited_file: Pa
     assert decoder.energy_scale(sharp) < 0.9  # otherwise this file would test nothing
 
 
+@pytest.mark.slow
 def test_every_decode_path_follows_the_spec_order(decoder: BrdfDecoder, edited_file: Path) -> None:
     records = _records(edited_file)
     many = list(decoder.decode_many(records, masked="keep"))
@@ -123,6 +124,7 @@ def test_bvae_decompress_phi_d_equals_the_full_decode(edited_file: Path, tmp_pat
 
 @pytest.mark.shared
 @pytest.mark.parametrize("name", ["edit-mix.bvae", "edit-traverse.bvae"])
+@pytest.mark.slow
 def test_the_spec_readers_crafted_edits(name: str, shared_dir: Path, decoder: BrdfDecoder) -> None:
     """The spec-reader's files (they name today's default model; they skip when it has changed)."""
     path = shared_dir / "spec-reader-2.3" / "crafted" / name
@@ -140,6 +142,7 @@ def test_the_spec_readers_crafted_edits(name: str, shared_dir: Path, decoder: Br
             np.testing.assert_allclose(part, material.table(masked="keep")[..., SOME_BINS], rtol=2e-7, atol=0)
 
 
+@pytest.mark.slow
 def test_the_float32_decode_is_within_1e_6_mapped_of_a_float64_reference(decoder: BrdfDecoder) -> None:
     """spec §9: the numerically sensitive part (interpolation, the mapping's exponential) in float64, rounded
     once; dark entries included (the network's output pushed towards 0 on some rows), 8 random latents."""

@@ -199,6 +199,7 @@ def test_spec_decoder_on_huge_latents() -> None:
     "fc, blocks, norm, linear",
     [((), 1, "group", False), ((24, 40), 3, "batch", False), ((16,), 0, "none", True), ((16,), 2, "batch", True)],
 )
+@pytest.mark.slow
 def test_spec_decoder_matches_other_configurations(fc: tuple[int, ...], blocks: int, norm: str, linear: bool) -> None:
     """Random weights in other shapes: the spec's layer list holds for every configuration, not one model."""
     import torch

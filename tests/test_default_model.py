@@ -54,6 +54,7 @@ def test_every_latent_dimension_changes_the_material(default_model) -> None:  # 
 
 
 @pytest.mark.shared
+@pytest.mark.slow
 def test_card_numbers_are_reproduced(nbrdf_zip: Path) -> None:
     """Re-measure some validation materials (and green-acrylic) from the proxy archive; compare with the card."""
     encoder, decoder = BrdfEncoder(effort=0), BrdfDecoder()  # the card measures the network's own posterior mean

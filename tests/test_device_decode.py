@@ -77,6 +77,7 @@ def assert_same_tables(got: torch.Tensor, want: list[np.ndarray]) -> None:
         assert largest_mapped_difference(table, mapped_of(expected)) <= MAPPED_TOLERANCE
 
 
+@pytest.mark.slow
 def test_random_and_extreme_latents_decode_as_decode_many_does(decoder: BrdfDecoder) -> None:
     records = plain(extreme_codes(decoder.latent_dim))
     got = decoder.decode_many_tensor(records, batch_size=4)
@@ -86,6 +87,7 @@ def test_random_and_extreme_latents_decode_as_decode_many_does(decoder: BrdfDeco
     assert bool((got[:, :, ~torch.from_numpy(_VALID.copy())] == -1).all())  # below the horizon: MERL's unmeasured marker
 
 
+@pytest.mark.slow
 def test_the_tables_are_within_the_cross_device_tolerance_of_a_float64_decode(decoder: BrdfDecoder) -> None:
     codes = extreme_codes(decoder.latent_dim)
     got = decoder.decode_many_tensor(codes, masked="keep").numpy()
@@ -164,6 +166,7 @@ def mixed(decoder: BrdfDecoder) -> list[Record]:
     ]
 
 
+@pytest.mark.slow
 def test_every_record_kind_decodes_as_decode_many_does(decoder: BrdfDecoder, mixed: list[Record]) -> None:
     assert decoder.energy_scale(mixed[0]) < 0.9  # the edit's bound changes its table: otherwise nothing is tested
     got = decoder.decode_many_tensor(mixed, batch_size=2)

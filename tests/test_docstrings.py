@@ -20,6 +20,7 @@ def _module_names() -> list[str]:
 
 
 @pytest.mark.parametrize("name", _module_names())
+@pytest.mark.slow
 def test_docstring_examples(name: str) -> None:
     if name in _OPTIONAL:
         pytest.importorskip(_OPTIONAL[name])

@@ -94,6 +94,7 @@ def test_graft_with_v2_equal_v1_gives_green_equal_red(decoder: BrdfDecoder) -> N
     np.testing.assert_allclose(reflectance[1], reflectance[0], rtol=1e-5, atol=1e-9)
 
 
+@pytest.mark.slow
 def test_fitting_brings_a_code_closer_to_the_target(analytic_tables: dict[str, MerlBRDF]) -> None:
     decoder = BrdfDecoder(default_model_folder())
     brdf = analytic_tables["red-plastic"]

@@ -99,6 +99,7 @@ def test_a_record_that_is_not_an_edit_decodes_as_encoded(decoder, chrome) -> Non
     assert "edit" not in chrome.meta
 
 
+@pytest.mark.slow
 def test_traversals_of_materials_never_trained_on_conserve_energy(decoder, analytic_tables) -> None:
     """Every dimension at ±1, ±2, ±3σ of two analytic materials (no model here saw them), as edits decode: no
     directional albedo above 1 (issue 41)."""

@@ -79,6 +79,7 @@ SHARP = {"chrome": _chrome_table, "spike-theta-h-0-1": _spike_table}
 
 
 @pytest.mark.parametrize("name", sorted(SHARP))
+@pytest.mark.slow
 def test_the_quadrature_matches_a_dense_reference_on_sharp_tables(name: str) -> None:
     """Four incident angles of the bound (all 13: the slow test below), 720,000 directions each."""
     table = SHARP[name]()

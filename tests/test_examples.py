@@ -14,6 +14,7 @@ from brdfcodec.render.preview import render_sphere
 from brdfcodec.representation.metrics import relae_mapped
 
 
+@pytest.mark.slow
 def test_every_shipped_material_decodes_and_renders_finite_and_non_negative() -> None:
     decoder = BrdfDecoder()
     with MaterialLibrary(example_library(), decoder=decoder) as library:

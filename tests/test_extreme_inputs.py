@@ -80,6 +80,7 @@ def _source(name: str) -> MerlBRDF:
 
 
 @pytest.mark.parametrize("name", list(TABLES))
+@pytest.mark.slow
 def test_relae_is_defined_exactly_when_the_source_is_not_near_black(name: str) -> None:
     source = _source(name)
     values, mask = source.values, source.mask
@@ -129,6 +130,7 @@ def _check_decode(decoded: np.ndarray) -> None:
 
 
 @pytest.mark.parametrize("name", list(TABLES))
+@pytest.mark.slow
 def test_extreme_table_encodes_and_reports_honestly(name: str, codec: tuple) -> None:
     from brdfcodec.codec import encode_records
 

@@ -19,6 +19,7 @@ def analytic_dataset(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return out
 
 
+@pytest.mark.slow
 def test_rows_per_family_and_split(analytic_dataset: Path) -> None:
     from brdfcodec.training.family_report import evaluate_by_family, family_table
 
@@ -46,6 +47,7 @@ def test_rows_per_family_and_split(analytic_dataset: Path) -> None:
     assert "| analytic | held-out | 12 |" in "\n".join(family_table(rows))
 
 
+@pytest.mark.slow
 def test_cli_evaluate_stores_into_a_copy_of_the_model(analytic_dataset: Path, tmp_path: Path, capsys) -> None:
     import shutil
 

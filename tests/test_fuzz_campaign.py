@@ -92,6 +92,7 @@ def test_the_checker_reports_an_untyped_error_and_info_accepting_what_decode_ref
     assert checker.run(item, path, full=False) == ("refused", "BvaeChecksumError")
 
 
+@pytest.mark.slow
 def test_seeded_mutants_in_process_find_no_bug(seed_folder: Path, tmp_path: Path) -> None:
     """200 seeded inputs checked in this process (the campaign's inputs and oracles, without its worker pool)."""
     import shutil

@@ -310,6 +310,7 @@ def check_rgl(data: bytes, path: Path) -> str:
 # --------------------------------------------------------------------------- the long mutation run
 
 
+@pytest.mark.slow
 def test_mutation_run(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """Mutated ``.bvae`` files (every record kind) and ``.bsdf`` headers: zero crashes, zero untyped
     exceptions, zero inputs that ``info`` accepts and decoding refuses (at least 100,000 with ``BVAE_FUZZ=long``)."""
@@ -359,6 +360,7 @@ def test_mutation_run(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
 
 @fuzz(40)
 @given(st.binary(max_size=64), st.sampled_from(["append", "prepend", "replace", "cut", "frame"]))
+@pytest.mark.slow
 def test_fuzz_detail_frames(extra: bytes, how: str) -> None:
     """A detail layer's bytes that are not exactly one whole frame: a format error naming the record, at read."""
     import zstandard

@@ -56,6 +56,7 @@ def test_rgl_declared_shape_that_overflows_is_refused_before_mitsuba(tmp_path: P
     assert "reads yes" not in out.out and "vndf" in out.out + out.err
 
 
+@pytest.mark.slow
 def test_rgl_overflowing_shape_does_not_crash_compress(tmp_path: Path) -> None:
     """The red-team file killed ``bvae compress`` by SIGSEGV inside Mitsuba: run it in a child process."""
     path = _rgl(tmp_path, shapes={"vndf": [1, 3, 2**31, 2**31]})
@@ -214,6 +215,7 @@ def _skippable(payload: bytes) -> bytes:
 
 
 @pytest.mark.parametrize("how", ["corrupt", "truncated", "two-frames", "trailing-garbage", "skippable-frame"])
+@pytest.mark.slow
 def test_broken_detail_layer_is_refused_at_read(tmp_path: Path, shipped_decoder: BrdfDecoder, how: str,
                                                 capsys: pytest.CaptureFixture[str]) -> None:
     """A detail frame that is corrupt or truncated under a correct record CRC, or followed by anything:

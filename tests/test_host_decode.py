@@ -52,6 +52,7 @@ def float64_mapped(mapped: np.ndarray) -> np.ndarray:
 
 
 @pytest.mark.parametrize("masked", ["unmeasured", "zero", "keep"])
+@pytest.mark.slow
 def test_the_host_decode_is_the_reference_path_s_table(mapped: np.ndarray, masked: str) -> None:
     for slices in mapped:
         got = table_from_mapped_host(slices, masked=masked)  # type: ignore[arg-type]

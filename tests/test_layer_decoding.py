@@ -60,6 +60,7 @@ def sparse_coefficients(seed: int, share: float, big: bool = False) -> np.ndarra
 @pytest.mark.parametrize("dense_share", [0.0, 0.5, np.inf], ids=["batched", "default", "plane-by-plane"])
 @pytest.mark.parametrize(("share", "big"), [(0.002, False), (0.05, False), (0.9, False), (0.05, True)],
                          ids=["sparse", "medium", "dense", "int32"])
+@pytest.mark.slow
 def test_detail_decoding_equals_the_plain_inverse(monkeypatch, dense_share: float, share: float, big: bool) -> None:
     monkeypatch.setattr(detail_module, "_DENSE_SHARE", dense_share)
     q = sparse_coefficients(3, share, big)
@@ -131,6 +132,7 @@ def test_a_layered_decode_is_the_base_plus_its_layers_and_a_bad_layer_is_named()
         decoder.mapped_record(dataclasses.replace(record, detail=broken_detail()))
 
 
+@pytest.mark.slow
 def test_decode_many_gives_each_record_its_own_layers() -> None:
     """A batch mixing base-only, layered and graft records: the batched network, then each record's layers."""
     from brdfcodec.codec import BrdfDecoder

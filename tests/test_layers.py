@@ -41,6 +41,7 @@ def layered(step: float = 0.05, name: str = "layered-0") -> LayeredRecord:
 
 
 @pytest.mark.parametrize("step", [0.01, 0.1, 1.0])
+@pytest.mark.slow
 def test_detail_error_is_bounded_by_the_step(step: float) -> None:
     residual = smooth_residual()
     layer = encode_detail(residual, step)
@@ -56,12 +57,14 @@ def test_detail_sizes_fall_as_the_step_grows() -> None:
     assert sizes[0] > sizes[1] > sizes[2]
 
 
+@pytest.mark.slow
 def test_partial_detail_equals_the_same_slots_of_the_full_one() -> None:
     layer = encode_detail(smooth_residual(), 0.02)
     full = decode_detail(layer)
     np.testing.assert_allclose(decode_detail(layer, [0, 7, 20]), full[:, [0, 7, 20]], atol=1e-5)
 
 
+@pytest.mark.slow
 def test_large_residuals_switch_to_int32() -> None:
     assert encode_detail(smooth_residual() * 40, 1e-4).dtype == "int32"
 
@@ -176,6 +179,7 @@ def test_rate_control_meets_budgets_and_targets(analytic_tables) -> None:
         BrdfEncoder(effort=0, bytes=11, latent="always").encode(brdf)
 
 
+@pytest.mark.slow
 def test_refinement_never_worsens_and_edits_keep_the_layers(analytic_tables) -> None:
     from brdfcodec.codec import BrdfEncoder, measure
     from brdfcodec.edit.latent_edits import interpolate, traverse
@@ -196,6 +200,7 @@ def test_refinement_never_worsens_and_edits_keep_the_layers(analytic_tables) -> 
     assert isinstance(mixed, LayeredRecord) and mixed.detail is record.detail and mixed.basis is record.basis
 
 
+@pytest.mark.slow
 def test_layered_decode_adds_the_layer_and_partial_decode_matches(analytic_tables) -> None:
     from brdfcodec.codec import BrdfEncoder
 
@@ -240,6 +245,7 @@ def test_cli_rate_control_flags(red_plastic_file, tmp_path, capsys) -> None:
     assert main(["compress", str(red_plastic_file), "-o", str(bad), "--effort", "7"]) == 2
 
 
+@pytest.mark.slow
 def test_refinement_adam_matches_torch_optim() -> None:
     """The hand-written Adam of refine.py (no torch._dynamo import) follows torch.optim.Adam step for step."""
     import torch
@@ -332,6 +338,7 @@ def test_measure_sets_the_provenance_of_the_source_it_measured_against(analytic_
 
 
 @pytest.mark.parametrize("better", [32, 75])
+@pytest.mark.slow
 def test_a_record_with_a_detail_layer_carries_at_most_the_detail_basis_count(better: int) -> None:
     """Under a budget with room for detail, all 75 coefficients are tried without detail and at most 32 with it
     (a bound on every layered record's decode time), and the lower error is kept."""
@@ -363,6 +370,7 @@ def test_a_record_with_a_detail_layer_carries_at_most_the_detail_basis_count(bet
 
 
 @pytest.mark.parametrize("all_coefficients_meet_it", [True, False])
+@pytest.mark.slow
 def test_an_error_target_searches_records_without_detail_first(all_coefficients_meet_it: bool) -> None:
     """The detail ladder carries at most 32 coefficients, so its coarse rungs can be worse than all 75 without
     detail: the search keeps to the records without detail when the largest of them meets the target."""

@@ -37,6 +37,7 @@ def _assert_lean(path: Path, budget: int) -> None:
     assert all(not r.meta for r in parsed.records) and b"created_by" not in path.read_bytes()
 
 
+@pytest.mark.slow
 def test_one_material_at_64_bytes_is_at_most_200_bytes(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     source = tmp_path / "gold-metallic-paint.binary"  # a 19-byte name, as MERL's are
     write_merl(source, ANALYTIC_PRESETS["gold"].to_merl())
@@ -53,6 +54,7 @@ def test_one_material_at_64_bytes_is_at_most_200_bytes(tmp_path: Path, capsys: p
     assert kept.stat().st_size > out.stat().st_size + 100
 
 
+@pytest.mark.slow
 def test_every_material_of_a_library_keeps_within_its_budget(
     analytic_training_set: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:

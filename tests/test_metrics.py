@@ -86,6 +86,7 @@ def test_zero_reference_gives_nan_not_an_exception() -> None:
     assert np.isnan(relae_linear(zeros, zeros).overall)
 
 
+@pytest.mark.slow
 def test_one_reference_against_many_estimates_gives_the_same_numbers(analytic_tables: dict[str, MerlBRDF]) -> None:
     values = analytic_tables["gold"].values
     rng = np.random.default_rng(3)

@@ -167,6 +167,7 @@ def test_llvm_plugin_matches_render_sphere(llvm: str, glossy_bvae: Path) -> None
     np.testing.assert_allclose(rendered[inner].mean(axis=0), reference[inner].mean(axis=0), rtol=0.02)
 
 
+@pytest.mark.slow
 def test_merl_plugin_renders_the_original_table(llvm: str, analytic_files: dict[str, Path], analytic_tables) -> None:
     _use(llvm)
     size = 40
@@ -229,6 +230,7 @@ def noise_file(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, object]:
 
 
 @pytest.mark.parametrize("mode", ["nearest", "trilinear"])
+@pytest.mark.slow
 def test_lookup_modes_match_the_library_on_noise(llvm: str, noise_file, mode: str) -> None:
     """Both lookups in llvm_ad_rgb equal brdfcodec.representation.lookup (with the file's mask) on a random table, on 2,000
     random pairs within 1e-3 relative: ≥ 99.9 % for trilinear (continuous, but steep where θh → 0), ≥ 99.5 %
@@ -299,6 +301,7 @@ def _uniform_albedo(material, theta_deg: float, n: int, seed: int = 1) -> np.nda
     return (material.eval(wi, wo) * z[:, None]).mean(axis=0) * 2 * np.pi
 
 
+@pytest.mark.slow
 def test_sampling_is_consistent_with_pdf_and_unbiased(llvm: str, analytic_files: dict[str, Path],
                                                       analytic_tables) -> None:
     """sample()'s pdf equals pdf(), and its albedo estimate equals an independent uniform-sampling one (gold, GGX
@@ -333,6 +336,7 @@ def test_pdf_integrates_to_the_share_of_valid_samples(llvm: str, glossy_bvae: Pa
     assert integral == pytest.approx(valid_share, abs=0.015), (integral, valid_share)
 
 
+@pytest.mark.slow
 def test_furnace_albedo_at_most_one_for_plausible_materials(llvm: str, analytic_files: dict[str, Path]) -> None:
     """White-furnace check: directional albedo ≤ 1 for the analytic materials (energy-conserving by design)."""
     _use(llvm)
@@ -399,6 +403,7 @@ def test_scene_materials_of_the_example_scene() -> None:
                                                 "blue-metallic-paint", "chrome"]
 
 
+@pytest.mark.slow
 def test_example_scene_renders(llvm: str) -> None:
     """The shipped XML scene loads (relative library path, $parameters) and renders; its 6 spheres share 5 tables."""
     from brdfcodec.render.mitsuba_scene import material_memory, render_scene
@@ -428,6 +433,7 @@ def test_extract_scene_keeps_exactly_the_referenced_materials(tmp_path: Path) ->
     assert not (tmp_path / "bad.bvae").exists()
 
 
+@pytest.mark.slow
 def test_render_mitsuba_command(llvm: str, tmp_path: Path, capsys) -> None:
     scene = tmp_path / "s.json"
     scene.write_text(json.dumps({
@@ -455,6 +461,7 @@ def test_render_mitsuba_command(llvm: str, tmp_path: Path, capsys) -> None:
 # ---------------------------------------------------------------- original vs .bvae decode (shared data)
 
 @pytest.mark.shared
+@pytest.mark.slow
 def test_original_and_decoded_material_in_one_scene_match_the_report(llvm: str, nbrdf_zip: Path,
                                                                      tmp_path: Path) -> None:
     """A material and its .bvae decode side by side in Mitsuba: ΔE ITP near the report's (NBRDF proxy of MERL).

@@ -77,6 +77,7 @@ def _sample(bsdf: object, theta_deg: float, n: int, seed: int = 0) -> tuple[obje
     return bs, _rows(weight, n), si
 
 
+@pytest.mark.slow
 def test_the_plugin_samples_by_the_warps(bsdfs: dict[str, object]) -> None:
     from brdfcodec.render.mitsuba_bsdf import WARP_COSINE_SHARE, material_of
     from brdfcodec.render.mitsuba_tables import SAMPLING_RESOLUTION as RES
@@ -97,6 +98,7 @@ def test_the_plugin_samples_by_the_warps(bsdfs: dict[str, object]) -> None:
       for name, theta in [("gold", 0.0), ("gold", 75.0), ("red-plastic", 0.0), ("red-plastic", 37.0),
                           ("red-plastic", 75.0)]],
 ])
+@pytest.mark.slow
 def test_sample_weight_is_eval_over_pdf(bsdfs: dict[str, object], name: str, theta_deg: float) -> None:
     """For every sampled ωo: bs.pdf == pdf(ωo), weight == eval(ωo) / pdf(ωo), eval_pdf agrees."""
     bsdf = bsdfs[name]
@@ -118,6 +120,7 @@ def test_sample_weight_is_eval_over_pdf(bsdfs: dict[str, object], name: str, the
 
 @pytest.mark.parametrize("name", ["gold", "red-plastic"])
 @pytest.mark.parametrize("theta_deg", [10.0, 50.0, 80.0])
+@pytest.mark.slow
 def test_sampled_directions_follow_the_pdf(llvm: str, bsdfs: dict[str, object], name: str, theta_deg: float,
                                            tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """Mitsuba's χ² test: the histogram of sample()'s directions against pdf() integrated over each cell (24 × 24
@@ -148,6 +151,7 @@ def test_sampled_directions_follow_the_pdf(llvm: str, bsdfs: dict[str, object], 
 
 
 @pytest.mark.parametrize("theta_deg", [60.0, pytest.param(20.0, marks=pytest.mark.slow)])
+@pytest.mark.slow
 def test_pdf_integrates_to_the_share_of_drawn_directions(bsdfs: dict[str, object], theta_deg: float) -> None:
     """∫ pdf dωo over the upper hemisphere (uniform Monte Carlo) equals the share of sample() calls that return a
     direction (the rest are reflections below the horizon), and is at most 1."""

@@ -118,6 +118,7 @@ def test_compress_reads_one_fit_with_its_provenance(tmp_path: Path, fit_folder: 
     assert np.isfinite(records[0].meta["relae"]["mapped"])
 
 
+@pytest.mark.slow
 def test_compress_reads_the_zip_the_folder_and_the_description(tmp_path: Path, fit_folder: Path,
                                                                tiny_model: Path) -> None:
     archive = write_fit_archive(tmp_path / "fits.zip", {"grey": constant_fit((0.05, 0.06, 0.07)),
@@ -137,6 +138,7 @@ def test_compress_reads_the_zip_the_folder_and_the_description(tmp_path: Path, f
     np.testing.assert_array_equal(codes["json"], codes["folder"])
 
 
+@pytest.mark.slow
 def test_compress_folder_mixes_measured_files_and_fits(tmp_path: Path, fit_folder: Path, red_plastic_file: Path,
                                                        tiny_model: Path) -> None:
     (fit_folder / "red-plastic.binary").symlink_to(red_plastic_file)
@@ -187,6 +189,7 @@ def test_dataset_build_takes_the_unzipped_folder(tmp_path: Path, fit_folder: Pat
     assert "Is a directory" not in error and "subfolder merl-nbrdf" in error
 
 
+@pytest.mark.slow
 def test_decompress_reference_takes_a_fit_or_its_archive(tmp_path: Path, fit_folder: Path, tiny_model: Path,
                                                          capsys: pytest.CaptureFixture[str]) -> None:
     out = tmp_path / "lobe.bvae"
@@ -270,6 +273,7 @@ def two_material_library(tmp_path: Path, fit_folder: Path, tiny_model: Path) -> 
     return library
 
 
+@pytest.mark.slow
 def test_decompress_writes_a_folder_only_when_asked(tmp_path: Path, two_material_library: Path,
                                                    capsys: pytest.CaptureFixture[str]) -> None:
     lib = str(two_material_library)

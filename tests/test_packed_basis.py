@@ -116,6 +116,7 @@ def test_packed_records_round_trip_and_the_file_states_version_2_3() -> None:
     assert encode_bvae(int8, DECODER)[10] == 2
 
 
+@pytest.mark.slow
 def test_rate_control_packs_within_the_budget_and_beats_int8(analytic_tables) -> None:
     """At 16 and 32 B, the packed records fit the budget with more coefficients and no more error than int8."""
     from brdfcodec.codec import BrdfEncoder, measure
@@ -141,6 +142,7 @@ def same_layer(a: BasisLayer | None, b: BasisLayer | None) -> bool:
     return a is not None and b is not None and a.entry() == b.entry() and a.data == b.data
 
 
+@pytest.mark.slow
 def test_an_edit_keeps_a_packed_layer_and_undoing_it_returns_the_decode(red_plastic_file, tmp_path) -> None:
     """Edits move μ and keep the layers (§4.4): a packed basis layer is copied as it is, and moving μ back
     decodes to the source record's slices, guarded as every edit's are (§6 step 6)."""

@@ -139,6 +139,7 @@ class Code:
         self.record = LatentRecord(name, np.asarray(mu, dtype=np.float32), np.ones(len(mu), dtype=np.float32))
 
 
+@pytest.mark.slow
 def test_measure_plausibility_on_a_constructed_decoder() -> None:
     records = [Code("a", [0.0, 0.0]).record, Code("b", [-0.9, 0.0]).record]
     report = measure_plausibility(PeakDecoder(), records, energy_bound=False)  # the raw decodes
@@ -177,6 +178,7 @@ def test_an_inversion_without_a_hole_is_a_broken_highlight() -> None:
     assert report.fractions["highlight"][0].tolist() == [0, 0, 0, 1, 1, 1]
 
 
+@pytest.mark.slow
 def test_plausible_range_stops_before_the_first_implausible_step() -> None:
     decoder = PeakDecoder()
     # b, peak 1.9 − t: +1σ fine, +2σ inverted (0 under a flank of 0.5); −2σ (peak 3.9) has an albedo > 1
@@ -248,6 +250,7 @@ def default_library() -> tuple[object, dict[str, object]]:
     return decoder, records
 
 
+@pytest.mark.slow
 def test_v1_model_gold_paint_black_hole_is_found(default_library: tuple[object, dict[str, object]]) -> None:
     decoder, records = default_library
     report = measure_plausibility(decoder, list(records.values()), dims=[0], energy_bound=False)  # the network's
@@ -275,6 +278,7 @@ def test_gold_paint_black_hole_is_the_linear_path_below_the_clamp(
     np.testing.assert_allclose(clamped, np.clip(raw, 0, 5), rtol=0, atol=1e-6)  # one float32 rounding apart
 
 
+@pytest.mark.slow
 def test_cli_plausibility_json(capsys: pytest.CaptureFixture[str]) -> None:
     code = main(["model", "plausibility", "--materials", "1", "--dims", "1", "--json"])
     captured = capsys.readouterr()

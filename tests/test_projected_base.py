@@ -124,6 +124,7 @@ def test_a_decoder_without_a_linear_path_refuses_a_projected_base() -> None:
 
 
 @pytest.mark.parametrize("budget", [32, 64])
+@pytest.mark.slow
 def test_the_encoder_projects_where_that_lowers_the_error(analytic_tables, budget: int) -> None:
     """``never`` and ``always`` do as they say; ``auto`` (the default) writes whichever of the two has the lower
     kept-slice error on the material."""
@@ -152,6 +153,7 @@ def test_the_encoder_projects_where_that_lowers_the_error(analytic_tables, budge
         EncodeOptions(project_base="sometimes")  # type: ignore[arg-type]
 
 
+@pytest.mark.slow
 def test_auto_leaves_records_with_a_detail_layer_unprojected(analytic_tables) -> None:
     """A projected base under a detail layer decodes past the 1.5x a layered decode may take, so ``auto`` keeps
     the projection to records without one; ``always`` still projects them."""
@@ -165,6 +167,7 @@ def test_auto_leaves_records_with_a_detail_layer_unprojected(analytic_tables) ->
 
 
 @pytest.mark.parametrize("compact", [None, "int8-fixed"])
+@pytest.mark.slow
 def test_the_encoders_fit_is_the_decode_of_the_record_it_writes(analytic_tables, compact: str | None) -> None:
     """Rate control measures, and the detail layer codes, what the encoder's basis fit returns: it must be what
     the decoder makes of the written record, projection included."""
@@ -188,6 +191,7 @@ def test_the_encoders_fit_is_the_decode_of_the_record_it_writes(analytic_tables,
     np.testing.assert_allclose(decoder.mapped_record(written), np.clip(mapped, 0.0, 5.0), atol=1e-5)
 
 
+@pytest.mark.slow
 def test_cli_project_base(red_plastic_file, tmp_path, capsys) -> None:
     from brdfcodec.cli.main import main
 
@@ -239,6 +243,7 @@ def test_the_joint_fit_codes_the_residual_of_the_projected_base(analytic_tables)
     assert np.abs(unprojected[0] - c[0]).max() > 1e-2
 
 
+@pytest.mark.slow
 def test_a_projected_record_with_a_detail_layer_decodes_as_the_spec_says(analytic_tables) -> None:
     """The fast projected decode (dot products through the network's last layer, one pass over the vectors,
     the detail layer beside the network) against the spec's sum written out."""

@@ -35,6 +35,7 @@ def test_lambertian_sphere_matches_the_closed_form(lambert: MerlBRDF) -> None:
     assert (image[(x * x + y * y) >= 1] == 0).all()
 
 
+@pytest.mark.slow
 def test_renders_of_decoded_materials_and_traversals_are_finite_and_non_negative() -> None:
     decoder = BrdfDecoder()
     rng = np.random.default_rng(0)

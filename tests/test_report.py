@@ -58,6 +58,7 @@ def test_report_records_and_files(small_dataset: Path, tmp_path: Path) -> None:
     assert (tmp_path / "out" / "relae_vs_bytes.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
+@pytest.mark.slow
 def test_rate_distortion_points_are_held_out_only_and_meet_their_budgets(small_dataset: Path, tmp_path: Path) -> None:
     from brdfcodec.datasets.hdf5 import BrdfDataset
     from brdfcodec.models.pca import fit_pca
@@ -82,6 +83,7 @@ def test_rate_distortion_points_are_held_out_only_and_meet_their_budgets(small_d
 
 
 
+@pytest.mark.slow
 def test_the_report_compares_with_pca_of_colour_permuted_training_materials() -> None:
     from brdfcodec.layers.basis import with_colour_permutations
     from brdfcodec.models.pca import fit_pca
@@ -145,6 +147,7 @@ def test_rate_distortion_plot_draws_every_family_in_its_own_style(monkeypatch: p
     assert len({(line.get_color(), line.get_linestyle()) for line in drawn}) == len(families)
 
 
+@pytest.mark.slow
 def test_the_report_has_projected_base_points_up_to_256_bytes() -> None:
     from brdfcodec.report.rd_points import LayeredBvae, rate_distortion_points
 

@@ -113,6 +113,7 @@ def test_tabulation_matches_mitsubas_eval(paper_white: object, rgl_file: Path) -
 
 
 @pytest.mark.shared
+@pytest.mark.slow
 def test_compress_and_decompress_round_trip(rgl_file: Path, mitsuba_llvm: None, tmp_path: Path,
                                             capsys: pytest.CaptureFixture[str]) -> None:
     bvae = tmp_path / "p.bvae"

@@ -73,6 +73,7 @@ _REFUSED = {
 
 
 @pytest.mark.parametrize("case", list(_REFUSED))
+@pytest.mark.slow
 def test_crafted_fields_are_refused_by_info_and_compress_alike(case: str, tmp_path: Path,
                                                                capsys: pytest.CaptureFixture[str]) -> None:
     """R3-08: the files ``bvae info`` called readable and ``bvae compress`` refused after Mitsuba returned
@@ -216,6 +217,7 @@ def test_fields_are_checked_a_chunk_at_a_time(tmp_path: Path, monkeypatch: pytes
 
 
 @pytest.mark.shared
+@pytest.mark.slow
 def test_red_team_construction_on_the_real_file(shared_dir: Path, tmp_path: Path,
                                                 capsys: pytest.CaptureFixture[str]) -> None:
     """``make_bsdf.py``'s R3-08 files, rebuilt from ``paper_white_rgb.bsdf``: each refused by info and compress."""

@@ -221,6 +221,7 @@ def _measured_eval(mi: object, path: Path, wi: np.ndarray, wo: np.ndarray) -> np
     return np.asarray(bsdf.eval(m.BSDFContext(), si, vec), dtype=np.float64).T  # type: ignore[attr-defined]
 
 
+@pytest.mark.slow
 def test_mitsuba_eval_agrees_with_the_table(mi: object, analytic_tables: dict[str, MerlBRDF], tmp_path: Path) -> None:
     """Mitsuba's eval (f cos θo) against the trilinear lookup of the table at random direction pairs."""
     rng = np.random.default_rng(3)
@@ -262,6 +263,7 @@ def test_mitsuba_sampling_passes_a_chi_square_test(mi: object, analytic_tables: 
 
 
 @pytest.mark.parametrize("name", ["red-plastic", "gold"])
+@pytest.mark.slow
 def test_sample_weight_is_eval_over_pdf(mi: object, analytic_tables: dict[str, MerlBRDF], tmp_path: Path,
                                         name: str) -> None:
     """At sampled directions (every incident elevation): the sample's pdf is pdf(), its weight eval / pdf."""
@@ -287,6 +289,7 @@ def test_sample_weight_is_eval_over_pdf(mi: object, analytic_tables: dict[str, M
     np.testing.assert_allclose(weight.T[ok], value.T[ok] / pdf[ok, None], rtol=2e-3, atol=1e-5)
 
 
+@pytest.mark.slow
 def test_real_rgl_file_round_trips(mi: object, shared_dir: Path, tmp_path: Path) -> None:
     """paper_white: read (tabulate) → write → read again gives the same table within the format's resolution.
 

@@ -57,6 +57,7 @@ def test_decoder_outputs_beyond_the_domain_are_clamped(decoder: BrdfDecoder, mon
 
 
 @pytest.mark.parametrize("dtype", [torch.bfloat16, torch.float16])
+@pytest.mark.slow
 def test_reduced_precision_decoding_stays_close_to_float32(decoder: BrdfDecoder, dtype: torch.dtype) -> None:
     try:
         reduced = BrdfDecoder(dtype=dtype)
@@ -88,6 +89,7 @@ HARD_MATERIALS = {
 
 
 @pytest.mark.parametrize("name", sorted(HARD_MATERIALS))
+@pytest.mark.slow
 def test_hardest_materials_round_trip_with_bounded_error(decoder: BrdfDecoder, name: str) -> None:
     brdf: MerlBRDF = HARD_MATERIALS[name].to_merl()
     assert np.isfinite(brdf.values).all()

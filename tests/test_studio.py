@@ -353,6 +353,7 @@ def test_cli_studio_rejects_bad_arguments(tmp_path: Path, capsys: pytest.Capture
     assert "Traceback" not in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_cli_studio_serves_on_localhost(tmp_path: Path) -> None:
     env = {**os.environ, "BRDFCODEC_CACHE_DIR": str(tmp_path / "cache"), "OMP_NUM_THREADS": "1"}
     process = subprocess.Popen([sys.executable, "-m", "brdfcodec", "studio", "--port", "0", "--save-dir",
@@ -381,6 +382,7 @@ def test_front_end_ships_in_the_package_and_loads_nothing_from_outside() -> None
         assert "http://" not in text and "https://" not in text and "//cdn" not in text
 
 
+@pytest.mark.slow
 def test_user_environment_map_is_offered_by_name_only(tmp_path: Path, catalogue: Catalogue) -> None:
     from brdfcodec.io.exr import write_exr_rgb
 

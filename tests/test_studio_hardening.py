@@ -169,6 +169,7 @@ def test_silent_connection_times_out(studio: str) -> None:
     assert reply.startswith(b"HTTP/1.1 408") and elapsed < HEADER_TIMEOUT + 3.0
 
 
+@pytest.mark.slow
 def test_prompt_requests_and_kept_alive_connections_are_served(studio: str) -> None:
     """The deadline covers each request's header block, not the connection: a second request on a kept-alive
     connection is served, and a slow second request is timed out like a first one."""

@@ -60,6 +60,7 @@ def test_the_cli_exports_the_limited_count(capsys: pytest.CaptureFixture[str]) -
 
 
 @pytest.mark.parametrize("name", ["BVAE_NUM_THREADS", "OMP_NUM_THREADS"])
+@pytest.mark.slow
 def test_bvae_runs_with_a_huge_count(name: str, tmp_path) -> None:
     """R3-12's repro, end to end: the process decodes and says why it used fewer threads (no libgomp abort)."""
     from brdfcodec.examples import example_library

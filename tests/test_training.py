@@ -37,6 +37,7 @@ def read_log(run_dir: Path) -> list[dict]:
     return [json.loads(line) for line in (run_dir / "log.jsonl").read_text().splitlines()]
 
 
+@pytest.mark.slow
 def test_run_writes_log_checkpoints_and_summary(tiny_dataset: Path, tmp_path: Path) -> None:
     run = tmp_path / "run"
     result = train(tiny_dataset, run, model_config=TINY_CONFIG, train_config=TINY_TRAIN, progress=False)
@@ -71,6 +72,7 @@ def test_resume_continues_exactly(tiny_dataset: Path, tmp_path: Path) -> None:
         assert rb["val_relae_mapped"] == pytest.approx(ra["val_relae_mapped"], rel=1e-5)
 
 
+@pytest.mark.slow
 def test_resume_after_a_kill_drops_the_log_records_past_the_checkpoint(tiny_dataset: Path, tmp_path: Path) -> None:
     run = tmp_path / "run"
     first = TrainConfig(**{**TINY_TRAIN.to_dict(), "time_limit_s": 0.0})
@@ -84,6 +86,7 @@ def test_resume_after_a_kill_drops_the_log_records_past_the_checkpoint(tiny_data
     assert all(r["loss"] > 0 for r in log)
 
 
+@pytest.mark.slow
 def test_resume_refuses_a_different_config(tiny_dataset: Path, tmp_path: Path) -> None:
     run = tmp_path / "run"
     train(tiny_dataset, run, model_config=TINY_CONFIG, train_config=TINY_TRAIN, progress=False)
@@ -92,6 +95,7 @@ def test_resume_refuses_a_different_config(tiny_dataset: Path, tmp_path: Path) -
         train(tiny_dataset, run, model_config=TINY_CONFIG, train_config=other, resume=True, progress=False)
 
 
+@pytest.mark.slow
 def test_resume_accepts_a_run_from_before_new_config_fields(tiny_dataset: Path, tmp_path: Path) -> None:
     run = tmp_path / "run"
     first = TrainConfig(**{**TINY_TRAIN.to_dict(), "time_limit_s": 0.0})
@@ -177,6 +181,7 @@ def test_export_card_store_and_registry(tiny_dataset: Path, tmp_path: Path) -> N
         load_model(folder, parts=("decoder",))
 
 
+@pytest.mark.slow
 def test_a_run_can_start_from_an_exported_model(tiny_dataset: Path, tmp_path: Path) -> None:
     from brdfcodec.models.store import export_model, load_model
 
@@ -199,6 +204,7 @@ def test_a_run_can_start_from_an_exported_model(tiny_dataset: Path, tmp_path: Pa
               initial_model=folder)
 
 
+@pytest.mark.slow
 def test_early_stopping_after_patience_evaluations_without_gain(
     tiny_dataset: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
@@ -292,6 +298,7 @@ def test_decoder_dropout_run_is_reproducible_and_differs(tiny_dataset: Path, tmp
     assert json.loads((tmp_path / "a" / "run.json").read_text())["train_config"]["decoder_dropout"] == 0.3
 
 
+@pytest.mark.slow
 def test_epoch_record_is_the_sample_weighted_mean_of_its_steps(tiny_dataset: Path) -> None:
     """The epoch's logged loss, reconstruction, KL and per-dimension KL are means over its samples: each step's
     terms weighted by its batch size (the sums stay on the training device between steps)."""
@@ -326,6 +333,7 @@ def test_epoch_record_is_the_sample_weighted_mean_of_its_steps(tiny_dataset: Pat
     assert record["traversal"] == 0.0
 
 
+@pytest.mark.slow
 def test_folds_and_train_families_choose_the_held_out_materials(tiny_dataset: Path, tmp_path: Path) -> None:
     from brdfcodec.datasets.hdf5 import BrdfDataset
     from brdfcodec.datasets.split import fold_by_family
@@ -353,6 +361,7 @@ def test_folds_and_train_families_choose_the_held_out_materials(tiny_dataset: Pa
         train(tiny_dataset, tmp_path / "nofamily", model_config=TINY_CONFIG, train_config=config, progress=False)
 
 
+@pytest.mark.slow
 def test_keep_last_saves_the_last_evaluation(
     tiny_dataset: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
@@ -366,6 +375,7 @@ def test_keep_last_saves_the_last_evaluation(
         assert torch.load(tmp_path / keep / "best.pt", weights_only=False)["epoch"] == kept_epoch
 
 
+@pytest.mark.slow
 def test_a_run_with_nothing_held_out_keeps_its_last_weights(tmp_path: Path) -> None:
     path = tmp_path / "all.h5"
     build_dataset(path, analytic_sources(random_count=3), source_kind="analytic", description="all trained",
@@ -376,6 +386,7 @@ def test_a_run_with_nothing_held_out_keeps_its_last_weights(tmp_path: Path) -> N
     assert torch.load(tmp_path / "run" / "best.pt", weights_only=False)["epoch"] == 2
 
 
+@pytest.mark.slow
 def test_export_of_a_fold_run_measures_and_fits_on_the_fold_s_training_materials(
     tiny_dataset: Path, tmp_path: Path
 ) -> None:
