@@ -3,7 +3,7 @@
 An edit of a layered record moves its base code and keeps its basis and
 detail layers, so the edited material is clamp(B(μ′) + L): the edited base
 plus the original layers' residual L in the mapped domain. Moving μ′ back
-returns the original decode. Material: an analytic red plastic compressed
+returns the original decode, guarded as every edit's is (§6 step 6). Material: an analytic red plastic compressed
 into 16 KB with the shipped model (a basis layer and a detail layer).
 """
 
@@ -21,6 +21,7 @@ from brdfcodec.format.bvae import GraftRecord, LatentRecord, read_bvae, write_bv
 from brdfcodec.format.layered_record import LayeredRecord
 from brdfcodec.layers.layer_sum import layered_residual
 from brdfcodec.representation import clamp_mapped
+from brdfcodec.representation.highlight_guard import guard_highlight
 
 pytestmark = pytest.mark.slow  # the 16 KB record takes rate control (about 15 s on 2 busy cores)
 
@@ -40,8 +41,11 @@ def layered(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
     library = read_bvae(path)
     decoder = BrdfDecoder.for_header(library.header)
     record = library.records[0]
+    decode = decoder.mapped_record(record)
+    # An edit decodes with the highlight guard (spec/bvae-format.md §6 step 6): an edit that returns to the
+    # record's code decodes as its guarded slices.
     return {"path": path, "folder": folder, "record": record, "decoder": decoder,
-            "decode": decoder.mapped_record(record)}
+            "decode": decode, "guarded": guard_highlight(decode)}
 
 
 def layers_sum(decoder: BrdfDecoder, record: LayeredRecord) -> np.ndarray:
@@ -71,7 +75,9 @@ def test_an_edit_is_the_edited_base_plus_the_original_layers(layered: dict[str, 
     assert isinstance(edited, LayeredRecord)
     assert edited.basis == record.basis and edited.detail == record.detail
     assert edited.mu[dim] == pytest.approx(record.mu[dim] + step)
-    got = decoder.mapped_record(edited, energy_bound=False)  # the layers' rule (§4.4); the bound comes after (§6)
+    # The layers' rule (§4.4); the highlight guard (§6 step 6) and the bound (step 5) come after it.
+    got = decoder._unguarded_mapped(edited)
+    np.testing.assert_array_equal(decoder.mapped_record(edited, energy_bound=False), guard_highlight(got))
     residual = layers_sum(decoder, record)
     want = clamp_mapped(base_decode(decoder, record, edited.mu) + residual)
     np.testing.assert_allclose(got, want, rtol=0, atol=1e-6)
@@ -94,7 +100,7 @@ def test_traversing_back_returns_the_original_decode(layered: dict[str, Any], di
     assert np.abs(decoder.mapped_record(edited) - layered["decode"]).max() > 1e-3  # the edit did something
     back = traverse(edited, dim, [-step])[0]
     assert isinstance(back, LayeredRecord)
-    assert np.abs(decoder.mapped_record(back) - layered["decode"]).max() < UNDO_TOLERANCE
+    assert np.abs(decoder.mapped_record(back, energy_bound=False) - layered["guarded"]).max() < UNDO_TOLERANCE
 
 
 def test_interpolating_back_returns_the_original_and_keeps_the_first_operands_layers(
@@ -106,7 +112,7 @@ def test_interpolating_back_returns_the_original_and_keeps_the_first_operands_la
     assert isinstance(half, LayeredRecord) and half.detail == record.detail
     back = interpolate(half, record, 1.0)
     np.testing.assert_array_equal(back.mu, record.mu)
-    np.testing.assert_array_equal(decoder.mapped_record(back), layered["decode"])
+    np.testing.assert_array_equal(decoder.mapped_record(back, energy_bound=False), layered["guarded"])
     mixed = mix_factors(record, other, [0, 1])
     assert isinstance(mixed, LayeredRecord) and mixed.basis == record.basis
     np.testing.assert_array_equal(mixed.mu[2:], other.mu[2:])
@@ -148,7 +154,7 @@ def test_bvae_edit_traverse_and_back_on_a_16_kb_record(layered: dict[str, Any]) 
     assert isinstance(edited, LayeredRecord) and edited.detail == layered["record"].detail
     assert main(["edit", "traverse", str(up), "--dim", "3", "--values=-1.5", "-o", str(down), "--force"]) == 0
     back = read_bvae(down).records[0]
-    assert np.abs(decoder.mapped_record(back) - layered["decode"]).max() < UNDO_TOLERANCE
+    assert np.abs(decoder.mapped_record(back, energy_bound=False) - layered["guarded"]).max() < UNDO_TOLERANCE
     both = folder / "both.bvae"
     write_bvae(both, [layered["record"], LatentRecord("plain", np.zeros(8, np.float32), np.ones(8, np.float32))],
                decoder.reference, overwrite=True)
@@ -176,6 +182,7 @@ def test_the_studio_edits_a_layered_record_with_its_layers(layered: dict[str, An
     record, decoder = layered["record"], layered["decoder"]
     z = [float(v) for v in record.mu]
     edited_record = catalogue.edited_record({"base": "rp", "z": z, "graft": None})
+    # The base's own code is not an edit (catalogue.edited_record): the material as encoded, no guard.
     np.testing.assert_array_equal(decoder.mapped_record(edited_record), layered["decode"])
     z[2] += 1.0
     moved = catalogue.edited_record({"base": "rp", "z": z, "graft": None})
@@ -207,7 +214,7 @@ def test_a_projected_compact_record_edits_by_the_same_rule(layered: dict[str, An
         edited = traverse(record, dim, [step])[0]
         assert isinstance(edited, LayeredRecord) and edited.basis == record.basis
         assert edited.compact_mu is stays_compact
-        want = clamp_mapped(base_decode(decoder, record, edited.mu) + layers_sum(decoder, record))
+        want = guard_highlight(clamp_mapped(base_decode(decoder, record, edited.mu) + layers_sum(decoder, record)))
         np.testing.assert_allclose(decoder.mapped_record(edited, energy_bound=False), want, rtol=0, atol=1e-5)
         back = traverse(edited, dim, [-step])[0]
-        assert np.abs(decoder.mapped_record(back) - original).max() < UNDO_TOLERANCE
+        assert np.abs(decoder.mapped_record(back, energy_bound=False) - guard_highlight(original)).max() < UNDO_TOLERANCE
