@@ -376,8 +376,15 @@ def _basis_fit(
             codings = ["packed", "coded"] if options.basis_coding == "auto" else [
                 "coded" if options.coded else "packed"]
             max_bytes = {"packed": STEP_BYTES + k, "coded": STEP_BYTES + k - 1}  # a coded layer's length: 1 byte
-            count_of = {c: (_coded_count(fitted, first, max_bytes[c], CODED_PRIOR[True]) if c == "coded"
-                            else _packed_count(fitted, first, max_bytes[c])) for c in codings}
+            count_of = {}
+            for c in codings:
+                try:
+                    count_of[c] = (_coded_count(fitted, first, max_bytes[c], CODED_PRIOR[True]) if c == "coded"
+                                   else _packed_count(fitted, first, max_bytes[c]))
+                except ValueError:  # no coded layer fits these bytes: under auto, the packed one alone
+                    if options.basis_coding != "auto":
+                        raise
+            codings = [c for c in codings if c in count_of]
         else:
             first = basis_offset(linear_rank, basis.count, k)
             codings, count_of = ["int8"], {"int8": k}
