@@ -66,6 +66,22 @@ def test_on_a_tie_the_coding_listed_first_is_kept() -> None:
     assert result.record.basis.coefficients()[0] == pytest.approx(1.0, rel=0.01)
 
 
+def test_a_fit_whose_coefficients_all_round_to_zero_is_the_base_alone() -> None:
+    """The joint fit may find no coefficients best (a material unlike the training ones); no layer then survives
+    quantisation, and the candidate is the base, sized and decoded as one (an rd run on a fold model raised)."""
+    base, target, masks = _case()
+
+    def fit(k: int, mu_storage: str | None, under_detail: bool, coding: str | None = None):  # noqa: ANN202, ARG001
+        return base, None, target * 0.9
+
+    result = encode_layers(base, target * 0.5, target, masks, bytes_budget=100, basis_fit=fit, basis_count=75,
+                           basis_variants=("packed", "coded"))
+    assert getattr(result.record, "basis", None) is None
+    assert np.allclose(result.record.mu, base.mu)
+    base_only = {p.distortion for p in result.points if p.option[1] is None}
+    assert len(base_only) == 1  # every k, every coding: the base's own error (its decode, not the fit's mapped)
+
+
 def test_the_chosen_record_is_the_lowest_error_that_fits_even_off_the_hull() -> None:
     """A point inside the convex hull that fits the budget beats the hull points that do."""
     from brdfcodec.codec.rate import RatePoint

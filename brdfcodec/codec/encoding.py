@@ -351,7 +351,7 @@ def _basis_fit(
     project = projected_base_vectors(decoder, basis) if options.project_base != "never" else 0
     ways = [project] if options.project_base == "always" or not project else [0, project]
     target, weights = np.asarray(inputs, dtype=np.float32), np.asarray(masks, dtype=np.float32)
-    made: dict[tuple[int, MuStorage, int, bool, int], tuple[LatentRecord, BasisLayer, np.ndarray]] = {}
+    made: dict[tuple[int, MuStorage, int, bool, int], tuple[LatentRecord, BasisLayer | None, np.ndarray]] = {}
     least_squares_of: dict[tuple[int, int, int], np.ndarray] = {}
     projected_as: dict[tuple[int, MuStorage], int] = {}  # the projection the first variant kept, per size and μ
 
@@ -364,7 +364,7 @@ def _basis_fit(
         return least_squares_of[first, available, p]
 
     def fit_one(k: int, mu_storage: MuStorage, p: int, packed: bool,
-                start: int) -> tuple[LatentRecord, BasisLayer, np.ndarray]:
+                start: int) -> tuple[LatentRecord, BasisLayer | None, np.ndarray]:
         projection = None if not p else (basis.vectors(0, p), decoder.projection_centre)
         # Each coding asked for: the bytes of its layer and how many coefficients it keeps. --basis-coding auto makes
         # a packed and a coded layer, of one fit where they keep as many coefficients (from about 64 B: all), else
@@ -417,13 +417,16 @@ def _basis_fit(
                     layer = packed_coefficients(basis.sha256, coefficients[0], max_bytes[coding], first, p)
                 else:
                     layer = quantise_coefficients(basis.sha256, coefficients[0], first, p)
-                assert layer is not None
+                if layer is None:  # every coefficient rounds to 0 in these bytes (the fit may find none best)
+                    continue
                 if base_mapped is None:
                     base_mapped = decoder.decode_mapped(code)
                     decoder.project_base(LayeredRecord(base.name, code, base.sigma, base.meta, basis=layer),
                                          base_mapped)
                 made_layers.append((codings.index(coding),
                                     (record, layer, base_mapped + basis.residual(layer.coefficients(), first))))
+        if not made_layers:  # no layer at all: the candidate is the base (encode_layers' stage for k = 0)
+            return base, None, decoder.decode_mapped(base.mu)
         made_layers.sort(key=lambda made: made[0])
         return min((made for _, made in made_layers), key=lambda made: kept_slice_error(made[2]))
 
@@ -440,7 +443,7 @@ def _basis_fit(
         return float((np.abs(np.clip(mapped, 0.0, MAPPED_MAX) - target) * weights).sum())
 
     def fit(k: int, mu_storage: MuStorage, under_detail: bool,
-            variant: str | None = None) -> tuple[LatentRecord, BasisLayer, np.ndarray]:
+            variant: str | None = None) -> tuple[LatentRecord, BasisLayer | None, np.ndarray]:
         # variant: the first vector of a packed or coded layer (one of options.variants(...), rate control
         # comparing them); None: after the decoder's linear path.
         # "auto" projects only records without a detail layer: with one, the projection's pass over the vectors

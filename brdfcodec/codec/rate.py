@@ -160,8 +160,9 @@ MuStorage = str | None
 #: quantised one, and the coefficients are fitted to it) and whether a detail layer will follow (the writer may
 #: then choose differently, for decode time: :func:`~brdfcodec.codec.encoding.layer_records`): the base with its
 #: jointly refined μ, the layer, and the decoder's mapped output before the detail layer (clamped base decode
-#: plus the basis residual).
-BasisFit = Callable[[int, MuStorage, bool], tuple[LatentRecord, BasisLayer, np.ndarray]]
+#: plus the basis residual). The layer is None when no coefficient survives quantisation in those bytes (the fit
+#: found no coefficients best, as it may on a material unlike the training ones): the candidate is then the base.
+BasisFit = Callable[[int, MuStorage, bool], tuple[LatentRecord, BasisLayer | None, np.ndarray]]
 #: What a fit of a record without a latent (format 2.1) returns for k coefficients on the basis' vectors
 #: 0 … k − 1: the layer (quantised as stored) and the decode's mapped kept slices before the clamp (the decoder's
 #: linear-path mean at the basis' entries plus the layer's sum).
@@ -213,6 +214,8 @@ class _Candidates:
             assert self.basis_fit is not None
             fitted = (self.basis_fit(k, self.mu_storage, under_detail) if variant is None
                       else self.basis_fit(k, self.mu_storage, under_detail, variant))  # type: ignore[call-arg]
+            if fitted[1] is None:  # no coefficient survived in these bytes: the base alone, as k = 0
+                fitted = (self.base, None, self.base_mapped)
             self.stages[k, under_detail, variant] = fitted
         return self.stages[k, under_detail, variant]
 
