@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import json
 import os
+from collections.abc import Callable
 from pathlib import Path
 
 import pytest
@@ -95,6 +96,51 @@ def nbrdf_zip() -> Path:
     if not archive.is_file():
         pytest.skip(f"NBRDF proxy archive not found at {archive}")
     return archive
+
+
+@pytest.fixture(scope="module")
+def llvm() -> str:
+    """Mitsuba's ``llvm_ad_rgb`` variant set (the benchmark skipped, with the reason, where libLLVM is missing)."""
+    from brdfcodec.runtime import mitsuba as mitsuba_runtime
+
+    try:
+        return mitsuba_runtime.set_variant("llvm_ad_rgb", fallback=None)
+    except (mitsuba_runtime.LibLLVMNotFoundError, RuntimeError) as error:
+        pytest.skip(f"llvm_ad_rgb unavailable: {error}")
+
+
+@pytest.fixture
+def sky_sphere_scene() -> Callable[[dict, int, int], object]:
+    """``make(bsdf, size, spp)``: a sphere of ``bsdf`` under a sky (blue above, grey below) with a small, bright
+    sun (a 64×128 lat-long map), seen by a size² perspective camera, path traced to depth 4 at spp samples."""
+    import mitsuba as mi
+    import numpy as np
+
+    def environment() -> object:
+        rows, cols = 64, 128
+        theta = (np.arange(rows) + 0.5) / rows * np.pi
+        phi = (np.arange(cols) + 0.5) / cols * 2 * np.pi
+        up = np.cos(theta)[:, None, None] * np.ones((1, cols, 1))
+        sky = np.where(up > 0, 0.3 + 0.5 * up * np.array([0.4, 0.6, 1.0]), 0.15)
+        sun = (np.abs(theta[:, None] - 0.8) < 0.06) & (np.abs(phi[None, :] - 2.2) < 0.06)
+        sky[sun] = 400.0
+        return mi.Bitmap(sky.astype(np.float32))
+
+    def make(bsdf: dict, size: int, spp: int) -> object:
+        return mi.load_dict({
+            "type": "scene",
+            "integrator": {"type": "path", "max_depth": 4},
+            "sensor": {
+                "type": "perspective", "fov": 30,
+                "to_world": mi.ScalarTransform4f().look_at(origin=[0, 0, 4.2], target=[0, 0, 0], up=[0, 1, 0]),
+                "film": {"type": "hdrfilm", "width": size, "height": size, "pixel_format": "rgb"},
+                "sampler": {"type": "independent", "sample_count": spp},
+            },
+            "sphere": {"type": "sphere", "bsdf": bsdf},
+            "light": {"type": "envmap", "bitmap": environment()},
+        })
+
+    return make
 
 
 def _ratios(config: pytest.Config) -> dict[str, dict[str, float]]:

@@ -22,47 +22,11 @@ import pytest
 
 from brdfcodec.examples import example_library
 from brdfcodec.render import mitsuba_bsdf
-from brdfcodec.runtime import mitsuba as mitsuba_runtime
 
 mi = pytest.importorskip("mitsuba", reason="Mitsuba 3 is an optional extra: pip install 'brdfcodec[mitsuba]'")
 
 SIZE, SPP = 256, 64
 SCALAR_SIZE, SCALAR_SPP = 64, 16
-
-
-@pytest.fixture(scope="module")
-def llvm() -> str:
-    try:
-        return mitsuba_runtime.set_variant("llvm_ad_rgb", fallback=None)
-    except (mitsuba_runtime.LibLLVMNotFoundError, RuntimeError) as error:
-        pytest.skip(f"llvm_ad_rgb unavailable: {error}")
-
-
-def _environment() -> object:
-    """A sky (blue above, grey below) with a small, bright sun, as a 64×128 lat-long map."""
-    rows, cols = 64, 128
-    theta = (np.arange(rows) + 0.5) / rows * np.pi
-    phi = (np.arange(cols) + 0.5) / cols * 2 * np.pi
-    up = np.cos(theta)[:, None, None] * np.ones((1, cols, 1))
-    sky = np.where(up > 0, 0.3 + 0.5 * up * np.array([0.4, 0.6, 1.0]), 0.15)
-    sun = (np.abs(theta[:, None] - 0.8) < 0.06) & (np.abs(phi[None, :] - 2.2) < 0.06)
-    sky[sun] = 400.0
-    return mi.Bitmap(sky.astype(np.float32))
-
-
-def _scene(bsdf: dict, size: int, spp: int) -> object:
-    return mi.load_dict({
-        "type": "scene",
-        "integrator": {"type": "path", "max_depth": 4},
-        "sensor": {
-            "type": "perspective", "fov": 30,
-            "to_world": mi.ScalarTransform4f().look_at(origin=[0, 0, 4.2], target=[0, 0, 0], up=[0, 1, 0]),
-            "film": {"type": "hdrfilm", "width": size, "height": size, "pixel_format": "rgb"},
-            "sampler": {"type": "independent", "sample_count": spp},
-        },
-        "sphere": {"type": "sphere", "bsdf": bsdf},
-        "light": {"type": "envmap", "bitmap": _environment()},
-    })
 
 
 def _chrome(**extra: object) -> dict:
@@ -74,45 +38,45 @@ def _render(scene: object, spp: int | None = None, seed: int = 0) -> np.ndarray:
     return np.asarray(image)
 
 
-def test_roughconductor_baseline(benchmark, llvm: str) -> None:
+def test_roughconductor_baseline(benchmark, llvm: str, sky_sphere_scene) -> None:
     benchmark.group = "mitsuba-vs-roughconductor"
     benchmark.extra_info["role"] = "baseline"
     mi.set_variant(llvm)
-    scene = _scene({"type": "roughconductor", "alpha": 0.05}, SIZE, SPP)
+    scene = sky_sphere_scene({"type": "roughconductor", "alpha": 0.05}, SIZE, SPP)
     _render(scene)  # compile once
     image = benchmark.pedantic(_render, args=(scene,), rounds=3, iterations=1)
     assert np.isfinite(image).all()
 
 
-def test_bvae_llvm_vs_roughconductor(benchmark, llvm: str) -> None:
+def test_bvae_llvm_vs_roughconductor(benchmark, llvm: str, sky_sphere_scene) -> None:
     benchmark.group = "mitsuba-vs-roughconductor"
     benchmark.extra_info["role"] = "candidate"
     mi.set_variant(llvm)
     mitsuba_bsdf.register()
-    scene = _scene(_chrome(), SIZE, SPP)
+    scene = sky_sphere_scene(_chrome(), SIZE, SPP)
     _render(scene)
     image = benchmark.pedantic(_render, args=(scene,), rounds=3, iterations=1)
     assert np.isfinite(image).all() and image.mean() > 0
 
 
-def test_bvae_scalar_baseline(benchmark, llvm: str) -> None:
+def test_bvae_scalar_baseline(benchmark, llvm: str, sky_sphere_scene) -> None:
     benchmark.group = "mitsuba-vs-scalar"
     benchmark.extra_info["role"] = "baseline"
     benchmark.extra_info["work_scale"] = (SIZE * SIZE * SPP) / (SCALAR_SIZE * SCALAR_SIZE * SCALAR_SPP)
     mi.set_variant("scalar_rgb")
     mitsuba_bsdf.register()
-    scene = _scene(_chrome(), SCALAR_SIZE, SCALAR_SPP)
+    scene = sky_sphere_scene(_chrome(), SCALAR_SIZE, SCALAR_SPP)
     image = benchmark.pedantic(_render, args=(scene,), rounds=1, iterations=1)
     mi.set_variant(llvm)
     assert np.isfinite(image).all()
 
 
-def test_bvae_llvm_vs_scalar(benchmark, llvm: str) -> None:
+def test_bvae_llvm_vs_scalar(benchmark, llvm: str, sky_sphere_scene) -> None:
     benchmark.group = "mitsuba-vs-scalar"
     benchmark.extra_info["role"] = "candidate"
     mi.set_variant(llvm)
     mitsuba_bsdf.register()
-    scene = _scene(_chrome(), SIZE, SPP)
+    scene = sky_sphere_scene(_chrome(), SIZE, SPP)
     _render(scene)
     image = benchmark.pedantic(_render, args=(scene,), rounds=3, iterations=1)
     assert np.isfinite(image).all()
@@ -125,13 +89,13 @@ def _timed(scene: object, spp: int, seeds: range) -> tuple[float, list[np.ndarra
     return (time.perf_counter() - start) / len(seeds), images
 
 
-def test_importance_sampling_beats_cosine_at_equal_time(llvm: str, record_property) -> None:
+def test_importance_sampling_beats_cosine_at_equal_time(llvm: str, sky_sphere_scene, record_property) -> None:
     """Chrome (example library) under a sky with a sun: RMSE against a 1024 spp reference at equal time."""
     mi.set_variant(llvm)
     mitsuba_bsdf.register()
     size, spp = 64, 16
-    tabulated = _scene(_chrome(), size, spp)
-    cosine = _scene(_chrome(sampling="cosine"), size, spp)
+    tabulated = sky_sphere_scene(_chrome(), size, spp)
+    cosine = sky_sphere_scene(_chrome(sampling="cosine"), size, spp)
     reference = _render(tabulated, 1024, seed=12345)
     seeds = range(4)
     t_tab, tab_images = _timed(tabulated, spp, seeds)

@@ -31,48 +31,12 @@ import pytest
 
 from brdfcodec.codec.rgl_export import export_rgl
 from brdfcodec.examples import example_library
-from brdfcodec.runtime import mitsuba as mitsuba_runtime
 
 mi = pytest.importorskip("mitsuba", reason="Mitsuba 3 is an optional extra: pip install 'brdfcodec[mitsuba]'")
 
 SIZE, SPP, REFERENCE_SPP, ROUNDS = 64, 32, 512, 4
 RELMSE_TARGET = 1.5
 _GROUP_SUFFIX = {"example": "", "example-chrome": "-chrome", "16KB": "-16KB"}
-
-
-@pytest.fixture(scope="module")
-def llvm() -> str:
-    try:
-        return mitsuba_runtime.set_variant("llvm_ad_rgb", fallback=None)
-    except (mitsuba_runtime.LibLLVMNotFoundError, RuntimeError) as error:
-        pytest.skip(f"llvm_ad_rgb unavailable: {error}")
-
-
-def _environment() -> object:
-    """A sky (blue above, grey below) with a small, bright sun, as a 64×128 lat-long map."""
-    rows, cols = 64, 128
-    theta = (np.arange(rows) + 0.5) / rows * np.pi
-    phi = (np.arange(cols) + 0.5) / cols * 2 * np.pi
-    up = np.cos(theta)[:, None, None] * np.ones((1, cols, 1))
-    sky = np.where(up > 0, 0.3 + 0.5 * up * np.array([0.4, 0.6, 1.0]), 0.15)
-    sun = (np.abs(theta[:, None] - 0.8) < 0.06) & (np.abs(phi[None, :] - 2.2) < 0.06)
-    sky[sun] = 400.0
-    return mi.Bitmap(sky.astype(np.float32))
-
-
-def _scene(bsdf: dict) -> object:
-    return mi.load_dict({
-        "type": "scene",
-        "integrator": {"type": "path", "max_depth": 4},
-        "sensor": {
-            "type": "perspective", "fov": 30,
-            "to_world": mi.ScalarTransform4f().look_at(origin=[0, 0, 4.2], target=[0, 0, 0], up=[0, 1, 0]),
-            "film": {"type": "hdrfilm", "width": SIZE, "height": SIZE, "pixel_format": "rgb"},
-            "sampler": {"type": "independent", "sample_count": SPP},
-        },
-        "sphere": {"type": "sphere", "bsdf": bsdf},
-        "light": {"type": "envmap", "bitmap": _environment()},
-    })
 
 
 def _relmse(image: np.ndarray, reference: np.ndarray, epsilon: float) -> float:
@@ -100,8 +64,8 @@ def _compressed_material(folder: Path, archive: Path) -> tuple[dict, Path]:
 
 
 @pytest.mark.parametrize("source", ["example", "example-chrome", pytest.param("16KB", marks=pytest.mark.shared)])
-def test_plugin_sampling_against_measured(benchmark, llvm: str, source: str,  # noqa: ANN001 - pytest-benchmark
-                                          tmp_path: Path, request: pytest.FixtureRequest) -> None:
+def test_plugin_sampling_against_measured(benchmark, llvm: str, sky_sphere_scene,  # noqa: ANN001 - pytest-benchmark
+                                          source: str, tmp_path: Path, request: pytest.FixtureRequest) -> None:
     from brdfcodec.render import mitsuba_bsdf
 
     benchmark.group = "mitsuba-sampling-vs-measured" + _GROUP_SUFFIX[source]
@@ -114,7 +78,8 @@ def test_plugin_sampling_against_measured(benchmark, llvm: str, source: str,  # 
             plugin["lookup"] = "trilinear"
     else:
         plugin, exported = _compressed_material(tmp_path, request.getfixturevalue("nbrdf_zip"))
-    scenes = {"plugin": _scene(plugin), "measured": _scene({"type": "measured", "filename": str(exported)})}
+    scenes = {"plugin": sky_sphere_scene(plugin, SIZE, SPP),
+              "measured": sky_sphere_scene({"type": "measured", "filename": str(exported)}, SIZE, SPP)}
     references = {name: np.asarray(mi.render(scene, spp=REFERENCE_SPP, seed=10_000)) for name, scene in scenes.items()}
     for scene in scenes.values():
         mi.render(scene, spp=SPP, seed=9_999)  # compile at the timed sample count
