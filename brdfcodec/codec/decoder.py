@@ -65,7 +65,8 @@ def _guarded(record: Record, mapped: np.ndarray) -> np.ndarray:
 
 
 def _table(
-    mapped: np.ndarray, bins: Sequence[int] | None, energy_bound: bool, masked: MaskedEntries
+    mapped: np.ndarray, bins: Sequence[int] | None, energy_bound: bool, masked: MaskedEntries,
+    compiled: bool = False,
 ) -> npt.NDArray[np.float32]:
     """The table of full mapped slices (only ``bins`` when given), times the energy bound's factor when asked,
     below-horizon bins as ``masked`` says.
@@ -73,11 +74,11 @@ def _table(
     The order of ``spec/bvae-format.md`` §6: the slices are interpolated to the bins and unmapped (step 2),
     then multiplied by the factor (step 5), which is computed from the whole table. A full table takes the
     host decode (:func:`~brdfcodec.codec.device_decode.table_from_mapped_host`: the same steps, its
-    exponentials vectorised, the mask applied block by block).
+    exponentials vectorised, the mask applied block by block; ``compiled``: its passes compiled, for batches).
     """
     scale = energy_bound_scale_mapped(mapped) if energy_bound else 1.0
     if bins is None:
-        return table_from_mapped_host(mapped, scale=scale, masked=masked)
+        return table_from_mapped_host(mapped, scale=scale, masked=masked, compiled=compiled)
     return _apply_mask(table_from_mapped(mapped, phi_d_bins=bins, scale=scale), bins, masked)
 
 
@@ -558,7 +559,12 @@ class BrdfDecoder:
     def decode_many(
         self, records: Sequence[Record], *, masked: MaskedEntries = "unmeasured", batch_size: int = 16
     ) -> Iterator[npt.NDArray[np.float32]]:
-        """Full tables of many records, decoded ``batch_size`` at a time (a generator: one table built at a time)."""
+        """Full tables of many records, decoded ``batch_size`` at a time (a generator: one table built at a time).
+
+        The work after the network runs compiled (Numba, :mod:`brdfcodec.representation.stepped_kernel`), the
+        tables bit for bit :meth:`decode`'s: the first batch decode of a process imports Numba and loads the
+        kernels (about 1 s and 100 MB, once); ``BRDFCODEC_NO_JIT=1`` keeps the NumPy path.
+        """
         for record in records:
             self._check_record(record)
         for start in range(0, len(records), batch_size):
@@ -576,7 +582,7 @@ class BrdfDecoder:
                         mapped = _guarded(record, self._with_layers(record, next(batch)))
                     else:
                         mapped = self._mapped_record(record)
-                    table = _table(mapped, None, is_edited(record), masked)
+                    table = _table(mapped, None, is_edited(record), masked, compiled=True)
                 yield table
 
     def decode_many_tensor(

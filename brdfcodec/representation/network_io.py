@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import functools
 from collections.abc import Sequence
+from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 import numpy.typing as npt
@@ -34,6 +35,8 @@ from brdfcodec.conventions import (
     N_CHANNELS,
     N_KEPT_SLICES,
     N_PHI_D,
+    N_THETA_D,
+    N_THETA_H,
     NETWORK_INPUT_SHAPE,
 )
 from brdfcodec.representation.layout import (
@@ -44,6 +47,8 @@ from brdfcodec.representation.layout import (
 )
 from brdfcodec.representation.mapping import LOG_RANGE, clamp_mapped, map_values
 from brdfcodec.representation.mask import validity_mask
+from brdfcodec.representation.stepped_kernel import compiled_stepping, invalid_runs
+from brdfcodec.runtime.threads import get_num_threads
 
 __all__ = [
     "network_input_from_table", "reflectance_from_mapped", "stepped_table", "table_from_mapped",
@@ -209,6 +214,8 @@ def stepped_table(
     invalid: np.ndarray | None = None,
     fill: float = 0.0,
     out: np.ndarray | None = None,
+    compiled: bool = False,
+    threads: int | None = None,
 ) -> npt.NDArray[np.float32]:
     """All 180 bins from the kept slices' exponentials: ``current − factor_c`` rounded to float32 once, ``current``
     stepped by ``q`` through each gap (:func:`_scaled_expm1`'s geometric sequence), float64 throughout.
@@ -234,6 +241,13 @@ def stepped_table(
         The value of the ``invalid`` bins.
     out : ndarray of float32, shape (..., 3, 90, 90, 180), optional
         Where to write the table (C-contiguous); a new array by default.
+    compiled : bool, default False
+        Step in one compiled pass (:mod:`~brdfcodec.representation.stepped_kernel`), bit for bit the same table,
+        about 3× faster, where Numba imports (else the NumPy path). Its first use in a process imports Numba and
+        loads the kernel (about 1 s and 100 MB): for batch decodes, not for one table.
+    threads : int, optional
+        Threads of the compiled pass (the NumPy path runs on the calling thread): the codec's thread count by
+        default (:func:`~brdfcodec.runtime.threads.get_num_threads`).
 
     Returns
     -------
@@ -249,6 +263,27 @@ def stepped_table(
     last = N_KEPT_SLICES - 1
     filler = np.float32(fill)
     scales = np.asarray(factor, dtype=np.float64).reshape(N_CHANNELS)
+    kernel = compiled_stepping() if compiled else None
+    if (kernel is not None and len(lead) >= 3 and lead[-3:] == (N_CHANNELS, N_THETA_H, N_THETA_D)
+            and start.shape[-1] == N_KEPT_SLICES and ratio.shape == (*lead, last)
+            and (invalid is None or invalid.shape == (N_THETA_H, N_THETA_D, N_PHI_D))):
+        # one compiled pass, bit for bit the steps below (representation/stepped_kernel.py), its θh rows split over
+        # the codec's threads; the shapes checked here, as the compiled code does not check its indices
+        count = int(np.prod(lead[:-2]))
+        arguments = (np.ascontiguousarray(start, dtype=np.float64).reshape(count, N_THETA_H, N_THETA_D, -1),
+                     np.ascontiguousarray(ratio, dtype=np.float64).reshape(count, N_THETA_H, N_THETA_D, -1), scales,
+                     _runs_of(invalid), filler, invalid is not None,
+                     out.reshape(count, N_THETA_H, N_THETA_D, N_PHI_D))
+        parts = max(1, min(get_num_threads() if threads is None else int(threads), N_THETA_H))
+        bounds = [N_THETA_H * i // parts for i in range(parts + 1)]
+        if parts == 1:
+            kernel(*arguments, 0, N_THETA_H)
+        else:
+            pool = _row_pool(parts)
+            ranges = zip(bounds[:-1], bounds[1:], strict=True)
+            for done in [pool.submit(kernel, *arguments, low, high) for low, high in ranges]:
+                done.result()
+        return out
     spans = None if invalid is None else _invalid_spans(invalid)
     for index in np.ndindex(*lead[:-2]):  # every leading index and channel
         channel_scale = scales[index[-1]]
@@ -275,6 +310,34 @@ def stepped_table(
 #: Per read-only ``invalid`` array (by identity, the array kept alive): for each block of θh rows, the θd columns
 #: that hold an invalid bin (the horizon's are a suffix, all but a third of the table is whole).
 _SPANS: dict[int, tuple[np.ndarray, list[tuple[int, int] | None]]] = {}
+
+
+@functools.cache
+def _row_pool(threads: int) -> ThreadPoolExecutor:
+    """The threads that run the compiled pass over disjoint θh rows (one pool per thread count, kept)."""
+    return ThreadPoolExecutor(max_workers=threads, thread_name_prefix="brdfcodec-step")
+
+
+#: Per read-only ``invalid`` array (by identity, the array kept alive): its runs as the compiled pass reads them.
+_RUNS: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+#: The runs of the compiled pass when no bin is filled.
+_NO_RUNS = np.zeros((N_THETA_H, N_THETA_D, 1, 2), dtype=np.int64)
+
+
+def _runs_of(invalid: np.ndarray | None) -> np.ndarray:
+    """:func:`~brdfcodec.representation.stepped_kernel.invalid_runs` of ``invalid`` (cached for a read-only
+    array)."""
+    if invalid is None:
+        return _NO_RUNS
+    cached = _RUNS.get(id(invalid))
+    if cached is not None and cached[0] is invalid:
+        return cached[1]
+    runs = invalid_runs(invalid)
+    if not invalid.flags.writeable:
+        if len(_RUNS) > 8:
+            _RUNS.clear()
+        _RUNS[id(invalid)] = (invalid, runs)
+    return runs
 
 
 def _invalid_spans(invalid: np.ndarray) -> list[tuple[int, int] | None]:

@@ -1,0 +1,94 @@
+"""The compiled passes of the host decode (``representation/stepped_kernel.py``, issue 51 item 2) give the NumPy and
+torch paths' output bit for bit: same operations, same order, no fast-math."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from brdfcodec.codec.device_decode import _invalid_bins, table_from_mapped_host
+from brdfcodec.representation import stepped_kernel
+from brdfcodec.representation.network_io import stepped_table
+from brdfcodec.representation.stepped_kernel import invalid_runs
+
+pytest.importorskip("numba", reason="numba is a dependency; without it the compiled passes are not used")
+
+
+@pytest.fixture
+def without_compiled_passes(monkeypatch: pytest.MonkeyPatch):  # noqa: ANN201
+    """Inside: the NumPy and torch paths (BRDFCODEC_NO_JIT=1); the compiled kernels again after."""
+
+    def clear() -> None:
+        stepped_kernel.compiled_stepping.cache_clear()
+        stepped_kernel.compiled_log_arguments.cache_clear()
+
+    class Switch:
+        def __enter__(self) -> None:
+            monkeypatch.setenv(stepped_kernel.DISABLE_VARIABLE, "1")
+            clear()
+
+        def __exit__(self, *exc: object) -> None:
+            monkeypatch.delenv(stepped_kernel.DISABLE_VARIABLE)
+            clear()
+
+    yield Switch()
+    clear()
+
+
+def _bits(array: np.ndarray) -> np.ndarray:
+    return np.ascontiguousarray(array).view(np.uint32)
+
+
+@pytest.mark.parametrize("masked", [True, False])
+def test_the_compiled_stepping_is_the_numpy_steps_bit_for_bit(without_compiled_passes, masked: bool) -> None:  # noqa: ANN001
+    rng = np.random.default_rng(3)
+    # steep gaps, tiny and huge values: where the float64 steps and the one rounding to float32 can differ
+    start = np.exp(rng.standard_normal((2, 3, 90, 90, 21)) * 8.0)
+    ratio = np.exp(rng.standard_normal((2, 3, 90, 90, 20)))
+    factor = np.array([1e-3, 0.7, 2.0])
+    invalid = _invalid_bins() if masked else None
+    compiled = stepped_table(start, ratio, factor, invalid=invalid, fill=-1.0, compiled=True)
+    assert stepped_kernel.compiled_stepping() is not None
+    reference = stepped_table(start, ratio, factor, invalid=invalid, fill=-1.0)  # the NumPy path by default
+    np.testing.assert_array_equal(_bits(compiled), _bits(reference))
+    with without_compiled_passes:  # asked for, but switched off: the NumPy path
+        assert stepped_kernel.compiled_stepping() is None
+        np.testing.assert_array_equal(
+            _bits(stepped_table(start, ratio, factor, invalid=invalid, fill=-1.0, compiled=True)), _bits(reference))
+    # the rows split over threads write the same table
+    np.testing.assert_array_equal(
+        _bits(stepped_table(start, ratio, factor, invalid=invalid, fill=-1.0, compiled=True, threads=3)),
+        _bits(reference))
+
+
+def test_the_host_decode_is_the_same_with_and_without_the_compiled_passes() -> None:
+    rng = np.random.default_rng(4)
+    mapped = (rng.random((63, 90, 90)) * 1.2).astype(np.float32)
+    mapped[:, :5] = 0.0  # flat dark rows and a saturated corner
+    mapped[:, -3:, -3:] = 1.9
+    for masked in ("unmeasured", "zero", "keep"):
+        compiled = table_from_mapped_host(mapped, scale=0.8, masked=masked, compiled=True)
+        reference = table_from_mapped_host(mapped, scale=0.8, masked=masked)
+        np.testing.assert_array_equal(_bits(compiled), _bits(reference))
+
+
+def test_decode_many_and_decode_give_the_same_tables() -> None:
+    from brdfcodec.codec import BrdfDecoder
+    from brdfcodec.format.bvae import LatentRecord
+
+    decoder = BrdfDecoder()
+    codes = np.random.default_rng(5).standard_normal((3, decoder.latent_dim)).astype(np.float32) * 2.5
+    records = [LatentRecord(f"m{i}", code, np.ones(decoder.latent_dim, np.float32)) for i, code in enumerate(codes)]
+    for record, table in zip(records, decoder.decode_many(records, batch_size=1), strict=True):
+        np.testing.assert_array_equal(_bits(table), _bits(decoder.decode(record)))
+
+
+def test_invalid_runs_cover_exactly_the_invalid_bins() -> None:
+    invalid = _invalid_bins()
+    runs = invalid_runs(invalid)
+    rebuilt = np.zeros_like(invalid)
+    for h, d, r in np.ndindex(*runs.shape[:3]):
+        low, high = runs[h, d, r]
+        rebuilt[h, d, low:high] = True
+    np.testing.assert_array_equal(rebuilt, invalid)
+    assert invalid_runs(np.zeros((2, 2, 5), dtype=bool)).shape == (2, 2, 1, 2)
