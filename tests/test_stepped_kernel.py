@@ -92,3 +92,12 @@ def test_invalid_runs_cover_exactly_the_invalid_bins() -> None:
         rebuilt[h, d, low:high] = True
     np.testing.assert_array_equal(rebuilt, invalid)
     assert invalid_runs(np.zeros((2, 2, 5), dtype=bool)).shape == (2, 2, 1, 2)
+
+
+def _not_compilable(value: object) -> None:
+    print(object(), value)  # an arbitrary Python object: Numba's nopython mode refuses it
+
+
+def test_a_kernel_numba_cannot_compile_leaves_the_numpy_path_with_a_warning() -> None:
+    with pytest.warns(RuntimeWarning, match="compiled decode passes are unavailable"):
+        assert stepped_kernel._compiled(_not_compilable, 1) is None

@@ -20,27 +20,43 @@ from __future__ import annotations
 
 import functools
 import os
+import warnings
 from collections.abc import Callable
 
 import numpy as np
 
 __all__ = ["compiled_log_arguments", "compiled_stepping"]
 
-#: Bins from one kept slice to the next (a compile-time constant of the kernel: its inner loop unrolled).
+#: Bins from one kept slice to the next (a compile-time constant of the kernel: its inner loop unrolled), and the
+#: gaps between the 21 kept slices (``conventions.KEPT_PHI_D_SLICES``: 20 gaps of 9 fill the 180 bins).
 _GAP = 9
+_GAP_COUNT = 20
 
 #: Set to 1 to skip the compiled passes (the NumPy and torch paths then run): for comparisons and debugging.
 DISABLE_VARIABLE = "BRDFCODEC_NO_JIT"
 
 
-def _compiled(function: Callable[..., None]) -> Callable[..., None] | None:
+def _compiled(function: Callable[..., None], *example: object) -> Callable[..., None] | None:
+    """``function`` compiled by Numba and run once on ``example`` (small arrays of the real calls' types), or None
+    where Numba is switched off, cannot be imported, or fails to compile (a warning then says so): the caller
+    takes the NumPy path. Cached on disk where Numba finds a writable cache folder, else compiled per process."""
     if os.environ.get(DISABLE_VARIABLE, "") not in ("", "0"):
         return None
     try:
         import numba
     except ImportError:  # pragma: no cover - numba is a dependency; platforms without its wheels
         return None
-    return numba.njit(cache=True, nogil=True, fastmath=False)(function)
+    try:
+        try:
+            kernel = numba.njit(cache=True, nogil=True, fastmath=False)(function)
+        except RuntimeError:  # no writable cache folder ("no locator available"): compiled in this process only
+            kernel = numba.njit(cache=False, nogil=True, fastmath=False)(function)
+        kernel(*example)
+    except Exception as error:  # noqa: BLE001 - any compiler failure: the NumPy path, bit for bit the same output
+        warnings.warn(f"brdfcodec: the compiled decode passes are unavailable ({type(error).__name__}: {error}); "
+                      f"the NumPy path runs (same tables, slower)", RuntimeWarning, stacklevel=3)
+        return None
+    return kernel
 
 
 @functools.cache
@@ -57,7 +73,10 @@ def compiled_stepping() -> Callable[..., None] | None:
     - ``out`` float32 (N, 90, 90, 180), C-contiguous, written at θh rows ``first_row`` … ``stop_row − 1``
       (threads may write disjoint row ranges at once: the kernel releases the GIL).
     """
-    return _compiled(_stepping)
+    kept = _GAP_COUNT + 1
+    return _compiled(_stepping, np.ones((3, 1, 1, kept)), np.ones((3, 1, 1, kept - 1)), np.ones(3),
+                     np.zeros((1, 1, 1, 2), dtype=np.int64), np.float32(-1.0), True,
+                     np.empty((3, 1, 1, _GAP_COUNT * _GAP), dtype=np.float32), 0, 1)
 
 
 @functools.cache
@@ -69,7 +88,9 @@ def compiled_log_arguments() -> Callable[..., None] | None:
     ``(x_b − x_a) / n`` into ``gaps`` float64 (3, 90, 90, 20), kept slice last — the operations of
     ``codec/device_decode.py:table_from_mapped_host``'s torch path, in its order.
     """
-    return _compiled(_log_arguments)
+    kept = _GAP_COUNT + 1
+    return _compiled(_log_arguments, np.ones((3, kept, 1, 1), dtype=np.float32), 1.0, np.full(kept - 1, 9.0),
+                     np.empty((3, 1, 1, kept)), np.empty((3, 1, 1, kept - 1)))
 
 
 def invalid_runs(invalid: np.ndarray) -> np.ndarray:
