@@ -101,3 +101,20 @@ def _not_compilable(value: object) -> None:
 def test_a_kernel_numba_cannot_compile_leaves_the_numpy_path_with_a_warning() -> None:
     with pytest.warns(RuntimeWarning, match="compiled decode passes are unavailable"):
         assert stepped_kernel._compiled(_not_compilable, 1) is None
+
+
+def test_batch_decodes_on_two_threads_at_once_give_each_its_own_tables() -> None:
+    """The compiled passes' working arrays are per thread: two threads decoding at once do not mix them."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    from brdfcodec.codec import BrdfDecoder
+    from brdfcodec.format.bvae import LatentRecord
+
+    decoder = BrdfDecoder()
+    codes = np.random.default_rng(6).standard_normal((4, decoder.latent_dim)).astype(np.float32)
+    records = [LatentRecord(f"m{i}", code, np.ones(decoder.latent_dim, np.float32)) for i, code in enumerate(codes)]
+    expected = [_bits(decoder.decode(record)) for record in records]
+    with ThreadPoolExecutor(2) as pool:
+        halves = list(pool.map(lambda part: list(decoder.decode_many(part, batch_size=1)), [records[:2], records[2:]]))
+    for table, bits in zip(halves[0] + halves[1], expected, strict=True):
+        np.testing.assert_array_equal(_bits(table), bits)

@@ -28,6 +28,7 @@ network output on the device, before the one clamp (§4.4).
 from __future__ import annotations
 
 import functools
+import threading
 from collections.abc import Sequence
 from typing import TYPE_CHECKING, Protocol
 
@@ -292,8 +293,7 @@ def table_from_mapped_host(
     arguments = compiled_log_arguments() if compiled else None
     with torch.no_grad():
         if arguments is not None:  # x = L · m and (x_b − x_a) / n in one compiled pass, the same operations
-            x_array = np.empty((N_CHANNELS, N_THETA_H, N_THETA_D, N_KEPT_SLICES), dtype=np.float64)
-            gaps = np.empty((N_CHANNELS, N_THETA_H, N_THETA_D, N_KEPT_SLICES - 1), dtype=np.float64)
+            x_array, gaps = _scratch()
             arguments(np.ascontiguousarray(array, dtype=np.float32).reshape(
                 N_CHANNELS, N_KEPT_SLICES, N_THETA_H, N_THETA_D), LOG_RANGE, _GAP_STEPS, x_array, gaps)
             x, ratio = torch.from_numpy(x_array), torch.from_numpy(gaps).exp_()
@@ -307,6 +307,20 @@ def table_from_mapped_host(
     return stepped_table(start.numpy(), ratio.numpy(), factor,
                          invalid=None if fill is None else _invalid_bins(), fill=fill or 0.0, out=out,
                          compiled=compiled)
+
+
+_SCRATCH = threading.local()
+
+
+def _scratch() -> tuple[np.ndarray, np.ndarray]:
+    """This thread's float64 working arrays of the compiled host passes (x at the kept slices, and the gaps'
+    arguments; 8 MB together), reused from table to table: a new pair per table cost its page faults."""
+    arrays = getattr(_SCRATCH, "arrays", None)
+    if arrays is None:
+        arrays = (np.empty((N_CHANNELS, N_THETA_H, N_THETA_D, N_KEPT_SLICES), dtype=np.float64),
+                  np.empty((N_CHANNELS, N_THETA_H, N_THETA_D, N_KEPT_SLICES - 1), dtype=np.float64))
+        _SCRATCH.arrays = arrays
+    return arrays
 
 
 def _mask_fill(masked: str) -> float | None:
