@@ -54,7 +54,7 @@ from brdfcodec.representation.highlight_guard import guard_highlight
 from brdfcodec.representation.layout import interpolation_plan
 from brdfcodec.representation.mapping import LOG_RANGE
 from brdfcodec.representation.mask import horizon_mask
-from brdfcodec.representation.network_io import stepped_table
+from brdfcodec.representation.network_io import _GAP_LENGTHS, stepped_table
 from brdfcodec.representation.stepped_kernel import compiled_log_arguments
 from brdfcodec.runtime.threads import codec_threads
 
@@ -86,9 +86,6 @@ __all__ = [
 _GAP = KEPT_PHI_D_SLICES[1] - KEPT_PHI_D_SLICES[0]
 #: ε / S_c per channel: stored units per unit of ``expm1`` (as in ``representation/network_io.py``).
 _STORED_PER_EXPM1 = EPSILON / np.asarray(MERL_COLOR_SCALE, dtype=np.float64)
-#: Bins in each gap between kept slices (float64, as the steps divide by them).
-_GAP_STEPS = np.diff(np.asarray(KEPT_PHI_D_SLICES)).astype(np.float64)
-_GAP_STEPS.setflags(write=False)
 #: Records whose energy bound is computed at once on the CPU (the float64 working arrays stay in cache).
 _CPU_CHUNK = 1
 #: Records unmapped at once on other devices (float64 working arrays of about 35 MB a record).
@@ -117,7 +114,7 @@ def _constants(device: torch.device) -> dict[str, torch.Tensor]:
     """Per-device constants: the below-horizon bins, the gap lengths, ε / S_c (built once per device)."""
     return {
         "invalid": torch.from_numpy(~horizon_mask()).to(device),  # (90, 90, 180) bool
-        "steps": torch.from_numpy(np.diff(np.asarray(KEPT_PHI_D_SLICES)).astype(np.float64)).to(device),  # (20,)
+        "steps": torch.from_numpy(_GAP_LENGTHS.copy()).to(device),  # (20,)
         "stored": torch.from_numpy(_STORED_PER_EXPM1.copy()).to(device),  # (3,) float64
     }
 
@@ -295,7 +292,7 @@ def table_from_mapped_host(
         if arguments is not None:  # x = L · m and (x_b − x_a) / n in one compiled pass, the same operations
             x_array, gaps = _scratch()
             arguments(np.ascontiguousarray(array, dtype=np.float32).reshape(
-                N_CHANNELS, N_KEPT_SLICES, N_THETA_H, N_THETA_D), LOG_RANGE, _GAP_STEPS, x_array, gaps)
+                N_CHANNELS, N_KEPT_SLICES, N_THETA_H, N_THETA_D), LOG_RANGE, _GAP_LENGTHS, x_array, gaps)
             x, ratio = torch.from_numpy(x_array), torch.from_numpy(gaps).exp_()
         else:
             kept = torch.from_numpy(np.require(array, np.float32, ("C", "W"))).view(

@@ -25,12 +25,14 @@ from collections.abc import Callable
 
 import numpy as np
 
+from brdfcodec.conventions import KEPT_PHI_D_SLICES, N_KEPT_SLICES
+
 __all__ = ["compiled_log_arguments", "compiled_stepping"]
 
 #: Bins from one kept slice to the next (a compile-time constant of the kernel: its inner loop unrolled), and the
 #: gaps between the 21 kept slices (``conventions.KEPT_PHI_D_SLICES``: 20 gaps of 9 fill the 180 bins).
-_GAP = 9
-_GAP_COUNT = 20
+_GAP = KEPT_PHI_D_SLICES[1] - KEPT_PHI_D_SLICES[0]
+_GAP_COUNT = N_KEPT_SLICES - 1
 
 #: Set to 1 to skip the compiled passes (the NumPy and torch paths then run): for comparisons and debugging.
 DISABLE_VARIABLE = "BRDFCODEC_NO_JIT"
