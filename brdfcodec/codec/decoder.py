@@ -563,7 +563,7 @@ class BrdfDecoder:
 
         The work after the network runs compiled (Numba, :mod:`brdfcodec.representation.stepped_kernel`), the
         tables bit for bit :meth:`decode`'s: the first batch decode of a process imports Numba and loads the
-        kernels (about 1 s and 100 MB, once); ``BRDFCODEC_NO_JIT=1`` keeps the NumPy path.
+        kernels (a one-time cost in time and memory); ``BRDFCODEC_NO_JIT=1`` keeps the NumPy path.
         """
         for record in records:
             self._check_record(record)

@@ -270,8 +270,8 @@ def table_from_mapped_host(
         Where to write the table (C-contiguous; a CPU tensor's ``.numpy()``, say); a new array by default.
     compiled : bool, default False
         The passes before and after the exponentials compiled (:mod:`~brdfcodec.representation.stepped_kernel`,
-        Numba), bit for bit the same table in about half the time; the batch decodes ask for them (their first
-        use in a process costs about 1 s and 100 MB).
+        Numba), bit for bit the same table, faster; the batch decodes ask for them (their first use in a process
+        imports Numba: a one-time cost in time and memory).
 
     Returns
     -------
@@ -311,7 +311,7 @@ _SCRATCH = threading.local()
 
 def _scratch() -> tuple[np.ndarray, np.ndarray]:
     """This thread's float64 working arrays of the compiled host passes (x at the kept slices, and the gaps'
-    arguments; 8 MB together), reused from table to table: a new pair per table cost its page faults."""
+    arguments), reused from table to table: a new pair per table cost its page faults."""
     arrays = getattr(_SCRATCH, "arrays", None)
     if arrays is None:
         arrays = (np.empty((N_CHANNELS, N_THETA_H, N_THETA_D, N_KEPT_SLICES), dtype=np.float64),

@@ -242,9 +242,10 @@ def stepped_table(
     out : ndarray of float32, shape (..., 3, 90, 90, 180), optional
         Where to write the table (C-contiguous); a new array by default.
     compiled : bool, default False
-        Step in one compiled pass (:mod:`~brdfcodec.representation.stepped_kernel`), bit for bit the same table,
-        about 3× faster, where Numba imports (else the NumPy path). Its first use in a process imports Numba and
-        loads the kernel (about 1 s and 100 MB): for batch decodes, not for one table.
+        Step in one compiled pass (:mod:`~brdfcodec.representation.stepped_kernel`), bit for bit the same table and
+        faster, where Numba imports (else the NumPy path). Its first use in a process imports Numba and loads the
+        kernel, a one-time cost in time and memory: for batch decodes, not for one table
+        (``benchmarks/test_bench_decode_path.py``, ``benchmarks/test_bench_memory.py``).
     threads : int, optional
         Threads of the compiled pass (the NumPy path runs on the calling thread): the codec's thread count by
         default (:func:`~brdfcodec.runtime.threads.get_num_threads`).

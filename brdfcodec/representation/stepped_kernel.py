@@ -11,7 +11,7 @@ reordered and the output is bit for bit the NumPy path's (``tests/test_stepped_k
 Numba is a dependency of the package; where it cannot be imported (a platform without its wheels),
 :func:`compiled_stepping` returns None and the NumPy path runs. The kernel is compiled on first use and cached on
 disk (Numba's cache: next to this file, or the user's cache directory where that is read-only): the first decode in
-a fresh environment takes a few seconds longer. It runs without Numba's threading layer (no second OpenMP pool
+a fresh environment takes longer. It runs without Numba's threading layer (no second OpenMP pool
 beside torch's, nothing unsafe across ``fork``): the caller splits the θh rows over its own threads, the kernel
 releasing the GIL.
 """
