@@ -6,7 +6,8 @@ table consumed), and ``BrdfDecoder.decode_many_tensor`` (the same tables as one 
 on the decoder's device), each against the decoder network alone on the same latents, in batches of the same
 size, on the same torch threads (``codec_threads``). Paired: each round times both, alternating, so that a shared
 machine's drift falls on both; the ratio checked is the median of the per-round ratios (targets in
-``conftest.TARGETS``, "decode-many-32" and "decode-many-tensor-32").
+``conftest.TARGETS``, "decode-many-32", "decode-many-tensor-32" and "decode-many-tensor-out-32", the last
+decoding into one tensor reused from round to round, as a renderer that decodes batch after batch would).
 """
 
 from __future__ import annotations
@@ -79,3 +80,13 @@ def test_decode_many_tensor_against_the_network_alone(benchmark) -> None:  # noq
         assert tables.shape == (_COUNT, 3, 90, 90, 180)
 
     _paired_against_the_network(benchmark, "decode-many-tensor-32", "decode_many_tensor", decode_many_tensor)
+
+
+def test_decode_many_tensor_into_a_reused_out_against_the_network_alone(benchmark) -> None:  # noqa: ANN001
+    out = torch.empty((_COUNT, 3, 90, 90, 180))  # a renderer's buffer, decoded into batch after batch
+
+    def decode_many_tensor_into_out(decoder: BrdfDecoder, codes: np.ndarray, records: list[LatentRecord]) -> None:
+        assert decoder.decode_many_tensor(records, batch_size=_BATCH, out=out) is out
+
+    _paired_against_the_network(benchmark, "decode-many-tensor-out-32", "decode_many_tensor(out=)",
+                                decode_many_tensor_into_out)

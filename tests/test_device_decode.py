@@ -130,6 +130,42 @@ def test_bad_input_is_refused_with_a_value_error(decoder: BrdfDecoder) -> None:
         decoder.decode_many_tensor([LatentRecord("a", np.zeros(8), np.ones(8)), np.zeros(8)])  # type: ignore[list-item]
 
 
+def test_tables_are_written_into_a_given_out_tensor_that_can_be_reused(decoder: BrdfDecoder) -> None:
+    codes = extreme_codes(decoder.latent_dim)[:3]
+    out = torch.full((3, 3, 90, 90, 180), float("nan"))
+    assert decoder.decode_many_tensor(codes, out=out) is out
+    assert torch.equal(out, decoder.decode_many_tensor(codes))
+    # Reused for other materials: records (an edited one takes the energy bound), every entry rewritten.
+    records = plain(codes[::-1].copy())
+    shifted = records[1].mu.copy()
+    shifted[0] += 2.0
+    records[1] = with_parameters(records[1], shifted, name="m1.z1+2", edit={"op": "traverse"})
+    assert decoder.decode_many_tensor(records, masked="zero", out=out) is out
+    assert torch.equal(out, decoder.decode_many_tensor(records, masked="zero"))
+    empty = torch.empty((0, 3, 90, 90, 180))
+    assert decoder.decode_many_tensor([], out=empty) is empty
+
+
+def test_an_out_tensor_tables_cannot_go_into_is_refused_before_any_work(decoder: BrdfDecoder) -> None:
+    codes = np.zeros((2, decoder.latent_dim), np.float32)
+    wrong = {
+        "shape": torch.zeros((3, 3, 90, 90, 180)),
+        "dtype": torch.zeros((2, 3, 90, 90, 180), dtype=torch.float64),
+        "contiguous": torch.zeros((2, 3, 90, 180, 90)).transpose(3, 4),
+        "decoded on": torch.empty((2, 3, 90, 90, 180), device="meta"),
+    }
+    for message, out in wrong.items():
+        before = out.clone() if out.device.type != "meta" else None
+        with pytest.raises(ValueError, match=message):
+            decoder.decode_many_tensor(codes, out=out)
+        if before is not None:
+            assert torch.equal(out, before)  # nothing written
+    with pytest.raises(ValueError, match="shape"):
+        decoder.decode_many_tensor(plain(codes), out=torch.zeros((1, 3, 90, 90, 180)))
+    with pytest.raises(TypeError, match="torch.Tensor"):
+        decoder.decode_many_tensor(codes, out=np.zeros((2, 3, 90, 90, 180), np.float32))  # type: ignore[arg-type]
+
+
 def test_the_tables_go_through_dlpack_without_a_copy(decoder: BrdfDecoder) -> None:
     tables = decoder.decode_many_tensor(np.zeros((1, decoder.latent_dim), np.float32))
     shared = torch.utils.dlpack.from_dlpack(torch.utils.dlpack.to_dlpack(tables))

@@ -592,6 +592,7 @@ class BrdfDecoder:
         masked: MaskedEntries = "unmeasured",
         energy_bound: bool | None = None,
         batch_size: int = 16,
+        out: torch.Tensor | None = None,
     ) -> torch.Tensor:
         """Full tables of many records (or latent codes) as one torch tensor on the decoder's device.
 
@@ -615,21 +616,29 @@ class BrdfDecoder:
             default, exactly for edited records (:func:`is_edited`), never for bare codes.
         batch_size : int, default 16
             Codes run through the network at once.
+        out : torch.Tensor of float32, shape (N, 3, 90, 90, 180), optional
+            A contiguous tensor on :attr:`device` to write the tables into, for a renderer that decodes batch
+            after batch into the same memory (a new 17.5 MB a table is otherwise allocated and first touched on
+            every call); a new tensor by default.
 
         Returns
         -------
         torch.Tensor of float32, shape (N, 3, 90, 90, 180)
-            Stored MERL units, on :attr:`device` (17.5 MB a table: ask for as many as the device holds).
+            Stored MERL units, on :attr:`device` (17.5 MB a table: ask for as many as the device holds); ``out``
+            itself when given.
 
         Raises
         ------
         ValueError
-            Codes of the wrong width or not finite, a bad ``masked`` or ``batch_size``, or a record of another
-            latent size.
+            Codes of the wrong width or not finite, a bad ``masked`` or ``batch_size``, a record of another
+            latent size, or an ``out`` of another shape, dtype or device, or not contiguous.
+        TypeError
+            ``out`` is not a tensor.
         """
         from brdfcodec.codec.device_decode import decode_many_tensor
 
-        return decode_many_tensor(self, records, masked=masked, energy_bound=energy_bound, batch_size=batch_size)
+        return decode_many_tensor(self, records, masked=masked, energy_bound=energy_bound, batch_size=batch_size,
+                                  out=out)
 
     def _check_record(self, record: Record) -> None:
         if record.latent_dim != self.latent_dim:

@@ -78,8 +78,8 @@ class BrdfDecoder(Protocol):
     def _check_record(self, record: Record) -> None: ...
 
 __all__ = [
-    "clamp_mapped_tensor", "decode_many_tensor", "energy_bound_scales_tensor", "table_from_mapped_host",
-    "tables_from_mapped_tensor",
+    "check_tables_out", "clamp_mapped_tensor", "decode_many_tensor", "energy_bound_scales_tensor",
+    "table_from_mapped_host", "tables_from_mapped_tensor",
 ]
 
 #: Bins from one kept slice to the next (the last gap, 171 → 179, holds 8).
@@ -184,8 +184,44 @@ def _unmap_chunk(kept: torch.Tensor, factor: torch.Tensor, target: torch.Tensor)
     target[..., N_PHI_D - 1] = (start[..., -1] - scale[..., 0]).float()  # bin 179, a kept slice of its own
 
 
+def check_tables_out(out: torch.Tensor, count: int, device: torch.device) -> None:
+    """Refuse an ``out`` tensor that full tables cannot be written into.
+
+    Parameters
+    ----------
+    out : torch.Tensor
+        Must be float32, contiguous, of shape (count, 3, 90, 90, 180), on ``device``.
+    count : int
+        Tables to write.
+    device : torch.device
+        Where they are decoded.
+
+    Raises
+    ------
+    TypeError
+        ``out`` is not a torch tensor.
+    ValueError
+        Its shape, dtype, device or layout is not the one above (the message says which).
+    """
+    if not isinstance(out, torch.Tensor):
+        raise TypeError(f"out must be a torch.Tensor, got {type(out).__name__}")
+    shape = (count, N_CHANNELS, N_THETA_H, N_THETA_D, N_PHI_D)
+    if tuple(out.shape) != shape:
+        raise ValueError(f"out has shape {tuple(out.shape)}; {count} tables need {shape}")
+    if out.dtype != torch.float32:
+        raise ValueError(f"out has dtype {out.dtype}; tables are torch.float32")
+    if out.device != torch.device(device):
+        raise ValueError(f"out is on {out.device}; the tables are decoded on {device}")
+    if not out.is_contiguous():
+        raise ValueError("out must be contiguous")
+
+
 def tables_from_mapped_tensor(
-    mapped: torch.Tensor, scales: torch.Tensor | None = None, *, masked: MaskedEntries = "unmeasured"
+    mapped: torch.Tensor,
+    scales: torch.Tensor | None = None,
+    *,
+    masked: MaskedEntries = "unmeasured",
+    out: torch.Tensor | None = None,
 ) -> torch.Tensor:
     """Full tables in stored MERL units from clamped mapped slices, on their device.
 
@@ -198,16 +234,22 @@ def tables_from_mapped_tensor(
         the interpolated table; 1 by default.
     masked : {"unmeasured", "zero", "keep"}, default "unmeasured"
         Below-horizon bins: −1, 0, or the decoded value.
+    out : torch.Tensor of float32, shape (B, 3, 90, 90, 180), optional
+        Where to write the tables (contiguous, on ``mapped``'s device; checked by :func:`check_tables_out`);
+        a new tensor by default.
 
     Returns
     -------
     torch.Tensor of float32, shape (B, 3, 90, 90, 180)
-        On ``mapped``'s device; finite, ≥ 0 above the horizon.
+        ``out`` when given; on ``mapped``'s device; finite, ≥ 0 above the horizon.
     """
     fill = _mask_fill(masked)
     count = mapped.shape[0]
+    if out is not None:
+        check_tables_out(out, count, mapped.device)
     if mapped.device.type == "cpu":  # the host decode, written into the tensor: the same steps, in fewer passes
-        out = torch.empty((count, N_CHANNELS, N_THETA_H, N_THETA_D, N_PHI_D), dtype=torch.float32)
+        if out is None:
+            out = torch.empty((count, N_CHANNELS, N_THETA_H, N_THETA_D, N_PHI_D), dtype=torch.float32)
         tables, slices = out.numpy(), mapped.detach().numpy()
         factors = [1.0] * count if scales is None else scales.detach().to(torch.float64).reshape(count).tolist()
         for i in range(count):
@@ -219,7 +261,9 @@ def tables_from_mapped_tensor(
     if scales is not None:
         factors *= scales.to(mapped.device, torch.float64).reshape(count, 1)
     kept = mapped.reshape(count, N_CHANNELS, N_KEPT_SLICES, N_THETA_H, N_THETA_D).permute(0, 1, 3, 4, 2)
-    out = torch.empty((count, N_CHANNELS, N_THETA_H, N_THETA_D, N_PHI_D), dtype=torch.float32, device=mapped.device)
+    if out is None:
+        out = torch.empty((count, N_CHANNELS, N_THETA_H, N_THETA_D, N_PHI_D), dtype=torch.float32,
+                          device=mapped.device)
     chunk, rows = _DEVICE_CHUNK, N_THETA_H
     for start in range(0, count, chunk):
         records = slice(start, start + chunk)
@@ -400,6 +444,7 @@ def decode_many_tensor(
     masked: MaskedEntries = "unmeasured",
     energy_bound: bool | None = None,
     batch_size: int = 16,
+    out: torch.Tensor | None = None,
 ) -> torch.Tensor:
     """:meth:`BrdfDecoder.decode_many_tensor <brdfcodec.codec.BrdfDecoder.decode_many_tensor>` (see there)."""
     if batch_size < 1:
@@ -409,8 +454,12 @@ def decode_many_tensor(
     as_records = given is not None and len(given) > 0 and any(isinstance(r, Record) for r in given)
     if as_records and not all(isinstance(r, Record) for r in given):  # type: ignore[union-attr]
         raise TypeError("records must be a sequence of records, or latent codes of shape (B, latent_dim)")
+    codes = None if as_records or (given is not None and not given) else _codes_tensor(decoder, records)
+    if out is not None:  # refused before any work
+        check_tables_out(out, len(given) if codes is None else len(codes), decoder.device)  # type: ignore[arg-type]
     if given is not None and not given:
-        return torch.empty((0, N_CHANNELS, N_THETA_H, N_THETA_D, N_PHI_D), device=decoder.device)
+        return out if out is not None else torch.empty((0, N_CHANNELS, N_THETA_H, N_THETA_D, N_PHI_D),
+                                                       device=decoder.device)
     with codec_threads(), torch.no_grad():
         if as_records:
             for record in given:  # type: ignore[union-attr]
@@ -419,7 +468,7 @@ def decode_many_tensor(
             # By default the bound is for edits (records whose metadata holds "edit": decoder.is_edited).
             bounded = [energy_bound if energy_bound is not None else "edit" in r.meta for r in given]  # type: ignore[union-attr]
         else:
-            mapped = _network_mapped(decoder, _codes_tensor(decoder, records), batch_size)
+            mapped = _network_mapped(decoder, codes, batch_size)
             bounded = [bool(energy_bound)] * len(mapped)
         scales = None
         if any(bounded):
@@ -429,4 +478,4 @@ def decode_many_tensor(
             for start in range(0, len(which), chunk):
                 part = which[start : start + chunk]
                 scales[part] = energy_bound_scales_tensor(mapped[part])
-        return tables_from_mapped_tensor(mapped, scales, masked=masked)
+        return tables_from_mapped_tensor(mapped, scales, masked=masked, out=out)
