@@ -105,6 +105,32 @@ def test_bad_source_file_aborts_and_leaves_nothing(merl_folder: Path, tmp_path: 
     assert sorted(p.name for p in tmp_path.iterdir()) == ["in"]
 
 
+def test_materials_loaded_on_several_threads_give_the_same_file(merl_dataset: Path, merl_folder: Path,
+                                                                  tmp_path: Path) -> None:
+    out = tmp_path / "threads.h5"
+    build_dataset(out, merl_folder_sources(merl_folder), source_kind="merl", description="test tables",
+                  validation_fraction=0.4, seed=1, progress=False, jobs=3)
+    with h5py.File(merl_dataset) as serial, h5py.File(out) as threaded:
+        assert set(serial) == set(threaded)
+        for key in ("names", "split", "origins", "families", "source_kinds", "source_sha256", "inputs",
+                    "input_masks", "tables"):
+            assert np.array_equal(serial[key][()], threaded[key][()]), key
+
+
+def test_a_bad_source_on_several_threads_aborts_in_order_and_leaves_nothing(merl_folder: Path,
+                                                                             tmp_path: Path) -> None:
+    folder = tmp_path / "in"
+    shutil.copytree(merl_folder, folder)
+    (folder / "a-broken.binary").write_bytes(b"\0" * 100)  # first in order; the others load beside it
+    out = tmp_path / "out.h5"
+    with pytest.raises(MerlFormatError, match="a-broken.binary"):
+        build_dataset(out, merl_folder_sources(folder), source_kind="merl", description="x", progress=False, jobs=4)
+    assert not out.exists()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["in"]
+    with pytest.raises(ValueError, match="jobs"):
+        build_dataset(out, merl_folder_sources(merl_folder), source_kind="merl", description="x", jobs=0)
+
+
 def test_folder_errors(tmp_path: Path) -> None:
     with pytest.raises(SourceFormatError, match="no MERL .binary files"):
         merl_folder_sources(tmp_path)

@@ -56,6 +56,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     build.add_argument("--no-tables", action="store_true", help="omit full 90x90x180 tables (smaller file)")
     build.add_argument("--force", action="store_true", help="replace an existing output file")
     build.add_argument("--quiet", action="store_true", help="no progress bar")
+    build.add_argument("--jobs", type=int, default=1, metavar="N",
+                       help="materials read or tabulated at once, on threads (default 1; the file is the same "
+                            "for any N; RGL measurements load one at a time)")
     build.set_defaults(handler=run_build)
 
 
@@ -123,12 +126,14 @@ def run_build(args: argparse.Namespace) -> int:
               "--analytic or --random N", file=sys.stderr)
         return 2
     require_output_type(args.output, "dataset build", "an HDF5 dataset", (".h5",))
+    if args.jobs < 1:
+        raise ValueError(f"--jobs must be at least 1, got {args.jobs}")
     sources = collect_sources(args)
     start = time.perf_counter()
     build_dataset(
         args.output, sources, description=_describe_sources(sources),
         validation_fraction=args.validation_fraction, seed=args.seed,
-        include_tables=not args.no_tables, overwrite=args.force, progress=not args.quiet,
+        include_tables=not args.no_tables, overwrite=args.force, progress=not args.quiet, jobs=args.jobs,
     )
     elapsed = time.perf_counter() - start
     size = args.output.stat().st_size

@@ -10,7 +10,9 @@ from __future__ import annotations
 
 import datetime
 import os
-from collections.abc import Sequence
+from collections import deque
+from collections.abc import Iterator, Sequence
+from concurrent.futures import Future, ThreadPoolExecutor
 from pathlib import Path
 from types import TracebackType
 from typing import Final
@@ -29,7 +31,7 @@ from brdfcodec.conventions import (
     TABLE_SHAPE,
     UNMEASURED_VALUE,
 )
-from brdfcodec.datasets.sources import MaterialSource
+from brdfcodec.datasets.sources import LoadedMaterial, MaterialSource
 from brdfcodec.datasets.split import TRAIN, VALIDATION, split_by_family
 from brdfcodec.errors import DatasetError
 from brdfcodec.io.atomic import atomic_output
@@ -89,6 +91,7 @@ def build_dataset(
     include_tables: bool = True,
     overwrite: bool = False,
     progress: bool = True,
+    jobs: int = 1,
 ) -> Path:
     """Write a dataset file from material sources, atomically.
 
@@ -117,6 +120,10 @@ def build_dataset(
         Replace an existing file.
     progress : bool, default True
         Show a progress bar on stderr.
+    jobs : int, default 1
+        Materials loaded (read or tabulated, then mapped to network inputs) at once, on threads; the file is
+        written on the calling thread in the sources' order, so that its content does not depend on ``jobs``.
+        RGL measurements, tabulated through Mitsuba, are loaded on the calling thread whatever ``jobs`` is.
 
     Returns
     -------
@@ -125,6 +132,8 @@ def build_dataset(
     """
     if not sources:
         raise ValueError("no materials to write")
+    if jobs < 1:
+        raise ValueError(f"jobs must be at least 1, got {jobs}")
     names = [source.name for source in sources]
     _check_distinct(sources)
     families = [source.family for source in sources]
@@ -168,14 +177,46 @@ def build_dataset(
                 "tables", shape=(n, *TABLE_SHAPE), dtype=np.float32,
                 chunks=(1, 1, *TABLE_SHAPE[1:]), **_COMPRESSION,
             )
-        for index, source in enumerate(tqdm(sources, desc="materials", unit="mat", disable=not progress)):
-            loaded = source.load()
-            inputs[index], masks[index] = network_input_from_table(loaded.brdf.values, loaded.brdf.mask)
+        bar = tqdm(total=n, desc="materials", unit="mat", disable=not progress)
+        for index, (loaded, network_input, mask) in enumerate(_loaded_in_order(sources, jobs)):
+            inputs[index], masks[index] = network_input, mask
             digests[index] = loaded.source_sha256
             genuine[index] = loaded.genuine_merl
             if tables is not None:
                 tables[index] = np.where(loaded.brdf.mask, loaded.brdf.values, UNMEASURED_VALUE)
+            bar.update()
+        bar.close()
     return Path(output)
+
+
+def _load_one(source: MaterialSource) -> tuple[LoadedMaterial, np.ndarray, np.ndarray]:
+    loaded = source.load()
+    return (loaded, *network_input_from_table(loaded.brdf.values, loaded.brdf.mask))
+
+
+def _loaded_in_order(
+    sources: Sequence[MaterialSource], jobs: int
+) -> Iterator[tuple[LoadedMaterial, np.ndarray, np.ndarray]]:
+    """Each source loaded with its network input and mask, in order; up to ``jobs`` loading at once (at most
+    2 · ``jobs`` materials held in memory ahead of the writer). A load's error is raised in the sources' order, and
+    the loads not yet started are cancelled."""
+    if jobs == 1:
+        yield from map(_load_one, sources)
+        return
+    pending: deque[Future[tuple[LoadedMaterial, np.ndarray, np.ndarray]] | MaterialSource] = deque()
+    upcoming = iter(sources)
+    executor = ThreadPoolExecutor(max_workers=jobs, thread_name_prefix="brdfcodec-dataset")
+    try:
+        while True:
+            while len(pending) < 2 * jobs and (source := next(upcoming, None)) is not None:
+                # Mitsuba (RGL measurements) is not asked to load on several threads: those load in turn, here.
+                pending.append(source if source.source_kind == RGL_SOURCE_KIND else executor.submit(_load_one, source))
+            if not pending:
+                return
+            head = pending.popleft()
+            yield _load_one(head) if isinstance(head, MaterialSource) else head.result()
+    finally:
+        executor.shutdown(wait=True, cancel_futures=True)
 
 
 def _check_distinct(sources: Sequence[MaterialSource]) -> None:
