@@ -1,0 +1,153 @@
+"""Collect the from-scratch supervision study (issue 50 item 3, trained on one H100) into one rows file.
+
+usage (repository root; the runs restored by benchmarks/device/training/restore_runs.py into runs/dev1, the models
+exported into runs/models/dev1-NAME, the measurements of reports/disentanglement/from-scratch-supervision.txt's
+header in runs/dev1/eval):
+
+    python reports/disentanglement/from_scratch_rows.py
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from brdfcodec.datasets.hdf5 import BrdfDataset
+from brdfcodec.report.rows import read_rows, stamp, write_rows
+
+RUNS = Path("runs/dev1")
+EVAL = RUNS / "eval"
+MODELS = {"bvae-nbrdf-proxy-small-v3": "brdfcodec/data/models/default",
+          **{f"bvae-scratch-{name}": f"runs/models/dev1-{name}" for name in ("w0", "w3k", "w10k", "w30k")}}
+DEVICE = "cuda: NVIDIA H100 80GB HBM3 (driver 580.159.04), four runs side by side"
+
+
+def training_rows() -> list[dict]:
+    rows = []
+    scored = {json.loads(line)["run"]: json.loads(line)
+              for line in (RUNS / "device-logs/logs/eval.jsonl").read_text().splitlines() if line.strip()}
+    plan = {line.split()[0]: line.split()[1:] for line in (RUNS / "device-logs/logs/plan.txt").read_text().splitlines()}
+    for name, score in sorted(scored.items()):
+        log = [json.loads(line) for line in (RUNS / name / "log.jsonl").read_text().splitlines() if line.strip()]
+        summary = json.loads((RUNS / name / "summary.json").read_text())
+        config = json.loads((RUNS / name / "run.json").read_text())["train_config"]
+        rows.append({
+            "kind": "training", "model": f"bvae-scratch-{name}", "device": DEVICE, "torch": "2.11.0+cu130",
+            "command": (RUNS / f"cmd-{name}.txt").read_text().strip(), "factor_weight": config["factor_weight"],
+            "epochs_planned": int(plan[name][0]), "epochs_done": summary["epochs_done"],
+            "weights_epoch": score["epoch"], "stop_reason": summary["stop_reason"],
+            "seconds": summary["seconds_this_session"], "seconds_per_epoch_probe": float(plan[name][2]),
+            "last_epoch": {k: log[-1][k] for k in ("lr", "recon", "kl", "traversal", "factor")},
+            "device_scores": {k: score[k] for k in ("mig", "dci_d", "dci_c", "dci_i", "relae_all", "relae")},
+        })
+    return rows
+
+
+def reconstruction_rows() -> list[dict]:
+    with BrdfDataset("runs/both.h5") as dataset:
+        family = dict(zip(dataset.names, dataset.families, strict=True))
+    rows = []
+    for name, folder in MODELS.items():
+        info = json.loads(Path(folder, "model.json").read_text())["info"]
+        per: dict[str, list[dict]] = {}
+        for error in info["errors"]:
+            per.setdefault(family[error["name"]], []).append(error)
+        for fam, errors in sorted(per.items()):
+            rows.append({"kind": "reconstruction", "model": name, "family": fam, "split": "train",
+                         "count": len(errors), "effort": 0,
+                         "relae_mapped": sum(e["relae_mapped"] for e in errors) / len(errors),
+                         "relae_linear": sum(e["relae_linear"] for e in errors) / len(errors),
+                         "command": "bvae model export (model.json info.errors: μ of the encoder decoded, mapped "
+                                    "RelAE on the full table of each of the 120 materials of runs/both.h5)"})
+        held_out = EVAL / f"evaluate-{Path(folder).name}.json"
+        if held_out.exists() and held_out.stat().st_size:
+            for row in json.loads(held_out.read_text()):
+                rows.append({"kind": "evaluation", "model": name, **row, "effort": 0,
+                             "command": f"bvae model evaluate {folder} --dataset runs/v3-held-out.h5 --json"})
+    for line in (EVAL / "refine_probe.jsonl").read_text().splitlines():
+        probe = json.loads(line)
+        label = {"v3": "bvae-nbrdf-proxy-small-v3"}.get(probe["model"], f"bvae-scratch-{probe['model']}")
+        rows.append({"kind": "refinement", **probe, "model": label,
+                     "command": "python reports/disentanglement/refinement_probe.py "
+                                "> runs/dev1/eval/refine_probe.jsonl "
+                                "(BrdfEncoder(effort=E).encode, decode, mapped RelAE on the full table; every 4th "
+                                "of the 120 materials of runs/both.h5)"})
+    return rows
+
+
+HEADER = """\
+# Factor supervision from scratch (issue 50 item 3): four models of the release recipe trained side by side on one
+# NVIDIA H100 (torch 2.11.0+cu130), all 120 materials of the NBRDF proxies (90 MERL, 30 RGL; neural fits, not
+# measurements), each `bvae train` run stopped by the session's time limit (epochs below), weights of its last
+# evaluation. Runner: benchmarks/device/training/train_side_by_side.sh (configs: from-scratch-supervision.configs).
+# Export here: bvae model export runs/dev1/RUN -o runs/models/dev1-RUN --name bvae-scratch-RUN --dataset runs/both.h5
+#   --basis-count 0 --align-factors 300 --keep-axes (axes as trained; no shared basis: measured, not shipped)
+# Benchmark: bvae model disentanglement brdfcodec/data/models/default runs/models/dev1-{w0,w3k,w10k,w30k}
+#   --materials 300 --seed S (S = 0, as reports/disentanglement/default-model.txt, and 2)
+# Never-seen materials: bvae model evaluate MODEL --dataset runs/v3-held-out.h5 (24 random analytic, 1 real RGL)
+# Rows: python reports/disentanglement/from_scratch_rows.py -> from-scratch-supervision.jsonl
+"""
+
+
+def text(rows: list[dict]) -> str:
+    """The study's tables, from its rows."""
+    lines = [HEADER]
+    for seed in (0, 2):
+        lines.append(f"MIG and DCI, 300 analytic materials of seed {seed} (base RelAE: the model's decode of them)")
+        lines.append(f"{'code':<28}{'MIG':>7}{'DCI-D':>7}{'DCI-C':>7}{'DCI-I':>7}{'base RelAE':>12}")
+        for row in rows:
+            if row.get("study") == "disentanglement" and row["seed"] == seed:
+                lines.append(f"{row['model']:<28}{row['mig']:7.3f}{row['dci_disentanglement']:7.3f}"
+                             f"{row['dci_completeness']:7.3f}{row['dci_informativeness']:7.3f}"
+                             f"{row['base_relae_kept_mapped']:12.4f}")
+        lines.append("")
+    lines.append("dominant factor of each dimension, seed 0 (share of the dimension's importance):")
+    for row in rows:
+        if row.get("study") == "disentanglement" and row["seed"] == 0 and row["code"] == "model":
+            pairs = zip(row["dominant_factor"], row["dominant_share"], strict=True)
+            dims = ", ".join(f"z{i + 1} {factor} ({share:.2f})" for i, (factor, share) in enumerate(pairs))
+            lines.append(f"  {row['model']}: {dims}")
+    lines.append("")
+    lines.append("Reconstruction, mapped RelAE of the encoder's μ decoded (effort 0), full tables:")
+    lines.append(f"{'model':<28}{'MERL 90 (train)':>16}{'RGL 30 (train)':>16}{'analytic 24 (never)':>21}"
+                 f"{'real RGL 1 (never)':>20}")
+    for model in MODELS:
+        cell = {}
+        for row in rows:
+            if row.get("model") != model:
+                continue
+            if row.get("kind") == "reconstruction":
+                cell[row["family"]] = row["relae_mapped"]
+            if row.get("kind") == "evaluation" and row["split"] == "held-out":
+                cell[f"{row['family']}-never"] = row["mapped"]
+        values = [cell.get(k) for k in ("merl", "rgl", "analytic-never", "rgl-never")]
+        lines.append(f"{model:<28}" + "".join(f"{'—' if v is None else f'{v:.4f}':>{w}}"
+                                              for v, w in zip(values, (16, 16, 21, 20), strict=True)))
+    lines.append("")
+    lines.append("Latent refinement (BrdfEncoder effort), every 4th of the 120 materials, mapped RelAE:")
+    for row in rows:
+        if row.get("kind") == "refinement":
+            per = ", ".join(f"{k} {v:.4f}" for k, v in sorted(row["relae_mapped"].items()))
+            lines.append(f"  {row['model']:<28} effort {row['effort']}: all {row['all']:.4f} ({per})")
+    lines.append("")
+    lines.append("Training (one H100, four runs side by side):")
+    for row in rows:
+        if row.get("kind") == "training":
+            last = row["last_epoch"]
+            lines.append(f"  {row['model']:<22} factor weight {row['factor_weight']:>7g}: {row['epochs_done']} of "
+                         f"{row['epochs_planned']} epochs in {row['seconds']:.0f} s ({row['stop_reason']}; weights of "
+                         f"epoch {row['weights_epoch']}, learning rate {last['lr']:.1e} at the stop); last epoch: "
+                         f"recon {last['recon']:.0f}, KL {last['kl']:.1f}, factor {last['factor']:.3f}")
+    return "\n".join(lines) + "\n"
+
+
+def main() -> None:
+    rows = read_rows(EVAL / "dis-seed0.jsonl") + read_rows(EVAL / "dis-seed2.jsonl")
+    rows += stamp(training_rows() + reconstruction_rows(), study="from-scratch-supervision")
+    path = write_rows("reports/disentanglement/from-scratch-supervision.jsonl", rows)
+    Path("reports/disentanglement/from-scratch-supervision.txt").write_text(text(rows), encoding="utf-8")
+    print(f"wrote {path}: {len(rows)} rows, and from-scratch-supervision.txt")
+
+
+if __name__ == "__main__":
+    main()
