@@ -255,3 +255,8 @@ def test_on_cuda_the_tables_stay_on_the_device_and_meet_the_cross_device_toleran
     records = cuda.decode_many_tensor(mixed).cpu().numpy()
     for table, expected in zip(records, cpu.decode_many(mixed), strict=True):
         assert largest_mapped_difference(table, mapped_of(expected)) <= MAPPED_TOLERANCE
+    out = torch.full((len(codes), 3, 90, 90, 180), float("nan"), device="cuda")  # a renderer's reused buffer
+    assert cuda.decode_many_tensor(torch.from_numpy(codes).cuda(), masked="keep", out=out) is out
+    torch.testing.assert_close(out, got, rtol=1e-5, atol=1e-6)  # the same decode (a GPU may pick other kernels)
+    with pytest.raises(ValueError, match="decoded on"):
+        cuda.decode_many_tensor(codes, out=torch.empty((len(codes), 3, 90, 90, 180)))  # a host tensor
