@@ -12,7 +12,7 @@ import pytest
 import torch
 
 import brdfcodec as bc
-from brdfcodec.codec import BrdfDecoder
+from brdfcodec.codec import BrdfDecoder, device_decode
 from brdfcodec.codec.device_decode import clamp_mapped_tensor, energy_bound_scales_tensor
 from brdfcodec.conventions import MAPPED_MAX
 from brdfcodec.edit.latent_edits import with_parameters
@@ -146,7 +146,13 @@ def test_tables_are_written_into_a_given_out_tensor_that_can_be_reused(decoder: 
     assert decoder.decode_many_tensor([], out=empty) is empty
 
 
-def test_an_out_tensor_tables_cannot_go_into_is_refused_before_any_work(decoder: BrdfDecoder) -> None:
+def test_an_out_tensor_tables_cannot_go_into_is_refused_before_any_work(decoder: BrdfDecoder,
+                                                                         monkeypatch: pytest.MonkeyPatch) -> None:
+    def no_work(*args: object, **kwargs: object) -> None:
+        raise AssertionError("the network ran before out was checked")
+
+    monkeypatch.setattr(device_decode, "_network_mapped", no_work)
+    monkeypatch.setattr(device_decode, "_records_mapped", no_work)
     codes = np.zeros((2, decoder.latent_dim), np.float32)
     wrong = {
         "shape": torch.zeros((3, 3, 90, 90, 180)),
