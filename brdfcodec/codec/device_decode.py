@@ -245,11 +245,12 @@ def tables_from_mapped_tensor(
     """
     fill = _mask_fill(masked)
     count = mapped.shape[0]
-    if out is not None:
+    if out is None:
+        out = torch.empty((count, N_CHANNELS, N_THETA_H, N_THETA_D, N_PHI_D), dtype=torch.float32,
+                          device=mapped.device)
+    else:
         check_tables_out(out, count, mapped.device)
     if mapped.device.type == "cpu":  # the host decode, written into the tensor: the same steps, in fewer passes
-        if out is None:
-            out = torch.empty((count, N_CHANNELS, N_THETA_H, N_THETA_D, N_PHI_D), dtype=torch.float32)
         tables, slices = out.numpy(), mapped.detach().numpy()
         factors = [1.0] * count if scales is None else scales.detach().to(torch.float64).reshape(count).tolist()
         for i in range(count):
@@ -261,9 +262,6 @@ def tables_from_mapped_tensor(
     if scales is not None:
         factors *= scales.to(mapped.device, torch.float64).reshape(count, 1)
     kept = mapped.reshape(count, N_CHANNELS, N_KEPT_SLICES, N_THETA_H, N_THETA_D).permute(0, 1, 3, 4, 2)
-    if out is None:
-        out = torch.empty((count, N_CHANNELS, N_THETA_H, N_THETA_D, N_PHI_D), dtype=torch.float32,
-                          device=mapped.device)
     chunk, rows = _DEVICE_CHUNK, N_THETA_H
     for start in range(0, count, chunk):
         records = slice(start, start + chunk)
