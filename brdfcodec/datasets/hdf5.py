@@ -121,7 +121,8 @@ def build_dataset(
     progress : bool, default True
         Show a progress bar on stderr.
     jobs : int, default 1
-        Materials loaded (read or tabulated, then mapped to network inputs) at once, on threads; the file is
+        Materials loaded (read or tabulated, then mapped to network inputs) at once, on threads (at most as
+        many as the machine has cores); the file is
         written on the calling thread in the sources' order, so that its content does not depend on ``jobs``.
         RGL measurements, tabulated through Mitsuba, are loaded on the calling thread whatever ``jobs`` is.
 
@@ -203,6 +204,7 @@ def _loaded_in_order(
     if jobs == 1:
         yield from map(_load_one, sources)
         return
+    jobs = min(jobs, os.cpu_count() or 1)  # more threads than cores only hold more materials in memory
     pending: deque[Future[tuple[LoadedMaterial, np.ndarray, np.ndarray]] | MaterialSource] = deque()
     upcoming = iter(sources)
     executor = ThreadPoolExecutor(max_workers=jobs, thread_name_prefix="brdfcodec-dataset")

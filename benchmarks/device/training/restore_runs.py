@@ -9,6 +9,7 @@ its fully connected layer came back in float16, as the compact export stores it 
 
 import io
 import json
+import re
 import shutil
 import sys
 import tarfile
@@ -29,7 +30,9 @@ def main() -> int:
     data = b"".join(p.read_bytes() for p in chunks)
     with tarfile.open(fileobj=io.BytesIO(data)) as tar:
         for member in tar.getmembers():
-            run = member.name.split("/")[0]
+            run, _, leaf = member.name.partition("/")
+            if not re.fullmatch(r"[A-Za-z0-9][A-Za-z0-9_.-]*", run) or leaf != "slim.pt" or not member.isfile():
+                raise ValueError(f"{files_at}: models archive member {member.name!r} is not RUN/slim.pt")
             state = torch.load(io.BytesIO(tar.extractfile(member).read()), weights_only=True)
             weights = state["model"]
             encoder = {k[len("encoder."):]: v for k, v in weights.items() if k.startswith("encoder.")}
