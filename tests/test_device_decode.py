@@ -266,3 +266,29 @@ def test_on_cuda_the_tables_stay_on_the_device_and_meet_the_cross_device_toleran
     torch.testing.assert_close(out, got, rtol=1e-5, atol=1e-6)  # the same decode (a GPU may pick other kernels)
     with pytest.raises(ValueError, match="decoded on"):
         cuda.decode_many_tensor(codes, out=torch.empty((len(codes), 3, 90, 90, 180)))  # a host tensor
+
+
+@pytest.mark.parametrize("masked", ["unmeasured", "zero", "keep"])
+def test_the_gpu_s_float32_unmapping_is_within_1e_6_mapped_of_a_float64_decode(decoder: BrdfDecoder,
+                                                                              masked: str) -> None:
+    """The tensor steps a GPU takes (``unmap_kept_slices``: float32 interpolation and ``expm1`` over the full
+    table), run here on the CPU: dark, bright, saturated and black slices, an energy-bound factor; every entry
+    above the horizon within 1e-6 mapped of a float64 decode, and the host decode's table to float32 rounding of
+    arguments up to L · 5 (relative 5e-6)."""
+    codes = np.random.default_rng(5).standard_normal((4, decoder.latent_dim)).astype(np.float32)
+    mapped = torch.from_numpy(np.stack(decoder.decode_mapped(codes)).copy())
+    mapped[0, :, :20] *= 1e-4  # dark rows, where the exponential amplifies rounding
+    mapped[1, :, 40:] = MAPPED_MAX  # the clamp's top, x = L · 5
+    mapped[2] = 0.0  # black
+    scales = torch.tensor([1.0, 0.25, 1.0, 0.5], dtype=torch.float64)
+    fill = device_decode._mask_fill(masked)
+    out = torch.full((4, 3, 90, 90, 180), float("nan"))
+    got = device_decode._tables_by_tensor_steps(mapped, scales, fill, out)
+    assert got is out and bool(torch.isfinite(got).all())
+    host = device_decode.tables_from_mapped_tensor(mapped, scales, masked=masked)  # type: ignore[arg-type]
+    np.testing.assert_allclose(got.numpy(), host.numpy(), rtol=5e-6, atol=1e-12)
+    for table, slices, scale in zip(got.numpy(), mapped.numpy(), scales.tolist(), strict=True):
+        assert largest_mapped_difference(table, float64_reference(slices, scale)) <= 1e-6
+        below = table[np.broadcast_to(~_VALID, table.shape)]
+        assert (below == fill).all() if fill is not None else (below >= 0).all()
+    assert bool((got[2] == torch.where(torch.from_numpy(_VALID.copy()), 0.0, fill or 0.0)).all())  # black is 0

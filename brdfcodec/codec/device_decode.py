@@ -9,14 +9,15 @@ run as tensor operations where the network ran, and the tables stay there: a ren
 without a copy through the host (DLPack: ``torch.utils.dlpack.to_dlpack(tables)`` or the tensor's
 ``__dlpack__``, which ``drjit``, ``jax.dlpack.from_dlpack`` and ``cupy.from_dlpack`` accept).
 
-The unmapping is the NumPy path's (:func:`~brdfcodec.representation.network_io.table_from_mapped`) in the same
-order and precision: float64, one exponential per kept slice and one per gap between kept slices, then a product
-per bin, rounded to float32 once (``spec/bvae-format.md`` §9). The device's float64 ``exp`` may differ from
-NumPy's in the last bit, so the two decodes agree to float32 rounding (far within §9's 1e-3 mapped), not bit
-for bit. The energy bound's albedo is the NumPy path's quadrature (``representation/energy.py``), summed on the
-device in another order (a relative difference of about 1e-15 in the factor). On the CPU the tables are the
-host decode's (:func:`table_from_mapped_host`, what ``BrdfDecoder.decode`` and ``decode_many`` use: torch's
-exponentials, NumPy's steps, written into the tensor), which takes fewer passes than the tensor steps.
+On a GPU the unmapping (:func:`unmap_kept_slices`) takes ``x = L · m`` and the step through each gap between
+kept slices in float64 at the kept slices, then interpolates ``x`` and takes one ``expm1`` per bin in float32
+over the full table: four passes over the table's memory, and no float64 array of the table's size. It is
+within 1e-6 mapped of a float64 decode (``spec/bvae-format.md`` §9, whose cross-device
+tolerance is 1e-3 mapped). The energy bound's albedo is the NumPy path's quadrature
+(``representation/energy.py``), summed on the device in another order (a relative difference of about 1e-15 in
+the factor). On the CPU the tables are the host decode's (:func:`table_from_mapped_host`, what
+``BrdfDecoder.decode`` and ``decode_many`` use: float64 interpolation and unmapping, one exponential per kept
+slice and one per gap, written into the tensor), so the two CPU paths give the same tables.
 
 What stays on the host: records that are not a plain latent decode — grafts (two codes), records whose base is
 projected on the shared basis (format 1.6), records without a latent (format 2.1) — get their mapped slices
@@ -80,6 +81,7 @@ class BrdfDecoder(Protocol):
 __all__ = [
     "check_tables_out", "clamp_mapped_tensor", "decode_many_tensor", "energy_bound_scales_tensor",
     "table_from_mapped_host", "tables_from_mapped_tensor",
+    "unmap_kept_slices",
 ]
 
 #: Bins from one kept slice to the next (the last gap, 171 → 179, holds 8).
@@ -88,8 +90,9 @@ _GAP = KEPT_PHI_D_SLICES[1] - KEPT_PHI_D_SLICES[0]
 _STORED_PER_EXPM1 = EPSILON / np.asarray(MERL_COLOR_SCALE, dtype=np.float64)
 #: Records whose energy bound is computed at once on the CPU (the float64 working arrays stay in cache).
 _CPU_CHUNK = 1
-#: Records unmapped at once on other devices (float64 working arrays of about 35 MB a record).
-_DEVICE_CHUNK = 16
+#: Records unmapped at once on other devices (working arrays of about 8 MB a record beside the table), and
+#: whose energy bound is computed at once.
+_DEVICE_CHUNK = 64
 
 
 def clamp_mapped_tensor(mapped: torch.Tensor) -> torch.Tensor:
@@ -163,25 +166,34 @@ def energy_bound_scales_tensor(mapped: torch.Tensor) -> torch.Tensor:
     return torch.where(largest > 1.0, 1.0 / largest.clamp(min=1.0), torch.ones_like(largest))
 
 
-def _unmap_chunk(kept: torch.Tensor, factor: torch.Tensor, target: torch.Tensor) -> None:
-    """``factor_c · expm1(L · m)`` at all 180 bins of kept slices (C, 3, R, 90, 21), into ``target`` (C, 3, R, 90, 180).
+def unmap_kept_slices(kept: torch.Tensor, factor: torch.Tensor, target: torch.Tensor) -> None:
+    """``factor_c · expm1(L · m)`` at all 180 φd bins of kept mapped slices, written into ``target``.
 
-    The operations of ``representation/network_io.py:_scaled_expm1_all`` in the same order: ``x = L · m`` in
-    float64, ``q = exp((x_b − x_a) / n)`` per gap, ``factor · exp(x_a)`` per kept slice, then for each offset
-    j of the gaps ``current − factor`` rounded to float32 and ``current ·= q``; bin 179 is the last kept slice.
+    The device decode's unmapping (``spec/bvae-format.md`` §6 step 2), in four passes over the full table:
+    ``x = L · m`` and the steps ``(x_b − x_a) / n`` of the 20 gaps in float64 at the kept slices (a ninth of the
+    table), rounded to float32; then, in float32 on the full table, ``x_a + j · step`` for the offsets j = 0…8 of
+    each gap (bin 179 is the last kept slice's own ``x``), ``expm1`` and the factor. Against a float64 decode
+    this is within 1e-6 in the mapped domain (the float32 rounding of ``x`` ≤ L · 5 = 23 moves the mapped value by
+    a few 1e-7), far within §9's cross-device 1e-3; ``tests/test_device_decode.py`` measures it on dark, bright
+    and saturated tables.
+
+    Parameters
+    ----------
+    kept : torch.Tensor of float32, shape (C, 3, R, 90, 21)
+        Clamped mapped values at the kept φd slices, kept slice last (values in ``[0, MAPPED_MAX]``).
+    factor : torch.Tensor of float64, shape (C, 3)
+        Stored MERL units per unit of ``expm1`` per table and channel (ε / S_c times the energy bound's factor).
+    target : torch.Tensor of float32, shape (C, 3, R, 90, 180)
+        Contiguous; overwritten with the tables in stored MERL units (no mask).
     """
-    x = kept.double().mul_(LOG_RANGE)
-    ratio = torch.exp((x[..., 1:] - x[..., :-1]).div_(_constants(kept.device)["steps"]))
-    scale = factor.reshape(*factor.shape, 1, 1, 1)  # (C, 3, 1, 1, 1)
-    start = torch.exp(x).mul_(scale)
-    current = start[..., :-1].clone()
-    offsets = []
-    for j in range(_GAP):
-        offsets.append((current - scale).float())
-        if j + 1 < _GAP:
-            current.mul_(ratio)
-    target.copy_(torch.stack(offsets, dim=-1).reshape(target.shape))  # one interleaving copy, φd in order
-    target[..., N_PHI_D - 1] = (start[..., -1] - scale[..., 0]).float()  # bin 179, a kept slice of its own
+    x = kept.to(dtype=torch.float64, memory_format=torch.contiguous_format).mul_(LOG_RANGE)
+    start = x[..., :-1].float().unsqueeze(-1)
+    step = (x[..., 1:] - x[..., :-1]).div_(_constants(kept.device)["steps"]).float().unsqueeze(-1)
+    offsets = torch.arange(_GAP, dtype=torch.float32, device=kept.device)
+    gaps = target.view(*target.shape[:-1], N_KEPT_SLICES - 1, _GAP)  # bin g · 9 + j of gap g
+    torch.addcmul(start, step, offsets, out=gaps)
+    target[..., N_PHI_D - 1] = x[..., -1]  # bin 179: the last kept slice itself (not a + 8 · step, rounded)
+    target.expm1_().mul_(factor.float().reshape(*factor.shape, 1, 1, 1))
 
 
 def check_tables_out(out: torch.Tensor, count: int, device: torch.device) -> None:
@@ -257,17 +269,22 @@ def tables_from_mapped_tensor(
             table_from_mapped_host(slices[i], scale=factors[i], masked=masked, out=tables[i],  # type: ignore[arg-type]
                                    compiled=True)
         return out
+    return _tables_by_tensor_steps(mapped, scales, fill, out)
+
+
+def _tables_by_tensor_steps(mapped: torch.Tensor, scales: torch.Tensor | None, fill: float | None,
+                            out: torch.Tensor) -> torch.Tensor:
+    """The device branch of :func:`tables_from_mapped_tensor` (on any device; the CPU takes the host decode):
+    :func:`unmap_kept_slices` in chunks of records, then the horizon mask's ``fill`` (None: kept)."""
+    count = mapped.shape[0]
     constants = _constants(mapped.device)
     factors = constants["stored"].expand(count, N_CHANNELS).clone()
     if scales is not None:
         factors *= scales.to(mapped.device, torch.float64).reshape(count, 1)
     kept = mapped.reshape(count, N_CHANNELS, N_KEPT_SLICES, N_THETA_H, N_THETA_D).permute(0, 1, 3, 4, 2)
-    chunk, rows = _DEVICE_CHUNK, N_THETA_H
-    for start in range(0, count, chunk):
-        records = slice(start, start + chunk)
-        for row in range(0, N_THETA_H, rows):
-            block = slice(row, row + rows)
-            _unmap_chunk(kept[records, :, block].contiguous(), factors[records], out[records, :, block])
+    for start in range(0, count, _DEVICE_CHUNK):
+        records = slice(start, start + _DEVICE_CHUNK)
+        unmap_kept_slices(kept[records], factors[records], out[records])
     if fill is not None:
         out.masked_fill_(constants["invalid"], fill)
     return out

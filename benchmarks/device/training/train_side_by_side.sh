@@ -12,6 +12,8 @@
 #   WHEELS    folder of wheels to install first, if it exists (default .devrun/whl, carried)
 #   DEADLINE  seconds after the start by which everything has ended (default 560; the device tool's limit is 600)
 #   BENCH_S   seconds given to device_benchmark.py beside the runs' start (default 60; 0: none)
+#   MARGIN    the runs' seconds per epoch over the probe's (default 1.5: four runs side by side took 0.65-0.72 s
+#             an epoch where their probe had measured 0.39-0.52 s)
 #   QUICK=1   a rehearsal on the CPU: 10 MERL-family materials, 3 epochs, a 16-material pool
 set -u
 T0=$(date +%s)
@@ -24,10 +26,11 @@ DATA=${DATA:-.devrun/data}
 WHEELS=${WHEELS:-.devrun/whl}
 DEADLINE=${DEADLINE:-560}
 BENCH_S=${BENCH_S:-60}
+MARGIN=${MARGIN:-1.5}
 QUICK=${QUICK:-0}
 W=${WORK:-/tmp/devwork}; rm -rf "$W"; mkdir -p "$W/runs" "$W/logs"
 if [ -d "$WHEELS" ] && [ "$QUICK" != 1 ]; then
-  python3 -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --target /tmp/site "$WHEELS"/*.whl || exit 1
+  python3 -m pip install -q --upgrade --no-index --no-deps --no-compile --no-cache-dir --target /tmp/site "$WHEELS"/*.whl || exit 1
   export PYTHONPATH=/tmp/site:$PWD
 else
   export PYTHONPATH=$PWD
@@ -70,10 +73,10 @@ for p in "${PIDS[@]}"; do wait $p; done
 log "probe done"
 START=$(el)
 TRAIN_END=$(( DEADLINE - 75 ))
-PLAN=$(python3 - "$W" "$START" "$TRAIN_END" "$POOL" "$QUICK" "${RUNS[@]}" <<'EOF'
+PLAN=$(python3 - "$W" "$START" "$TRAIN_END" "$POOL" "$QUICK" "$MARGIN" "${RUNS[@]}" <<'EOF'
 import json, sys
-work, start, end, pool, quick, *runs = sys.argv[1:]
-start, end, pool = int(start), int(end), int(pool)
+work, start, end, pool, quick, margin, *runs = sys.argv[1:]
+start, end, pool, margin = int(start), int(end), int(pool), float(margin)
 for run in runs:
     try:  # seconds per epoch: the mean of epochs 2 and 3 (the first holds the warm-up)
         records = [json.loads(line) for line in open(f"{work}/probe-{run}/log.jsonl") if line.strip()]
@@ -82,7 +85,7 @@ for run in runs:
     except (OSError, ValueError, KeyError):
         per_epoch, supervised = 5.0, True
     tabulate = pool * 0.07 if supervised else 0  # the factor pool, tabulated before the first epoch
-    epochs = 3 if quick == "1" else max(3, int((end - start - tabulate - 15) / (per_epoch * 1.12)))
+    epochs = 3 if quick == "1" else max(3, int((end - start - tabulate - 15) / (per_epoch * margin)))
     print(run, epochs, max(30, end - start), round(per_epoch, 3))
 EOF
 )
