@@ -292,3 +292,24 @@ def test_the_gpu_s_float32_unmapping_is_within_1e_6_mapped_of_a_float64_decode(d
         below = table[np.broadcast_to(~_VALID, table.shape)]
         assert (below == fill).all() if fill is not None else (below >= 0).all()
     assert bool((got[2] == torch.where(torch.from_numpy(_VALID.copy()), 0.0, fill or 0.0)).all())  # black is 0
+
+
+def test_codes_beyond_the_latent_limit_decode_as_the_limit(decoder: BrdfDecoder) -> None:
+    """spec §6 step 2: each coordinate is clipped to ±LATENT_LIMIT at the decoder's input, in every entry point of
+    the network (so that 1e19 decodes alike on every device); within the bound the codes are untouched."""
+    from brdfcodec.conventions import LATENT_LIMIT
+    from brdfcodec.models.network import clip_latent
+
+    codes = extreme_codes(decoder.latent_dim)[3:]  # 1e19, -1e23, ±1e23
+    clipped = np.clip(codes, -LATENT_LIMIT, LATENT_LIMIT)
+    assert not np.array_equal(codes, clipped)
+    np.testing.assert_array_equal(decoder.decode_mapped(codes), decoder.decode_mapped(clipped))
+    network = decoder.network.eval()
+    with torch.no_grad():
+        far, bound = torch.from_numpy(codes), torch.from_numpy(clipped)
+        assert torch.equal(network.forward_channels(far, (0, 21)), network.forward_channels(bound, (0, 21)))
+        assert torch.equal(network.hidden_and_unbounded(far)[1], network.hidden_and_unbounded(bound)[1])
+    inside = torch.tensor([[-LATENT_LIMIT, -3.0, 0.0, 2.5, LATENT_LIMIT]], requires_grad=True)
+    clip_latent(inside).sum().backward()
+    assert torch.equal(clip_latent(inside.detach()), inside.detach())
+    assert torch.equal(inside.grad, torch.ones_like(inside))  # training and edits see the identity

@@ -11,7 +11,7 @@ import numpy as np
 import torch
 from torch import nn
 
-from brdfcodec.conventions import MAPPED_MAX, NETWORK_INPUT_SHAPE
+from brdfcodec.conventions import LATENT_LIMIT, MAPPED_MAX, NETWORK_INPUT_SHAPE
 from brdfcodec.models.config import ModelConfig
 from brdfcodec.models.pca import fit_pca
 from brdfcodec.representation import to_network_layout
@@ -99,6 +99,16 @@ class Encoder(nn.Module):
         return mu, logvar
 
 
+def clip_latent(z: torch.Tensor) -> torch.Tensor:
+    """Each latent coordinate clipped to ``[−LATENT_LIMIT, LATENT_LIMIT]`` (``spec/bvae-format.md`` §6 step 2).
+
+    Every entry point of :class:`Decoder` starts with it, so that absurd codes (``1e19``) decode the same on every
+    device; within the bound it is the identity (and its gradient is 1), so training and ordinary codes are
+    untouched.
+    """
+    return z.clamp(-LATENT_LIMIT, LATENT_LIMIT)
+
+
 class Decoder(nn.Module):
     """Latent ``(B, latent_dim)`` to mapped slices ``(B, 63, 90, 90)`` in [0, MAPPED_MAX]."""
 
@@ -132,11 +142,12 @@ class Decoder(nn.Module):
     def logits(self, z: torch.Tensor) -> torch.Tensor:
         """Output of the convolutional path, ``(B, 63, 90, 90)``."""
         c0 = self.config.decoder_channels[0]
-        h = self.fc(z).view(-1, c0, _BOTTLENECK, _BOTTLENECK)
+        h = self.fc(clip_latent(z)).view(-1, c0, _BOTTLENECK, _BOTTLENECK)
         return self.upsample(self.blocks(h))
 
     def unbounded(self, z: torch.Tensor) -> torch.Tensor:
         """Output before it is limited to the mapped domain (the training loss uses it)."""
+        z = clip_latent(z)
         out = self.logits(z)
         if not self.config.linear_basis:
             return MAPPED_MAX * torch.sigmoid(out)
@@ -156,6 +167,7 @@ class Decoder(nn.Module):
         ``spec/bvae-format.md`` §4.5 takes its dot products through the last layer's adjoint).
         """
         c0 = self.config.decoder_channels[0]
+        z = clip_latent(z)
         hidden = self.upsample[:-1](self.blocks(self.fc(z).view(-1, c0, _BOTTLENECK, _BOTTLENECK)))
         out = self.upsample[-1](hidden)
         if not self.config.linear_basis:
@@ -172,6 +184,7 @@ class Decoder(nn.Module):
         channels only (decoding one φd bin needs 6 of the 63).
         """
         c0 = self.config.decoder_channels[0]
+        z = clip_latent(z)
         hidden = self.upsample[:-1](self.blocks(self.fc(z).view(-1, c0, _BOTTLENECK, _BOTTLENECK)))
         last = self.upsample[-1]
         index = list(channels)
