@@ -263,7 +263,8 @@ def test_on_cuda_the_tables_stay_on_the_device_and_meet_the_cross_device_toleran
         assert largest_mapped_difference(table, mapped_of(expected)) <= MAPPED_TOLERANCE
     out = torch.full((len(codes), 3, 90, 90, 180), float("nan"), device="cuda")  # a renderer's reused buffer
     assert cuda.decode_many_tensor(torch.from_numpy(codes).cuda(), masked="keep", out=out) is out
-    torch.testing.assert_close(out, got, rtol=1e-5, atol=1e-6)  # the same decode (a GPU may pick other kernels)
+    for again, first in zip(out.cpu().numpy(), tables, strict=True):  # a GPU may pick other kernels (TF32 convs)
+        assert largest_mapped_difference(again, mapped_of(first)) <= MAPPED_TOLERANCE
     with pytest.raises(ValueError, match="decoded on"):
         cuda.decode_many_tensor(codes, out=torch.empty((len(codes), 3, 90, 90, 180)))  # a host tensor
 
