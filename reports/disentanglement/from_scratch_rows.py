@@ -1,39 +1,58 @@
-"""Collect the from-scratch supervision study (issue 50 item 3, trained on one H100) into one rows file.
+"""Collect a from-scratch training study of issue 50 item 3 (trained on a device) into one rows file.
 
-usage (repository root; the runs restored by benchmarks/device/training/restore_runs.py into runs/dev1, the models
-exported into runs/models/dev1-NAME, the measurements of reports/disentanglement/from-scratch-supervision.txt's
-header in runs/dev1/eval):
+usage (repository root; the runs restored by benchmarks/device/training/restore_runs.py into runs/SESSION, the
+models exported into runs/models/SESSION-NAME, the measurements of the study's text header in runs/SESSION/eval):
 
-    python reports/disentanglement/from_scratch_rows.py
+    python reports/disentanglement/from_scratch_rows.py [--study from-scratch-supervision | free-dimensions]
+
+Studies: ``from-scratch-supervision`` (runs/dev1: four factor weights, one H100, time-limited) and
+``free-dimensions`` (runs/dev2: weights 5,000 and 10,000 and a 12-dimensional latent, one H200, full schedules).
 """
 
 from __future__ import annotations
 
+import argparse
 import json
+from dataclasses import dataclass
 from pathlib import Path
 
 from brdfcodec.datasets.hdf5 import BrdfDataset
 from brdfcodec.report.rows import read_rows, stamp, write_rows
 
-RUNS = Path("runs/dev1")
-EVAL = RUNS / "eval"
-MODELS = {"bvae-nbrdf-proxy-small-v3": "brdfcodec/data/models/default",
-          **{f"bvae-scratch-{name}": f"runs/models/dev1-{name}" for name in ("w0", "w3k", "w10k", "w30k")}}
-DEVICE = "cuda: NVIDIA H100 80GB HBM3 (driver 580.159.04), four runs side by side"
+@dataclass(frozen=True)
+class Study:
+    """Where one study's runs, exports and measurements are, and how its tables are headed."""
+
+    name: str
+    session: str  # runs/SESSION, runs/models/SESSION-RUN
+    runs: tuple[str, ...]
+    device: str
+    training_title: str
+    header: str
+
+    @property
+    def folder(self) -> Path:
+        return Path("runs") / self.session
+
+    @property
+    def models(self) -> dict[str, str]:
+        return {"bvae-nbrdf-proxy-small-v3": "brdfcodec/data/models/default",
+                **{f"bvae-scratch-{run}": f"runs/models/{self.session}-{run}" for run in self.runs}}
 
 
-def training_rows() -> list[dict]:
+def training_rows(study: Study) -> list[dict]:
     rows = []
+    runs = study.folder
     scored = {json.loads(line)["run"]: json.loads(line)
-              for line in (RUNS / "device-logs/logs/eval.jsonl").read_text().splitlines() if line.strip()}
-    plan = {line.split()[0]: line.split()[1:] for line in (RUNS / "device-logs/logs/plan.txt").read_text().splitlines()}
+              for line in (runs / "device-logs/logs/eval.jsonl").read_text().splitlines() if line.strip()}
+    plan = {line.split()[0]: line.split()[1:] for line in (runs / "device-logs/logs/plan.txt").read_text().splitlines()}
     for name, score in sorted(scored.items()):
-        log = [json.loads(line) for line in (RUNS / name / "log.jsonl").read_text().splitlines() if line.strip()]
-        summary = json.loads((RUNS / name / "summary.json").read_text())
-        config = json.loads((RUNS / name / "run.json").read_text())["train_config"]
+        log = [json.loads(line) for line in (runs / name / "log.jsonl").read_text().splitlines() if line.strip()]
+        summary = json.loads((runs / name / "summary.json").read_text())
+        config = json.loads((runs / name / "run.json").read_text())["train_config"]
         rows.append({
-            "kind": "training", "model": f"bvae-scratch-{name}", "device": DEVICE, "torch": "2.11.0+cu130",
-            "command": (RUNS / f"cmd-{name}.txt").read_text().strip(), "factor_weight": config["factor_weight"],
+            "kind": "training", "model": f"bvae-scratch-{name}", "device": study.device, "torch": "2.11.0+cu130",
+            "command": (runs / f"cmd-{name}.txt").read_text().strip(), "factor_weight": config["factor_weight"],
             "epochs_planned": int(plan[name][0]), "epochs_done": summary["epochs_done"],
             "weights_epoch": score["epoch"], "stop_reason": summary["stop_reason"],
             "seconds": summary["seconds_this_session"], "seconds_per_epoch_probe": float(plan[name][2]),
@@ -43,11 +62,12 @@ def training_rows() -> list[dict]:
     return rows
 
 
-def reconstruction_rows() -> list[dict]:
+def reconstruction_rows(study: Study) -> list[dict]:
     with BrdfDataset("runs/both.h5") as dataset:
         family = dict(zip(dataset.names, dataset.families, strict=True))
     rows = []
-    for name, folder in MODELS.items():
+    evaluations = study.folder / "eval"
+    for name, folder in study.models.items():
         info = json.loads(Path(folder, "model.json").read_text())["info"]
         per: dict[str, list[dict]] = {}
         for error in info["errors"]:
@@ -59,12 +79,13 @@ def reconstruction_rows() -> list[dict]:
                          "relae_linear": sum(e["relae_linear"] for e in errors) / len(errors),
                          "command": "bvae model export (model.json info.errors: μ of the encoder decoded, mapped "
                                     "RelAE on the full table of each of the 120 materials of runs/both.h5)"})
-        held_out = EVAL / f"evaluate-{Path(folder).name}.json"
+        held_out = evaluations / f"evaluate-{Path(folder).name}.json"
         if held_out.exists() and held_out.stat().st_size:
             for row in json.loads(held_out.read_text()):
                 rows.append({"kind": "evaluation", "model": name, **row, "effort": 0,
                              "command": f"bvae model evaluate {folder} --dataset runs/v3-held-out.h5 --json"})
-    for line in (EVAL / "refine_probe.jsonl").read_text().splitlines():
+    probe_rows = evaluations / "refine_probe.jsonl"
+    for line in (probe_rows.read_text().splitlines() if probe_rows.exists() else []):
         probe = json.loads(line)
         label = {"v3": "bvae-nbrdf-proxy-small-v3"}.get(probe["model"], f"bvae-scratch-{probe['model']}")
         rows.append({"kind": "refinement", **probe, "model": label,
@@ -75,7 +96,11 @@ def reconstruction_rows() -> list[dict]:
     return rows
 
 
-HEADER = """\
+FROM_SCRATCH_SUPERVISION = Study(
+    name="from-scratch-supervision", session="dev1", runs=("w0", "w3k", "w10k", "w30k"),
+    device="cuda: NVIDIA H100 80GB HBM3 (driver 580.159.04), four runs side by side",
+    training_title="Training (one H100, four runs side by side):",
+    header="""\
 # Factor supervision from scratch (issue 50 item 3): four models of the release recipe trained side by side on one
 # NVIDIA H100 (torch 2.11.0+cu130), all 120 materials of the NBRDF proxies (90 MERL, 30 RGL; neural fits, not
 # measurements), each `bvae train` run stopped by the session's time limit (epochs below), weights of its last
@@ -86,12 +111,32 @@ HEADER = """\
 #   --materials 300 --seed S (S = 0, as reports/disentanglement/default-model.txt, and 2)
 # Never-seen materials: bvae model evaluate MODEL --dataset runs/v3-held-out.h5 (24 random analytic, 1 real RGL)
 # Rows: python reports/disentanglement/from_scratch_rows.py -> from-scratch-supervision.jsonl
-"""
+""")
+
+FREE_DIMENSIONS = Study(
+    name="free-dimensions", session="dev2", runs=("w5k-z8", "w10k-z8", "w10k-z12"),
+    device="cuda: NVIDIA H200 (driver 580.159.04), three runs side by side",
+    training_title="Training (one H200, three runs side by side):",
+    header="""\
+# Free latent dimensions beside the supervised ones (issue 50 item 3): three models of the release recipe trained
+# from scratch side by side on one NVIDIA H200 (torch 2.11.0+cu130), all 120 materials of the NBRDF proxies (90
+# MERL, 30 RGL; neural fits, not measurements), each to the end of its planned schedule (epochs below): factor weight
+# 5,000 and 10,000 with an 8-dimensional latent, and 10,000 with a 12-dimensional one whose dimensions 8-12 no
+# factor pulls. Runner: benchmarks/device/training/train_side_by_side.sh (configs: free-dimensions.configs).
+# Export here: bvae model export runs/dev2/RUN -o runs/models/dev2-RUN --name bvae-scratch-RUN --dataset runs/both.h5
+#   --basis-count 0 --align-factors 300 --keep-axes (axes as trained; no shared basis: measured, not shipped)
+# Benchmark: bvae model disentanglement brdfcodec/data/models/default runs/models/dev2-{w5k-z8,w10k-z8,w10k-z12}
+#   --materials 300 --seed S (S = 0, as reports/disentanglement/default-model.txt, and 2)
+# Never-seen materials: bvae model evaluate MODEL --dataset runs/v3-held-out.h5 (24 random analytic, 1 real RGL)
+# Rows: python reports/disentanglement/from_scratch_rows.py --study free-dimensions -> free-dimensions.jsonl
+""")
+
+STUDIES = {study.name: study for study in (FROM_SCRATCH_SUPERVISION, FREE_DIMENSIONS)}
 
 
-def text(rows: list[dict]) -> str:
+def text(study: Study, rows: list[dict]) -> str:
     """The study's tables, from its rows."""
-    lines = [HEADER]
+    lines = [study.header]
     for seed in (0, 2):
         lines.append(f"MIG and DCI, 300 analytic materials of seed {seed} (base RelAE: the model's decode of them)")
         lines.append(f"{'code':<28}{'MIG':>7}{'DCI-D':>7}{'DCI-C':>7}{'DCI-I':>7}{'base RelAE':>12}")
@@ -111,7 +156,7 @@ def text(rows: list[dict]) -> str:
     lines.append("Reconstruction, mapped RelAE of the encoder's μ decoded (effort 0), full tables:")
     lines.append(f"{'model':<28}{'MERL 90 (train)':>16}{'RGL 30 (train)':>16}{'analytic 24 (never)':>21}"
                  f"{'real RGL 1 (never)':>20}")
-    for model in MODELS:
+    for model in study.models:
         cell = {}
         for row in rows:
             if row.get("model") != model:
@@ -130,7 +175,7 @@ def text(rows: list[dict]) -> str:
             per = ", ".join(f"{k} {v:.4f}" for k, v in sorted(row["relae_mapped"].items()))
             lines.append(f"  {row['model']:<28} effort {row['effort']}: all {row['all']:.4f} ({per})")
     lines.append("")
-    lines.append("Training (one H100, four runs side by side):")
+    lines.append(study.training_title)
     for row in rows:
         if row.get("kind") == "training":
             last = row["last_epoch"]
@@ -142,11 +187,15 @@ def text(rows: list[dict]) -> str:
 
 
 def main() -> None:
-    rows = read_rows(EVAL / "dis-seed0.jsonl") + read_rows(EVAL / "dis-seed2.jsonl")
-    rows += stamp(training_rows() + reconstruction_rows(), study="from-scratch-supervision")
-    path = write_rows("reports/disentanglement/from-scratch-supervision.jsonl", rows)
-    Path("reports/disentanglement/from-scratch-supervision.txt").write_text(text(rows), encoding="utf-8")
-    print(f"wrote {path}: {len(rows)} rows, and from-scratch-supervision.txt")
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--study", choices=sorted(STUDIES), default=FROM_SCRATCH_SUPERVISION.name)
+    study = STUDIES[parser.parse_args().study]
+    evaluations = study.folder / "eval"
+    rows = read_rows(evaluations / "dis-seed0.jsonl") + read_rows(evaluations / "dis-seed2.jsonl")
+    rows += stamp(training_rows(study) + reconstruction_rows(study), study=study.name)
+    path = write_rows(f"reports/disentanglement/{study.name}.jsonl", rows)
+    Path(f"reports/disentanglement/{study.name}.txt").write_text(text(study, rows), encoding="utf-8")
+    print(f"wrote {path}: {len(rows)} rows, and {study.name}.txt")
 
 
 if __name__ == "__main__":
