@@ -597,11 +597,12 @@ class BrdfDecoder:
         """Full tables of many records (or latent codes) as one torch tensor on the decoder's device.
 
         The tables of :meth:`decode_many`, stacked, with the work after the network (clamp, layers, slice
-        interpolation, unmapping in float64, energy bound, mask) done as tensor operations where the network
-        runs (:mod:`brdfcodec.codec.device_decode`): on a GPU nothing passes through the host. Hand the result
+        interpolation, unmapping, energy bound, mask) done as tensor operations where the network runs
+        (:mod:`brdfcodec.codec.device_decode`): on a GPU nothing passes through the host. Hand the result
         to Dr.Jit/Mitsuba, JAX or CuPy without a copy through DLPack (``torch.utils.dlpack.to_dlpack(tables)``
-        or ``tables.__dlpack__()``); ``tables.cpu().numpy()`` is what :meth:`decode_many` yields, up to float32
-        rounding (the device's float64 ``exp``).
+        or ``tables.__dlpack__()``). On the CPU ``tables.numpy()`` is what :meth:`decode_many` yields, up to
+        float32 rounding; a GPU unmaps in float32 from float64 arguments, within 1e-6 mapped of it
+        (``spec/bvae-format.md`` §9).
 
         Parameters
         ----------
@@ -639,6 +640,51 @@ class BrdfDecoder:
 
         return decode_many_tensor(self, records, masked=masked, energy_bound=energy_bound, batch_size=batch_size,
                                   out=out)
+
+    def evaluate_tensor(
+        self,
+        records: Sequence[Record] | torch.Tensor | npt.ArrayLike,
+        wi: torch.Tensor | npt.ArrayLike,
+        wo: torch.Tensor | npt.ArrayLike,
+        *,
+        energy_bound: bool | None = None,
+        batch_size: int = 16,
+    ) -> torch.Tensor:
+        """Values of many records (or latent codes) at direction pairs, on the decoder's device, without tables.
+
+        Each pair's MERL bin (the nearest-bin lookup of ``spec/conventions.md`` §3, as
+        :func:`~brdfcodec.representation.lookup.lookup`) is made from the network's kept φd slices alone
+        (:mod:`brdfcodec.codec.device_lookup`): the same value as that bin of :meth:`decode_many_tensor`'s table
+        with ``masked="zero"``, up to float32 rounding, for a renderer that needs values at some directions and not
+        17.5 MB a material.
+
+        Parameters
+        ----------
+        records : sequence of Record, or array_like / torch.Tensor of shape (B, latent_dim)
+            As for :meth:`decode_many_tensor` (any record kind; finite latent codes of plain materials).
+        wi, wo : array_like or torch.Tensor, shape (N, 3) or (B, N, 3)
+            Incoming and outgoing directions in the shading frame (z = normal), any finite non-zero length,
+            broadcast together: one set for every material, or one per material.
+        energy_bound : bool, optional
+            As for :meth:`decode_many_tensor`: by default exactly for edited records, never for bare codes.
+        batch_size : int, default 16
+            Codes run through the network at once.
+
+        Returns
+        -------
+        torch.Tensor of float32, shape (B, N, 3)
+            RGB in stored MERL units (times ``brdfcodec.conventions.MERL_COLOR_SCALE`` for reflectance in 1/sr),
+            on :attr:`device`; 0 where either direction is at or below the horizon or the bin is below it.
+
+        Raises
+        ------
+        ValueError
+            Codes of the wrong width or not finite, directions that are not 3-vectors, not finite, zero, or of a
+            shape that is neither (N, 3) nor (B, N, 3), a bad ``batch_size``, a record of another latent size.
+        """
+        from brdfcodec.codec.device_lookup import evaluate_tensor
+
+        return evaluate_tensor(self, records, wi, wo, energy_bound=energy_bound, batch_size=batch_size)
 
     def _check_record(self, record: Record) -> None:
         if record.latent_dim != self.latent_dim:

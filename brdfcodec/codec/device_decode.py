@@ -484,21 +484,34 @@ def decode_many_tensor(
         return out if out is not None else torch.empty((0, N_CHANNELS, N_THETA_H, N_THETA_D, N_PHI_D),
                                                        device=decoder.device)
     with codec_threads(), torch.no_grad():
-        if as_records:
-            for record in given:  # type: ignore[union-attr]
-                decoder._check_record(record)
-            mapped = _records_mapped(decoder, given, batch_size)  # type: ignore[arg-type]
-            # By default the bound is for edits (records whose metadata holds "edit": decoder.is_edited).
-            bounded = [energy_bound if energy_bound is not None else "edit" in r.meta for r in given]  # type: ignore[union-attr]
-        else:
-            mapped = _network_mapped(decoder, codes, batch_size)
-            bounded = [bool(energy_bound)] * len(mapped)
-        scales = None
-        if any(bounded):
-            scales = torch.ones(len(mapped), dtype=torch.float64, device=mapped.device)
-            chunk = _CPU_CHUNK if mapped.device.type == "cpu" else _DEVICE_CHUNK
-            which = [i for i, bound in enumerate(bounded) if bound]
-            for start in range(0, len(which), chunk):
-                part = which[start : start + chunk]
-                scales[part] = energy_bound_scales_tensor(mapped[part])
+        mapped, scales = _mapped_and_scales(decoder, given if as_records else None, codes, energy_bound, batch_size)
         return tables_from_mapped_tensor(mapped, scales, masked=masked, out=out)
+
+
+def _mapped_and_scales(
+    decoder: BrdfDecoder, records: Sequence[Record] | None, codes: torch.Tensor | None, energy_bound: bool | None,
+    batch_size: int,
+) -> tuple[torch.Tensor, torch.Tensor | None]:
+    """Clamped mapped slices (N, 63, 90, 90) of records (or of codes, when ``records`` is None) on the decoder's
+    device, and the energy bound's factors (N,) float64 where a table takes it (None where none does).
+
+    By default the bound is for edits (records whose metadata holds "edit": ``decoder.is_edited``), never for codes.
+    """
+    if records is not None:
+        for record in records:
+            decoder._check_record(record)
+        mapped = _records_mapped(decoder, records, batch_size)
+        bounded = [energy_bound if energy_bound is not None else "edit" in r.meta for r in records]
+    else:
+        assert codes is not None
+        mapped = _network_mapped(decoder, codes, batch_size)
+        bounded = [bool(energy_bound)] * len(mapped)
+    scales = None
+    if any(bounded):
+        scales = torch.ones(len(mapped), dtype=torch.float64, device=mapped.device)
+        chunk = _CPU_CHUNK if mapped.device.type == "cpu" else _DEVICE_CHUNK
+        which = [i for i, bound in enumerate(bounded) if bound]
+        for start in range(0, len(which), chunk):
+            part = which[start : start + chunk]
+            scales[part] = energy_bound_scales_tensor(mapped[part])
+    return mapped, scales

@@ -1,0 +1,177 @@
+"""Decoded materials evaluated at direction pairs on the decoder's device, without full tables (issue 51, item 1).
+
+Part of :mod:`brdfcodec.codec`; reached through :meth:`BrdfDecoder.evaluate_tensor
+<brdfcodec.codec.BrdfDecoder.evaluate_tensor>`.
+
+A renderer that needs a material's value at a few directions, not its 17.5 MB table, asks for them here: each
+direction pair is turned into its MERL bin (the nearest-bin lookup of ``spec/conventions.md`` §3, as
+:func:`~brdfcodec.representation.lookup.lookup` and MERL's reader do), and only that bin of the table is made from
+the network's 21 kept φd slices — the two kept slices around the bin's φd, interpolated and unmapped as
+``spec/bvae-format.md`` §6 step 2 says (float64), times the energy bound's factor where the table takes it.
+So a value equals the same bin of :meth:`BrdfDecoder.decode_many_tensor`'s table, up to float32 rounding, and the
+work and memory grow with the directions asked for, not with the table. The angles are computed in float64 on the
+device, in the operations of :func:`~brdfcodec.representation.coords.half_diff_from_directions` and the bin
+functions beside it.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from collections.abc import Sequence
+from typing import TYPE_CHECKING
+
+import numpy as np
+import numpy.typing as npt
+import torch
+
+from brdfcodec.conventions import (
+    BIN_TOLERANCE,
+    EPSILON,
+    HORIZON_COS_MIN,
+    MERL_COLOR_SCALE,
+    N_CHANNELS,
+    N_KEPT_SLICES,
+    N_PHI_D,
+    N_THETA_D,
+    N_THETA_H,
+)
+from brdfcodec.format.bvae import Record
+from brdfcodec.representation.layout import interpolation_plan
+from brdfcodec.representation.mapping import LOG_RANGE
+from brdfcodec.representation.mask import horizon_mask
+
+if TYPE_CHECKING:
+    from brdfcodec.codec.device_decode import BrdfDecoder
+
+__all__ = ["evaluate_tensor", "merl_bins_tensor"]
+
+
+@functools.cache
+def _plan_on(device: torch.device) -> dict[str, torch.Tensor]:
+    """Per-device constants: each φd bin's kept slots and weight, the valid bins, ε / S_c."""
+    left, right, weight = interpolation_plan()
+    return {
+        "left": torch.from_numpy(left.astype(np.int64)).to(device),
+        "right": torch.from_numpy(right.astype(np.int64)).to(device),
+        "weight": torch.from_numpy(weight.astype(np.float64)).to(device),
+        "valid": torch.from_numpy(horizon_mask().copy()).to(device),  # (90, 90, 180) bool
+        "stored": torch.from_numpy(EPSILON / np.asarray(MERL_COLOR_SCALE, dtype=np.float64)).to(device),
+    }
+
+
+def _directions(values: torch.Tensor | npt.ArrayLike, label: str, device: torch.device) -> torch.Tensor:
+    """Direction vectors (..., 3) as float64 on ``device``: finite and non-zero (any length)."""
+    tensor = torch.as_tensor(values, dtype=torch.float64, device=device)
+    if tensor.ndim == 0 or tensor.shape[-1] != 3:
+        raise ValueError(f"{label} must hold 3-vectors, shape (..., 3), got shape {tuple(tensor.shape)}")
+    if not bool(torch.isfinite(tensor).all()):
+        raise ValueError(f"{label} holds NaN or infinite components")
+    if not bool((tensor != 0).any(dim=-1).all()):
+        raise ValueError(f"{label} holds zero vectors (a direction needs a length > 0)")
+    return tensor
+
+
+def _normalized(v: torch.Tensor) -> torch.Tensor:
+    return v / torch.linalg.vector_norm(v, dim=-1, keepdim=True)
+
+
+def _bin(coordinate: torch.Tensor, n: int) -> torch.Tensor:
+    return torch.floor(coordinate + BIN_TOLERANCE).to(torch.int64).clamp_(0, n - 1)
+
+
+def merl_bins_tensor(wi: torch.Tensor, wo: torch.Tensor) -> tuple[torch.Tensor, ...]:
+    """MERL bins (θh, θd, φd indices) of direction pairs and whether both lie above the horizon.
+
+    Parameters
+    ----------
+    wi, wo : torch.Tensor of float64, shape (..., 3)
+        Directions in the shading frame (z = normal), any finite non-zero length, broadcast together.
+
+    Returns
+    -------
+    tuple of torch.Tensor
+        ``theta_h``, ``theta_d``, ``phi_d`` bin indices (int64, in [0, 89], [0, 89], [0, 179]) and ``above``
+        (bool), each of the broadcast shape without its last axis.
+    """
+    wi, wo = torch.broadcast_tensors(_normalized(wi), _normalized(wo))
+    half = _normalized(wi + wo)
+    theta_h = torch.acos(half[..., 2].clamp(-1.0, 1.0))
+    phi_h = torch.atan2(half[..., 1], half[..., 0])
+    # d = wi rotated by −φh about z, then by −θh about y (representation/coords.py)
+    cos_p, sin_p = torch.cos(-phi_h), torch.sin(-phi_h)
+    x = cos_p * wi[..., 0] - sin_p * wi[..., 1]
+    y = sin_p * wi[..., 0] + cos_p * wi[..., 1]
+    z = wi[..., 2]
+    cos_t, sin_t = torch.cos(-theta_h), torch.sin(-theta_h)
+    dx, dz = cos_t * x + sin_t * z, -sin_t * x + cos_t * z
+    diff_norm = torch.sqrt(dx * dx + y * y + dz * dz)
+    theta_d = torch.acos((dz / diff_norm).clamp(-1.0, 1.0))
+    phi_d = torch.atan2(y, dx)
+    half_pi = math.pi / 2
+    h_index = _bin(N_THETA_H * torch.sqrt(theta_h.clamp(min=0.0) / half_pi), N_THETA_H)
+    d_index = _bin(N_THETA_D * theta_d.clamp(min=0.0) / half_pi, N_THETA_D)
+    folded = torch.remainder(phi_d, math.pi)
+    folded = torch.where(folded >= math.pi, torch.zeros_like(folded), folded)
+    p_index = torch.remainder(_bin(N_PHI_D * folded / math.pi, N_PHI_D + 1), N_PHI_D)
+    above = (wi[..., 2] > HORIZON_COS_MIN) & (wo[..., 2] > HORIZON_COS_MIN)
+    return h_index, d_index, p_index, above
+
+
+def evaluate_tensor(
+    decoder: BrdfDecoder,
+    records: Sequence[Record] | torch.Tensor | npt.ArrayLike,
+    wi: torch.Tensor | npt.ArrayLike,
+    wo: torch.Tensor | npt.ArrayLike,
+    *,
+    energy_bound: bool | None = None,
+    batch_size: int = 16,
+) -> torch.Tensor:
+    """:meth:`BrdfDecoder.evaluate_tensor <brdfcodec.codec.BrdfDecoder.evaluate_tensor>` (see there)."""
+    from brdfcodec.codec.device_decode import _codes_tensor, _mapped_and_scales
+    from brdfcodec.runtime.threads import codec_threads
+
+    if batch_size < 1:
+        raise ValueError(f"batch_size must be at least 1, got {batch_size}")
+    device = decoder.device
+    incoming, outgoing = _directions(wi, "wi", device), _directions(wo, "wo", device)
+    try:
+        shape = torch.broadcast_shapes(incoming.shape, outgoing.shape)
+    except RuntimeError:
+        raise ValueError(f"wi and wo do not broadcast together: shapes {tuple(incoming.shape)} and "
+                         f"{tuple(outgoing.shape)}") from None
+    given = list(records) if isinstance(records, Sequence) and not isinstance(records, str | bytes) else None
+    as_records = given is not None and len(given) > 0 and any(isinstance(r, Record) for r in given)
+    if as_records and not all(isinstance(r, Record) for r in given):  # type: ignore[union-attr]
+        raise TypeError("records must be a sequence of records, or latent codes of shape (B, latent_dim)")
+    codes = None if as_records or (given is not None and not given) else _codes_tensor(decoder, records)
+    count = len(given) if codes is None else len(codes)  # type: ignore[arg-type]
+    lead = tuple(shape[:-1])
+    if len(lead) > 2 or (len(lead) == 2 and lead[0] not in (1, count)):
+        raise ValueError(f"directions must have shape (N, 3), or (B, N, 3) with B = {count} materials; "
+                         f"got shape {tuple(shape)}")
+    directions = lead[-1] if lead else 1
+    if count == 0:
+        return torch.empty((0, directions, N_CHANNELS), dtype=torch.float32, device=device)
+    rows = lead[0] if len(lead) == 2 else 1
+    incoming = incoming.expand(shape).reshape(rows, directions, 3)
+    outgoing = outgoing.expand(shape).reshape(rows, directions, 3)
+    with codec_threads(), torch.no_grad():
+        mapped, scales = _mapped_and_scales(decoder, given if as_records else None, codes, energy_bound, batch_size)
+        h, d, p, above = merl_bins_tensor(incoming, outgoing)
+        h, d, p, above = (t.expand(count, directions) for t in (h, d, p, above))
+        plan = _plan_on(device)
+        kept = mapped.reshape(count, N_CHANNELS, N_KEPT_SLICES, N_THETA_H, N_THETA_D)
+        material = torch.arange(count, device=device)[:, None, None]  # (B, 1, 1)
+        channel = torch.arange(N_CHANNELS, device=device)[None, None, :]  # (1, 1, 3)
+        h3, d3, p3 = h[..., None], d[..., None], p[..., None]
+        low = kept[material, channel, plan["left"][p3], h3, d3].double()  # (B, N, 3)
+        high = kept[material, channel, plan["right"][p3], h3, d3].double()
+        t = plan["weight"][p3]
+        x = ((1.0 - t) * low + t * high) * LOG_RANGE  # the interpolated argument (float64)
+        factor = plan["stored"].reshape(1, 1, N_CHANNELS)
+        if scales is not None:
+            factor = factor * scales.reshape(count, 1, 1)
+        value = torch.expm1(x) * factor
+        keep = above & plan["valid"][h, d, p]
+        return torch.where(keep[..., None], value, torch.zeros_like(value)).float()
