@@ -90,3 +90,15 @@ def test_decode_many_tensor_into_a_reused_out_against_the_network_alone(benchmar
 
     _paired_against_the_network(benchmark, "decode-many-tensor-out-32", "decode_many_tensor(out=)",
                                 decode_many_tensor_into_out)
+
+
+def test_evaluate_tensor_at_directions_against_the_network_alone(benchmark) -> None:  # noqa: ANN001
+    rng = np.random.default_rng(1)
+    wi, wo = rng.standard_normal((2, 4096, 3))  # a renderer's 4,096 direction pairs per material, no tables
+    wi[:, 2], wo[:, 2] = np.abs(wi[:, 2]), np.abs(wo[:, 2])
+
+    def evaluate_tensor(decoder: BrdfDecoder, codes: np.ndarray, records: list[LatentRecord]) -> None:
+        assert decoder.evaluate_tensor(records, wi, wo, batch_size=_BATCH).shape == (_COUNT, 4096, 3)
+
+    _paired_against_the_network(benchmark, "evaluate-tensor-32x4096", "evaluate_tensor (4,096 pairs)",
+                                evaluate_tensor)

@@ -442,10 +442,14 @@ def _records_mapped(decoder: BrdfDecoder, records: Sequence[Record], batch_size:
     """Clamped mapped slices (N, 63, 90, 90) of records on the decoder's device (layers added, §4.4)."""
     plain = [i for i, record in enumerate(records) if _is_plain_latent(record)]
     on_network = set(plain)
-    mapped = torch.empty((len(records), N_CHANNELS * N_KEPT_SLICES, N_THETA_H, N_THETA_D), device=decoder.device)
-    if plain:
-        codes = _codes_tensor(decoder, np.stack([np.asarray(records[i].mu, dtype=np.float32) for i in plain]))
-        mapped[plain] = _network_mapped(decoder, codes, batch_size)
+    codes = _codes_tensor(decoder, np.stack([np.asarray(records[i].mu, dtype=np.float32) for i in plain])) \
+        if plain else None
+    if len(plain) == len(records):  # all from the network (the usual case): its output is the result, no copy
+        mapped = _network_mapped(decoder, codes, batch_size)  # type: ignore[arg-type]
+    else:
+        mapped = torch.empty((len(records), N_CHANNELS * N_KEPT_SLICES, N_THETA_H, N_THETA_D), device=decoder.device)
+        if codes is not None:
+            mapped[plain] = _network_mapped(decoder, codes, batch_size)
     for i, record in enumerate(records):
         if i in on_network:
             residuals = decoder._layer_residuals(record)  # host: basis sum, inverse DCT (empty without layers)

@@ -161,13 +161,16 @@ def evaluate_tensor(
         h, d, p, above = merl_bins_tensor(incoming, outgoing)
         h, d, p, above = (t.expand(count, directions) for t in (h, d, p, above))
         plan = _plan_on(device)
-        kept = mapped.reshape(count, N_CHANNELS, N_KEPT_SLICES, N_THETA_H, N_THETA_D)
-        material = torch.arange(count, device=device)[:, None, None]  # (B, 1, 1)
-        channel = torch.arange(N_CHANNELS, device=device)[None, None, :]  # (1, 1, 3)
-        h3, d3, p3 = h[..., None], d[..., None], p[..., None]
-        low = kept[material, channel, plan["left"][p3], h3, d3].double()  # (B, N, 3)
-        high = kept[material, channel, plan["right"][p3], h3, d3].double()
-        t = plan["weight"][p3]
+        # flat indices into each material's (63, 90, 90) slices of the kept slot on either side, per channel
+        channel = torch.arange(N_CHANNELS, device=device) * N_KEPT_SLICES  # (3,)
+        cell = (h * N_THETA_D + d)[..., None]  # (B, N, 1)
+        plane = N_THETA_H * N_THETA_D
+        flat = mapped.reshape(count, -1)
+        low = flat.gather(1, ((channel + plan["left"][p][..., None]) * plane + cell).reshape(count, -1))
+        high = flat.gather(1, ((channel + plan["right"][p][..., None]) * plane + cell).reshape(count, -1))
+        low = low.reshape(count, directions, N_CHANNELS).double()
+        high = high.reshape(count, directions, N_CHANNELS).double()
+        t = plan["weight"][p][..., None]
         x = ((1.0 - t) * low + t * high) * LOG_RANGE  # the interpolated argument (float64)
         factor = plan["stored"].reshape(1, 1, N_CHANNELS)
         if scales is not None:
