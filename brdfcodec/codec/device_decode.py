@@ -80,8 +80,7 @@ class BrdfDecoder(Protocol):
 
 __all__ = [
     "check_tables_out", "clamp_mapped_tensor", "decode_many_tensor", "energy_bound_scales_tensor",
-    "table_from_mapped_host", "tables_from_mapped_tensor",
-    "unmap_kept_slices",
+    "records_or_codes", "table_from_mapped_host", "tables_from_mapped_tensor", "unmap_kept_slices",
 ]
 
 #: Bins from one kept slice to the next (the last gap, 171 → 179, holds 8).
@@ -477,19 +476,40 @@ def decode_many_tensor(
     if batch_size < 1:
         raise ValueError(f"batch_size must be at least 1, got {batch_size}")
     _mask_fill(masked)  # a bad value is refused before any work
-    given = list(records) if isinstance(records, Sequence) and not isinstance(records, str | bytes) else None
-    as_records = given is not None and len(given) > 0 and any(isinstance(r, Record) for r in given)
-    if as_records and not all(isinstance(r, Record) for r in given):  # type: ignore[union-attr]
-        raise TypeError("records must be a sequence of records, or latent codes of shape (B, latent_dim)")
-    codes = None if as_records or (given is not None and not given) else _codes_tensor(decoder, records)
+    given, codes, count = records_or_codes(decoder, records)
     if out is not None:  # refused before any work
-        check_tables_out(out, len(given) if codes is None else len(codes), decoder.device)  # type: ignore[arg-type]
-    if given is not None and not given:
+        check_tables_out(out, count, decoder.device)
+    if count == 0:
         return out if out is not None else torch.empty((0, N_CHANNELS, N_THETA_H, N_THETA_D, N_PHI_D),
                                                        device=decoder.device)
     with codec_threads(), torch.no_grad():
-        mapped, scales = _mapped_and_scales(decoder, given if as_records else None, codes, energy_bound, batch_size)
+        mapped, scales = _mapped_and_scales(decoder, given, codes, energy_bound, batch_size)
         return tables_from_mapped_tensor(mapped, scales, masked=masked, out=out)
+
+
+def records_or_codes(
+    decoder: BrdfDecoder, records: Sequence[Record] | torch.Tensor | npt.ArrayLike,
+) -> tuple[list[Record] | None, torch.Tensor | None, int]:
+    """What the batch decodes were given: ``(records, None, N)`` for a sequence of records, ``(None, codes, N)``
+    for latent codes (checked: shape (N, latent_dim), finite; on the decoder's device), ``(None, None, 0)`` for
+    an empty sequence.
+
+    Raises
+    ------
+    TypeError
+        A sequence that mixes records with anything else.
+    ValueError
+        Codes of the wrong shape or not finite.
+    """
+    given = list(records) if isinstance(records, Sequence) and not isinstance(records, str | bytes) else None
+    if given is not None and not given:
+        return None, None, 0
+    if given is not None and any(isinstance(r, Record) for r in given):
+        if not all(isinstance(r, Record) for r in given):
+            raise TypeError("records must be a sequence of records, or latent codes of shape (B, latent_dim)")
+        return given, None, len(given)
+    codes = _codes_tensor(decoder, records)
+    return None, codes, len(codes)
 
 
 def _mapped_and_scales(

@@ -128,7 +128,7 @@ def evaluate_tensor(
     batch_size: int = 16,
 ) -> torch.Tensor:
     """:meth:`BrdfDecoder.evaluate_tensor <brdfcodec.codec.BrdfDecoder.evaluate_tensor>` (see there)."""
-    from brdfcodec.codec.device_decode import _codes_tensor, _mapped_and_scales
+    from brdfcodec.codec.device_decode import _mapped_and_scales, records_or_codes
     from brdfcodec.runtime.threads import codec_threads
 
     if batch_size < 1:
@@ -140,12 +140,7 @@ def evaluate_tensor(
     except RuntimeError:
         raise ValueError(f"wi and wo do not broadcast together: shapes {tuple(incoming.shape)} and "
                          f"{tuple(outgoing.shape)}") from None
-    given = list(records) if isinstance(records, Sequence) and not isinstance(records, str | bytes) else None
-    as_records = given is not None and len(given) > 0 and any(isinstance(r, Record) for r in given)
-    if as_records and not all(isinstance(r, Record) for r in given):  # type: ignore[union-attr]
-        raise TypeError("records must be a sequence of records, or latent codes of shape (B, latent_dim)")
-    codes = None if as_records or (given is not None and not given) else _codes_tensor(decoder, records)
-    count = len(given) if codes is None else len(codes)  # type: ignore[arg-type]
+    given, codes, count = records_or_codes(decoder, records)
     lead = tuple(shape[:-1])
     if len(lead) > 2 or (len(lead) == 2 and lead[0] not in (1, count)):
         raise ValueError(f"directions must have shape (N, 3), or (B, N, 3) with B = {count} materials; "
@@ -157,7 +152,7 @@ def evaluate_tensor(
     incoming = incoming.expand(shape).reshape(rows, directions, 3)
     outgoing = outgoing.expand(shape).reshape(rows, directions, 3)
     with codec_threads(), torch.no_grad():
-        mapped, scales = _mapped_and_scales(decoder, given if as_records else None, codes, energy_bound, batch_size)
+        mapped, scales = _mapped_and_scales(decoder, given, codes, energy_bound, batch_size)
         h, d, p, above = merl_bins_tensor(incoming, outgoing)
         h, d, p, above = (t.expand(count, directions) for t in (h, d, p, above))
         plan = _plan_on(device)
