@@ -19,6 +19,7 @@ from pathlib import Path
 from brdfcodec.datasets.hdf5 import BrdfDataset
 from brdfcodec.report.rows import read_rows, stamp, write_rows
 
+
 @dataclass(frozen=True)
 class Study:
     """Where one study's runs, exports and measurements are, and how its tables are headed."""
@@ -169,12 +170,13 @@ def text(study: Study, rows: list[dict]) -> str:
         lines.append(f"{model:<28}" + "".join(f"{'—' if v is None else f'{v:.4f}':>{w}}"
                                               for v, w in zip(values, (16, 16, 21, 20), strict=True)))
     lines.append("")
-    lines.append("Latent refinement (BrdfEncoder effort), every 4th of the 120 materials, mapped RelAE:")
-    for row in rows:
-        if row.get("kind") == "refinement":
+    refinement = [row for row in rows if row.get("kind") == "refinement"]
+    if refinement:
+        lines.append("Latent refinement (BrdfEncoder effort), every 4th of the 120 materials, mapped RelAE:")
+        for row in refinement:
             per = ", ".join(f"{k} {v:.4f}" for k, v in sorted(row["relae_mapped"].items()))
             lines.append(f"  {row['model']:<28} effort {row['effort']}: all {row['all']:.4f} ({per})")
-    lines.append("")
+        lines.append("")
     lines.append(study.training_title)
     for row in rows:
         if row.get("kind") == "training":
