@@ -253,6 +253,7 @@ def test_on_cuda_the_tables_stay_on_the_device_and_meet_the_cross_device_toleran
                             np.random.default_rng(0).standard_normal((58, cuda.latent_dim)).astype(np.float32)])
     got = cuda.decode_many_tensor(torch.from_numpy(codes).cuda(), masked="keep")
     assert got.device.type == "cuda" and got.dtype == torch.float32
+    assert got.device == cuda.device  # the decoder's device is indexed (cuda:N), as its tensors
     tables = got.cpu().numpy()
     for table, mapped in zip(tables, cuda.decode_mapped(codes), strict=True):
         assert largest_mapped_difference(table, float64_reference(mapped)) <= MAPPED_TOLERANCE
@@ -310,6 +311,14 @@ def test_codes_beyond_the_latent_limit_decode_as_the_limit(decoder: BrdfDecoder)
         far, bound = torch.from_numpy(codes), torch.from_numpy(clipped)
         assert torch.equal(network.forward_channels(far, (0, 21)), network.forward_channels(bound, (0, 21)))
         assert torch.equal(network.hidden_and_unbounded(far)[1], network.hidden_and_unbounded(bound)[1])
+        assert torch.equal(network.logits(far), network.logits(bound))
+    basis = decoder.shared_basis
+    assert basis is not None
+    layer = quantise_coefficients(basis.sha256, [3.0, -1.0, 0.5], first=8, project=50)  # a projected base (§4.5)
+    projected_far = LayeredRecord("far", codes[0], np.ones(len(codes[0])), basis=layer)
+    projected_bound = LayeredRecord("bound", clipped[0], np.ones(len(codes[0])), basis=layer)
+    np.testing.assert_array_equal(decoder.decode(projected_far, masked="keep"),
+                                  decoder.decode(projected_bound, masked="keep"))  # its fast path clips too
     inside = torch.tensor([[-LATENT_LIMIT, -3.0, 0.0, 2.5, LATENT_LIMIT]], requires_grad=True)
     clip_latent(inside).sum().backward()
     assert torch.equal(clip_latent(inside.detach()), inside.detach())

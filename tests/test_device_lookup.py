@@ -16,7 +16,16 @@ from brdfcodec.codec.device_lookup import merl_bins_tensor
 from brdfcodec.edit.latent_edits import with_parameters
 from brdfcodec.examples import example_library
 from brdfcodec.format.bvae import LatentRecord
-from brdfcodec.representation.coords import half_diff_from_directions, phi_d_index, theta_d_index, theta_h_index
+from brdfcodec.representation.coords import (
+    directions_from_half_diff,
+    half_diff_from_directions,
+    phi_d_from_index,
+    phi_d_index,
+    theta_d_from_index,
+    theta_d_index,
+    theta_h_from_index,
+    theta_h_index,
+)
 from brdfcodec.representation.lookup import lookup
 from brdfcodec.representation.mask import horizon_mask
 
@@ -37,8 +46,18 @@ def directions(count: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
     return wi, wo
 
 
-def test_the_bins_are_numpy_s() -> None:
-    wi, wo = directions(20000, 1)
+def grid_directions() -> tuple[np.ndarray, np.ndarray]:
+    """Pairs at the representative angles of MERL bins (the bins' lower edges: θh bin 1 starts at 1.9e-4 rad,
+    where an arccos of z is off by more than the bins' tolerance), θd > 0, random φh."""
+    h, d, p = np.meshgrid(np.arange(90), np.arange(1, 90, 3), np.arange(0, 180, 7), indexing="ij")
+    phi_h = np.random.default_rng(8).uniform(-np.pi, np.pi, h.shape)
+    wi, wo = directions_from_half_diff(theta_h_from_index(h), theta_d_from_index(d), phi_d_from_index(p), phi_h)
+    return wi.reshape(-1, 3), wo.reshape(-1, 3)
+
+
+@pytest.mark.parametrize("pairs", ["random", "grid"])
+def test_the_bins_are_numpy_s(pairs: str) -> None:
+    wi, wo = directions(20000, 1) if pairs == "random" else grid_directions()
     h, d, p, above = merl_bins_tensor(torch.from_numpy(wi), torch.from_numpy(wo))
     theta_h, theta_d, phi_d, _ = half_diff_from_directions(wi, wo)
     np.testing.assert_array_equal(h.numpy(), theta_h_index(theta_h))
@@ -71,12 +90,14 @@ def test_values_are_the_decoded_table_s_nearest_bins(decoder: BrdfDecoder) -> No
 def test_directions_per_material_and_codes(decoder: BrdfDecoder) -> None:
     codes = np.random.default_rng(6).standard_normal((2, decoder.latent_dim)).astype(np.float32)
     wi, wo = directions(50, 3)
-    per = decoder.evaluate_tensor(codes, np.stack([wi, wo]), np.stack([wo, wi]))  # (B, N, 3) each
+    other_wi, other_wo = directions(50, 9)
+    per = decoder.evaluate_tensor(codes, np.stack([wi, other_wi]), np.stack([wo, other_wo]))  # (B, N, 3) each
     shared_first = decoder.evaluate_tensor(codes, wi, wo)
-    shared_second = decoder.evaluate_tensor(codes, wo, wi)
+    shared_second = decoder.evaluate_tensor(codes, other_wi, other_wo)
     torch.testing.assert_close(per[0], shared_first[0])
     torch.testing.assert_close(per[1], shared_second[1])
-    torch.testing.assert_close(shared_first, shared_second)  # reciprocity: the same bin
+    assert not torch.equal(per[1], shared_first[1])  # material 1 read its own directions
+    torch.testing.assert_close(decoder.evaluate_tensor(codes, wo, wi), shared_first)  # reciprocity: the same bin
     one = decoder.evaluate_tensor(torch.from_numpy(codes), wi[5], wo[5])
     assert one.shape == (2, 1, 3)
     torch.testing.assert_close(one[:, 0], shared_first[:, 5])

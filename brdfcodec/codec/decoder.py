@@ -14,7 +14,7 @@ import numpy as np
 import numpy.typing as npt
 import torch
 
-from brdfcodec.conventions import N_KEPT_SLICES, NETWORK_INPUT_SHAPE
+from brdfcodec.conventions import LATENT_LIMIT, N_KEPT_SLICES, NETWORK_INPUT_SHAPE
 from brdfcodec.errors import (
     BasisMismatchError,
     DecoderMismatchError,
@@ -47,6 +47,7 @@ if TYPE_CHECKING:
     from brdfcodec.layers.basis import SharedBasis
 
 from brdfcodec.codec.device_decode import table_from_mapped_host
+from brdfcodec.codec.devices import indexed_device
 from brdfcodec.codec.prepare import MaskedEntries, ModelSpec, _apply_mask, resolve_model
 from brdfcodec.codec.projection import _has_latent, _projected_vectors, _ProjectionPlan
 
@@ -134,7 +135,7 @@ class BrdfDecoder:
         self, network: torch.nn.Module, device: str | torch.device, dtype: torch.dtype, manifest: ModelManifest | None
     ) -> None:
         self.network = network
-        self.device = torch.device(device)
+        self.device = indexed_device(device)  # cuda → cuda:N, as its tensors' .device
         self.dtype = dtype
         self.manifest = manifest
         self.reference = None if manifest is None else DecoderReference(manifest.decoder_sha256, manifest.name)
@@ -395,7 +396,8 @@ class BrdfDecoder:
             mapped.reshape(-1)[on_basis] += basis.weighted_sum(c, first)
         else:
             weights = np.zeros(max(count, first + len(c)), dtype=np.float32)
-            weights[:count] = plan.dot_products(count, h, batch[0], moved)
+            code = np.clip(batch[0], -LATENT_LIMIT, LATENT_LIMIT)  # the network's input (§6 step 2)
+            weights[:count] = plan.dot_products(count, h, code, moved)
             weights[first : first + len(c)] += c
             mapped.reshape(-1)[on_basis] = plan.reconstruct(weights)
         if record.detail is not None:
@@ -654,8 +656,8 @@ class BrdfDecoder:
 
         Each pair's MERL bin (the nearest-bin lookup of ``spec/conventions.md`` §3, as
         :func:`~brdfcodec.representation.lookup.lookup`) is made from the network's kept φd slices alone
-        (:mod:`brdfcodec.codec.device_lookup`): the same value as that bin of :meth:`decode_many_tensor`'s table
-        with ``masked="zero"``, up to float32 rounding, for a renderer that needs values at some directions and not
+        (:mod:`brdfcodec.codec.device_lookup`): the same value as that bin of :meth:`decode_many`'s table with
+        ``masked="zero"``, up to float32 rounding, for a renderer that needs values at some directions and not
         17.5 MB a material.
 
         Parameters

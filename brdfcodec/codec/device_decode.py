@@ -37,6 +37,7 @@ import numpy as np
 import numpy.typing as npt
 import torch
 
+from brdfcodec.codec.devices import indexed_device
 from brdfcodec.conventions import (
     EPSILON,
     KEPT_PHI_D_SLICES,
@@ -195,14 +196,6 @@ def unmap_kept_slices(kept: torch.Tensor, factor: torch.Tensor, target: torch.Te
     target.expm1_().mul_(factor.float().reshape(*factor.shape, 1, 1, 1))
 
 
-def _indexed(device: torch.device) -> torch.device:
-    """``device`` with its index where torch gives its tensors one (``cuda`` is the current ``cuda:N``), so that
-    a decoder on ``cuda`` takes an ``out`` tensor made on ``cuda`` (whose device reads ``cuda:0``)."""
-    if device.index is None and device.type not in ("cpu", "meta"):
-        return torch.empty(0, device=device).device
-    return device
-
-
 def check_tables_out(out: torch.Tensor, count: int, device: torch.device) -> None:
     """Refuse an ``out`` tensor that full tables cannot be written into.
 
@@ -229,7 +222,7 @@ def check_tables_out(out: torch.Tensor, count: int, device: torch.device) -> Non
         raise ValueError(f"out has shape {tuple(out.shape)}; {count} tables need {shape}")
     if out.dtype != torch.float32:
         raise ValueError(f"out has dtype {out.dtype}; tables are torch.float32")
-    if out.device != _indexed(torch.device(device)):
+    if out.device != indexed_device(device):
         raise ValueError(f"out is on {out.device}; the tables are decoded on {device}")
     if not out.is_contiguous():
         raise ValueError("out must be contiguous")

@@ -8,10 +8,11 @@ direction pair is turned into its MERL bin (the nearest-bin lookup of ``spec/con
 :func:`~brdfcodec.representation.lookup.lookup` and MERL's reader do), and only that bin of the table is made from
 the network's 21 kept φd slices — the two kept slices around the bin's φd, interpolated and unmapped as
 ``spec/bvae-format.md`` §6 step 2 says (float64), times the energy bound's factor where the table takes it.
-So a value equals the same bin of :meth:`BrdfDecoder.decode_many_tensor`'s table, up to float32 rounding, and the
-work and memory grow with the directions asked for, not with the table. The angles are computed in float64 on the
-device, in the operations of :func:`~brdfcodec.representation.coords.half_diff_from_directions` and the bin
-functions beside it.
+So a value equals the same bin of :meth:`BrdfDecoder.decode_many`'s table up to float32 rounding (and of a GPU's
+:meth:`BrdfDecoder.decode_many_tensor` table within its 1e-6 mapped), and the work and memory grow with the
+directions asked for, not with the table. The angles are computed in float64 on the device, in the operations of
+:func:`~brdfcodec.representation.coords.half_diff_from_directions` and the bin functions beside it; a pair is above
+the horizon as :func:`~brdfcodec.representation.lookup.lookup` decides it, on the vectors as given.
 """
 
 from __future__ import annotations
@@ -62,6 +63,8 @@ def _plan_on(device: torch.device) -> dict[str, torch.Tensor]:
 
 def _directions(values: torch.Tensor | npt.ArrayLike, label: str, device: torch.device) -> torch.Tensor:
     """Direction vectors (..., 3) as float64 on ``device``: finite and non-zero (any length)."""
+    if isinstance(values, np.ndarray) and not values.flags.writeable:
+        values = values.copy()  # torch warns on read-only arrays (np.broadcast_to gives them)
     tensor = torch.as_tensor(values, dtype=torch.float64, device=device)
     if tensor.ndim == 0 or tensor.shape[-1] != 3:
         raise ValueError(f"{label} must hold 3-vectors, shape (..., 3), got shape {tuple(tensor.shape)}")
@@ -94,9 +97,11 @@ def merl_bins_tensor(wi: torch.Tensor, wo: torch.Tensor) -> tuple[torch.Tensor, 
         ``theta_h``, ``theta_d``, ``phi_d`` bin indices (int64, in [0, 89], [0, 89], [0, 179]) and ``above``
         (bool), each of the broadcast shape without its last axis.
     """
+    above = (wi[..., 2] > HORIZON_COS_MIN) & (wo[..., 2] > HORIZON_COS_MIN)  # on the vectors as given, as lookup
     wi, wo = torch.broadcast_tensors(_normalized(wi), _normalized(wo))
+    above = above.expand(wi.shape[:-1])
     half = _normalized(wi + wo)
-    theta_h = torch.acos(half[..., 2].clamp(-1.0, 1.0))
+    theta_h = torch.atan2(torch.hypot(half[..., 0], half[..., 1]), half[..., 2])  # accurate near 0, unlike acos
     phi_h = torch.atan2(half[..., 1], half[..., 0])
     # d = wi rotated by −φh about z, then by −θh about y (representation/coords.py)
     cos_p, sin_p = torch.cos(-phi_h), torch.sin(-phi_h)
@@ -105,8 +110,7 @@ def merl_bins_tensor(wi: torch.Tensor, wo: torch.Tensor) -> tuple[torch.Tensor, 
     z = wi[..., 2]
     cos_t, sin_t = torch.cos(-theta_h), torch.sin(-theta_h)
     dx, dz = cos_t * x + sin_t * z, -sin_t * x + cos_t * z
-    diff_norm = torch.sqrt(dx * dx + y * y + dz * dz)
-    theta_d = torch.acos((dz / diff_norm).clamp(-1.0, 1.0))
+    theta_d = torch.atan2(torch.hypot(dx, y), dz)
     phi_d = torch.atan2(y, dx)
     half_pi = math.pi / 2
     h_index = _bin(N_THETA_H * torch.sqrt(theta_h.clamp(min=0.0) / half_pi), N_THETA_H)
@@ -114,7 +118,6 @@ def merl_bins_tensor(wi: torch.Tensor, wo: torch.Tensor) -> tuple[torch.Tensor, 
     folded = torch.remainder(phi_d, math.pi)
     folded = torch.where(folded >= math.pi, torch.zeros_like(folded), folded)
     p_index = torch.remainder(_bin(N_PHI_D * folded / math.pi, N_PHI_D + 1), N_PHI_D)
-    above = (wi[..., 2] > HORIZON_COS_MIN) & (wo[..., 2] > HORIZON_COS_MIN)
     return h_index, d_index, p_index, above
 
 

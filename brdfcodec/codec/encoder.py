@@ -41,6 +41,7 @@ if TYPE_CHECKING:
 
 from brdfcodec.codec.black import black_record, is_near_black_source
 from brdfcodec.codec.decoder import BrdfDecoder, _EvalMode
+from brdfcodec.codec.devices import indexed_device
 from brdfcodec.codec.prepare import ModelSpec, prepare_source, resolve_model
 
 __all__ = ["BrdfEncoder", "MaterialInput", "measure"]
@@ -162,7 +163,7 @@ class BrdfEncoder:
 
     def _setup(self, network: torch.nn.Module, device: str | torch.device, manifest: ModelManifest | None) -> None:
         self.network = network
-        self.device = torch.device(device)
+        self.device = indexed_device(device)  # cuda → cuda:N, as its tensors' .device
         self.manifest = manifest
         self.reference = None if manifest is None else DecoderReference(manifest.decoder_sha256, manifest.name)
 
