@@ -28,9 +28,7 @@ import torch
 
 from brdfcodec.conventions import (
     BIN_TOLERANCE,
-    EPSILON,
     HORIZON_COS_MIN,
-    MERL_COLOR_SCALE,
     N_CHANNELS,
     N_KEPT_SLICES,
     N_PHI_D,
@@ -40,7 +38,6 @@ from brdfcodec.conventions import (
 from brdfcodec.format.bvae import Record
 from brdfcodec.representation.layout import interpolation_plan
 from brdfcodec.representation.mapping import LOG_RANGE
-from brdfcodec.representation.mask import horizon_mask
 
 if TYPE_CHECKING:
     from brdfcodec.codec.device_decode import BrdfDecoder
@@ -50,14 +47,12 @@ __all__ = ["evaluate_tensor", "merl_bins_tensor"]
 
 @functools.cache
 def _plan_on(device: torch.device) -> dict[str, torch.Tensor]:
-    """Per-device constants: each φd bin's kept slots and weight, the valid bins, ε / S_c."""
+    """Per-device interpolation plan: each φd bin's two kept slots and the right one's weight."""
     left, right, weight = interpolation_plan()
     return {
         "left": torch.from_numpy(left.astype(np.int64)).to(device),
         "right": torch.from_numpy(right.astype(np.int64)).to(device),
         "weight": torch.from_numpy(weight.astype(np.float64)).to(device),
-        "valid": torch.from_numpy(horizon_mask().copy()).to(device),  # (90, 90, 180) bool
-        "stored": torch.from_numpy(EPSILON / np.asarray(MERL_COLOR_SCALE, dtype=np.float64)).to(device),
     }
 
 
@@ -131,7 +126,7 @@ def evaluate_tensor(
     batch_size: int = 16,
 ) -> torch.Tensor:
     """:meth:`BrdfDecoder.evaluate_tensor <brdfcodec.codec.BrdfDecoder.evaluate_tensor>` (see there)."""
-    from brdfcodec.codec.device_decode import _mapped_and_scales, records_or_codes
+    from brdfcodec.codec.device_decode import _constants, _mapped_and_scales, records_or_codes
     from brdfcodec.runtime.threads import codec_threads
 
     if batch_size < 1:
@@ -158,7 +153,7 @@ def evaluate_tensor(
         mapped, scales = _mapped_and_scales(decoder, given, codes, energy_bound, batch_size)
         h, d, p, above = merl_bins_tensor(incoming, outgoing)
         h, d, p, above = (t.expand(count, directions) for t in (h, d, p, above))
-        plan = _plan_on(device)
+        plan, constants = _plan_on(device), _constants(device)
         # flat indices into each material's (63, 90, 90) slices of the kept slot on either side, per channel
         channel = torch.arange(N_CHANNELS, device=device) * N_KEPT_SLICES  # (3,)
         cell = (h * N_THETA_D + d)[..., None]  # (B, N, 1)
@@ -170,9 +165,9 @@ def evaluate_tensor(
         high = high.reshape(count, directions, N_CHANNELS).double()
         t = plan["weight"][p][..., None]
         x = ((1.0 - t) * low + t * high) * LOG_RANGE  # the interpolated argument (float64)
-        factor = plan["stored"].reshape(1, 1, N_CHANNELS)
+        factor = constants["stored"].reshape(1, 1, N_CHANNELS)
         if scales is not None:
             factor = factor * scales.reshape(count, 1, 1)
         value = torch.expm1(x) * factor
-        keep = above & plan["valid"][h, d, p]
+        keep = above & ~constants["invalid"][h, d, p]
         return torch.where(keep[..., None], value, torch.zeros_like(value)).float()
