@@ -64,9 +64,8 @@ MAPPED_MAX: Final = 5.0
 #: Bound on each latent coordinate at the decoder's input (``spec/bvae-format.md`` §6 step 2): a code is
 #: clipped to ``[−LATENT_LIMIT, LATENT_LIMIT]`` before the network. Encoders give codes within a few units
 #: (the prior is N(0, 1)), edits within tens; codes far beyond saturate the output, and in float32 the network's
-#: arithmetic on them depends on the device (codes of 1e19 to 1e23 decoded up to MAPPED_MAX apart on a CPU and
-#: an H100), so the clip gives them one decode on every device (CPU and CUDA within 8e-6 mapped at the bound,
-#: measured on an H100; 1.2e-4 at 1e4).
+#: arithmetic on them depends on the device, so the clip gives them one decode on every device (CPU against CUDA
+#: by code magnitude: ``benchmarks/device/extreme_latents.py``, rows in ``reports/device/``).
 LATENT_LIMIT: Final = 1e3
 
 #: The φd slices kept as network input: every 9th slice from 0 to 171, plus
