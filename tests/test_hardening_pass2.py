@@ -185,7 +185,7 @@ def shipped_decoder() -> BrdfDecoder:
     from brdfcodec.codec import BrdfDecoder
 
     decoder = BrdfDecoder()
-    assert decoder.shared_basis is not None and decoder.shared_basis.count < 200
+    assert decoder.shared_basis is not None and decoder.shared_basis.count < 4000
     return decoder
 
 
@@ -260,19 +260,34 @@ def _basis_layer(decoder: BrdfDecoder, *, count: int = 5, first: int = 0, projec
     return BasisLayer(sha or decoder.shared_basis.sha256, 0.25, np.ones(count, dtype=np.int8), first, project)
 
 
-@pytest.mark.parametrize(("fields", "what"), [
-    ({"count": 200}, "vectors 1 to 200"),
-    ({"count": 10, "first": 70}, "vectors 71 to 80"),
-    ({"count": 5, "first": 8, "project": 76}, "projected on 76"),
+@pytest.mark.parametrize(("past", "basis"), [
+    ({"count": 1}, "own"),
+    ({"count": 10, "first": -5}, "own"),
+    ({"count": 5, "first": 8, "project": 1}, "own"),
+    ({"count": 10, "first": -5}, "prefix"),  # an earlier basis the shipped one extends: its own size bounds it
+    ({"count": 5, "first": 8, "project": 1}, "prefix"),
 ])
 def test_basis_fields_beyond_the_shared_basis_are_refused_on_open(
-        tmp_path: Path, shipped_decoder: BrdfDecoder, fields: dict, what: str,
+        tmp_path: Path, shipped_decoder: BrdfDecoder, past: dict, basis: str,
         capsys: pytest.CaptureFixture[str]) -> None:
     from brdfcodec.codec import MaterialLibrary
     from brdfcodec.errors import BasisError
     from brdfcodec.format.bvae import read_bvae
 
-    path = _layered_file(tmp_path, shipped_decoder, basis=_basis_layer(shipped_decoder, **fields))
+    assert shipped_decoder.manifest is not None
+    if basis == "prefix":
+        if not shipped_decoder.manifest.basis_prefixes:
+            pytest.skip("the shipped model's basis extends no earlier one")
+        sha, size = next(iter(shipped_decoder.manifest.basis_prefixes.items()))
+    else:
+        sha, size = shipped_decoder.shared_basis.sha256, shipped_decoder.shared_basis.count
+    # Fields just past the basis' size: all of it and one more, 10 from 5 before its end, projected on one more.
+    fields = {"count": size + past["count"]} if set(past) == {"count"} else (
+        {"count": 10, "first": size + past["first"]} if "project" not in past else
+        {"count": 5, "first": 8, "project": size + past["project"]})
+    what = ("projected on {}".format(fields["project"]) if "project" in fields else
+            "vectors {} to {}".format(fields.get("first", 0) + 1, fields.get("first", 0) + fields["count"]))
+    path = _layered_file(tmp_path, shipped_decoder, basis=_basis_layer(shipped_decoder, sha=sha, **fields))
     with pytest.raises(BasisError, match=what) as caught:
         MaterialLibrary(path)
     assert isinstance(caught.value, BrdfcodecError) and str(path) in str(caught.value) and "'gold'" in str(caught.value)

@@ -109,7 +109,7 @@ def _bvae_summary(path: Path) -> dict[str, Any]:
             )
         from brdfcodec.layers.basis import check_basis_layers, check_records_without_latent, model_basis_lookup
 
-        bases = model_basis_lookup(model.folder, model.basis_sha256, {})  # one basis per model (issue 40)
+        bases = model_basis_lookup(model.folder, model.basis_sha256, model.basis_prefixes)
         check_basis_layers(header.entries, bases, str(path), model.basis_sha256)
         check_records_without_latent(header.entries, bases, str(path), bool(model.config.linear_basis))
     name = header.decoder.name or (model.name if installed is not None else "")

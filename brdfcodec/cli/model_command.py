@@ -53,14 +53,20 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
         "of the materials the model trained on, as its model.json lists them, else of the dataset's training "
         "split; by default in all 6 orders of their colour channels) for a model folder that "
         "lacks one, and name it in model.json. The weights are not touched: the decoder hash, and every file "
-        "made with the model, stay valid. A model that has a basis keeps it unless --replace is given; then the "
-        "new basis replaces it (a model ships one basis), and files with basis layers made with the old one no "
-        "longer decode with this folder.",
+        "made with the model, stay valid. A model that has a basis keeps it unless --extend or --replace is given: "
+        "--extend adds vectors after the basis' own, which stay bit for bit, and names the old basis in "
+        "model.json's basis_prefixes, so files made with it keep decoding; --replace fits a new basis that "
+        "replaces it (a model ships one basis), and files with basis layers made with the old one no longer "
+        "decode with this folder.",
     )
     fit.add_argument("folder", type=Path, help="model folder")
     fit.add_argument("--dataset", type=Path, required=True, help="dataset holding the materials the model trained on")
     fit.add_argument("--count", type=int, default=None, metavar="K", help="vectors (default 75)")
-    fit.add_argument("--replace", action="store_true",
+    how = fit.add_mutually_exclusive_group()
+    how.add_argument("--extend", action="store_true",
+                     help="grow the model's basis to K vectors, keeping its vectors bit for bit: files made with "
+                     "the old basis keep decoding with this folder")
+    how.add_argument("--replace", action="store_true",
                      help="give a model that has a basis a new one; files with basis layers made with the old "
                      "one no longer decode with this folder")
     fit.add_argument("--colour-permutations", action=argparse.BooleanOptionalAction, default=True,
@@ -190,9 +196,11 @@ def run_fit_basis(args: argparse.Namespace) -> int:
     if count < 1:
         raise ValueError(f"--count must be ≥ 1, got {count}")
     manifest = add_shared_basis(args.folder, args.dataset, count, colour_permutations=args.colour_permutations,
-                                replace=args.replace)
+                                replace=args.replace, extend=args.extend)
+    extends = "".join(f"; its first {n} are basis {sha}, whose files keep decoding"
+                      for sha, n in manifest.basis_prefixes.items())
     print(f"wrote {args.folder}/basis.safetensors: {manifest.info['basis']['count']} vectors, "
-          f"sha256 {manifest.basis_sha256}")
+          f"sha256 {manifest.basis_sha256}{extends}")
     return 0
 
 

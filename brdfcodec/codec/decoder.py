@@ -291,11 +291,17 @@ class BrdfDecoder:
         return load_shared_basis(self.manifest.folder / BASIS_FILE, self.manifest.basis_sha256)
 
     def basis_named(self, sha256: str) -> SharedBasis | None:
-        """The model's shared basis (:attr:`shared_basis`) if it has this SHA-256, else None: a model ships one
-        basis, and a file's basis layers decode with the model whose basis they name (``spec/bvae-format.md``
-        §4.5)."""
+        """The model's shared basis (:attr:`shared_basis`) if it has this SHA-256, its leading vectors where
+        ``model.json`` names an earlier basis of that SHA-256 they are (``basis_prefixes``, ``spec/model.md``
+        §5), else None: a file's basis layers decode with the model whose basis they name
+        (``spec/bvae-format.md`` §4.5)."""
         basis = self.shared_basis
-        return basis if basis is not None and basis.sha256 == sha256 else None
+        if basis is None:
+            return None
+        if basis.sha256 == sha256:
+            return basis
+        count = self.manifest.basis_prefixes.get(sha256) if self.manifest is not None else None
+        return None if count is None else basis.leading(count, sha256)
 
     @property
     def projection_centre(self) -> npt.NDArray[np.float32]:

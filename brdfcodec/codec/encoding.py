@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Literal, Protocol, get_args
 
@@ -99,10 +99,28 @@ BasisCoding = Literal["auto", "coded", "packed", "int8"]
 CODED_PRIOR: dict[bool, tuple[int, int]] = {True: (156, 28), False: (190, 41)}
 _BASIS_CODINGS: tuple[str, ...] = get_args(BasisCoding)
 
-def _most_packed(k: int) -> int:
-    """Most coefficients of a packed layer that fits where k int8 ones would: its count's varint in the record's
-    descriptor stays as long as k's."""
-    return 127 if k < 128 else MAX_BASIS_COUNT
+#: Most coefficients whose count takes one varint byte in a record's descriptor.
+_ONE_BYTE_COUNT = 127
+
+
+def _layer_size(count_in: Callable[[int, int], int], k: int, available: int) -> tuple[int, int]:
+    """How many coefficients a packed or coded layer in the bytes of k int8 coefficients keeps, and the bytes
+    (step and coefficients) it may take: ``(count, layer_bytes)``.
+
+    ``count_in(available, layer_bytes)`` is the count the layer keeps of the leading ``available`` coefficients
+    in ``layer_bytes``. The count's varint in the record's descriptor takes one byte up to 127 and two beyond: where
+    k's takes one (k < 128), a layer of more than 127 coefficients has one byte less for them, and is kept only
+    where it still keeps more than 127 (a basis larger than 128 vectors, from about 64 B).
+    """
+    layer_bytes = STEP_BYTES + k
+    if k > _ONE_BYTE_COUNT:
+        return count_in(min(available, MAX_BASIS_COUNT), layer_bytes), layer_bytes
+    count = count_in(min(available, _ONE_BYTE_COUNT), layer_bytes)
+    if available > _ONE_BYTE_COUNT and count == _ONE_BYTE_COUNT:
+        more = count_in(min(available, MAX_BASIS_COUNT), layer_bytes - 1)
+        if more > _ONE_BYTE_COUNT:
+            return more, layer_bytes - 1
+    return count, layer_bytes
 
 
 def projected_base_vectors(decoder: LayerDecoder, basis: SharedBasis) -> int:
@@ -205,9 +223,9 @@ class EncodeOptions:
     def variants(self, linear_rank: int) -> tuple[str, ...]:
         """The first basis vectors whose packed or coded layers rate control compares: after the decoder's
         linear path (``linear_rank``, which μ drives) and from vector 0 (where the decoder's output misses on
-        the leading components too; the fit tries it only where the bytes hold every vector past the linear path,
-        from about 64 B, and otherwise gives the first variant's record); none where there is no linear path or no
-        packed layer."""
+        the leading components too: on materials the model never saw, the coefficients of those first vectors are
+        often worth more than the same bytes past the last one, at every size); none where there is no linear path
+        or no packed layer."""
         return (str(linear_rank), "0") if self.packed and linear_rank > 0 else ()
 
     @property
@@ -313,12 +331,20 @@ def _basis_only_fit(
     def fit_packed(k: int) -> tuple[BasisLayer, np.ndarray]:
         # in the bytes of k int8 coefficients: the count the least-squares coefficients pack to, then those fitted
         # (Adam) and packed, and the integers polished within their fields
-        max_bytes = STEP_BYTES + k - (1 if options.coded else 0)  # a coded layer's length takes a descriptor byte
-        available = min(basis.count, _most_packed(k))
-        least_squares = fit_basis_only_coefficients(target, weights, centre, basis.vectors(0, available), 0)
         prior = CODED_PRIOR[False]
-        count = _coded_count(least_squares, 0, max_bytes, prior) if options.coded else (
-            _packed_count(least_squares, 0, max_bytes))
+        least_squares_of: dict[int, np.ndarray] = {}
+
+        def count_in(available: int, layer_bytes: int) -> int:
+            if available not in least_squares_of:
+                least_squares_of[available] = fit_basis_only_coefficients(
+                    target, weights, centre, basis.vectors(0, available), 0)
+            fitted = least_squares_of[available]
+            # a coded layer's length takes a descriptor byte
+            return (_coded_count(fitted, 0, layer_bytes - 1, prior) if options.coded
+                    else _packed_count(fitted, 0, layer_bytes))
+
+        count, layer_bytes = _layer_size(count_in, k, basis.count)
+        max_bytes = layer_bytes - (1 if options.coded else 0)
         components = basis.vectors(0, count)
         coefficients = fit_basis_only_coefficients(target, weights, centre, components, options.effort)
         if options.coded:
@@ -371,19 +397,22 @@ def _basis_fit(
         # of a fit each, and keeps the lower error (packed first: kept on a tie, readable by 2.3 readers).
         if packed:  # in the bytes of k int8 coefficients: as many as the least-squares coefficients pack to
             first = min(start, basis.count - 1)
-            available = min(basis.count - first, _most_packed(k))
-            fitted = least_squares(first, available, p)
             codings = ["packed", "coded"] if options.basis_coding == "auto" else [
                 "coded" if options.coded else "packed"]
-            max_bytes = {"packed": STEP_BYTES + k, "coded": STEP_BYTES + k - 1}  # a coded layer's length: 1 byte
-            count_of = {}
+            max_bytes, count_of = {}, {}
             for c in codings:
+                def count_in(available: int, layer_bytes: int, coding: str = c) -> int:
+                    fitted = least_squares(first, available, p)
+                    # a coded layer's length takes a descriptor byte
+                    return (_coded_count(fitted, first, layer_bytes - 1, CODED_PRIOR[True]) if coding == "coded"
+                            else _packed_count(fitted, first, layer_bytes))
                 try:
-                    count_of[c] = (_coded_count(fitted, first, max_bytes[c], CODED_PRIOR[True]) if c == "coded"
-                                   else _packed_count(fitted, first, max_bytes[c]))
+                    count_of[c], layer_bytes = _layer_size(count_in, k, basis.count - first)
                 except ValueError:  # no coded layer fits these bytes: under auto, the packed one alone
                     if options.basis_coding != "auto":
                         raise
+                    continue
+                max_bytes[c] = layer_bytes - (1 if c == "coded" else 0)
             codings = [c for c in codings if c in count_of]
         else:
             first = basis_offset(linear_rank, basis.count, k)
@@ -430,14 +459,6 @@ def _basis_fit(
         made_layers.sort(key=lambda made: made[0])
         return min((made for _, made in made_layers), key=lambda made: kept_slice_error(made[2]))
 
-    def holds_all(k: int, p: int) -> bool:
-        """Whether a packed layer of k int8 coefficients' bytes after the linear path keeps every vector there
-        (then the coefficients may as well start at the first vector: from about 64 B)."""
-        first = min(linear_rank, basis.count - 1)
-        available = min(basis.count - first, _most_packed(k))
-        return available == basis.count - first and _packed_count(
-            least_squares(first, available, p), first, STEP_BYTES + k) == available
-
     def kept_slice_error(mapped: np.ndarray) -> float:
         """What rate control ranks candidates by: the clamped decode's L1 error over valid kept-slice entries."""
         return float((np.abs(np.clip(mapped, 0.0, MAPPED_MAX) - target) * weights).sum())
@@ -456,8 +477,6 @@ def _basis_fit(
             if (k, mu_storage) not in projected_as:
                 fit(k, mu_storage, under_detail)  # the first variant chooses the projection
             chosen = [projected_as[k, mu_storage]]  # a later variant: the projection the first one kept
-            if not holds_all(k, chosen[0]):
-                start = linear_rank  # too few bytes for every vector past the linear path: the first variant's
         fits = []
         for p in chosen:
             if (k, mu_storage, p, packed, start) not in made:

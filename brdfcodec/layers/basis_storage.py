@@ -119,16 +119,15 @@ def _validate(components: np.ndarray, entries: np.ndarray, where: str) -> None:
         raise BasisError(f"{where}: 'components' holds non-finite values")
 
 def model_basis_lookup(folder: str | os.PathLike[str], current: str | None,
-                       previous: Mapping[str, str]) -> Callable[[str], SharedBasis | None]:
-    """``basis_named`` for :func:`check_basis_layers` from a model folder (no torch): its current basis
-    (``basis.safetensors``, hash ``current``) or a previous one (``previous``: hash → file name), each read and
-    checked against its hash once."""
+                       prefixes: Mapping[str, int]) -> Callable[[str], SharedBasis | None]:
+    """``basis_named`` for :func:`check_basis_layers` from a model folder (no torch): its basis
+    (``basis.safetensors``, hash ``current``, read and checked against its hash once), or its leading vectors
+    where they are an earlier basis (``prefixes``: that basis' hash → its count; ``spec/model.md`` §5)."""
     def basis_named(sha256: str) -> SharedBasis | None:
-        if sha256 == current:
-            return _load_checked(Path(folder) / BASIS_FILE, sha256)
-        if sha256 in previous:
-            return _load_checked(Path(folder) / previous[sha256], sha256)
-        return None
+        if current is None or (sha256 != current and sha256 not in prefixes):
+            return None
+        basis = _load_checked(Path(folder) / BASIS_FILE, current)
+        return basis if sha256 == current else basis.leading(prefixes[sha256], sha256)
 
     return basis_named
 

@@ -24,6 +24,7 @@ __all__ = [
     "FactorisedBasis",
     "SharedBasis",
     "basis_offset",
+    "extend_factorised_basis",
     "fit_factorised_basis",
     "fit_shared_basis",
     "shared_basis_rank",
@@ -223,6 +224,24 @@ class SharedBasis:
             return m + self.weighted_sum(a)
         return m + np.stack([self.weighted_sum(row) for row in a])
 
+    def leading(self, count: int, sha256: str) -> SharedBasis:
+        """The first ``count`` vectors, as the basis named ``sha256`` whose vectors they are (a model's
+        ``basis_prefixes``, ``spec/model.md`` §5): the same arrays, no copy.
+
+        Raises
+        ------
+        BasisError
+            ``count`` outside 1 … K.
+        """
+        self._rows(0, count)
+        if self.factorised is None:
+            assert self.components is not None
+            return SharedBasis(self.components[:count], self.entries, sha256)
+        f = self.factorised
+        used = int(f.factor_of[:count].max()) + 1
+        return SharedBasis(None, self.entries, sha256, FactorisedBasis(
+            f.factors[:used], f.colours[:count], f.factor_of[:count], f.colour_entries))
+
     def check_vectors(self, first: int, k: int) -> None:
         """Refuse (:class:`BasisError`, with the sizes) unless vectors ``first … first + k − 1`` exist."""
         self._rows(first, k)
@@ -404,6 +423,54 @@ def fit_factorised_basis(inputs: npt.ArrayLike, masks: npt.ArrayLike, count: int
     # The 6 orders' principal components, found without making them (brdfcodec.layers.colour_orders_pca).
     fit = colour_orders_pca(values, count)
     return FactorisedBasis(fit.factors.astype(np.float16), fit.colours, fit.factor_of, colour_entries)
+
+def extend_factorised_basis(current: FactorisedBasis, fitted: FactorisedBasis) -> FactorisedBasis:
+    """``current`` followed by the vectors of ``fitted`` past its size: a larger basis whose leading vectors are
+    ``current``'s, bit for bit (``spec/model.md`` §5, ``basis_prefixes``).
+
+    ``fitted`` is a fit of the same materials with more vectors (:func:`fit_factorised_basis`), so its first
+    vectors span what ``current``'s do, up to rounding. Its later vectors are kept in their order: a chroma
+    vector whose pair partner ``current`` already holds shares that partner's factor; every other new factor is
+    made orthogonal, in binary64, to the factors of its colour kind (grey, or chroma) already in the basis, then
+    normalised and rounded to binary16, so the basis stays orthonormal up to that rounding.
+
+    Raises
+    ------
+    BasisError
+        The two cover other entries, or ``fitted`` holds no more vectors than ``current``.
+    """
+    size = len(current.colours)
+    if not np.array_equal(current.colour_entries, fitted.colour_entries):
+        raise BasisError("the fitted basis covers other entries than the current one: it was fitted on other "
+                         "materials, and cannot extend it")
+    if len(fitted.colours) <= size:
+        raise BasisError(f"the fitted basis holds {len(fitted.colours)} vectors; extending one of {size} needs more")
+    factors = [np.asarray(f, dtype=np.float64) for f in current.factors]
+    kinds = [int(current.colours[np.flatnonzero(current.factor_of == i)[0]] > 0) for i in range(len(factors))]
+    colours, factor_of = list(current.colours), list(current.factor_of)
+    row_of_fitted: dict[int, int] = {}  # a fitted factor's row in the extended basis
+    if size and fitted.colours[size] > 0 and fitted.factor_of[size] == fitted.factor_of[size - 1]:
+        row_of_fitted[int(fitted.factor_of[size])] = int(current.factor_of[size - 1])  # a pair split at the end
+    for k in range(size, len(fitted.colours)):
+        source = int(fitted.factor_of[k])
+        if source not in row_of_fitted:
+            kind = int(fitted.colours[k] > 0)
+            u = fitted.factors[source].astype(np.float64)
+            for _ in range(2):  # Gram–Schmidt twice: orthogonal to binary64 precision
+                for row, row_kind in zip(factors, kinds, strict=True):
+                    if row_kind == kind:
+                        u -= (u @ row) / (row @ row) * row
+            norm = float(np.linalg.norm(u))
+            if not norm > 1e-3:
+                raise BasisError(f"fitted vector {k + 1} lies in the span of the current basis: nothing to add")
+            factors.append(u / norm)
+            kinds.append(kind)
+            row_of_fitted[source] = len(factors) - 1
+        colours.append(int(fitted.colours[k]))
+        factor_of.append(row_of_fitted[source])
+    stacked = np.concatenate([current.factors, np.asarray(factors[len(current.factors):]).astype(np.float16)])
+    return FactorisedBasis(stacked, np.asarray(colours, dtype=np.int64), np.asarray(factor_of, dtype=np.int64),
+                           current.colour_entries)
 
 def shared_basis_rank(materials: int, colour_permutations: bool = False) -> int:
     """Most vectors a shared basis fitted on ``materials`` training materials can have: the rank of the centred data.

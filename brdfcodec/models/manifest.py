@@ -53,6 +53,10 @@ class ModelManifest:
     encoder_storage : {"full", "compact"}
         How ``encoder.safetensors`` stores the encoder (``spec/model.md`` §3): every tensor as trained, or
         large matrices as float16 and the linear path derived from the decoder's basis.
+    basis_prefixes : dict of str to int
+        Earlier bases this model's basis extends (``spec/model.md`` §5): SHA-256 of such a basis file → its
+        vector count, the basis' leading vectors being exactly that file's. Files whose basis layers name one
+        of them decode with this model.
     """
 
     name: str
@@ -64,6 +68,7 @@ class ModelManifest:
     parameters: dict[str, Any] = field(default_factory=dict)
     basis_sha256: str | None = None
     encoder_storage: str = "full"
+    basis_prefixes: dict[str, int] = field(default_factory=dict)
 
 
 #: Values of ``encoder_storage`` this reader knows.
@@ -148,7 +153,31 @@ def parse_manifest(text: bytes, folder: str | os.PathLike[str]) -> ModelManifest
         parameters=_object_field(data, "parameters"),
         basis_sha256=None if basis is None else _sha256_field(data, "basis_sha256"),
         encoder_storage=_encoder_storage(data.get("encoder_storage", "full")),
+        basis_prefixes=_basis_prefixes(data),
     )
+
+
+#: Most earlier bases a model's basis may extend.
+MAX_BASIS_PREFIXES = 16
+
+
+def _basis_prefixes(data: dict[str, Any]) -> dict[str, int]:
+    """``basis_prefixes`` (absent: none): lower-case SHA-256 → a count in 1 … 4095, only beside a basis."""
+    prefixes = data.get("basis_prefixes", {})
+    if not isinstance(prefixes, dict) or len(prefixes) > MAX_BASIS_PREFIXES:
+        raise ValueError(f"basis_prefixes must be an object of at most {MAX_BASIS_PREFIXES} entries")
+    if prefixes and data.get("basis_sha256") is None:
+        raise ValueError("basis_prefixes needs a basis_sha256: they name leading parts of that basis")
+    out = {}
+    for sha, count in prefixes.items():
+        if not is_sha256_hex(sha):
+            raise ValueError(f"basis_prefixes: {sha[:80]!r} is not a lower-case hex SHA-256")
+        if sha == data.get("basis_sha256"):
+            raise ValueError("basis_prefixes: the model's own basis is not a prefix of itself")
+        if isinstance(count, bool) or not isinstance(count, int) or not 1 <= count < 4096:
+            raise ValueError(f"basis_prefixes: {sha[:12]}…'s count must be a whole number in 1 … 4095")
+        out[sha] = count
+    return out
 
 
 def load_manifest(folder: str | os.PathLike[str]) -> ModelManifest:

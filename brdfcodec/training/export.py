@@ -7,7 +7,7 @@ import os
 import platform
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import torch
@@ -25,6 +25,9 @@ from brdfcodec.training.card import render_model_card
 from brdfcodec.training.checkpoint import load_checkpoint
 from brdfcodec.training.measurements import kl_per_dim, measure_model, summarise, traversal_changes
 from brdfcodec.version import __version__
+
+if TYPE_CHECKING:
+    from brdfcodec.layers.shared_basis import SharedBasis
 
 __all__ = ["CARD", "DEFAULT_BASIS_COUNT", "add_shared_basis", "copy_renamed", "export_run", "store_info"]
 
@@ -174,20 +177,25 @@ def export_run(
 def _trained_rows(dataset: BrdfDataset, run_info: dict[str, Any]) -> list[int]:
     """Rows of the materials the run trained on (``run.json``: its folds or families, not only the stored
     split), or the dataset's training split when the run's materials are not all in this dataset."""
-    trained = set(run_info.get("data", {}).get("train", []))
+    data = run_info.get("data")  # free-form: a model made by hand may describe its data in words
+    listed = data.get("train", []) if isinstance(data, dict) else []
+    trained = {name for name in listed if isinstance(name, str)} if isinstance(listed, list) else set()
     rows = [i for i, name in enumerate(dataset.names) if name in trained]
     return rows if trained and len(rows) == len(trained) else dataset.indices("train")
 
 
 def _fit_basis(folder: Path, dataset: BrdfDataset, rows: list[int], count: int, colour_permutations: bool,
-               name: str | None = None) -> dict[str, Any]:
+               name: str | None = None, extends: SharedBasis | None = None) -> dict[str, Any]:
     """Fit the shared basis on the given (training) materials, then write it into ``folder`` as ``name``
     (``basis.safetensors`` by default; atomically: a failed fit leaves any basis there as it was).
+    With ``extends``, the basis written is that one followed by the fit's later vectors
+    (:func:`~brdfcodec.layers.basis.extend_factorised_basis`).
 
     With ``colour_permutations`` the file holds the basis' factors (``spec/model.md`` §5), a third of the
     dense vectors' size."""
     from brdfcodec.layers.basis import (
         BASIS_FILE,
+        extend_factorised_basis,
         fit_factorised_basis,
         fit_shared_basis,
         shared_basis_rank,
@@ -199,8 +207,16 @@ def _fit_basis(folder: Path, dataset: BrdfDataset, rows: list[int], count: int, 
         raise ValueError(f"{dataset.path}: a shared basis needs at least 2 training materials")
     count = min(count, shared_basis_rank(len(rows), colour_permutations))  # no more vectors than the data's rank
     path = folder / (name or BASIS_FILE)
+    if extends is not None and (extends.factorised is None or not colour_permutations):
+        raise ValueError("only a basis fitted in all 6 colour orders (stored as factors) can be extended")
+    if extends is not None and count <= extends.count:
+        raise ValueError(f"the basis holds {extends.count} vectors; extending it needs a count above that "
+                         f"(at most {shared_basis_rank(len(rows), colour_permutations)} for these materials)")
     if colour_permutations:
         factorised = fit_factorised_basis(dataset.inputs(rows), dataset.input_masks(rows), count)
+        if extends is not None:
+            assert extends.factorised is not None
+            factorised = extend_factorised_basis(extends.factorised, factorised)
         sha = write_factorised_basis(path, factorised)
         n_entries = 3 * len(factorised.colour_entries)
     else:
@@ -217,7 +233,7 @@ def _fit_basis(folder: Path, dataset: BrdfDataset, rows: list[int], count: int, 
 
 def add_shared_basis(folder: str | os.PathLike[str], dataset_path: str | os.PathLike[str],
                      count: int = DEFAULT_BASIS_COUNT, *, colour_permutations: bool = True,
-                     replace: bool = False) -> ModelManifest:
+                     replace: bool = False, extend: bool = False) -> ModelManifest:
     """Fit a shared basis for an exported model and name it in ``model.json``.
 
     The basis is fitted on the materials the model trained on (``info.data.train`` of its ``model.json``:
@@ -228,34 +244,52 @@ def add_shared_basis(folder: str | os.PathLike[str], dataset_path: str | os.Path
     ``replace``, to give a model a new basis: the new one replaces the old one (a model ships one basis), so
     files whose basis layers name the old one no longer decode with this folder (the decoder refuses them,
     naming both hashes). The weights are not touched, so the model's identity (its decoder hash) is unchanged.
-    ``colour_permutations`` as in :func:`export_run`. The basis file is written only once the fit has
-    succeeded: a failed fit leaves the model as it was.
+    ``colour_permutations`` as in :func:`export_run`. With ``extend``, the model's basis grows to ``count``
+    vectors instead: its vectors are kept bit for bit and the fit's later ones follow, and ``model.json`` names
+    the old basis (and any it extended) in ``basis_prefixes``, so every file made with the model keeps decoding
+    (``spec/model.md`` §5). The basis file is written only once the fit has succeeded: a failed fit leaves the
+    model as it was.
 
     Raises
     ------
     FileExistsError
-        The model already has a shared basis and ``replace`` is false.
+        The model already has a shared basis and neither ``replace`` nor ``extend`` is given.
+    ValueError
+        ``extend`` without a basis fitted in the 6 colour orders to extend, or a count not above its size.
     """
-    from brdfcodec.layers.basis import BASIS_FILE
+    from brdfcodec.layers.basis import BASIS_FILE, load_shared_basis
 
     out = Path(folder)
-    existing = json.loads((out / MANIFEST).read_text()).get("basis_sha256")
-    if existing and not replace:
+    manifest = json.loads((out / MANIFEST).read_text())
+    existing = manifest.get("basis_sha256")
+    if replace and extend:
+        raise ValueError("--replace and --extend exclude each other: extend keeps the basis, replace drops it")
+    if existing and not (replace or extend):
         raise FileExistsError(
-            f"{folder}: the model already has a shared basis ({existing[:12]}…). --replace fits a new one for "
-            "that replaces this one (files with basis layers made with it then no longer decode with this folder)"
+            f"{folder}: the model already has a shared basis ({existing[:12]}…). --extend adds vectors to it "
+            "(files made with it keep decoding); --replace fits a new one that replaces it (files with basis "
+            "layers made with it then no longer decode with this folder)"
         )
+    if extend and not existing:
+        raise ValueError(f"{folder}: the model has no shared basis to extend")
+    extends = load_shared_basis(out / BASIS_FILE, existing) if extend else None
     fitting = ".basis-fitting.safetensors"
-    trained_on = json.loads((out / MANIFEST).read_text()).get("info", {})  # its "data" names the materials
+    trained_on = manifest.get("info", {})  # its "data" names the materials
     with BrdfDataset(dataset_path) as dataset:
         basis = _fit_basis(out, dataset, _trained_rows(dataset, trained_on), count, colour_permutations,
-                           name=fitting)
+                           name=fitting, extends=extends)
     os.replace(out / fitting, out / BASIS_FILE)
+    prefixes = {**manifest.get("basis_prefixes", {}), existing: extends.count} if extends is not None else {}
 
     def add(stored: dict[str, Any]) -> None:
         stored["basis_sha256"] = basis.pop("sha256")
         stored.setdefault("info", {})["basis"] = basis
         stored.pop("previous_bases", None)  # a manifest of format 1.x of spec/model.md may list some
+        if prefixes:
+            stored["basis_prefixes"] = prefixes
+            basis["extends"] = {sha: {"count": n} for sha, n in prefixes.items()}
+        else:
+            stored.pop("basis_prefixes", None)
 
     return _rewrite_manifest(folder, add)
 
@@ -274,8 +308,16 @@ def _rewrite_manifest(folder: str | os.PathLike[str], change: Callable[[dict[str
     out = Path(folder)
     stored = json.loads((out / MANIFEST).read_text())
     change(stored)
-    write_card(out, stored)
+    if _has_card(out, stored):
+        write_card(out, stored)
     return write_manifest(out, stored)
+
+
+def _has_card(folder: Path, manifest: dict[str, Any]) -> bool:
+    """Whether the model's card can be written again: it has one, or its ``info`` holds an exported run's
+    measurements. A model made otherwise (by hand, or :func:`~brdfcodec.models.store.export_model` alone) has
+    no card to rewrite, and its ``model.json`` changes without one."""
+    return (folder / CARD).is_file() or isinstance(manifest.get("info", {}).get("train_config"), dict)
 
 
 def copy_renamed(source: str | os.PathLike[str], destination: str | os.PathLike[str], name: str) -> ModelManifest:
