@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from brdfcodec.errors import BasisError
-from brdfcodec.layers.basis import FactorisedBasis, extend_factorised_basis, fit_factorised_basis
+from brdfcodec.layers.basis import extend_factorised_basis, fit_factorised_basis
 
 
 def _materials(n: int = 7, width: int = 40, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
