@@ -98,9 +98,19 @@ def test_the_shipped_decoder_projects_the_base_as_the_spec_says() -> None:
     decoder.mapped_record(fewer)
     # One plan per basis, whatever the records' P: a file's counts cannot multiply the decoder's memory.
     assert list(decoder.__dict__["_projection_plans"]) == [basis.sha256]
-    too_many = LayeredRecord("t", mu, np.ones(8), basis=BasisLayer(basis.sha256, 0.25, q, 8, 76))
-    with pytest.raises(BasisError, match="projects its base on 76 basis vectors, but this model's shared basis "
-                                         "holds 75"):
+    # The earlier 75-vector basis the shipped one extends (spec/model.md §5): the same plan, its own bound.
+    assert decoder.manifest is not None
+    for sha, size in decoder.manifest.basis_prefixes.items():
+        earlier = LayeredRecord("e", mu, np.ones(8), basis=BasisLayer(sha, 0.25, q, 8, 50))
+        assert np.array_equal(decoder.mapped_record(earlier), decoder.mapped_record(projected))
+        assert list(decoder.__dict__["_projection_plans"]) == [basis.sha256]
+        past = LayeredRecord("t", mu, np.ones(8), basis=BasisLayer(sha, 0.25, q, 8, size + 1))
+        with pytest.raises(BasisError, match=f"projects its base on {size + 1} basis vectors, but this model's "
+                                             f"shared basis holds {size}"):
+            decoder.decode(past)
+    too_many = LayeredRecord("t", mu, np.ones(8), basis=BasisLayer(basis.sha256, 0.25, q, 8, basis.count + 1))
+    with pytest.raises(BasisError, match=f"projects its base on {basis.count + 1} basis vectors, but this model's "
+                                         f"shared basis holds {basis.count}"):
         decoder.decode(too_many)
 
 

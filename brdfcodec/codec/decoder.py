@@ -358,7 +358,13 @@ class BrdfDecoder:
 
     def _projection_plan(self, basis: SharedBasis) -> _ProjectionPlan:
         """What a fast projected decode needs for every vector of ``basis``, computed once per decoder and basis
-        (records that project on fewer vectors use its first rows)."""
+        (records that project on fewer vectors use its first rows). An earlier basis that the model's basis
+        extends (``basis_prefixes``) is its leading vectors: it uses the model's basis' plan, so a file naming
+        it costs no second one."""
+        own = self.shared_basis
+        if own is not None and basis.sha256 != own.sha256 and basis.factorised is not None and (
+                self.manifest is not None and basis.sha256 in self.manifest.basis_prefixes):
+            basis = own
         cache = self.__dict__.setdefault("_projection_plans", {})
         if basis.sha256 not in cache:
             cache[basis.sha256] = _ProjectionPlan.build(self.network, basis, self._centre_on(basis))
