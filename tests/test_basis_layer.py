@@ -334,14 +334,7 @@ def test_the_shipped_model_has_a_basis_and_partial_decoding_matches() -> None:
 
     decoder = BrdfDecoder()
     basis = decoder.shared_basis
-    assert basis is not None and basis.count == 200 and basis.entries.shape == (387378,)
-    # It extends the 75-vector basis it shipped with before (spec/model.md 1.10): files made with that one
-    # name it, and decode with its first 75 vectors.
-    assert decoder.manifest is not None and decoder.manifest.basis_prefixes == {
-        "244ef1f90ab2324a9cdc61d6b7d160208c05a7e0d935ba8e3aadefcef347e38b": 75}
-    earlier = decoder.basis_named("244ef1f90ab2324a9cdc61d6b7d160208c05a7e0d935ba8e3aadefcef347e38b")
-    assert earlier is not None and earlier.count == 75
-    assert np.array_equal(earlier.vectors(0, 75), basis.vectors(0, 75))
+    assert basis is not None and basis.count == 75 and basis.entries.shape == (387378,)
     record = basis_record("m", k=20, sha=basis.sha256)
     full = decoder.decode(record, masked="zero")
     base = decoder.decode(record.base(), masked="zero")
@@ -354,13 +347,12 @@ def test_the_shipped_model_has_a_basis_and_partial_decoding_matches() -> None:
     np.testing.assert_allclose(batched, full, rtol=1e-5, atol=1e-6)
     with pytest.raises(BasisMismatchError, match=SHA):
         decoder.decode(basis_record("other"))  # made for another basis
-    for sha, size in ((basis.sha256, 200), (earlier.sha256, 75)):
-        too_long = LayeredRecord("long", record.mu, record.sigma,
-                                 basis=BasisLayer(sha, 0.5, np.ones(size + 1, dtype=np.int8)))
-        with pytest.raises(BasisError, match=f"this basis holds {size}"):
-            decoder.decode(too_long)
+    too_long = LayeredRecord("long", record.mu, record.sigma,
+                             basis=BasisLayer(basis.sha256, 0.5, np.ones(76, dtype=np.int8)))
+    with pytest.raises(BasisError, match="this basis holds 75"):
+        decoder.decode(too_long)
     past_the_end = LayeredRecord("past", record.mu, record.sigma,
-                                 basis=BasisLayer(earlier.sha256, 0.5, np.ones(6, dtype=np.int8), 70))
+                                 basis=BasisLayer(basis.sha256, 0.5, np.ones(6, dtype=np.int8), 70))
     with pytest.raises(BasisError, match="vectors 70 to 75, but this basis holds 75"):
         decoder.decode(past_the_end)
 
