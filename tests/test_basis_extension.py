@@ -60,6 +60,7 @@ def test_a_leading_part_is_the_same_vectors_under_the_old_name() -> None:
     basis = SharedBasis(None, np.arange(3 * len(grown.colour_entries)), "ab" * 32, grown)
     part = basis.leading(7, "cd" * 32)
     assert part.sha256 == "cd" * 32 and part.count == 7
+    assert basis.leading(7, "cd" * 32) is part  # made once: decoders ask for it per record
     assert np.array_equal(part.vectors(0, 7), basis.vectors(0, 7))
     weights = np.linspace(-1, 1, 7)
     assert np.array_equal(part.weighted_sum(weights), basis.weighted_sum(weights))
@@ -169,3 +170,14 @@ def test_fit_basis_extend_keeps_every_old_file_decoding_to_the_same_bits(
     again = load_manifest(folder)
     assert again.basis_prefixes == {old.basis_sha256: 12, grown.basis_sha256: 30}
     assert np.array_equal(BrdfDecoder(folder).decode(record, masked="zero"), before)
+
+
+def test_new_vectors_are_made_orthogonal_to_a_current_basis_that_the_fit_does_not_repeat() -> None:
+    # The current basis from other values over the same entries: the fit's later vectors are not orthogonal to it
+    # as they come, so the extension must make them so.
+    values, masks = _materials()
+    other = values + np.random.default_rng(1).normal(0, 1.0, size=values.shape)
+    old = fit_factorised_basis(other, masks, 6)
+    grown = extend_factorised_basis(old, fit_factorised_basis(values, masks, 20))
+    vectors = grown.products(0, 20).astype(np.float64)
+    assert np.abs(vectors @ vectors.T - np.eye(20)).max() < 5e-3

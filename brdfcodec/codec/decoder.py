@@ -362,8 +362,7 @@ class BrdfDecoder:
         extends (``basis_prefixes``) is its leading vectors: it uses the model's basis' plan, so a file naming
         it costs no second one."""
         own = self.shared_basis
-        if own is not None and basis.sha256 != own.sha256 and basis.factorised is not None and (
-                self.manifest is not None and basis.sha256 in self.manifest.basis_prefixes):
+        if own is not None and self.manifest is not None and basis.sha256 in self.manifest.basis_prefixes:
             basis = own
         cache = self.__dict__.setdefault("_projection_plans", {})
         if basis.sha256 not in cache:

@@ -338,10 +338,7 @@ def _basis_only_fit(
             if available not in least_squares_of:
                 least_squares_of[available] = fit_basis_only_coefficients(
                     target, weights, centre, basis.vectors(0, available), 0)
-            fitted = least_squares_of[available]
-            # a coded layer's length takes a descriptor byte
-            return (_coded_count(fitted, 0, layer_bytes - 1, prior) if options.coded
-                    else _packed_count(fitted, 0, layer_bytes))
+            return _kept_count(options.coded, least_squares_of[available], 0, layer_bytes, prior)
 
         count, layer_bytes = _layer_size(count_in, k, basis.count)
         max_bytes = layer_bytes - (1 if options.coded else 0)
@@ -402,10 +399,8 @@ def _basis_fit(
             max_bytes, count_of = {}, {}
             for c in codings:
                 def count_in(available: int, layer_bytes: int, coding: str = c) -> int:
-                    fitted = least_squares(first, available, p)
-                    # a coded layer's length takes a descriptor byte
-                    return (_coded_count(fitted, first, layer_bytes - 1, CODED_PRIOR[True]) if coding == "coded"
-                            else _packed_count(fitted, first, layer_bytes))
+                    return _kept_count(coding == "coded", least_squares(first, available, p), first, layer_bytes,
+                                       CODED_PRIOR[True])
                 try:
                     count_of[c], layer_bytes = _layer_size(count_in, k, basis.count - first)
                 except ValueError:  # no coded layer fits these bytes: under auto, the packed one alone
@@ -488,6 +483,14 @@ def _basis_fit(
         return best
 
     return fit
+
+
+def _kept_count(coded: bool, coefficients: np.ndarray, first: int, layer_bytes: int, prior: tuple[int, int]) -> int:
+    """How many of these coefficients a coded or packed layer keeps in ``layer_bytes`` (the bytes k int8
+    coefficients and their step would take; a coded layer has one less: its length takes a descriptor byte)."""
+    if coded:
+        return _coded_count(coefficients, first, layer_bytes - 1, prior)
+    return _packed_count(coefficients, first, layer_bytes)
 
 
 def _coded_count(coefficients: np.ndarray, first: int, max_bytes: int, prior: tuple[int, int]) -> int:

@@ -234,13 +234,20 @@ class SharedBasis:
             ``count`` outside 1 … K.
         """
         self._rows(0, count)
+        made = self.__dict__.setdefault("_leading", {})  # one view per earlier basis: decoders ask per record
+        if (count, sha256) in made:
+            return made[count, sha256]
         if self.factorised is None:
             assert self.components is not None
-            return SharedBasis(self.components[:count], self.entries, sha256)
-        f = self.factorised
-        used = int(f.factor_of[:count].max()) + 1
-        return SharedBasis(None, self.entries, sha256, FactorisedBasis(
-            f.factors[:used], f.colours[:count], f.factor_of[:count], f.colour_entries))
+            part = SharedBasis(self.components[:count], self.entries, sha256)
+        else:
+            f = self.factorised
+            used = int(f.factor_of[:count].max()) + 1
+            factors = FactorisedBasis(f.factors[:used], f.colours[:count], f.factor_of[:count], f.colour_entries)
+            factors.__dict__["factors32"] = f.factors32[:used]  # the widened factors, shared rather than made again
+            part = SharedBasis(None, self.entries, sha256, factors)
+        made[count, sha256] = part
+        return part
 
     def check_vectors(self, first: int, k: int) -> None:
         """Refuse (:class:`BasisError`, with the sizes) unless vectors ``first … first + k − 1`` exist."""
@@ -450,7 +457,12 @@ def extend_factorised_basis(current: FactorisedBasis, fitted: FactorisedBasis) -
     colours, factor_of = list(current.colours), list(current.factor_of)
     row_of_fitted: dict[int, int] = {}  # a fitted factor's row in the extended basis
     if size and fitted.colours[size] > 0 and fitted.factor_of[size] == fitted.factor_of[size - 1]:
-        row_of_fitted[int(fitted.factor_of[size])] = int(current.factor_of[size - 1])  # a pair split at the end
+        # a chroma pair split at the end: its partner shares the current basis' last factor, where that is the
+        # same factor (the fit repeats the current basis, as when both are fits of the same materials)
+        last = int(current.factor_of[size - 1])
+        same = abs(float(factors[last] @ fitted.factors[int(fitted.factor_of[size])].astype(np.float64)))
+        if current.colours[size - 1] > 0 and same > 0.999:
+            row_of_fitted[int(fitted.factor_of[size])] = last
     for k in range(size, len(fitted.colours)):
         source = int(fitted.factor_of[k])
         if source not in row_of_fitted:
