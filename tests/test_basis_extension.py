@@ -6,6 +6,7 @@ whose basis layers name the old basis keep decoding, to the same bits, within th
 
 from __future__ import annotations
 
+import functools
 import json
 
 import numpy as np
@@ -24,21 +25,25 @@ def _materials(n: int = 7, width: int = 40, seed: int = 0) -> tuple[np.ndarray, 
     return values, masks
 
 
+@pytest.mark.parametrize("storage", ["int8", "float16"])
 @pytest.mark.parametrize("size", range(1, 12))
-def test_an_extended_basis_keeps_the_old_vectors_bit_for_bit_and_stays_orthonormal(size: int) -> None:
+def test_an_extended_basis_keeps_the_old_vectors_bit_for_bit_and_stays_orthonormal(size: int, storage: str) -> None:
     values, masks = _materials()
     old = fit_factorised_basis(values, masks, size)
     fitted = fit_factorised_basis(values, masks, 30)
-    grown = extend_factorised_basis(old, fitted)
+    grown = extend_factorised_basis(old, fitted, storage=storage)  # type: ignore[arg-type]
     assert len(grown.colours) == 30 and np.array_equal(grown.colour_entries, old.colour_entries)
     assert np.array_equal(grown.products(0, size), old.products(0, size))  # the old vectors, unchanged
     assert np.array_equal(grown.factors[: len(old.factors)], old.factors)
+    assert (grown.factors_int8 is not None) == (storage == "int8" and grown.factor_count > len(old.factors))
     vectors = grown.products(0, 30).astype(np.float64)
-    assert np.abs(vectors @ vectors.T - np.eye(30)).max() < 5e-3  # orthonormal up to binary16 rounding
+    # orthonormal up to the rounding of the stored factors: binary16, or 8 bits per slice scale
+    tolerance = 5e-3 if storage == "float16" else 4e-2
+    assert np.abs(vectors @ vectors.T - np.eye(30)).max() < tolerance
     # It spans what the larger fit spans: every fitted vector lies in it (up to that rounding).
     target = fitted.products(0, 30).astype(np.float64)
-    assert np.linalg.norm(target - (target @ vectors.T) @ vectors, axis=1).max() < 2e-2
-    assert set(grown.factor_of.tolist()) == set(range(len(grown.factors)))  # every factor is used
+    assert np.linalg.norm(target - (target @ vectors.T) @ vectors, axis=1).max() < 2e-2 + tolerance
+    assert set(grown.factor_of.tolist()) == set(range(grown.factor_count))  # every factor is used
 
 
 def test_extending_refuses_a_fit_of_other_entries_or_no_more_vectors() -> None:
@@ -181,3 +186,81 @@ def test_new_vectors_are_made_orthogonal_to_a_current_basis_that_the_fit_does_no
     grown = extend_factorised_basis(old, fit_factorised_basis(values, masks, 20))
     vectors = grown.products(0, 20).astype(np.float64)
     assert np.abs(vectors @ vectors.T - np.eye(20)).max() < 5e-3
+
+
+@functools.cache
+def _grown_in_8_bits(width: int = 8200) -> tuple:
+    """A basis of 6 binary16 vectors extended to 20 in 8 bits, over entries spanning two kept slices (made once:
+    callers do not change it)."""
+    values, masks = _materials(n=9, width=width)
+    old = fit_factorised_basis(values, masks, 6)
+    return old, extend_factorised_basis(old, fit_factorised_basis(values, masks, 20))
+
+
+def test_eight_bit_factors_are_within_half_a_step_of_the_values_they_store() -> None:
+    from brdfcodec.layers.basis import quantise_factors
+
+    rng = np.random.default_rng(3)
+    entries = np.arange(0, 3 * 8100, 3)  # three kept slices
+    rows = rng.standard_t(3, size=(4, len(entries)))
+    rows[1, entries < 8100] = 0.0  # a slice of zeros: scale 1, values 0
+    coarse, scales = quantise_factors(rows, entries)
+    assert coarse.dtype == np.int8 and scales.dtype == np.float32 and scales.shape == (4, 21)
+    assert scales[1, 0] == 1 and not coarse[1, entries < 8100].any() and (scales[:, 3:] == 1).all()
+    step = scales[:, entries // 8100].astype(np.float64)
+    assert np.all(np.abs(coarse * step - rows) <= step / 2 * (1 + 1e-6))
+    assert np.abs(coarse).max() == 127  # the largest value of each slice takes the full range
+
+
+def test_an_eight_bit_basis_file_reads_back_to_the_same_vectors_and_grows_again(tmp_path) -> None:
+    from brdfcodec.layers.basis import load_shared_basis, write_factorised_basis
+
+    old, grown = _grown_in_8_bits()
+    assert grown.factors_int8 is not None and len(grown.factors) == len(old.factors)
+    sha = write_factorised_basis(tmp_path / "basis.safetensors", grown)
+    read = load_shared_basis(tmp_path / "basis.safetensors", sha)
+    assert read.factorised is not None and read.count == 20
+    assert np.array_equal(read.vectors(0, 20), grown.products(0, 20))
+    assert np.array_equal(read.vectors(0, 6), old.products(0, 6))  # the binary16 vectors, bit for bit
+    # a leading part that reaches into the 8-bit rows is the same vectors
+    part = read.leading(15, "cd" * 32)
+    assert np.array_equal(part.vectors(0, 15), read.vectors(0, 15))
+    # extended again, the 8-bit rows stay bit for bit; binary16 rows cannot follow them
+    values, masks = _materials(n=9, width=8200)
+    again = extend_factorised_basis(grown, fit_factorised_basis(values, masks, 30))
+    assert np.array_equal(again.factors_int8[: len(grown.factors_int8)], grown.factors_int8)
+    assert np.array_equal(again.products(0, 20), grown.products(0, 20))
+    with pytest.raises(BasisError, match="8 bits"):
+        extend_factorised_basis(grown, fit_factorised_basis(values, masks, 30), storage="float16")
+
+
+@pytest.mark.parametrize(("change", "message"), [
+    ({"factor_slice_scales": None}, "come together"),
+    ({"factors_int8": lambda t: t.astype(np.int16)}, "int8"),
+    ({"factors_int8": lambda t: t[:, :-1]}, "columns"),
+    ({"factor_slice_scales": lambda t: t[:, :20]}, "shape"),
+    ({"factor_slice_scales": lambda t: t.astype(np.float64)}, "float32"),
+    ({"factor_slice_scales": lambda t: -t}, "positive"),
+    ({"factor_slice_scales": lambda t: t * np.inf}, "positive"),
+    ({"factor_of": lambda t: t + 1}, "factor rows"),
+])
+def test_a_malformed_eight_bit_basis_file_is_refused_with_the_problem(change, message, tmp_path) -> None:
+    from safetensors.numpy import save_file
+
+    from brdfcodec.io.hashing import sha256_of_file
+    from brdfcodec.layers.basis import load_shared_basis
+
+    _, grown = _grown_in_8_bits()
+    tensors = {"factors": grown.factors, "colours": grown.colours, "factor_of": grown.factor_of,
+               "colour_entries": grown.colour_entries, "factors_int8": grown.factors_int8,
+               "factor_slice_scales": grown.factor_slice_scales}
+    for name, how in change.items():
+        if how is None:
+            del tensors[name]
+        else:
+            tensors[name] = np.ascontiguousarray(how(tensors[name]))
+    path = tmp_path / "basis.safetensors"
+    save_file(tensors, str(path))
+    with pytest.raises(BasisError, match=message) as caught:
+        load_shared_basis(path, sha256_of_file(path))
+    assert str(path) in str(caught.value)

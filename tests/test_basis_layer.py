@@ -334,7 +334,7 @@ def test_the_shipped_model_has_a_basis_and_partial_decoding_matches() -> None:
 
     decoder = BrdfDecoder()
     basis = decoder.shared_basis
-    assert basis is not None and basis.count == 75 and basis.entries.shape == (387378,)
+    assert basis is not None and basis.count == 200 and basis.entries.shape == (387378,)
     record = basis_record("m", k=20, sha=basis.sha256)
     full = decoder.decode(record, masked="zero")
     base = decoder.decode(record.base(), masked="zero")
@@ -348,12 +348,12 @@ def test_the_shipped_model_has_a_basis_and_partial_decoding_matches() -> None:
     with pytest.raises(BasisMismatchError, match=SHA):
         decoder.decode(basis_record("other"))  # made for another basis
     too_long = LayeredRecord("long", record.mu, record.sigma,
-                             basis=BasisLayer(basis.sha256, 0.5, np.ones(76, dtype=np.int8)))
-    with pytest.raises(BasisError, match="this basis holds 75"):
+                             basis=BasisLayer(basis.sha256, 0.5, np.ones(201, dtype=np.int8)))
+    with pytest.raises(BasisError, match="this basis holds 200"):
         decoder.decode(too_long)
     past_the_end = LayeredRecord("past", record.mu, record.sigma,
-                                 basis=BasisLayer(basis.sha256, 0.5, np.ones(6, dtype=np.int8), 70))
-    with pytest.raises(BasisError, match="vectors 70 to 75, but this basis holds 75"):
+                                 basis=BasisLayer(basis.sha256, 0.5, np.ones(6, dtype=np.int8), 195))
+    with pytest.raises(BasisError, match="vectors 195 to 200, but this basis holds 200"):
         decoder.decode(past_the_end)
 
 

@@ -65,7 +65,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     how = fit.add_mutually_exclusive_group()
     how.add_argument("--extend", action="store_true",
                      help="grow the model's basis to K vectors, keeping its vectors bit for bit: files made with "
-                     "the old basis keep decoding with this folder")
+                     "the old basis keep decoding with this folder; the new vectors' factors are stored in 8 bits "
+                     "with a scale per kept slice (spec/model.md §5), half the bytes of binary16")
     how.add_argument("--replace", action="store_true",
                      help="give a model that has a basis a new one; files with basis layers made with the old "
                      "one no longer decode with this folder")

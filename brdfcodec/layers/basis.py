@@ -76,6 +76,7 @@ from brdfcodec.layers.shared_basis import (
     fit_factorised_basis,
     fit_shared_basis,
     linear_path_entries,
+    quantise_factors,
     shared_basis_rank,
     with_colour_permutations,
 )
@@ -106,6 +107,7 @@ __all__ = [
     "model_basis_lookup",
     "packed_coefficients",
     "quantise_coefficients",
+    "quantise_factors",
     "shared_basis_rank",
     "with_colour_permutations",
     "write_factorised_basis",

@@ -74,7 +74,7 @@ def load_shared_basis(path: str | os.PathLike[str], expected_sha256: str) -> Sha
         raise BasisError(f"{path}: not a readable safetensors file ({error})") from None
     except (KeyError, ValueError, TypeError) as error:  # safetensors.numpy: a dtype NumPy has not (BF16), …
         raise BasisError(f"{path}: a tensor NumPy cannot read ({type(error).__name__}: {error}); a basis file "
-                         "holds float16/float32 and int64 tensors") from None
+                         "holds float16/float32, int8 and int64 tensors") from None
     if "factors" in tensors:
         factorised = _factorised(tensors, str(path))
         return SharedBasis(None, factorised.entries(), actual, factorised)
@@ -99,6 +99,9 @@ def write_factorised_basis(path: str | os.PathLike[str], basis: FactorisedBasis)
         "factor_of": np.ascontiguousarray(basis.factor_of, dtype=np.int64),
         "colour_entries": np.ascontiguousarray(basis.colour_entries, dtype=np.int64),
     }
+    if basis.factors_int8 is not None and basis.factor_slice_scales is not None:  # spec/model.md 1.11
+        tensors["factors_int8"] = np.ascontiguousarray(basis.factors_int8, dtype=np.int8)
+        tensors["factor_slice_scales"] = np.ascontiguousarray(basis.factor_slice_scales, dtype=np.float32)
     _factorised(tensors, str(path))
     with atomic_output(Path(path), overwrite=True) as tmp:
         save_file(tensors, str(tmp))

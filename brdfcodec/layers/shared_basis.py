@@ -11,6 +11,7 @@ import functools
 import itertools
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from typing import Literal
 
 import numpy as np
 import numpy.typing as npt
@@ -20,6 +21,9 @@ from brdfcodec.errors import BasisError
 from brdfcodec.layers.colour_orders_pca import colour_orders_pca
 from brdfcodec.layers.quantise import _COLUMN_BLOCK, _ENTRIES_PER_CHANNEL, _N_ENTRIES, MAX_BASIS_COUNT
 
+#: Entries of one kept slice in one colour's block of the network layout (90 θh × 90 θd).
+_SLICE_ENTRIES = NETWORK_INPUT_SHAPE[1] * NETWORK_INPUT_SHAPE[2]
+
 __all__ = [
     "FactorisedBasis",
     "SharedBasis",
@@ -27,6 +31,7 @@ __all__ = [
     "extend_factorised_basis",
     "fit_factorised_basis",
     "fit_shared_basis",
+    "quantise_factors",
     "shared_basis_rank",
     "with_colour_permutations",
 ]
@@ -135,7 +140,7 @@ class SharedBasis:
         rows = self._rows(first, len(w))
         if self.factorised is None:
             return w @ self.vectors(rows.start, len(w))
-        width = self.factorised.factors.shape[1]
+        width = self.factorised.width
         out = np.empty((N_CHANNELS, width), dtype=np.float32)
         self.factorised.combine(self.factorised.fold(w, rows.start), slice(0, width), out)
         return out.reshape(-1)
@@ -195,7 +200,7 @@ class SharedBasis:
                 out[row, target] = c @ self.vectors(rows.start, len(c))[:, start:stop]
             else:  # entries of colour k are k·P … k·P + P − 1 in order
                 colour = int(channel) // N_KEPT_SLICES
-                width = factorised.factors.shape[1]
+                width = factorised.width
                 part = slice(start - colour * width, stop - colour * width)
                 out[row, target] = folded[:, colour] @ factorised.factors32[:, part]
         return out.reshape(len(wanted), *NETWORK_INPUT_SHAPE[1:])
@@ -243,7 +248,12 @@ class SharedBasis:
         else:
             f = self.factorised
             used = int(f.factor_of[:count].max()) + 1
-            factors = FactorisedBasis(f.factors[:used], f.colours[:count], f.factor_of[:count], f.colour_entries)
+            fine = len(f.factors)
+            if used <= fine or f.factors_int8 is None or f.factor_slice_scales is None:
+                factors = FactorisedBasis(f.factors[:used], f.colours[:count], f.factor_of[:count], f.colour_entries)
+            else:
+                factors = FactorisedBasis(f.factors, f.colours[:count], f.factor_of[:count], f.colour_entries,
+                                          f.factors_int8[:used - fine], f.factor_slice_scales[:used - fine])
             factors.__dict__["factors32"] = f.factors32[:used]  # the widened factors, shared rather than made again
             part = SharedBasis(None, self.entries, sha256, factors)
         made[count, sha256] = part
@@ -316,10 +326,14 @@ class FactorisedBasis:
     taken on the factors (:meth:`fold`, then :meth:`combine`; :meth:`dots`), which read a third of the memory
     the dense vectors would.
 
+    Factor rows ``0 … F₀ − 1`` are stored in binary16 (``factors``); a basis extended in place may hold more,
+    ``F₀ … F − 1``, in 8 bits (since ``spec/model.md`` 1.11): row ``F₀ + i`` at column e is the binary32 product
+    ``factors_int8[i, e] · factor_slice_scales[i, colour_entries[e] // 8100]``, one scale per kept slice.
+
     Attributes
     ----------
-    factors : ndarray of float16, shape (F, P)
-        Vectors over one colour's entries.
+    factors : ndarray of float16, shape (F₀, P)
+        Vectors over one colour's entries (F₀ ≥ 1).
     colours : ndarray of int64, shape (K,)
         Each basis vector's colour vector, a row of
         :data:`~brdfcodec.layers.colour_orders_pca.COLOUR_VECTORS` (0: (1, 1, 1)/√3, 1: (1, −1, 0)/√2,
@@ -329,17 +343,37 @@ class FactorisedBasis:
     colour_entries : ndarray of int64, shape (P,)
         Strictly increasing positions within one colour's block of the network layout
         (``21 · 90 · 90`` entries); the basis covers them in every colour.
+    factors_int8 : ndarray of int8, shape (F − F₀, P), or None
+        The later factor rows in 8 bits, with ``factor_slice_scales``.
+    factor_slice_scales : ndarray of float32, shape (F − F₀, 21), or None
+        Positive scales of ``factors_int8``, per row and kept slice (``colour_entries // (90 · 90)``).
     """
 
     factors: npt.NDArray[np.float16]
     colours: npt.NDArray[np.int64]
     factor_of: npt.NDArray[np.int64]
     colour_entries: npt.NDArray[np.int64]
+    factors_int8: npt.NDArray[np.int8] | None = None
+    factor_slice_scales: npt.NDArray[np.float32] | None = None
+
+    @property
+    def factor_count(self) -> int:
+        """F: the factor rows, binary16 and 8-bit together."""
+        return len(self.factors) + (0 if self.factors_int8 is None else len(self.factors_int8))
+
+    @property
+    def width(self) -> int:
+        """P: the entries of one colour every factor covers."""
+        return int(self.factors.shape[1])
 
     @functools.cached_property
     def factors32(self) -> npt.NDArray[np.float32]:
-        """``factors`` widened to float32, ``(F, P)`` (read-only, cached)."""
+        """Every factor row in float32, ``(F, P)``: the binary16 rows widened, the 8-bit rows times their
+        slice scales (read-only, cached)."""
         widened = self.factors.astype(np.float32)
+        if self.factors_int8 is not None and self.factor_slice_scales is not None:
+            scales = self.factor_slice_scales.astype(np.float32)[:, self.colour_entries // _SLICE_ENTRIES]
+            widened = np.concatenate([widened, self.factors_int8.astype(np.float32) * scales])
         widened.setflags(write=False)
         return widened
 
@@ -361,7 +395,7 @@ class FactorisedBasis:
 
     def values_at(self, count: int, positions: npt.NDArray[np.int64]) -> npt.NDArray[np.float32]:
         """Values of vectors ``0 … count − 1`` at ``positions`` (indices into the ``3 · P`` entries), ``(count, n)``."""
-        width = self.factors.shape[1]
+        width = self.width
         colour, column = np.divmod(positions, width)
         return self._colour_vectors[:count][:, colour] * self.factors32[self.factor_of[:count]][:, column]
 
@@ -369,7 +403,7 @@ class FactorisedBasis:
         """Weights of vectors ``first …`` gathered per factor and colour: ``W[f, c] = Σ wᵢ · colourᵢ[c]`` over the
         vectors i of factor f, shape ``(F, 3)``; ``Σᵢ wᵢ vᵢ`` is then ``Wᵀ @ factors`` (:meth:`combine`)."""
         rows = slice(first, first + len(weights))
-        folded = np.zeros((self.factors.shape[0], N_CHANNELS), dtype=np.float32)
+        folded = np.zeros((self.factor_count, N_CHANNELS), dtype=np.float32)
         np.add.at(folded, self.factor_of[rows], weights[:, None] * self._colour_vectors[rows])
         return folded
 
@@ -393,7 +427,7 @@ class FactorisedBasis:
     def dots(self, values: npt.NDArray[np.float32], count: int) -> npt.NDArray[np.float32]:
         """Dot products of ``values`` (``(3 · P,)`` or ``(B, 3 · P)``) with vectors ``0 … count − 1``:
         per factor and colour first (``factors @ valuesᵀ``), then combined with each vector's colour vector."""
-        width = self.factors.shape[1]
+        width = self.width
         y = values.reshape(-1, N_CHANNELS, width)
         used = int(self.factor_of[:count].max()) + 1
         factors = self.factors32[:used]
@@ -431,7 +465,8 @@ def fit_factorised_basis(inputs: npt.ArrayLike, masks: npt.ArrayLike, count: int
     fit = colour_orders_pca(values, count)
     return FactorisedBasis(fit.factors.astype(np.float16), fit.colours, fit.factor_of, colour_entries)
 
-def extend_factorised_basis(current: FactorisedBasis, fitted: FactorisedBasis) -> FactorisedBasis:
+def extend_factorised_basis(current: FactorisedBasis, fitted: FactorisedBasis,
+                            storage: Literal["int8", "float16"] = "int8") -> FactorisedBasis:
     """``current`` followed by the vectors of ``fitted`` past its size: a larger basis whose leading vectors are
     ``current``'s, bit for bit (``spec/model.md`` §5, ``basis_prefixes``).
 
@@ -439,12 +474,15 @@ def extend_factorised_basis(current: FactorisedBasis, fitted: FactorisedBasis) -
     vectors span what ``current``'s do, up to rounding. Its later vectors are kept in their order: a chroma
     vector whose pair partner ``current`` already holds shares that partner's factor; every other new factor is
     made orthogonal, in binary64, to the factors of its colour kind (grey, or chroma) already in the basis, then
-    normalised and rounded to binary16, so the basis stays orthonormal up to that rounding.
+    normalised and stored in ``storage``: 8 bits with a scale per kept slice (the default,
+    :func:`quantise_factors`: half the bytes of binary16, the later vectors within about 2 % of their norm) or
+    binary16; the basis stays orthonormal up to that rounding.
 
     Raises
     ------
     BasisError
-        The two cover other entries, or ``fitted`` holds no more vectors than ``current``.
+        The two cover other entries, ``fitted`` holds no more vectors than ``current``, or binary16 rows
+        would follow ``current``'s 8-bit ones.
     """
     size = len(current.colours)
     if not np.array_equal(current.colour_entries, fitted.colour_entries):
@@ -452,7 +490,9 @@ def extend_factorised_basis(current: FactorisedBasis, fitted: FactorisedBasis) -
                          "materials, and cannot extend it")
     if len(fitted.colours) <= size:
         raise BasisError(f"the fitted basis holds {len(fitted.colours)} vectors; extending one of {size} needs more")
-    factors = [np.asarray(f, dtype=np.float64) for f in current.factors]
+    if storage == "float16" and current.factors_int8 is not None:
+        raise BasisError("the current basis stores factors in 8 bits; binary16 factors cannot follow them")
+    factors = [np.asarray(f, dtype=np.float64) for f in current.factors32]
     kinds = [int(current.colours[np.flatnonzero(current.factor_of == i)[0]] > 0) for i in range(len(factors))]
     colours, factor_of = list(current.colours), list(current.factor_of)
     row_of_fitted: dict[int, int] = {}  # a fitted factor's row in the extended basis
@@ -480,9 +520,45 @@ def extend_factorised_basis(current: FactorisedBasis, fitted: FactorisedBasis) -
             row_of_fitted[source] = len(factors) - 1
         colours.append(int(fitted.colours[k]))
         factor_of.append(row_of_fitted[source])
-    stacked = np.concatenate([current.factors, np.asarray(factors[len(current.factors):]).astype(np.float16)])
-    return FactorisedBasis(stacked, np.asarray(colours, dtype=np.int64), np.asarray(factor_of, dtype=np.int64),
-                           current.colour_entries)
+    new = np.asarray(factors[current.factor_count:]).reshape(-1, current.width)
+    colours_, factor_of_ = np.asarray(colours, dtype=np.int64), np.asarray(factor_of, dtype=np.int64)
+    if storage == "float16":
+        return FactorisedBasis(np.concatenate([current.factors, new.astype(np.float16)]), colours_, factor_of_,
+                               current.colour_entries)
+    coarse, scales = quantise_factors(new, current.colour_entries)
+    if current.factors_int8 is not None and current.factor_slice_scales is not None:
+        coarse = np.concatenate([current.factors_int8, coarse])
+        scales = np.concatenate([current.factor_slice_scales, scales])
+    return FactorisedBasis(current.factors, colours_, factor_of_, current.colour_entries, coarse, scales)
+
+
+def quantise_factors(factors: npt.ArrayLike, colour_entries: npt.NDArray[np.int64]
+                     ) -> tuple[npt.NDArray[np.int8], npt.NDArray[np.float32]]:
+    """Factor rows in 8 bits (``spec/model.md`` §5, since 1.11): per row and kept slice, the scale is the largest
+    magnitude over 127 (1 where the slice has no entry or only zeros), and each value the nearest integer to value
+    over scale, in −127 … 127.
+
+    Parameters
+    ----------
+    factors : array_like, shape (F, P)
+        Factor rows (unit vectors, dimensionless).
+    colour_entries : ndarray of int64, shape (P,)
+        Their columns' positions in one colour's block, ``21 · 90 · 90`` entries.
+
+    Returns
+    -------
+    (ndarray of int8, shape (F, P), ndarray of float32, shape (F, 21))
+    """
+    values = np.asarray(factors, dtype=np.float64)
+    slice_of = colour_entries // _SLICE_ENTRIES
+    scales = np.ones((len(values), N_KEPT_SLICES), dtype=np.float32)
+    for kept in range(N_KEPT_SLICES):
+        columns = slice_of == kept
+        if columns.any():
+            largest = np.abs(values[:, columns]).max(axis=1) / 127.0
+            scales[:, kept] = np.where(largest > 0, largest, 1.0).astype(np.float32)
+    quantised = np.clip(np.rint(values / scales[:, slice_of].astype(np.float64)), -127, 127).astype(np.int8)
+    return quantised, scales
 
 def shared_basis_rank(materials: int, colour_permutations: bool = False) -> int:
     """Most vectors a shared basis fitted on ``materials`` training materials can have: the rank of the centred data.
@@ -540,15 +616,31 @@ def _factorised(tensors: Mapping[str, np.ndarray], where: str) -> FactorisedBasi
         raise BasisError(f"{where}: 'colours' lists {colours.shape[0]} vectors; a basis holds 1 to {MAX_BASIS_COUNT}")
     if colours.min() < 0 or colours.max() > 2:
         raise BasisError(f"{where}: 'colours' must be 0 (grey), 1 or 2 (chroma)")
-    if factor_of.size and (factor_of.min() < 0 or factor_of.max() >= factors.shape[0]):
-        raise BasisError(f"{where}: 'factor_of' must name rows of 'factors' (0 to {factors.shape[0] - 1})")
+    if factor_of.size and factor_of.min() < 0:
+        raise BasisError(f"{where}: 'factor_of' must name factor rows, from 0")
     block = _N_ENTRIES // N_CHANNELS
     if colour_entries.min() < 0 or colour_entries.max() >= block or np.any(np.diff(colour_entries) <= 0):
         raise BasisError(f"{where}: 'colour_entries' must be strictly increasing positions in [0, {block})")
     if not np.isfinite(factors).all():
         raise BasisError(f"{where}: 'factors' holds non-finite values")
+    coarse, scales = tensors.get("factors_int8"), tensors.get("factor_slice_scales")
+    if (coarse is None) != (scales is None):
+        raise BasisError(f"{where}: 'factors_int8' and 'factor_slice_scales' come together")
+    rows = factors.shape[0]
+    if coarse is not None and scales is not None:
+        if coarse.dtype != np.int8 or coarse.ndim != 2 or coarse.shape[0] == 0 or coarse.shape[1] != factors.shape[1]:
+            raise BasisError(f"{where}: 'factors_int8' must be a 2-D int8 tensor with the {factors.shape[1]} "
+                             f"columns of 'factors', got {coarse.dtype} {coarse.shape}")
+        if scales.dtype != np.float32 or scales.shape != (coarse.shape[0], N_KEPT_SLICES):
+            raise BasisError(f"{where}: 'factor_slice_scales' must be float32 of shape ({coarse.shape[0]}, "
+                             f"{N_KEPT_SLICES}), got {scales.dtype} {scales.shape}")
+        if not (np.isfinite(scales).all() and (scales > 0).all()):
+            raise BasisError(f"{where}: 'factor_slice_scales' must be finite and positive")
+        rows += coarse.shape[0]
+    if factor_of.size and factor_of.max() >= rows:
+        raise BasisError(f"{where}: 'factor_of' must name factor rows (0 to {rows - 1})")
     return FactorisedBasis(factors, colours.astype(np.int64), factor_of.astype(np.int64),
-                           colour_entries.astype(np.int64))
+                           colour_entries.astype(np.int64), coarse, scales)
 
 def basis_offset(linear_rank: int, basis_count: int, k: int) -> int:
     """The first basis vector an encoder uses for k coefficients.
