@@ -654,7 +654,7 @@ def test_a_factorised_basis_file_expands_to_the_dense_basis_it_stands_for(tmp_pa
             "colour_entries": factorised.colour_entries}
     bad = [
         ({"colours": factorised.colours + 3}, "'colours' must be 0"),
-        ({"factor_of": factorised.factor_of + 40}, "'factor_of' must name rows"),
+        ({"factor_of": factorised.factor_of + 40}, "'factor_of' must name factor rows"),
         ({"colour_entries": factorised.colour_entries[::-1].copy()}, "strictly increasing"),
         ({"factors": factorised.factors.astype(np.float32)}, "float16"),
         ({"factors": np.full_like(factorised.factors, np.inf)}, "non-finite"),
