@@ -222,9 +222,20 @@ def test_an_eight_bit_basis_file_reads_back_to_the_same_vectors_and_grows_again(
     assert read.factorised is not None and read.count == 20
     assert np.array_equal(read.vectors(0, 20), grown.products(0, 20))
     assert np.array_equal(read.vectors(0, 6), old.products(0, 6))  # the binary16 vectors, bit for bit
-    # a leading part that reaches into the 8-bit rows is the same vectors
+    # the 8-bit rows as spec/model.md §5 defines them: integer times the scale of the column's kept slice
+    fine = len(old.factors)
+    slice_of = grown.colour_entries // 8100
+    assert len(np.unique(slice_of)) == 2
+    spec = np.empty((len(grown.factors_int8), len(slice_of)), dtype=np.float32)
+    for kept in np.unique(slice_of):
+        columns = slice_of == kept
+        spec[:, columns] = grown.factors_int8[:, columns].astype(np.float32) * grown.factor_slice_scales[:, [kept]]
+    assert np.array_equal(read.factorised.factors32[fine:], spec)
+    # a leading part that reaches into the 8-bit rows is the same vectors, and sums over them the same way
     part = read.leading(15, "cd" * 32)
     assert np.array_equal(part.vectors(0, 15), read.vectors(0, 15))
+    weights = np.linspace(-1, 1, 15, dtype=np.float32)
+    assert np.array_equal(part.weighted_sum(weights), read.weighted_sum(weights))
     # extended again, the 8-bit rows stay bit for bit; binary16 rows cannot follow them
     values, masks = _materials(n=9, width=8200)
     again = extend_factorised_basis(grown, fit_factorised_basis(values, masks, 30))

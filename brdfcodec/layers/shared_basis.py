@@ -475,7 +475,7 @@ def extend_factorised_basis(current: FactorisedBasis, fitted: FactorisedBasis,
     vector whose pair partner ``current`` already holds shares that partner's factor; every other new factor is
     made orthogonal, in binary64, to the factors of its colour kind (grey, or chroma) already in the basis, then
     normalised and stored in ``storage``: 8 bits with a scale per kept slice (the default,
-    :func:`quantise_factors`: half the bytes of binary16, the later vectors within about 2 % of their norm) or
+    :func:`quantise_factors`: half the bytes of binary16, each value within half its slice's step) or
     binary16; the basis stays orthonormal up to that rounding.
 
     Raises
