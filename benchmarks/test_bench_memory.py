@@ -1,8 +1,8 @@
 """Peak memory of encoding one material at a large size budget (issue 37): ``bvae compress --bytes 262144``.
 
-The table is 35 MB; the encoder, the decoder and the shared basis' dense float32 vectors (which the basis fit
-reads again and again) are most of the rest. The basis fit used to copy those vectors (and the projection's) for
-every fit; it now reads them in place. Run with ``python -m pytest benchmarks/test_bench_memory.py -s``: the
+The table is 35 MB; the encoder, the decoder and the shared basis' factors in float32 (which the basis fit
+reads again and again) are most of the rest. The basis fit used to copy the dense vectors (and the projection's)
+for every fit, then to keep them dense; it now reads the factors in place. Run with ``python -m pytest benchmarks/test_bench_memory.py -s``: the
 child process's peak resident memory is printed and held below :data:`PEAK_LIMIT_MB` (it is measured, not timed).
 """
 
@@ -13,13 +13,11 @@ import sys
 from pathlib import Path
 
 #: Largest accepted peak resident memory of the child process, in MB (the bound the fix keeps; before it the
-#: peak was well above it). 720 until the rate-distortion choice of issue 48 (cfd0a3b: packed and entropy-coded
-#: layers both tried), after which a fresh clone's CI venv measured 722 MB (2026-11-27); the cause of the 2 MB
-#: is not isolated yet (issue 48's closing note), so the bound was 760. The shipped basis grown from 75 to 200
-#: vectors (spec/model.md 1.11) adds 125 dense float32 vectors the encoder keeps (125 × 387,378 × 4 B = 194 MB)
-#: and their 96 widened factors (50 MB): 962 MB measured here at c928761 (2026-11-27), so the bound is 1,000 MB
-#: until the encoder fits on the factors instead of the dense vectors (issue 48, open).
-PEAK_LIMIT_MB = 1000
+#: peak was well above it). The shipped basis grown from 75 to 200 vectors (spec/model.md 1.11) took the peak to
+#: 962 MB while the encoder fitted on dense float32 vectors (125 more × 387,378 × 4 B); since it fits on the
+#: factors (``brdfcodec.codec.basis_operator``, issue 48) the peak measured here is 659 MB (2026-11-27), and the
+#: bound is back to 720 MB, the one kept before the basis grew.
+PEAK_LIMIT_MB = 720
 
 _CHILD = """
 import resource, sys

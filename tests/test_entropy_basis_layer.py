@@ -199,3 +199,15 @@ def test_info_names_a_coded_layer_and_its_prior(tmp_path, capsys) -> None:
     assert main(["info", "--json", str(path)]) == 0
     (item,) = json.loads(capsys.readouterr().out)["materials"]
     assert item["basis"]["coded_prior"] == [128, 40] and item["basis"]["coded_bytes"] <= 20
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_every_prefix_size_is_the_length_of_that_prefix_coded(seed: int) -> None:
+    from brdfcodec.layers.coded_basis import coded_prefix_sizes
+
+    q, codes = _laplace(100 + seed, 5 + 30 * seed)
+    q[::4] = 0
+    if seed % 3 == 0:
+        q[-1] = MAX_MAGNITUDE - seed  # an escape at the end
+    sizes = coded_prefix_sizes(q, codes)
+    assert sizes == [len(encode_integers(q[:k], codes[:k])) for k in range(len(q) + 1)]

@@ -9,6 +9,7 @@ from typing import TYPE_CHECKING, Any, Literal, Protocol, get_args
 
 import numpy as np
 
+from brdfcodec.codec.basis_operator import BasisOperator
 from brdfcodec.codec.rate import BasisFit, BasisOnlyFit, Metric, MuStorage, encode_layers
 from brdfcodec.codec.refine import (
     EFFORT_STEPS,
@@ -319,7 +320,7 @@ def _basis_only_fit(
     def fit(k: int) -> tuple[BasisLayer, np.ndarray]:
         if options.packed:
             return fit_packed(k)
-        components = basis.vectors(0, k)
+        components = BasisOperator.of(basis, 0, k)
         coefficients = fit_basis_only_coefficients(target, weights, centre, components, options.effort)
         layer = quantise_coefficients(basis.sha256, coefficients)
         if POLISH_PASSES[options.effort]:
@@ -337,12 +338,12 @@ def _basis_only_fit(
         def count_in(available: int, layer_bytes: int) -> int:
             if available not in least_squares_of:
                 least_squares_of[available] = fit_basis_only_coefficients(
-                    target, weights, centre, basis.vectors(0, available), 0)
+                    target, weights, centre, BasisOperator.of(basis, 0, available), 0)
             return _kept_count(options.coded, least_squares_of[available], 0, layer_bytes, prior)
 
         count, layer_bytes = _layer_size(count_in, k, basis.count)
         max_bytes = layer_bytes - (1 if options.coded else 0)
-        components = basis.vectors(0, count)
+        components = BasisOperator.of(basis, 0, count)
         coefficients = fit_basis_only_coefficients(target, weights, centre, components, options.effort)
         if options.coded:
             coded = coded_coefficients(basis.sha256, coefficients, max_bytes, prior)
@@ -352,7 +353,7 @@ def _basis_only_fit(
         assert layer is not None
         if POLISH_PASSES[options.effort]:
             widths = packed_widths(layer.top, 0, layer.count)
-            q = polish_quantised_coefficients(layer.step, layer.q, target, weights, centre, components[:layer.count],
+            q = polish_quantised_coefficients(layer.step, layer.q, target, weights, centre, BasisOperator.of(basis, 0, layer.count),
                                               POLISH_PASSES[options.effort],
                                               bounds=(-(1 << (widths - 1)), (1 << (widths - 1)) - 1))
             layer = BasisLayer(basis.sha256, layer.step, q, 0, 0, layer.top)
@@ -380,15 +381,15 @@ def _basis_fit(
 
     def least_squares(first: int, available: int, p: int) -> np.ndarray:
         if (first, available, p) not in least_squares_of:
-            projection = None if not p else (basis.vectors(0, p), decoder.projection_centre)
+            projection = None if not p else (BasisOperator.of(basis, 0, p), decoder.projection_centre)
             least_squares_of[first, available, p] = fit_basis_coefficients(
-                decoder.network, base.mu[None], inputs[None], masks[None], basis.vectors(first, available),
+                decoder.network, base.mu[None], inputs[None], masks[None], BasisOperator.of(basis, first, available),
                 basis.entries, 0, projection=projection)[1][0]
         return least_squares_of[first, available, p]
 
     def fit_one(k: int, mu_storage: MuStorage, p: int, packed: bool,
                 start: int) -> tuple[LatentRecord, BasisLayer | None, np.ndarray]:
-        projection = None if not p else (basis.vectors(0, p), decoder.projection_centre)
+        projection = None if not p else (BasisOperator.of(basis, 0, p), decoder.projection_centre)
         # Each coding asked for: the bytes of its layer and how many coefficients it keeps. --basis-coding auto makes
         # a packed and a coded layer, of one fit where they keep as many coefficients (from about 64 B: all), else
         # of a fit each, and keeps the lower error (packed first: kept on a tie, readable by 2.3 readers).
@@ -414,7 +415,7 @@ def _basis_fit(
             codings, count_of = ["int8"], {"int8": k}
         made_layers = []
         for count in dict.fromkeys(count_of.values()):
-            components = basis.vectors(first, count)
+            components = BasisOperator.of(basis, first, count)
             if (first, count, p) not in joint:
                 joint[first, count, p] = fit_basis_coefficients(
                     decoder.network, base.mu[None], inputs[None], masks[None], components, basis.entries,

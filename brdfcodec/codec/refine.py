@@ -11,13 +11,14 @@ RelAE more with it (documentation: Layers and rate control).
 
 from __future__ import annotations
 
-import warnings
 from collections.abc import Callable
 from typing import Final
 
 import numpy as np
 import numpy.typing as npt
 import torch
+
+from brdfcodec.codec.basis_operator import BasisOperator
 
 __all__ = [
     "BASIS_ONLY_STEPS",
@@ -145,33 +146,18 @@ def _mapped_l1(decoded: torch.Tensor, target: torch.Tensor, weight: torch.Tensor
     return ((decoded - target) * weight).abs().sum(1)
 
 
-def _read_only_tensor(values: npt.ArrayLike, device: torch.device, dtype: torch.dtype) -> torch.Tensor:
-    """A tensor of basis vectors that the fit only reads: the array's own memory when it is float32 on the CPU.
-
-    The vectors are the shared basis' cached float32 copy, read-only and large (K × E: over 100 MB for the
-    shipped basis); copying them for every fit doubled their memory at large budgets. Nothing here writes to
-    them (they hold no gradient), so torch may use them in place.
-    """
-    array = np.asarray(values)
-    if array.dtype == np.float32 and device.type == "cpu" and dtype == torch.float32 and array.flags.c_contiguous:
-        with warnings.catch_warnings():
-            warnings.filterwarnings("ignore", message="The given NumPy array is not writable")
-            return torch.from_numpy(array)
-    return torch.as_tensor(np.array(array, dtype=np.float32), device=device, dtype=dtype)
-
-
 def fit_basis_coefficients(
     decoder: torch.nn.Module,
     codes: npt.ArrayLike,
     inputs: npt.ArrayLike,
     masks: npt.ArrayLike,
-    components: npt.ArrayLike,
+    components: npt.ArrayLike | BasisOperator,
     entries: npt.ArrayLike,
     effort: int,
     *,
     fit_latent: bool = True,
     error: Callable[[torch.Tensor, torch.Tensor, torch.Tensor], torch.Tensor] | None = None,
-    projection: tuple[npt.ArrayLike, npt.ArrayLike] | None = None,
+    projection: tuple[npt.ArrayLike | BasisOperator, npt.ArrayLike] | None = None,
 ) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.float32]]:
     """Latent codes and basis coefficients fitted together (the basis layer's encoder).
 
@@ -189,8 +175,9 @@ def fit_basis_coefficients(
         Starting codes (refined μ).
     inputs, masks : array_like, shape (B, 63, 90, 90)
         Mapped kept slices and validity.
-    components : array_like, shape (k, E)
-        The first k vectors of the shared basis.
+    components : array_like, shape (k, E), or BasisOperator
+        The k vectors of the shared basis the coefficients weigh (a :class:`BasisOperator` sums on a
+        factorised basis' factors).
     entries : array_like of int, shape (E,)
         Their flat positions in the ``(63, 90, 90)`` layout.
     effort : int
@@ -203,7 +190,8 @@ def fit_basis_coefficients(
         tensors (mapped kept slices; validity as 0/1); the mapped L1 error over valid entries by default.
         For trying other objectives; the encoder uses the default.
     projection : (vectors, centre), optional
-        Project the clamped base decode at ``entries`` on ``vectors`` ``(P, E)`` (the shared basis' first P)
+        Project the clamped base decode at ``entries`` on ``vectors`` ``(P, E)`` or an operator of them (the
+        shared basis' first P)
         around ``centre`` ``(E,)`` before the coefficients are added: a projected base (format 1.6,
         :meth:`~brdfcodec.layers.basis.SharedBasis.project`).
 
@@ -222,7 +210,7 @@ def fit_basis_coefficients(
     start = torch.as_tensor(np.array(codes, dtype=np.float32, ndmin=2), device=device, dtype=dtype)
     target = torch.as_tensor(np.asarray(inputs, dtype=np.float32), device=device, dtype=dtype).flatten(1)
     weight = torch.as_tensor(np.asarray(masks, dtype=np.float32), device=device, dtype=dtype).flatten(1)
-    basis = _read_only_tensor(components, device, dtype)
+    basis = _as_operator(components)
     where = torch.as_tensor(np.asarray(entries, dtype=np.int64), device=device)
     grads = [p.requires_grad for p in decoder.parameters()]
     for p in decoder.parameters():
@@ -230,7 +218,7 @@ def fit_basis_coefficients(
 
     fixed_base: torch.Tensor | None = None
     if projection is not None:
-        p_vectors = _read_only_tensor(projection[0], device, dtype)
+        p_vectors = _as_operator(projection[0])
         p_centre = torch.as_tensor(np.array(projection[1], dtype=np.float32), device=device, dtype=dtype)
 
     def base_of(z: torch.Tensor) -> torch.Tensor:
@@ -238,11 +226,11 @@ def fit_basis_coefficients(
         if projection is None:
             return base
         centred = base[:, where] - p_centre
-        return base.index_copy(1, where, p_centre + (centred @ p_vectors.T) @ p_vectors)
+        return base.index_copy(1, where, p_centre + p_vectors.synthesise(p_vectors.analyse(centred)))
 
     def decoded(z: torch.Tensor, c: torch.Tensor) -> torch.Tensor:
         base = base_of(z) if fixed_base is None else fixed_base
-        return base.index_add(1, where, c @ basis)
+        return base.index_add(1, where, basis.synthesise(c))
 
     try:
         with torch.no_grad():
@@ -250,7 +238,7 @@ def fit_basis_coefficients(
             if not fit_latent:
                 fixed_base = start_base
             residual = (target - start_base) * weight
-            c0 = residual[:, where] @ basis.T
+            c0 = basis.analyse(residual[:, where])
             # No coefficients at all is a candidate too: on a material unlike the training ones the projection
             # (best in L2) can raise the L1 error.
             best_error = error(decoded(start, torch.zeros_like(c0)), target, weight)
@@ -296,7 +284,7 @@ def fit_basis_only_coefficients(
     inputs: npt.ArrayLike,
     masks: npt.ArrayLike,
     centre: npt.ArrayLike,
-    components: npt.ArrayLike,
+    components: npt.ArrayLike | BasisOperator,
     effort: int,
 ) -> npt.NDArray[np.float32]:
     """Basis coefficients of a record without a latent (format 2.1): its decode is clamp(m + Σ cᵢ vᵢ).
@@ -312,7 +300,7 @@ def fit_basis_only_coefficients(
         The material's mapped kept slices and their validity at the basis' entries.
     centre : array_like, shape (E,)
         m: the decoder's linear-path mean at those entries.
-    components : array_like, shape (k, E)
+    components : array_like, shape (k, E), or BasisOperator
         The basis vectors ``0 … k − 1``.
     effort : int
         0 to 3.
@@ -325,17 +313,16 @@ def fit_basis_only_coefficients(
 
     if effort not in BASIS_ONLY_STEPS:
         raise ValueError(f"effort must be one of {sorted(BASIS_ONLY_STEPS)}, got {effort!r}")
-    device, dtype = torch.device("cpu"), torch.float32
     target = torch.as_tensor(np.asarray(inputs, dtype=np.float32).reshape(-1))
     weight = torch.as_tensor(np.asarray(masks, dtype=np.float32).reshape(-1))
     mean = torch.as_tensor(np.asarray(centre, dtype=np.float32).reshape(-1))
-    basis = _read_only_tensor(components, device, dtype)
+    basis = _as_operator(components)
 
     def error(c: torch.Tensor) -> torch.Tensor:
-        return ((torch.clamp(mean + c @ basis, 0.0, MAPPED_MAX) - target) * weight).abs().sum()
+        return ((torch.clamp(mean + basis.synthesise(c[None])[0], 0.0, MAPPED_MAX) - target) * weight).abs().sum()
 
     with torch.no_grad():
-        start = ((target - mean) * weight) @ basis.T
+        start = basis.analyse(((target - mean) * weight)[None])[0]
         best, best_error = start.clone(), error(start)
     steps = BASIS_ONLY_STEPS[effort]
     if steps:
@@ -361,7 +348,7 @@ def polish_quantised_coefficients(
     inputs: npt.ArrayLike,
     masks: npt.ArrayLike,
     centre: npt.ArrayLike,
-    components: npt.ArrayLike,
+    components: npt.ArrayLike | BasisOperator,
     passes: int,
     bounds: tuple[npt.ArrayLike, npt.ArrayLike] | None = None,
 ) -> npt.NDArray[np.int8] | npt.NDArray[np.int64]:
@@ -380,7 +367,7 @@ def polish_quantised_coefficients(
         The rounded coefficients.
     inputs, masks, centre : array_like, shape (E,)
         As for :func:`fit_basis_only_coefficients`.
-    components : array_like, shape (k, E)
+    components : array_like, shape (k, E), or BasisOperator
     passes : int
     bounds : (low, high) of array_like of int, shape (k,), optional
         Each integer's range (a packed layer's fields, :mod:`brdfcodec.layers.packed`); default −127 … 127.
@@ -394,7 +381,7 @@ def polish_quantised_coefficients(
     codes = np.asarray(q, dtype=np.int64).copy()
     low, high = (np.full(len(codes), -127), np.full(len(codes), 127)) if bounds is None else (
         np.asarray(bounds[0], dtype=np.int64), np.asarray(bounds[1], dtype=np.int64))
-    vectors = np.asarray(components, dtype=np.float32)
+    vectors = _as_operator(components)
     x = np.asarray(inputs, dtype=np.float32).reshape(-1)
     w = np.asarray(masks, dtype=np.float32).reshape(-1)
     scratch = np.empty_like(x)
@@ -406,13 +393,14 @@ def polish_quantised_coefficients(
         return float(np.dot(scratch, w))
 
     mean = np.asarray(centre, dtype=np.float32).reshape(-1)
-    decoded = mean + (np.float32(step) * codes.astype(np.float32)) @ vectors
+    decoded = mean + vectors.combine(np.float32(step) * codes.astype(np.float32))
     current = error(decoded)
     for _ in range(passes):
         moved = False
         for i in range(len(codes)):
+            vector = vectors.row(i)
             for direction in (1, -1):
-                change = np.float32(direction * step) * vectors[i]
+                change = np.float32(direction * step) * vector
                 steps = 0
                 while low[i] <= codes[i] + direction <= high[i]:  # further while each step lowers the error
                     trial = decoded + change
@@ -426,3 +414,7 @@ def polish_quantised_coefficients(
         if not moved:
             break
     return codes.astype(np.int8) if bounds is None else codes
+
+
+def _as_operator(components: npt.ArrayLike | BasisOperator) -> BasisOperator:
+    return components if isinstance(components, BasisOperator) else BasisOperator.from_vectors(components)

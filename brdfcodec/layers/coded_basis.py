@@ -34,6 +34,7 @@ Part of :mod:`brdfcodec.layers.basis`, which gathers the names of its parts.
 
 from __future__ import annotations
 
+import functools
 from typing import Final
 
 import numpy as np
@@ -50,6 +51,7 @@ __all__ = [
     "ZERO_PROBABILITY",
     "CodedChoice",
     "choose_coding",
+    "coded_prefix_sizes",
     "decode_integers",
     "encode_integers",
     "prior_codes",
@@ -88,34 +90,99 @@ def _round_32_log2(n: int) -> int:
     return (int(n) ** 64).bit_length() // 2
 
 
+@functools.lru_cache(maxsize=64)
+def _scaled_log2(first: int, count: int) -> npt.NDArray[np.int64]:
+    """L(n) = round(32·log₂ n) for n = first + 1 … first + count, exactly (read-only, cached)."""
+    out = np.array([_round_32_log2(n) for n in range(first + 1, first + count + 1)], dtype=np.int64)
+    out.setflags(write=False)
+    return out
+
+
 def prior_codes(amplitude: int, decay: int, step_code: int, first: int, count: int) -> npt.NDArray[np.int64]:
     """Prior codes cᵢ of coefficients i = 0 … k − 1 (vectors n = first + i + 1), clipped to ±80."""
-    n = range(int(first) + 1, int(first) + int(count) + 1)
-    codes = [int(amplitude) - int(step_code) + 64 - (int(decay) * _round_32_log2(v) + 32) // 64 for v in n]
-    return np.clip(np.array(codes, dtype=np.int64), -PRIOR_CODE_LIMIT, PRIOR_CODE_LIMIT)
+    scaled = _scaled_log2(int(first), int(count))
+    codes = int(amplitude) - int(step_code) + 64 - (int(decay) * scaled + 32) // 64
+    return np.clip(codes, -PRIOR_CODE_LIMIT, PRIOR_CODE_LIMIT)
 
 
-def _binarise(q: npt.NDArray[np.int64], codes: npt.NDArray[np.int64]) -> list[tuple[int, int]]:
-    """The (bit, probability of 0) sequence of integers under their prior codes."""
-    out: list[tuple[int, int]] = []
+def _binarise(q: npt.NDArray[np.int64], codes: npt.NDArray[np.int64]) -> tuple[list[int], list[int], list[int]]:
+    """The bits of integers under their prior codes, each bit's probability of 0 (/256), in coding order, and
+    where each integer's bits end (the count of bits up to and including its own)."""
+    bits: list[int] = []
+    probabilities: list[int] = []
+    ends: list[int] = []
     for value, code in zip(q.tolist(), codes.tolist(), strict=True):
-        zero, stop = ZERO_PROBABILITY[code + PRIOR_CODE_LIMIT], STOP_PROBABILITY[code + PRIOR_CODE_LIMIT]
-        out.append((int(value != 0), zero))
         if not value:
+            bits.append(0)
+            probabilities.append(ZERO_PROBABILITY[code + PRIOR_CODE_LIMIT])
+            ends.append(len(bits))
             continue
-        out.append((int(value < 0), 128))
         m = abs(value)
-        for j in range(1, _UNARY + 1):
-            out.append((int(m > j), stop))
-            if m <= j:
-                break
+        ones = min(m - 1, _UNARY)  # bits "m > j" for j = 1 … min(m, 14): ones, then a 0 where m ≤ 14
+        bits += (1, int(value < 0), *_ONES[:ones], *((0,) if m <= _UNARY else ()))
+        stop = STOP_PROBABILITY[code + PRIOR_CODE_LIMIT]
+        probabilities += (ZERO_PROBABILITY[code + PRIOR_CODE_LIMIT], 128, *((stop,) * (ones + (m <= _UNARY))))
         if m > _UNARY:
             rest = m - _UNARY  # ≥ 1: Exp-Golomb order 0 of rest − 1
             prefix = rest.bit_length() - 1
-            out.extend((1, 128) for _ in range(prefix))
-            out.append((0, 128))
-            out.extend(((rest >> b) & 1, 128) for b in range(prefix - 1, -1, -1))
-    return out
+            bits += (*_ONES[:prefix], 0, *((rest >> b) & 1 for b in range(prefix - 1, -1, -1)))
+            probabilities += (128,) * (2 * prefix + 1)
+        ends.append(len(bits))
+    return bits, probabilities, ends
+
+
+#: Enough ones for the longest run of set bits one integer binarises to.
+_ONES: Final = (1,) * max(_UNARY, MAX_ESCAPE_PREFIX)
+
+
+def _checked(q: npt.ArrayLike, codes: npt.ArrayLike) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]:
+    values = np.asarray(q, dtype=np.int64).reshape(-1)
+    prior = np.asarray(codes, dtype=np.int64).reshape(-1)
+    if values.shape != prior.shape:
+        raise ValueError(f"{len(values)} integers for {len(prior)} prior codes")
+    if len(values) and int(np.abs(values).max()) > MAX_MAGNITUDE:
+        raise ValueError(f"a coded integer exceeds ±{MAX_MAGNITUDE}")
+    return values, prior
+
+
+def _code(values: npt.NDArray[np.int64], prior: npt.NDArray[np.int64],
+          prefix_sizes: list[int] | None = None) -> tuple[int, int, int]:
+    """The coder's state (low, span, shifts) after every bit of the integers; with ``prefix_sizes``, appends
+    the byte length of every prefix's terminated code to it (the empty one first)."""
+    low, span, shifts = 0, 255, 0
+    bits, probabilities, ends = _binarise(values, prior)
+    if prefix_sizes is not None:
+        prefix_sizes.append(0)
+    end = iter(ends)
+    next_end = next(end, -1)
+    for count, (bit, probability) in enumerate(zip(bits, probabilities, strict=True), start=1):
+        split = 1 + (((span - 1) * probability) >> 8)
+        if bit:
+            low += split
+            span -= split
+        else:
+            span = split
+        if span < 128:  # renormalise: double span (and low) until it is 128 or more
+            shift = 8 - span.bit_length()
+            span <<= shift
+            low <<= shift
+            shifts += shift
+        if count == next_end:
+            if prefix_sizes is not None:
+                prefix_sizes.append(_terminated_length(low, span, shifts))
+            next_end = next(end, -1)
+    return low, span, shifts
+
+
+def _terminated_length(low: int, span: int, shifts: int) -> int:
+    """The fewest bytes m whose value, as a binary fraction X with zeros after it, the decoder reads as the
+    coded bits: low ≤ X·2^(8 + shifts) < low + span, i.e. a multiple of 2^(8 + shifts − 8m) in
+    [low, low + span − 1]. Such a multiple exists for every exponent up to the highest bit where low − 1 and
+    low + span − 1 differ (for every exponent where low is 0), and for no larger one."""
+    if low == 0:
+        return 0
+    highest = ((low + span - 1) ^ (low - 1)).bit_length() - 1
+    return max(0, -(-(8 + shifts - highest) // 8))
 
 
 def encode_integers(q: npt.ArrayLike, codes: npt.ArrayLike) -> bytes:
@@ -126,37 +193,25 @@ def encode_integers(q: npt.ArrayLike, codes: npt.ArrayLike) -> bytes:
     ValueError
         A magnitude above :data:`MAX_MAGNITUDE`, or ``q`` and ``codes`` of different lengths.
     """
-    values = np.asarray(q, dtype=np.int64).reshape(-1)
-    prior = np.asarray(codes, dtype=np.int64).reshape(-1)
-    if values.shape != prior.shape:
-        raise ValueError(f"{len(values)} integers for {len(prior)} prior codes")
-    if len(values) and int(np.abs(values).max()) > MAX_MAGNITUDE:
-        raise ValueError(f"a coded integer exceeds ±{MAX_MAGNITUDE}")
-    low, span, shifts = 0, 255, 0
-    for bit, probability in _binarise(values, prior):
-        split = 1 + (((span - 1) * probability) >> 8)
-        if bit:
-            low += split
-            span -= split
-        else:
-            span = split
-        while span < 128:
-            span <<= 1
-            low <<= 1
-            shifts += 1
-    # The decoder follows the real number X (the bytes as a binary fraction, zeros after them) and needs
-    # low ≤ X·2^(8 + shifts) < low + span: the fewest bytes m whose value y·2^(8 + shifts − 8m) lies there.
-    total = 8 + shifts
-    for m in range((total + 7) // 8 + 1):
-        exponent = total - 8 * m
-        if exponent >= 0:
-            scale = 1 << exponent
-            y = -(-low // scale)
-            if y * scale < low + span:
-                return y.to_bytes(m, "big") if m else b""
-        else:
-            return (low << -exponent).to_bytes(m, "big")
-    raise AssertionError("unreachable: the last length holds low exactly")
+    low, span, shifts = _code(*_checked(q, codes))
+    m = _terminated_length(low, span, shifts)
+    exponent = 8 + shifts - 8 * m
+    if exponent < 0:
+        return (low << -exponent).to_bytes(m, "big")
+    return (-(-low >> exponent)).to_bytes(m, "big")
+
+
+def coded_prefix_sizes(q: npt.ArrayLike, codes: npt.ArrayLike) -> list[int]:
+    """``len(encode_integers(q[:k], codes[:k]))`` for every k = 0 … len(q), in one pass of the coder.
+
+    Raises
+    ------
+    ValueError
+        As :func:`encode_integers`.
+    """
+    sizes: list[int] = []
+    _code(*_checked(q, codes), prefix_sizes=sizes)
+    return sizes
 
 
 class _BoolDecoder:
@@ -221,6 +276,20 @@ def decode_integers(data: bytes, codes: npt.ArrayLike) -> npt.NDArray[np.int64]:
     return out
 
 
+class _PriorCodesByStep:
+    """Prior codes of one layer's coefficients, made per step code when first asked for."""
+
+    def __init__(self, amplitude: int, decay: int, first: int, count: int) -> None:
+        self._made: dict[int, npt.NDArray[np.int64]] = {}
+        self._arguments = (amplitude, decay, first, count)
+
+    def __getitem__(self, step_code: int) -> npt.NDArray[np.int64]:
+        if step_code not in self._made:
+            amplitude, decay, first, count = self._arguments
+            self._made[step_code] = prior_codes(amplitude, decay, step_code, first, count)
+        return self._made[step_code]
+
+
 class CodedChoice:
     """A coded layer chosen for some coefficients: step code, integers and their coder bytes.
 
@@ -280,7 +349,7 @@ def choose_coding(coefficients: npt.ArrayLike, first: int, max_bytes: int, ampli
     if budget < 0 or not len(c):
         return None
     energy_after = np.concatenate([np.cumsum((c ** 2)[::-1])[::-1], [0.0]])
-    codes_of = {e: prior_codes(amplitude, decay, e, first, len(c)) for e in range(256)}
+    codes_of = _PriorCodesByStep(amplitude, decay, first, len(c))
     best: CodedChoice | None = None
 
     def size(q: npt.NDArray[np.int64], e: int) -> int:
@@ -303,20 +372,19 @@ def choose_coding(coefficients: npt.ArrayLike, first: int, max_bytes: int, ampli
             q = _quantise(c, s, offset)
             nonzero = np.flatnonzero(q)
             k = int(nonzero[-1]) + 1 if len(nonzero) else 0
-            data = encode_integers(q[:k], codes_of[e][:k]) if k else b""
-            if len(data) > budget:  # fewer coefficients: bisect the most that fit
+            sizes = coded_prefix_sizes(q[:k], codes_of[e][:k])
+            if sizes[k] > budget:  # fewer coefficients: bisect the most that fit (on every prefix's size)
                 low, high = 0, k
                 while high - low > 1:
                     mid = (low + high) // 2
-                    if len(encode_integers(q[:mid], codes_of[e][:mid])) <= budget:
+                    if sizes[mid] <= budget:
                         low = mid
                     else:
                         high = mid
                 k = low
-                data = encode_integers(q[:k], codes_of[e][:k])
             if k == 0:
                 continue
             error = float(((c[:k] - q[:k] * s) ** 2).sum() + energy_after[k])
             if best is None or error < best.error:
-                best = CodedChoice(e, q[:k].copy(), data, error)
+                best = CodedChoice(e, q[:k].copy(), encode_integers(q[:k], codes_of[e][:k]), error)
     return best
