@@ -2,8 +2,9 @@
 
 The table is 35 MB; the encoder, the decoder and the shared basis' factors in float32 (which the basis fit
 reads again and again) are most of the rest. The basis fit used to copy the dense vectors (and the projection's)
-for every fit, then to keep them dense; it now reads the factors in place. Run with ``python -m pytest benchmarks/test_bench_memory.py -s``: the
-child process's peak resident memory is printed and held below :data:`PEAK_LIMIT_MB` (it is measured, not timed).
+for every fit, then to keep them dense; it now reads the factors in place. Run with
+``python -m pytest benchmarks/test_bench_memory.py -s``: the child process's peak resident memory is printed and
+held below :data:`PEAK_LIMIT_MB` (it is measured, not timed).
 """
 
 from __future__ import annotations

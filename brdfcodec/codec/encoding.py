@@ -353,8 +353,8 @@ def _basis_only_fit(
         assert layer is not None
         if POLISH_PASSES[options.effort]:
             widths = packed_widths(layer.top, 0, layer.count)
-            q = polish_quantised_coefficients(layer.step, layer.q, target, weights, centre, BasisOperator.of(basis, 0, layer.count),
-                                              POLISH_PASSES[options.effort],
+            q = polish_quantised_coefficients(layer.step, layer.q, target, weights, centre,
+                                              BasisOperator.of(basis, 0, layer.count), POLISH_PASSES[options.effort],
                                               bounds=(-(1 << (widths - 1)), (1 << (widths - 1)) - 1))
             layer = BasisLayer(basis.sha256, layer.step, q, 0, 0, layer.top)
         return layer, basis.on_grid(centre + basis.weighted_sum(layer.coefficients()))
