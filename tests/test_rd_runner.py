@@ -42,8 +42,12 @@ def test_rows_compare_file_bytes_with_pca_of_the_same_training_materials(fold_mo
                                   "experiments": [{"label": "fold0", "model": str(model), "group": "cv"}]}))
     assert main(["bench", "rd", "--config", str(config), "-o", str(tmp_path / "rows.jsonl"), "--quiet"]) == 0
     rows = read_rows(tmp_path / "rows.jsonl")
-    held = set(json.loads((model / "model.json").read_text())["info"]["data"]["validation"])
+    manifest = json.loads((model / "model.json").read_text())
+    held = set(manifest["info"]["data"]["validation"])
     assert rows and all(row["schema"] == SCHEMA and row["commit"] and row["group"] == "cv" for row in rows)
+    # every row names the decoder and the shared basis its records were made with
+    assert manifest["basis_sha256"] and all(row["basis_sha256"] == manifest["basis_sha256"] and
+                                            row["decoder_sha256"] == manifest["decoder_sha256"] for row in rows)
     ours = [row for row in rows if row["point"] == "bvae"]
     assert {row["budget_bytes"] for row in ours} == {32, 64}
     for row in ours:

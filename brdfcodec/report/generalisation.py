@@ -320,6 +320,7 @@ def run_experiment(config: RdConfig, experiment: Experiment,
         common = {"experiment": experiment.label, "group": experiment.group or experiment.label,
                   "decode_machine": decode_machine(),
                   "model": manifest.name, "decoder_sha256": manifest.decoder_sha256,
+                  "basis_sha256": manifest.basis_sha256,  # the shared basis the records were fitted on
                   "trained_materials": len(train_rows), "dataset_description": dataset.description}
         families = sorted({dataset.families[i] for i in held})
         measured = [i for family in families
