@@ -4,9 +4,9 @@ factorised basis (``spec/model.md`` §5) rather than on its dense vectors.
 The encoder fits basis coefficients again and again (least squares, Adam, the integer polish). On a dense
 basis file the vectors are the rows of the stored matrix. On a factorised one each vector is a colour vector
 times a factor row, and several vectors share a factor: the sums ``Σᵢ cᵢ vᵢ`` and the dot products ``r · vᵢ``
-are taken as a small mixing matrix (vectors to factors and colours) and a product with the factors. The
-factors take about a quarter of the dense vectors' memory (binary32, the shipped basis' 200 vectors: 82 MB
-against 310 MB), and the dense vectors are never built.
+are taken as a small mixing matrix (vectors to factors and colours) and a product with the factors, which
+take a fraction of the dense vectors' memory (F factor rows of one colour's entries against K vectors of all
+three colours), and the dense vectors are never built.
 """
 
 from __future__ import annotations
@@ -21,10 +21,10 @@ from brdfcodec.conventions import N_CHANNELS
 from brdfcodec.layers.basis import SharedBasis
 from brdfcodec.layers.colour_orders_pca import COLOUR_VECTORS
 
-__all__ = ["BasisOperator", "read_only_tensor"]
+__all__ = ["BasisOperator"]
 
 
-def read_only_tensor(values: npt.ArrayLike, device: torch.device, dtype: torch.dtype) -> torch.Tensor:
+def _read_only_tensor(values: npt.ArrayLike, device: torch.device, dtype: torch.dtype) -> torch.Tensor:
     """A tensor the fit only reads: the array's own memory when it is C-contiguous float32 on the CPU.
 
     Basis vectors and factors are large, read-only and cached (over 100 MB for the shipped basis); copying them
@@ -98,10 +98,10 @@ class BasisOperator:
         key = (device, dtype)
         if key not in self._tensors:
             if self._dense is not None:
-                self._tensors[key] = (read_only_tensor(self._dense, device, dtype), None)
+                self._tensors[key] = (_read_only_tensor(self._dense, device, dtype), None)
             else:
                 assert self._factors is not None and self._mixing is not None
-                self._tensors[key] = (read_only_tensor(self._factors, device, dtype),
+                self._tensors[key] = (_read_only_tensor(self._factors, device, dtype),
                                       torch.as_tensor(self._mixing, device=device, dtype=dtype))
         return self._tensors[key]
 

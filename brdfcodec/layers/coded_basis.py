@@ -105,6 +105,10 @@ def prior_codes(amplitude: int, decay: int, step_code: int, first: int, count: i
     return np.clip(codes, -PRIOR_CODE_LIMIT, PRIOR_CODE_LIMIT)
 
 
+#: Enough ones for the longest run of set bits one integer binarises to.
+_ONES: Final = (1,) * max(_UNARY, MAX_ESCAPE_PREFIX)
+
+
 def _binarise(q: npt.NDArray[np.int64], codes: npt.NDArray[np.int64]) -> tuple[list[int], list[int], list[int]]:
     """The bits of integers under their prior codes, each bit's probability of 0 (/256), in coding order, and
     where each integer's bits end (the count of bits up to and including its own)."""
@@ -129,10 +133,6 @@ def _binarise(q: npt.NDArray[np.int64], codes: npt.NDArray[np.int64]) -> tuple[l
             probabilities += (128,) * (2 * prefix + 1)
         ends.append(len(bits))
     return bits, probabilities, ends
-
-
-#: Enough ones for the longest run of set bits one integer binarises to.
-_ONES: Final = (1,) * max(_UNARY, MAX_ESCAPE_PREFIX)
 
 
 def _checked(q: npt.ArrayLike, codes: npt.ArrayLike) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]:
@@ -276,20 +276,6 @@ def decode_integers(data: bytes, codes: npt.ArrayLike) -> npt.NDArray[np.int64]:
     return out
 
 
-class _PriorCodesByStep:
-    """Prior codes of one layer's coefficients, made per step code when first asked for."""
-
-    def __init__(self, amplitude: int, decay: int, first: int, count: int) -> None:
-        self._made: dict[int, npt.NDArray[np.int64]] = {}
-        self._arguments = (amplitude, decay, first, count)
-
-    def __getitem__(self, step_code: int) -> npt.NDArray[np.int64]:
-        if step_code not in self._made:
-            amplitude, decay, first, count = self._arguments
-            self._made[step_code] = prior_codes(amplitude, decay, step_code, first, count)
-        return self._made[step_code]
-
-
 class CodedChoice:
     """A coded layer chosen for some coefficients: step code, integers and their coder bytes.
 
@@ -349,13 +335,13 @@ def choose_coding(coefficients: npt.ArrayLike, first: int, max_bytes: int, ampli
     if budget < 0 or not len(c):
         return None
     energy_after = np.concatenate([np.cumsum((c ** 2)[::-1])[::-1], [0.0]])
-    codes_of = _PriorCodesByStep(amplitude, decay, first, len(c))
+    codes_of = functools.cache(lambda e: prior_codes(amplitude, decay, e, first, len(c)))  # per step code
     best: CodedChoice | None = None
 
     def size(q: npt.NDArray[np.int64], e: int) -> int:
         nonzero = np.flatnonzero(q)
         k = int(nonzero[-1]) + 1 if len(nonzero) else 0
-        return len(encode_integers(q[:k], codes_of[e][:k])) if k else 0
+        return len(encode_integers(q[:k], codes_of(e)[:k])) if k else 0
 
     for offset in ROUNDING_OFFSETS:
         lo, hi = 0, 255  # bisect the finest step code whose whole layer fits (sizes fall as the step grows)
@@ -372,7 +358,7 @@ def choose_coding(coefficients: npt.ArrayLike, first: int, max_bytes: int, ampli
             q = _quantise(c, s, offset)
             nonzero = np.flatnonzero(q)
             k = int(nonzero[-1]) + 1 if len(nonzero) else 0
-            sizes = coded_prefix_sizes(q[:k], codes_of[e][:k])
+            sizes = coded_prefix_sizes(q[:k], codes_of(e)[:k])
             if sizes[k] > budget:  # fewer coefficients: bisect the most that fit (on every prefix's size)
                 low, high = 0, k
                 while high - low > 1:
@@ -386,5 +372,5 @@ def choose_coding(coefficients: npt.ArrayLike, first: int, max_bytes: int, ampli
                 continue
             error = float(((c[:k] - q[:k] * s) ** 2).sum() + energy_after[k])
             if best is None or error < best.error:
-                best = CodedChoice(e, q[:k].copy(), encode_integers(q[:k], codes_of[e][:k]), error)
+                best = CodedChoice(e, q[:k].copy(), encode_integers(q[:k], codes_of(e)[:k]), error)
     return best
