@@ -10,14 +10,19 @@ import numpy as np
 import pytest
 import torch
 
-from brdfcodec.datasets.analytic import FACTOR_NAMES, sample_factor_materials
+from brdfcodec.datasets.analytic import FACTOR_NAMES, factor_material, sample_factor_materials
 from brdfcodec.datasets.hdf5 import build_dataset
 from brdfcodec.datasets.sources import analytic_sources
 from brdfcodec.models.config import TINY_CONFIG
 from brdfcodec.models.loss import beta_norm
 from brdfcodec.models.network import BetaVAE
 from brdfcodec.training.config import TrainConfig
-from brdfcodec.training.factor_supervision import build_factor_pool, factor_supervision_loss, factor_targets
+from brdfcodec.training.factor_supervision import (
+    build_factor_pool,
+    factor_supervision_loss,
+    factor_targets,
+    factor_weights,
+)
 from brdfcodec.training.trainer import _global_batches, train
 
 SUPERVISED = TrainConfig(epochs=6, batch_size=4, learning_rate=3e-3, warmup_epochs=1, eval_every=1,
@@ -137,3 +142,43 @@ def test_a_supervised_run_logs_the_term_lowers_it_and_resumes_exactly(tiny_datas
     with pytest.raises(ValueError, match="different train config"):
         train(tiny_dataset, tmp_path / "split", model_config=TINY_CONFIG, train_config=other, resume=True,
               progress=False)
+
+
+def test_saturation_factor_adds_grey_colours_and_keeps_the_first_seven_factors() -> None:
+    plain = sample_factor_materials(40, seed=9)
+    varied = sample_factor_materials(40, seed=9, saturation=True)
+    assert varied.names == (*FACTOR_NAMES, "saturation") and varied.factors.shape == (40, 8)
+    np.testing.assert_array_equal(varied.factors[:, :7], plain.factors)
+    # A non-metal's diffuse colour: saturation 0 is grey, the benchmark's materials keep saturation 0.7.
+    base = [0.5, 0.2, 0.5, 0.5, 0.0, 0.0, 0.0]
+    grey = np.asarray(factor_material([*base, 0.0]).diffuse)
+    assert np.ptp(grey) < 1e-12 and grey.mean() > 0
+    np.testing.assert_array_equal(factor_material([*base, 0.7]).diffuse, factor_material(base).diffuse)
+    vivid = np.asarray(factor_material([*base, 1.0]).diffuse)
+    assert np.ptp(vivid) > np.ptp(np.asarray(factor_material(base).diffuse))
+    with pytest.raises(ValueError, match="saturation"):
+        factor_material([*base, 0.5, 0.5])
+
+
+def test_saturation_pool_ties_dimension_8_and_weights_the_hue_by_saturation() -> None:
+    pool = build_factor_pool(6, seed=4, latent_dim=9, saturation=True)
+    drawn = sample_factor_materials(6, seed=4, saturation=True)
+    np.testing.assert_allclose(pool.targets[:, 7].numpy(), (drawn.factors[:, 7] - 0.5) * math.sqrt(12), rtol=1e-6)
+    assert (pool.targets[:, 8] == 0).all()
+    hue = FACTOR_NAMES.index("hue")
+    np.testing.assert_allclose(pool.weights[:, hue].numpy(), np.minimum(1.0, drawn.factors[:, 7] / 0.7), rtol=1e-6)
+    others = np.delete(pool.weights.numpy(), hue, axis=1)
+    assert (others == 1).all()
+    weights = factor_weights(np.array([[0.5] * 7 + [0.0], [0.5] * 7 + [0.35]]), drawn.names, 8)
+    assert weights[0, hue] == 0 and weights[1, hue] == pytest.approx(0.5)
+    # The weighted loss: a grey material's hue costs nothing.
+    targets = torch.from_numpy(factor_targets(np.array([[0.5] * 7 + [0.0]] * 2), 8))
+    mu = targets.clone()
+    mu[:, hue] += 1.0
+    assert factor_supervision_loss(mu, targets, torch.from_numpy(weights)).item() == pytest.approx(0.25)
+    assert factor_supervision_loss(mu, targets).item() == pytest.approx(1.0)
+    # Without saturation the pool's weights are all 1 and a latent of 7 is enough.
+    plain = build_factor_pool(3, seed=4, latent_dim=7)
+    assert (plain.weights == 1).all()
+    with pytest.raises(ValueError, match="at least 8"):
+        build_factor_pool(2, seed=4, latent_dim=7, saturation=True)

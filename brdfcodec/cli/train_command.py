@@ -66,6 +66,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     parser.add_argument("--factor-seed", type=int,
                         help="seed of that pool (default 100; keep it apart from the benchmark's and the "
                         "alignment's seeds, 0 and 1)")
+    parser.add_argument("--factor-saturation", action="store_true", default=None,
+                        help="vary that pool's colour saturation too (grey to saturated; otherwise 0.7) and tie "
+                        "latent dimension 8 to it")
     parser.add_argument("--average-from-epoch", type=int,
                         help="average the weights of every step from this epoch on (stochastic weight averaging; "
                              "validation, best.pt and the export use the average; 0: never, the default)")

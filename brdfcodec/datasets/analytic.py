@@ -38,6 +38,7 @@ from brdfcodec.representation.mask import horizon_mask, kept_slice_horizon_mask
 __all__ = [
     "ANALYTIC_PRESETS",
     "FACTOR_NAMES",
+    "SATURATION_FACTOR",
     "AnalyticBRDF",
     "FactorMaterials",
     "factor_material",
@@ -230,14 +231,17 @@ def random_analytic_materials(count: int, *, seed: int = 0) -> Iterator[Analytic
 #: [0, 1] and independently of the others (:func:`factor_material` says what each value means).
 FACTOR_NAMES: tuple[str, ...] = ("albedo", "hue", "specular", "roughness", "grazing", "sheen", "metallic")
 
+#: The optional eighth factor of :func:`sample_factor_materials`: the base colour's HSV saturation.
+SATURATION_FACTOR = "saturation"
+
 _HUE_SATURATION = 0.7
 
 
-def _hue_rgb(hue: float) -> np.ndarray:
-    """An RGB colour of the given hue (0 red, 1/3 green, 2/3 blue), saturation 0.7, mean 1."""
+def _hue_rgb(hue: float, saturation: float = _HUE_SATURATION) -> np.ndarray:
+    """An RGB colour of the given hue (0 red, 1/3 green, 2/3 blue) and HSV saturation (0 grey), mean 1."""
     import colorsys
 
-    rgb = np.asarray(colorsys.hsv_to_rgb(hue, _HUE_SATURATION, 1.0))
+    rgb = np.asarray(colorsys.hsv_to_rgb(hue, saturation, 1.0))
     return rgb / rgb.mean()
 
 
@@ -250,16 +254,18 @@ def factor_material(factors: npt.ArrayLike, name: str = "factor-material") -> An
 
     Parameters
     ----------
-    factors : array_like, shape (7,)
+    factors : array_like, shape (7,) or (8,)
         ``albedo``: base colour level (mean of R, G, B), log-uniform 0.02 to 0.8;
         ``hue``: base colour hue from red (0) through green (0.5) to blue (1),
-        HSV saturation 0.7 (channels clipped to 1);
+        HSV saturation 0.7 unless an eighth value gives it (channels clipped to 1);
         ``specular``: dielectric F0, log-uniform 0.02 to 0.16;
         ``roughness``: GGX α, log-uniform 0.03 to 0.6;
         ``grazing``: weight of Schlick's grazing term, 0 to 1;
         ``sheen``: white sheen weight, 0 to 0.5;
         ``metallic``: m, 0 to 1: diffuse = (1 − m)·colour and
-        F0 = (1 − m)·F0_dielectric + m·colour, so a metal's specular takes the base colour.
+        F0 = (1 − m)·F0_dielectric + m·colour, so a metal's specular takes the base colour;
+        an eighth value, ``saturation`` (:data:`SATURATION_FACTOR`), if given: the base colour's HSV
+        saturation, 0 (grey) to 1; without it 0.7.
     name : str
         Material name.
 
@@ -268,11 +274,13 @@ def factor_material(factors: npt.ArrayLike, name: str = "factor-material") -> An
     AnalyticBRDF
     """
     values = np.asarray(factors, dtype=float).reshape(-1)
-    if values.size != len(FACTOR_NAMES) or not np.isfinite(values).all() or (values < 0).any() or (values > 1).any():
+    if (values.size not in (len(FACTOR_NAMES), len(FACTOR_NAMES) + 1) or not np.isfinite(values).all()
+            or (values < 0).any() or (values > 1).any()):
         raise ValueError(f"factors must be {len(FACTOR_NAMES)} values in [0, 1] ({', '.join(FACTOR_NAMES)}), "
-                         f"got {values.tolist()}")
-    albedo, hue, specular, roughness, grazing, sheen, metallic = (float(v) for v in values)
-    colour = np.minimum(_log_lerp(0.02, 0.8, albedo) * _hue_rgb(hue * 2.0 / 3.0), 1.0)
+                         f"optionally followed by {SATURATION_FACTOR}, got {values.tolist()}")
+    albedo, hue, specular, roughness, grazing, sheen, metallic = (float(v) for v in values[:len(FACTOR_NAMES)])
+    saturation = float(values[len(FACTOR_NAMES)]) if values.size > len(FACTOR_NAMES) else _HUE_SATURATION
+    colour = np.minimum(_log_lerp(0.02, 0.8, albedo) * _hue_rgb(hue * 2.0 / 3.0, saturation), 1.0)
     f0 = (1.0 - metallic) * _log_lerp(0.02, 0.16, specular) + metallic * colour
     return AnalyticBRDF(name, tuple((1.0 - metallic) * colour), tuple(np.maximum(f0, 1e-3)),  # type: ignore[arg-type]
                         _log_lerp(0.03, 0.6, roughness), grazing=grazing, sheen=0.5 * sheen)
@@ -286,10 +294,11 @@ class FactorMaterials:
     ----------
     materials : tuple of AnalyticBRDF
         Named ``factors-NNN``.
-    factors : ndarray of float64, shape (N, 7)
-        Each material's factor values in [0, 1], columns :data:`FACTOR_NAMES`.
+    factors : ndarray of float64, shape (N, K)
+        Each material's factor values in [0, 1], columns ``names``.
     names : tuple of str
-        :data:`FACTOR_NAMES`.
+        :data:`FACTOR_NAMES` (K = 7), followed by :data:`SATURATION_FACTOR` when the colour's saturation
+        was drawn too (K = 8).
     """
 
     materials: tuple[AnalyticBRDF, ...]
@@ -297,7 +306,7 @@ class FactorMaterials:
     names: tuple[str, ...] = FACTOR_NAMES
 
 
-def sample_factor_materials(count: int, *, seed: int = 0) -> FactorMaterials:
+def sample_factor_materials(count: int, *, seed: int = 0, saturation: bool = False) -> FactorMaterials:
     """Reproducible materials whose factors are drawn independently and uniformly in [0, 1].
 
     Parameters
@@ -306,6 +315,10 @@ def sample_factor_materials(count: int, *, seed: int = 0) -> FactorMaterials:
         Number of materials, ≥ 1.
     seed : int, default 0
         Seed; material i depends only on (seed, i), not on ``count``.
+    saturation : bool, default False
+        Draw the base colour's saturation as an eighth factor (:data:`SATURATION_FACTOR`, 0 grey to 1), so
+        that grey and white materials are among them; without it every colour has saturation 0.7 (the
+        disentanglement benchmark's materials). Material i's first seven factors are the same either way.
 
     Returns
     -------
@@ -316,7 +329,11 @@ def sample_factor_materials(count: int, *, seed: int = 0) -> FactorMaterials:
     rows, materials = [], []
     for index in range(count):
         digest = hashlib.sha256(f"brdfcodec-factors:{seed}:{index}".encode()).digest()
-        values = np.random.default_rng(int.from_bytes(digest[:8], "little")).random(len(FACTOR_NAMES))
+        rng = np.random.default_rng(int.from_bytes(digest[:8], "little"))
+        values = rng.random(len(FACTOR_NAMES))
+        if saturation:
+            values = np.append(values, rng.random())
         rows.append(values)
         materials.append(factor_material(values, f"factors-{index:03d}"))
-    return FactorMaterials(tuple(materials), np.asarray(rows))
+    names = (*FACTOR_NAMES, SATURATION_FACTOR) if saturation else FACTOR_NAMES
+    return FactorMaterials(tuple(materials), np.asarray(rows), names)

@@ -86,6 +86,11 @@ class TrainConfig:
         keep it apart from the disentanglement benchmark's seeds (0 by
         default) and the factor alignment's (1), so that a benchmark
         measures materials the supervision never saw.
+    factor_saturation : bool
+        Vary the pool's colour saturation as an eighth factor (0 grey to 1;
+        without it every colour has saturation 0.7) and tie latent
+        dimension 8 to it; the hue term is weighted by min(1, s / 0.7).
+        Needs a latent of at least 8 dimensions.
     average_from_epoch : int
         Stochastic weight averaging: from this epoch on (counted from 1; 0,
         the default, never) the weights after every optimiser step enter an
@@ -152,6 +157,7 @@ class TrainConfig:
     factor_batch: int = 8
     factor_materials: int = 256
     factor_seed: int = 100
+    factor_saturation: bool = False
     average_from_epoch: int = 0
     warmup_epochs: int = 2
     beta: float = 12.0

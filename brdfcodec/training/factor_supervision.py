@@ -13,6 +13,12 @@ variance 1, as the prior), and 0 for the dimensions beyond the seventh: the anal
 so a free dimension is kept at the prior's mean on it and left to the real materials' other variation. Dimension j
 is so tied to factor j alone, in the order of :data:`~brdfcodec.datasets.analytic.FACTOR_NAMES` (the order of the
 shipped model's aligned axes, ``model.json`` ``info.alignment``).
+
+With ``TrainConfig.factor_saturation`` the pool's colours also vary in saturation (an eighth factor, grey to fully
+saturated; without it every colour has saturation 0.7, so a grey or white material is outside the family the
+supervision ties the latent to), and dimension 8 is tied to it. The hue of a nearly grey colour is not visible, so
+the hue term of a material of saturation s is weighted by min(1, s / 0.7): full at the benchmark's saturation, 0
+for grey.
 """
 
 from __future__ import annotations
@@ -24,7 +30,10 @@ import numpy as np
 import numpy.typing as npt
 import torch
 
-__all__ = ["FactorPool", "build_factor_pool", "factor_supervision_loss", "factor_targets"]
+__all__ = ["FactorPool", "build_factor_pool", "factor_supervision_loss", "factor_targets", "factor_weights"]
+
+#: The saturation at which (and above which) a colour's hue counts fully in the supervision.
+_FULL_HUE_SATURATION = 0.7
 
 
 def factor_targets(factors: npt.ArrayLike, latent_dim: int) -> npt.NDArray[np.float32]:
@@ -54,22 +63,52 @@ def factor_targets(factors: npt.ArrayLike, latent_dim: int) -> npt.NDArray[np.fl
     return targets
 
 
-def factor_supervision_loss(mu: torch.Tensor, targets: torch.Tensor) -> torch.Tensor:
+def factor_weights(factors: npt.ArrayLike, names: tuple[str, ...], latent_dim: int) -> npt.NDArray[np.float32]:
+    """Per-material weights of each latent dimension's term.
+
+    Parameters
+    ----------
+    factors : array_like, shape (N, K)
+        Factor values in [0, 1], columns ``names``.
+    names : tuple of str
+        The factors' names (:attr:`~brdfcodec.datasets.analytic.FactorMaterials.names`).
+    latent_dim : int
+        Latent size M ≥ K.
+
+    Returns
+    -------
+    ndarray of float32, shape (N, M)
+        1, except the hue column when ``saturation`` is a factor: min(1, saturation / 0.7).
+    """
+    values = np.asarray(factors, dtype=np.float64)
+    weights = np.ones((len(values), latent_dim), dtype=np.float32)
+    if "saturation" in names and "hue" in names:
+        saturation = values[:, names.index("saturation")]
+        weights[:, names.index("hue")] = np.minimum(1.0, saturation / _FULL_HUE_SATURATION)
+    return weights
+
+
+def factor_supervision_loss(mu: torch.Tensor, targets: torch.Tensor, weights: torch.Tensor | None = None
+                            ) -> torch.Tensor:
     """Squared distance of the encoder means to their factor targets, summed over dimensions, batch mean.
 
     Parameters
     ----------
     mu, targets : Tensor, shape (B, M)
         Encoder means and :func:`factor_targets` (prior σ units).
+    weights : Tensor, shape (B, M), optional
+        :func:`factor_weights`; all 1 when not given.
 
     Returns
     -------
     Tensor
         A scalar ≥ 0 (prior σ² units).
     """
-    if mu.shape != targets.shape:
-        raise ValueError(f"mu and targets must have one shape, got {tuple(mu.shape)} and {tuple(targets.shape)}")
-    return (mu - targets).pow(2).sum(dim=1).mean()
+    if mu.shape != targets.shape or (weights is not None and weights.shape != mu.shape):
+        raise ValueError(f"mu, targets and weights must have one shape, got {tuple(mu.shape)}, "
+                         f"{tuple(targets.shape)} and {None if weights is None else tuple(weights.shape)}")
+    squared = (mu - targets).pow(2)
+    return (squared if weights is None else squared * weights).sum(dim=1).mean()
 
 
 @dataclass
@@ -84,6 +123,8 @@ class FactorPool:
         Valid entries.
     targets : Tensor of float32, shape (N, M)
         :func:`factor_targets`.
+    weights : Tensor of float32, shape (N, M)
+        :func:`factor_weights`.
     seed : int
         The seed the materials were drawn with.
     """
@@ -91,6 +132,7 @@ class FactorPool:
     inputs: torch.Tensor
     masks: torch.Tensor
     targets: torch.Tensor
+    weights: torch.Tensor
     seed: int
 
     def __len__(self) -> int:
@@ -98,11 +140,12 @@ class FactorPool:
 
     def to(self, device: torch.device) -> FactorPool:
         """The pool on ``device`` (in place; returns itself)."""
-        self.inputs, self.masks, self.targets = (t.to(device) for t in (self.inputs, self.masks, self.targets))
+        self.inputs, self.masks, self.targets, self.weights = (
+            t.to(device) for t in (self.inputs, self.masks, self.targets, self.weights))
         return self
 
 
-def build_factor_pool(count: int, seed: int, latent_dim: int) -> FactorPool:
+def build_factor_pool(count: int, seed: int, latent_dim: int, *, saturation: bool = False) -> FactorPool:
     """Draw ``count`` factor materials of ``seed`` and tabulate their network inputs (about 0.1 s each).
 
     Parameters
@@ -112,7 +155,10 @@ def build_factor_pool(count: int, seed: int, latent_dim: int) -> FactorPool:
     seed : int
         Seed of :func:`~brdfcodec.datasets.analytic.sample_factor_materials`.
     latent_dim : int
-        Latent size (≥ 7).
+        Latent size (≥ 7; ≥ 8 with ``saturation``).
+    saturation : bool, default False
+        Vary the colours' saturation too, an eighth factor tied to dimension 8
+        (:func:`~brdfcodec.datasets.analytic.sample_factor_materials`).
 
     Returns
     -------
@@ -120,12 +166,13 @@ def build_factor_pool(count: int, seed: int, latent_dim: int) -> FactorPool:
     """
     from brdfcodec.datasets.analytic import sample_factor_materials
 
-    drawn = sample_factor_materials(count, seed=seed)
+    drawn = sample_factor_materials(count, seed=seed, saturation=saturation)
     targets = torch.from_numpy(factor_targets(drawn.factors, latent_dim))
+    weights = torch.from_numpy(factor_weights(drawn.factors, drawn.names, latent_dim))
     first_input, first_mask = drawn.materials[0].kept_network_input()
     inputs = torch.empty((count, *first_input.shape), dtype=torch.float32)
     masks = torch.empty((count, *first_mask.shape), dtype=torch.bool)
     for index, material in enumerate(drawn.materials):
         x, m = (first_input, first_mask) if index == 0 else material.kept_network_input()
         inputs[index], masks[index] = torch.from_numpy(x), torch.from_numpy(m)
-    return FactorPool(inputs, masks, targets, seed)
+    return FactorPool(inputs, masks, targets, weights, seed)

@@ -417,7 +417,7 @@ def _train_epoch(model: BetaVAE, forward: torch.nn.Module, optimizer: torch.opti
             recon, mu, logvar = recon_all[:n_real], mu_all[:n_real], logvar_all[:n_real]
             analytic = beta_vae_loss(recon_all[n_real:], pool.inputs[frows], pool.masks[frows], mu_all[n_real:],
                                      logvar_all[n_real:], beta=train_config.beta, recon=train_config.recon)
-            factor = factor_supervision_loss(mu_all[n_real:], pool.targets[frows])
+            factor = factor_supervision_loss(mu_all[n_real:], pool.targets[frows], pool.weights[frows])
         terms = beta_vae_loss(recon, x, m, mu, logvar, beta=train_config.beta, recon=train_config.recon)
         loss, traversal = terms.loss, terms.loss.new_zeros(())
         if pool is not None:
@@ -548,7 +548,7 @@ def train(
             pit_weight=train_config.traversal_pit_weight).to(world.device)
     if train_config.factor_weight > 0:
         data.factor_pool = build_factor_pool(train_config.factor_materials, train_config.factor_seed,
-                                             model_config.latent_dim)
+                                             model_config.latent_dim, saturation=train_config.factor_saturation)
     run_info["data"] = data.info
     model, optimizer, state, average = _build_model(model_config, train_config, data, world, out, resume, initial)
     _resident(data, world.device)

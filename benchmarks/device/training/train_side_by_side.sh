@@ -12,6 +12,10 @@
 #   WHEELS    folder of wheels to install first, if it exists (default .devrun/whl, carried)
 #   DEADLINE  seconds after the start by which everything has ended (default 560; the device tool's limit is 600)
 #   BENCH_S   seconds given to device_benchmark.py beside the runs' start (default 60; 0: none)
+#   BENCH_STAGES  its stages (default environment,throughput,cross-device)
+#   BENCH_ARGS    more of its arguments (e.g. --llvm-reference reports/device/llvm-reference/renders.npz)
+#   SCORE_SOURCES dataset sources scored beside the training ones but never trained on (e.g. "--random 24 --rgl
+#                 .devrun/data/rgl"): the runs are scored on a second dataset of both (default: none)
 #   MARGIN    the runs' seconds per epoch over the probe's (default 1.5: four runs side by side took 0.65-0.72 s
 #             an epoch where their probe had measured 0.39-0.52 s)
 #   QUICK=1   a rehearsal on the CPU: 10 MERL-family materials, 3 epochs, a 16-material pool
@@ -26,6 +30,9 @@ DATA=${DATA:-.devrun/data}
 WHEELS=${WHEELS:-.devrun/whl}
 DEADLINE=${DEADLINE:-560}
 BENCH_S=${BENCH_S:-60}
+BENCH_STAGES=${BENCH_STAGES:-environment,throughput,cross-device}
+BENCH_ARGS=${BENCH_ARGS:-}
+SCORE_SOURCES=${SCORE_SOURCES:-}
 MARGIN=${MARGIN:-1.5}
 QUICK=${QUICK:-0}
 W=${WORK:-/tmp/devwork}; rm -rf "$W"; mkdir -p "$W/runs" "$W/logs"
@@ -56,6 +63,12 @@ else
 fi
 python3 -m brdfcodec dataset build $SOURCES -o "$W/both.h5" --jobs "$(nproc)" --quiet > "$W/logs/dataset.log" 2>&1 &
 DS=$!
+SCORED=$W/both.h5
+if [ -n "$SCORE_SOURCES" ]; then
+  SCORED=$W/scored.h5
+  python3 -m brdfcodec dataset build $SOURCES $SCORE_SOURCES -o "$SCORED" --jobs "$(nproc)" --quiet > "$W/logs/scored-dataset.log" 2>&1 &
+  SDS=$!
+fi
 python3 "$HERE/score_runs.py" --bench-only "$W/bench.npz" > "$W/logs/bench.log" 2>&1 &
 BENCH=$!
 wait $DS || { log "dataset build failed"; cat "$W/logs/dataset.log"; exit 1; }
@@ -101,7 +114,7 @@ done
 log "runs started"
 if [ "$BENCH_S" != 0 ]; then
   if [ "$QUICK" = 1 ]; then DB="--device cpu --quick --budget-s $BENCH_S"; else DB="--device cuda --budget-s $BENCH_S"; fi
-  python3 benchmarks/device/device_benchmark.py --out "$W/logs/devbench" $DB --stages environment,throughput,cross-device > "$W/logs/devbench.log" 2>&1
+  python3 benchmarks/device/device_benchmark.py --out "$W/logs/devbench" $DB --stages "$BENCH_STAGES" $BENCH_ARGS > "$W/logs/devbench.log" 2>&1
   log "device benchmark done"
 fi
 wait $BENCH
@@ -111,9 +124,10 @@ for r in "${RUNS[@]}"; do tail -c 300 "$W/logs/train-$r.log"; cat "$W/runs/$r/su
 
 # 4. scores on the device, one process per run; slim weights for the trip back
 log "score"
+if [ -n "$SCORE_SOURCES" ]; then wait $SDS || { log "scored dataset build failed"; cat "$W/logs/scored-dataset.log"; SCORED=$W/both.h5; }; fi
 PIDS=()
 for r in "${RUNS[@]}"; do
-  python3 "$HERE/score_runs.py" "$W/both.h5" "$W/bench.npz" "$W/logs/eval-$r.jsonl" "$W/runs/$r" > "$W/logs/eval-$r.log" 2>&1 &
+  python3 "$HERE/score_runs.py" "$SCORED" "$W/bench.npz" "$W/logs/eval-$r.jsonl" "$W/runs/$r" > "$W/logs/eval-$r.log" 2>&1 &
   PIDS+=($!)
 done
 for p in "${PIDS[@]}"; do wait $p; done
