@@ -56,7 +56,7 @@ from brdfcodec.representation.highlight_guard import guard_highlight
 from brdfcodec.representation.layout import interpolation_plan
 from brdfcodec.representation.mapping import LOG_RANGE
 from brdfcodec.representation.mask import horizon_mask
-from brdfcodec.representation.network_io import _GAP_LENGTHS, stepped_table
+from brdfcodec.representation.network_io import _GAP_LENGTHS, over_theta_h_rows, stepped_table
 from brdfcodec.representation.stepped_kernel import compiled_log_arguments
 from brdfcodec.runtime.threads import codec_threads
 
@@ -350,7 +350,7 @@ def table_from_mapped_host(
     with torch.no_grad():
         if arguments is not None:  # x = L · m and (x_b − x_a) / n in one compiled pass, the same operations
             x_array, gaps = _scratch()
-            arguments(np.ascontiguousarray(array, dtype=np.float32).reshape(
+            over_theta_h_rows(arguments, np.ascontiguousarray(array, dtype=np.float32).reshape(
                 N_CHANNELS, N_KEPT_SLICES, N_THETA_H, N_THETA_D), LOG_RANGE, _GAP_LENGTHS, x_array, gaps)
             x, ratio = torch.from_numpy(x_array), torch.from_numpy(gaps).exp_()
         else:

@@ -22,7 +22,7 @@ array([1., 1., 1.])
 from __future__ import annotations
 
 import functools
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
@@ -51,8 +51,8 @@ from brdfcodec.representation.stepped_kernel import compiled_stepping, invalid_r
 from brdfcodec.runtime.threads import get_num_threads
 
 __all__ = [
-    "network_input_from_table", "reflectance_from_mapped", "stepped_table", "table_from_mapped",
-    "table_from_network_output",
+    "network_input_from_table", "over_theta_h_rows", "reflectance_from_mapped", "stepped_table",
+    "table_from_mapped", "table_from_network_output",
 ]
 
 
@@ -275,15 +275,7 @@ def stepped_table(
                      np.ascontiguousarray(ratio, dtype=np.float64).reshape(count, N_THETA_H, N_THETA_D, -1), scales,
                      _runs_of(invalid), filler, invalid is not None,
                      out.reshape(count, N_THETA_H, N_THETA_D, N_PHI_D))
-        parts = max(1, min(get_num_threads() if threads is None else int(threads), N_THETA_H))
-        bounds = [N_THETA_H * i // parts for i in range(parts + 1)]
-        if parts == 1:
-            kernel(*arguments, 0, N_THETA_H)
-        else:
-            pool = _row_pool(parts)
-            ranges = zip(bounds[:-1], bounds[1:], strict=True)
-            for done in [pool.submit(kernel, *arguments, low, high) for low, high in ranges]:
-                done.result()
+        over_theta_h_rows(kernel, *arguments, threads=threads)
         return out
     spans = None if invalid is None else _invalid_spans(invalid)
     for index in np.ndindex(*lead[:-2]):  # every leading index and channel
@@ -311,6 +303,20 @@ def stepped_table(
 #: Per read-only ``invalid`` array (by identity, the array kept alive): for each block of θh rows, the θd columns
 #: that hold an invalid bin (the horizon's are a suffix, all but a third of the table is whole).
 _SPANS: dict[int, tuple[np.ndarray, list[tuple[int, int] | None]]] = {}
+
+
+def over_theta_h_rows(kernel: Callable[..., None], *arguments: object, threads: int | None = None) -> None:
+    """Run a compiled pass ``kernel(*arguments, first_row, stop_row)`` over the 90 θh rows, split into disjoint
+    row ranges over ``threads`` threads (the codec's by default, :func:`~brdfcodec.runtime.threads.get_num_threads`).
+    The kernel must release the GIL and write only its own rows."""
+    parts = max(1, min(get_num_threads() if threads is None else int(threads), N_THETA_H))
+    if parts == 1:
+        kernel(*arguments, 0, N_THETA_H)
+        return
+    bounds = [N_THETA_H * i // parts for i in range(parts + 1)]
+    pool = _row_pool(parts)
+    for done in [pool.submit(kernel, *arguments, low, high) for low, high in zip(bounds[:-1], bounds[1:], strict=True)]:
+        done.result()
 
 
 @functools.cache

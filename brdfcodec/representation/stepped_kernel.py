@@ -85,14 +85,15 @@ def compiled_stepping() -> Callable[..., None] | None:
 def compiled_log_arguments() -> Callable[..., None] | None:
     """The compiled pass before the exponentials, or None (as :func:`compiled_stepping`).
 
-    ``kernel(mapped, log_range, steps, x, gaps)``: from clamped mapped slices ``mapped`` float32 (3, 21, 90, 90)
-    (network layout, C-contiguous), ``x = L · float64(m)`` into ``x`` float64 (3, 90, 90, 21) and
-    ``(x_b − x_a) / n`` into ``gaps`` float64 (3, 90, 90, 20), kept slice last — the operations of
+    ``kernel(mapped, log_range, steps, x, gaps, first_row, stop_row)``: from clamped mapped slices ``mapped``
+    float32 (3, 21, 90, 90) (network layout, C-contiguous), ``x = L · float64(m)`` into ``x`` float64
+    (3, 90, 90, 21) and ``(x_b − x_a) / n`` into ``gaps`` float64 (3, 90, 90, 20), kept slice last, at θh rows
+    ``first_row`` … ``stop_row − 1`` (threads may take disjoint row ranges at once) — the operations of
     ``codec/device_decode.py:table_from_mapped_host``'s torch path, in its order.
     """
     kept = _GAP_COUNT + 1
     return _compiled(_log_arguments, np.ones((3, kept, 1, 1), dtype=np.float32), 1.0, np.full(kept - 1, 9.0),
-                     np.empty((3, 1, 1, kept)), np.empty((3, 1, 1, kept - 1)))
+                     np.empty((3, 1, 1, kept)), np.empty((3, 1, 1, kept - 1)), 0, 1)
 
 
 def invalid_runs(invalid: np.ndarray) -> np.ndarray:
@@ -133,11 +134,11 @@ def _stepping(start: np.ndarray, ratio: np.ndarray, factors: np.ndarray, runs: n
                             out[n, h, d, b] = fill
 
 
-def _log_arguments(mapped: np.ndarray, log_range: float, steps: np.ndarray, x: np.ndarray,
-                   gaps: np.ndarray) -> None:  # pragma: no cover - compiled
-    channels, kept, rows, columns = mapped.shape
+def _log_arguments(mapped: np.ndarray, log_range: float, steps: np.ndarray, x: np.ndarray, gaps: np.ndarray,
+                   first_row: int, stop_row: int) -> None:  # pragma: no cover - compiled
+    channels, kept, _, columns = mapped.shape
     for c in range(channels):
-        for h in range(rows):  # one θh row of x (90 × 21, in cache) at a time, read along θd
+        for h in range(first_row, stop_row):  # one θh row of x (90 × 21, in cache) at a time, read along θd
             for k in range(kept):
                 for d in range(columns):
                     x[c, h, d, k] = np.float64(mapped[c, k, h, d]) * log_range
