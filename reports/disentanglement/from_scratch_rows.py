@@ -3,10 +3,14 @@
 usage (repository root; the runs restored by benchmarks/device/training/restore_runs.py into runs/SESSION, the
 models exported into runs/models/SESSION-NAME, the measurements of the study's text header in runs/SESSION/eval):
 
-    python reports/disentanglement/from_scratch_rows.py [--study from-scratch-supervision | free-dimensions]
+    python reports/disentanglement/from_scratch_rows.py [--study from-scratch-supervision | free-dimensions |
+        saturation]
 
-Studies: ``from-scratch-supervision`` (runs/dev1: four factor weights, one H100, time-limited) and
-``free-dimensions`` (runs/dev2: weights 5,000 and 10,000 and a 12-dimensional latent, one H200, full schedules).
+Studies: ``from-scratch-supervision`` (runs/dev1: four factor weights, one H100, time-limited),
+``free-dimensions`` (runs/dev2: weights 5,000 and 10,000 and a 12-dimensional latent, one H200, full schedules) and
+``saturation`` (runs/dev3: the colour's saturation as an eighth factor; weights 10,000 and 5,000, and 10,000 with
+half the analytic materials per step; one H200, full schedules; scored on the device on never-seen analytic
+materials too).
 """
 
 from __future__ import annotations
@@ -30,6 +34,7 @@ class Study:
     device: str
     training_title: str
     header: str
+    train_keys: tuple[str, ...] = ()  # more of each run's train_config, in its training row and line
 
     @property
     def folder(self) -> Path:
@@ -59,6 +64,7 @@ def training_rows(study: Study) -> list[dict]:
             "seconds": summary["seconds_this_session"], "seconds_per_epoch_probe": float(plan[name][2]),
             "last_epoch": {k: log[-1][k] for k in ("lr", "recon", "kl", "traversal", "factor")},
             "device_scores": {k: score[k] for k in ("mig", "dci_d", "dci_c", "dci_i", "relae_all", "relae")},
+            **{k: config[k] for k in study.train_keys},
         })
     return rows
 
@@ -132,7 +138,33 @@ FREE_DIMENSIONS = Study(
 # Rows: python reports/disentanglement/from_scratch_rows.py --study free-dimensions -> free-dimensions.jsonl
 """)
 
-STUDIES = {study.name: study for study in (FROM_SCRATCH_SUPERVISION, FREE_DIMENSIONS)}
+SATURATION = Study(
+    name="saturation", session="dev3", runs=("sat-w10k", "sat-w5k", "sat-w10k-fb4"),
+    device="cuda: NVIDIA H200 (driver 580.159.04), three runs side by side",
+    training_title="Training (one H200, three runs side by side):",
+    train_keys=("factor_batch", "factor_saturation"),
+    header="""\
+# The colour's saturation as a factor of the supervision (issue 50 item 3): the supervised models of
+# free-dimensions.txt decoded 24 never-seen random analytic materials about twice as badly as the shipped model, and
+# every colour of their factor pool had one saturation (0.7), so grey and white materials were outside the family
+# the supervision tied the latent to. `bvae train --factor-saturation` (commit 673e319) draws the pool's saturation
+# from grey to fully saturated as an eighth factor tied to dimension 8, the hue term weighted by min(1, s / 0.7).
+# Three models of the release recipe trained from scratch side by side on one NVIDIA H200 (torch 2.11.0+cu130), all
+# 120 materials of the NBRDF proxies (90 MERL, 30 RGL; neural fits, not measurements), each to the end of its planned
+# schedule (epochs below): factor weight 10,000 and 5,000, and 10,000 with 4 analytic materials per step instead of
+# 8 (--factor-batch 4). Runner: benchmarks/device/training/train_side_by_side.sh (configs: saturation.configs;
+# SCORE_SOURCES="--random 24": also scored on the device on 24 random analytic materials none of them saw).
+# Export here: bvae model export runs/dev3/RUN -o runs/models/dev3-RUN --name bvae-scratch-RUN --dataset runs/both.h5
+#   --basis-count 0 --align-factors 300 --keep-axes (axes as trained; no shared basis: measured, not shipped)
+# Benchmark: bvae model disentanglement brdfcodec/data/models/default runs/models/dev3-{sat-w10k,sat-w5k,sat-w10k-fb4}
+#   --materials 300 --seed S (S = 0, as reports/disentanglement/default-model.txt, and 2); its materials have seven
+#   factors at saturation 0.7, so no benchmark factor measures dimension 8
+# Never-seen materials: bvae model evaluate MODEL --dataset runs/v3-held-out.h5 (24 random analytic, 1 real RGL);
+#   "analytic 24 (device)": the device's score, the same mapped RelAE of its dataset's 24 random analytic materials
+# Rows: python reports/disentanglement/from_scratch_rows.py --study saturation -> saturation.jsonl
+""")
+
+STUDIES = {study.name: study for study in (FROM_SCRATCH_SUPERVISION, FREE_DIMENSIONS, SATURATION)}
 
 
 def text(study: Study, rows: list[dict]) -> str:
@@ -155,8 +187,14 @@ def text(study: Study, rows: list[dict]) -> str:
             lines.append(f"  {row['model']}: {dims}")
     lines.append("")
     lines.append("Reconstruction, mapped RelAE of the encoder's μ decoded (effort 0), full tables:")
-    lines.append(f"{'model':<28}{'MERL 90 (train)':>16}{'RGL 30 (train)':>16}{'analytic 24 (never)':>21}"
-                 f"{'real RGL 1 (never)':>20}")
+    columns = {"merl": "MERL 90 (train)", "rgl": "RGL 30 (train)", "analytic-never": "analytic 24 (never)",
+               "rgl-never": "real RGL 1 (never)"}
+    widths = [16, 16, 21, 20]
+    training = [row for row in rows if row.get("kind") == "training"]
+    if any("analytic" in row["device_scores"]["relae"] for row in training):  # the runner scored never-seen ones
+        columns["analytic-device"] = "analytic 24 (device)"
+        widths.append(22)
+    lines.append(f"{'model':<28}" + "".join(f"{title:>{w}}" for title, w in zip(columns.values(), widths, strict=True)))
     for model in study.models:
         cell = {}
         for row in rows:
@@ -166,9 +204,11 @@ def text(study: Study, rows: list[dict]) -> str:
                 cell[row["family"]] = row["relae_mapped"]
             if row.get("kind") == "evaluation" and row["split"] == "held-out":
                 cell[f"{row['family']}-never"] = row["mapped"]
-        values = [cell.get(k) for k in ("merl", "rgl", "analytic-never", "rgl-never")]
+            if row.get("kind") == "training" and "analytic" in row["device_scores"]["relae"]:
+                cell["analytic-device"] = row["device_scores"]["relae"]["analytic"]
+        values = [cell.get(k) for k in columns]
         lines.append(f"{model:<28}" + "".join(f"{'—' if v is None else f'{v:.4f}':>{w}}"
-                                              for v, w in zip(values, (16, 16, 21, 20), strict=True)))
+                                              for v, w in zip(values, widths, strict=True)))
     lines.append("")
     refinement = [row for row in rows if row.get("kind") == "refinement"]
     if refinement:
@@ -181,10 +221,12 @@ def text(study: Study, rows: list[dict]) -> str:
     for row in rows:
         if row.get("kind") == "training":
             last = row["last_epoch"]
-            lines.append(f"  {row['model']:<22} factor weight {row['factor_weight']:>7g}: {row['epochs_done']} of "
-                         f"{row['epochs_planned']} epochs in {row['seconds']:.0f} s ({row['stop_reason']}; weights of "
-                         f"epoch {row['weights_epoch']}, learning rate {last['lr']:.1e} at the stop); last epoch: "
-                         f"recon {last['recon']:.0f}, KL {last['kl']:.1f}, factor {last['factor']:.3f}")
+            extra = "".join(f", {key.replace('_', ' ')} {row[key]}" for key in study.train_keys if key in row)
+            lines.append(f"  {row['model']:<22} factor weight {row['factor_weight']:>7g}{extra}: "
+                         f"{row['epochs_done']} of {row['epochs_planned']} epochs in {row['seconds']:.0f} s "
+                         f"({row['stop_reason']}; weights of epoch {row['weights_epoch']}, learning rate "
+                         f"{last['lr']:.1e} at the stop); last epoch: recon {last['recon']:.0f}, KL {last['kl']:.1f}, "
+                         f"factor {last['factor']:.3f}")
     return "\n".join(lines) + "\n"
 
 
