@@ -182,3 +182,23 @@ def test_saturation_pool_ties_dimension_8_and_weights_the_hue_by_saturation() ->
     assert (plain.weights == 1).all()
     with pytest.raises(ValueError, match="at least 8"):
         build_factor_pool(2, seed=4, latent_dim=7, saturation=True)
+
+
+def test_a_lower_alpha_min_draws_sharper_materials_from_the_same_factors() -> None:
+    plain = sample_factor_materials(12, seed=6)
+    sharp = sample_factor_materials(12, seed=6, alpha_min=0.01)
+    np.testing.assert_array_equal(sharp.factors, plain.factors)
+    roughness = FACTOR_NAMES.index("roughness")
+    for factors, a, b in zip(plain.factors, plain.materials, sharp.materials, strict=True):
+        u = factors[roughness]
+        assert a.roughness == pytest.approx(0.03 * (0.6 / 0.03) ** u)
+        assert b.roughness == pytest.approx(0.01 * (0.6 / 0.01) ** u)
+    pool = build_factor_pool(2, seed=6, latent_dim=8, alpha_min=0.01)
+    np.testing.assert_array_equal(pool.targets.numpy(), factor_targets(plain.factors[:2], 8))
+    x, _ = sharp.materials[1].kept_network_input()
+    np.testing.assert_array_equal(pool.inputs[1].numpy(), x)
+    for bad in (0.0, 0.6, -1.0):
+        with pytest.raises(ValueError, match="alpha_min"):
+            factor_material([0.5] * 7, alpha_min=bad)
+        with pytest.raises(ValueError, match="factor_alpha_min"):
+            TrainConfig(factor_alpha_min=bad)

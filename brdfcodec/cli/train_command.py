@@ -69,6 +69,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     parser.add_argument("--factor-saturation", action="store_true", default=None,
                         help="vary that pool's colour saturation too (grey to saturated; otherwise 0.7) and tie "
                         "latent dimension 8 to it")
+    parser.add_argument("--factor-alpha-min", type=float, metavar="ALPHA",
+                        help="that pool's sharpest GGX α: its roughness factor is log-uniform from ALPHA to 0.6 "
+                        "(default 0.03, the disentanglement benchmark's)")
     parser.add_argument("--average-from-epoch", type=int,
                         help="average the weights of every step from this epoch on (stochastic weight averaging; "
                              "validation, best.pt and the export use the average; 0: never, the default)")

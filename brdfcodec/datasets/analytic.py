@@ -37,6 +37,7 @@ from brdfcodec.representation.mask import horizon_mask, kept_slice_horizon_mask
 
 __all__ = [
     "ANALYTIC_PRESETS",
+    "FACTOR_ALPHA_RANGE",
     "FACTOR_NAMES",
     "SATURATION_FACTOR",
     "AnalyticBRDF",
@@ -249,7 +250,12 @@ def _log_lerp(low: float, high: float, u: float) -> float:
     return float(np.exp(np.log(low) + u * (np.log(high) - np.log(low))))
 
 
-def factor_material(factors: npt.ArrayLike, name: str = "factor-material") -> AnalyticBRDF:
+#: The GGX α range of the ``roughness`` factor (log-uniform between them) of the benchmark's materials.
+FACTOR_ALPHA_RANGE: tuple[float, float] = (0.03, 0.6)
+
+
+def factor_material(factors: npt.ArrayLike, name: str = "factor-material", *,
+                    alpha_min: float = FACTOR_ALPHA_RANGE[0]) -> AnalyticBRDF:
     """The material of one factor vector (values in [0, 1], :data:`FACTOR_NAMES` order).
 
     Parameters
@@ -259,7 +265,7 @@ def factor_material(factors: npt.ArrayLike, name: str = "factor-material") -> An
         ``hue``: base colour hue from red (0) through green (0.5) to blue (1),
         HSV saturation 0.7 unless an eighth value gives it (channels clipped to 1);
         ``specular``: dielectric F0, log-uniform 0.02 to 0.16;
-        ``roughness``: GGX α, log-uniform 0.03 to 0.6;
+        ``roughness``: GGX α, log-uniform ``alpha_min`` (0.03 by default) to 0.6;
         ``grazing``: weight of Schlick's grazing term, 0 to 1;
         ``sheen``: white sheen weight, 0 to 0.5;
         ``metallic``: m, 0 to 1: diffuse = (1 − m)·colour and
@@ -268,11 +274,15 @@ def factor_material(factors: npt.ArrayLike, name: str = "factor-material") -> An
         saturation, 0 (grey) to 1; without it 0.7.
     name : str
         Material name.
+    alpha_min : float, default 0.03
+        The sharpest GGX α, at ``roughness`` 0 (in (0, 0.6)); the benchmark's materials use the default.
 
     Returns
     -------
     AnalyticBRDF
     """
+    if not 0 < alpha_min < FACTOR_ALPHA_RANGE[1]:
+        raise ValueError(f"alpha_min must be in (0, {FACTOR_ALPHA_RANGE[1]}), got {alpha_min}")
     values = np.asarray(factors, dtype=float).reshape(-1)
     if (values.size not in (len(FACTOR_NAMES), len(FACTOR_NAMES) + 1) or not np.isfinite(values).all()
             or (values < 0).any() or (values > 1).any()):
@@ -283,7 +293,7 @@ def factor_material(factors: npt.ArrayLike, name: str = "factor-material") -> An
     colour = np.minimum(_log_lerp(0.02, 0.8, albedo) * _hue_rgb(hue * 2.0 / 3.0, saturation), 1.0)
     f0 = (1.0 - metallic) * _log_lerp(0.02, 0.16, specular) + metallic * colour
     return AnalyticBRDF(name, tuple((1.0 - metallic) * colour), tuple(np.maximum(f0, 1e-3)),  # type: ignore[arg-type]
-                        _log_lerp(0.03, 0.6, roughness), grazing=grazing, sheen=0.5 * sheen)
+                        _log_lerp(alpha_min, FACTOR_ALPHA_RANGE[1], roughness), grazing=grazing, sheen=0.5 * sheen)
 
 
 @dataclass(frozen=True)
@@ -306,7 +316,8 @@ class FactorMaterials:
     names: tuple[str, ...] = FACTOR_NAMES
 
 
-def sample_factor_materials(count: int, *, seed: int = 0, saturation: bool = False) -> FactorMaterials:
+def sample_factor_materials(count: int, *, seed: int = 0, saturation: bool = False,
+                            alpha_min: float = FACTOR_ALPHA_RANGE[0]) -> FactorMaterials:
     """Reproducible materials whose factors are drawn independently and uniformly in [0, 1].
 
     Parameters
@@ -319,6 +330,9 @@ def sample_factor_materials(count: int, *, seed: int = 0, saturation: bool = Fal
         Draw the base colour's saturation as an eighth factor (:data:`SATURATION_FACTOR`, 0 grey to 1), so
         that grey and white materials are among them; without it every colour has saturation 0.7 (the
         disentanglement benchmark's materials). Material i's first seven factors are the same either way.
+    alpha_min : float, default 0.03
+        The sharpest GGX α of the ``roughness`` factor (:func:`factor_material`): lower it to draw sharper
+        highlights; the factor values, and so the draws, are the same.
 
     Returns
     -------
@@ -334,6 +348,6 @@ def sample_factor_materials(count: int, *, seed: int = 0, saturation: bool = Fal
         if saturation:
             values = np.append(values, rng.random())
         rows.append(values)
-        materials.append(factor_material(values, f"factors-{index:03d}"))
+        materials.append(factor_material(values, f"factors-{index:03d}", alpha_min=alpha_min))
     names = (*FACTOR_NAMES, SATURATION_FACTOR) if saturation else FACTOR_NAMES
     return FactorMaterials(tuple(materials), np.asarray(rows), names)

@@ -91,6 +91,10 @@ class TrainConfig:
         without it every colour has saturation 0.7) and tie latent
         dimension 8 to it; the hue term is weighted by min(1, s / 0.7).
         Needs a latent of at least 8 dimensions.
+    factor_alpha_min : float
+        The pool's sharpest GGX α (its roughness factor is log-uniform
+        from it to 0.6; 0.03, the benchmark's, by default): lower it so
+        that sharp highlights are among the supervised materials.
     average_from_epoch : int
         Stochastic weight averaging: from this epoch on (counted from 1; 0,
         the default, never) the weights after every optimiser step enter an
@@ -158,6 +162,7 @@ class TrainConfig:
     factor_materials: int = 256
     factor_seed: int = 100
     factor_saturation: bool = False
+    factor_alpha_min: float = 0.03
     average_from_epoch: int = 0
     warmup_epochs: int = 2
     beta: float = 12.0
@@ -199,6 +204,8 @@ class TrainConfig:
             raise ValueError(f"linear_path_rate must be finite and ≥ 0, got {self.linear_path_rate}")
         if not 0 <= self.factor_weight < float("inf"):
             raise ValueError(f"factor_weight must be finite and ≥ 0, got {self.factor_weight}")
+        if not 0 < self.factor_alpha_min < 0.6:
+            raise ValueError(f"factor_alpha_min must be in (0, 0.6), got {self.factor_alpha_min}")
         if self.factor_batch < 1 or self.factor_materials < 1:
             raise ValueError(f"factor_batch and factor_materials must be ≥ 1, got {self.factor_batch}, "
                              f"{self.factor_materials}")

@@ -145,7 +145,8 @@ class FactorPool:
         return self
 
 
-def build_factor_pool(count: int, seed: int, latent_dim: int, *, saturation: bool = False) -> FactorPool:
+def build_factor_pool(count: int, seed: int, latent_dim: int, *, saturation: bool = False,
+                      alpha_min: float | None = None) -> FactorPool:
     """Draw ``count`` factor materials of ``seed`` and tabulate their network inputs (about 0.1 s each).
 
     Parameters
@@ -159,14 +160,17 @@ def build_factor_pool(count: int, seed: int, latent_dim: int, *, saturation: boo
     saturation : bool, default False
         Vary the colours' saturation too, an eighth factor tied to dimension 8
         (:func:`~brdfcodec.datasets.analytic.sample_factor_materials`).
+    alpha_min : float, optional
+        The sharpest GGX α of the roughness factor (default: the benchmark's, 0.03).
 
     Returns
     -------
     FactorPool
     """
-    from brdfcodec.datasets.analytic import sample_factor_materials
+    from brdfcodec.datasets.analytic import FACTOR_ALPHA_RANGE, sample_factor_materials
 
-    drawn = sample_factor_materials(count, seed=seed, saturation=saturation)
+    drawn = sample_factor_materials(count, seed=seed, saturation=saturation,
+                                    alpha_min=FACTOR_ALPHA_RANGE[0] if alpha_min is None else alpha_min)
     targets = torch.from_numpy(factor_targets(drawn.factors, latent_dim))
     weights = torch.from_numpy(factor_weights(drawn.factors, drawn.names, latent_dim))
     first_input, first_mask = drawn.materials[0].kept_network_input()

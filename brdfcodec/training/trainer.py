@@ -548,7 +548,8 @@ def train(
             pit_weight=train_config.traversal_pit_weight).to(world.device)
     if train_config.factor_weight > 0:
         data.factor_pool = build_factor_pool(train_config.factor_materials, train_config.factor_seed,
-                                             model_config.latent_dim, saturation=train_config.factor_saturation)
+                                             model_config.latent_dim, saturation=train_config.factor_saturation,
+                                             alpha_min=train_config.factor_alpha_min)
     run_info["data"] = data.info
     model, optimizer, state, average = _build_model(model_config, train_config, data, world, out, resume, initial)
     _resident(data, world.device)
