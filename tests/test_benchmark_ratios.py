@@ -2,21 +2,18 @@
 
 from __future__ import annotations
 
-import importlib.util
 from pathlib import Path
 from types import SimpleNamespace
 
 import pytest
+from script_loading import load_script
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 
 
 @pytest.fixture(scope="module")
 def bench_conftest():
-    spec = importlib.util.spec_from_file_location("brdfcodec_bench_conftest", REPO_ROOT / "benchmarks" / "conftest.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_script(REPO_ROOT / "benchmarks" / "conftest.py", "brdfcodec_bench_conftest")
 
 
 def _bench(group: str, role: str, median: float, **extra: float) -> SimpleNamespace:

@@ -10,6 +10,7 @@ import sys
 from pathlib import Path
 
 import pytest
+from script_loading import load_script
 
 from brdfcodec.cli.main import (
     EXIT_BROKEN_PIPE,
@@ -49,12 +50,7 @@ def test_a_command_line_run_sizes_torch_threads() -> None:
 
 def _cli_reference() -> str:
     """The documentation site's command-line reference (docs/hooks.py generates it from the parser)."""
-    import importlib.util
-
-    spec = importlib.util.spec_from_file_location("docs_hooks", ROOT / "docs" / "hooks.py")
-    hooks = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(hooks)
-    return hooks.cli_reference()
+    return load_script(ROOT / "docs" / "hooks.py", "docs_hooks").cli_reference()
 
 
 def test_docs_state_the_exit_codes_the_cli_uses() -> None:

@@ -4,7 +4,6 @@ difference is the project's mapping over the entries above the horizon."""
 
 from __future__ import annotations
 
-import importlib.util
 import json
 import subprocess
 import sys
@@ -13,6 +12,7 @@ from types import ModuleType
 
 import numpy as np
 import pytest
+from script_loading import load_script
 
 from brdfcodec.report.rows import SCHEMA, read_rows
 
@@ -21,11 +21,7 @@ SCRIPT = ROOT / "benchmarks" / "device" / "device_benchmark.py"
 
 
 def _script() -> ModuleType:
-    spec = importlib.util.spec_from_file_location("device_benchmark", SCRIPT)
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_script(SCRIPT)
 
 
 def _run(out: Path, *extra: str) -> list[dict]:
@@ -130,8 +126,11 @@ def test_llvm_reference_is_used_only_at_the_same_size_and_spp(tmp_path: Path) ->
     assert row["status"] == "skipped" and "'spp': 2" in row["reason"] and not renders
 
 
+@pytest.mark.parametrize(("brightness", "agrees"), [(1 + 1e-6, True), (1.3, False)], ids=["agree", "brighter"])
 def test_cuda_renders_are_held_to_the_llvm_seed_spread_seed_by_seed(
-        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch, brightness: float, agrees: bool) -> None:
+    """Each CUDA seed as the LLVM one up to float rounding; then seed 1 a third brighter (a backend that
+    disagrees)."""
     pytest.importorskip("mitsuba", reason="the render stage needs Mitsuba 3 (pip install 'brdfcodec[mitsuba]')")
     rng = np.random.default_rng(3)
     seed0 = (0.3 + 0.2 * rng.random((14, 24, 3))).astype(np.float32)
@@ -139,23 +138,21 @@ def test_cuda_renders_are_held_to_the_llvm_seed_spread_seed_by_seed(
     meta = np.array(json.dumps({"spp": 2, "width": 24, "height": 14}))
     llvm = tmp_path / "llvm.npz"
     np.savez_compressed(llvm, meta=meta, llvm_ad_rgb_seed0=seed0, llvm_ad_rgb_seed1=seed1)
-    rounding = np.float32(1 + 1e-6)
-    # Each seed as the LLVM one up to float rounding; then seed 1 a third brighter (a backend that disagrees).
-    for case, cuda_seed1, agrees in (("agree", seed1 * rounding, True), ("brighter", seed1 * 1.3, False)):
-        cuda = tmp_path / f"cuda-{case}.npz"
-        np.savez_compressed(cuda, meta=meta, cuda_ad_rgb_seed0=seed0 * rounding, cuda_ad_rgb_seed1=cuda_seed1)
-        rows = _run_here(tmp_path / case, monkeypatch, "--stages", "render", "--llvm-reference", str(llvm),
-                         "--renders", str(cuda))
-        by = {row["measurement"]: row for row in rows}
-        assert "llvm_ad_rgb" not in by and "cuda_ad_rgb" not in by  # compared, not rendered
-        assert by["llvm-reference"]["status"] == by["cuda-renders"]["status"] == "loaded"
-        spread = by["llvm-seed-spread"]["delta_e_itp_mean"]
-        assert spread > 0 and by["cuda-vs-llvm-seed0"]["llvm_seed_spread_delta_e_itp_mean"] == spread
-        assert by["cuda-vs-llvm-seed0"]["meets_target"] and by["cuda-vs-llvm-seed0"]["delta_e_itp_mean"] < 0.01 * spread
-        assert by["cuda-vs-llvm-seed1"]["meets_target"] is agrees
-        assert (by["cuda-vs-llvm-seed1"]["delta_e_itp_mean"] < 0.01 * spread) is agrees
-        other = by["cuda-vs-llvm-other-seed"]  # LLVM seed 0 against CUDA seed 1: the spread, kept without a target
-        assert "meets_target" not in other and (other["delta_e_itp_mean"] == pytest.approx(spread, rel=1e-3)) is agrees
+    cuda = tmp_path / "cuda.npz"
+    np.savez_compressed(cuda, meta=meta, cuda_ad_rgb_seed0=seed0 * np.float32(1 + 1e-6),
+                        cuda_ad_rgb_seed1=seed1 * np.float32(brightness))
+    rows = _run_here(tmp_path / "rows", monkeypatch, "--stages", "render", "--llvm-reference", str(llvm),
+                     "--renders", str(cuda))
+    by = {row["measurement"]: row for row in rows}
+    assert "llvm_ad_rgb" not in by and "cuda_ad_rgb" not in by  # compared, not rendered
+    assert by["llvm-reference"]["status"] == by["cuda-renders"]["status"] == "loaded"
+    spread = by["llvm-seed-spread"]["delta_e_itp_mean"]
+    assert spread > 0 and by["cuda-vs-llvm-seed0"]["llvm_seed_spread_delta_e_itp_mean"] == spread
+    assert by["cuda-vs-llvm-seed0"]["meets_target"] and by["cuda-vs-llvm-seed0"]["delta_e_itp_mean"] < 0.01 * spread
+    assert by["cuda-vs-llvm-seed1"]["meets_target"] is agrees
+    assert (by["cuda-vs-llvm-seed1"]["delta_e_itp_mean"] < 0.01 * spread) is agrees
+    other = by["cuda-vs-llvm-other-seed"]  # LLVM seed 0 against CUDA seed 1: the spread, kept without a target
+    assert "meets_target" not in other and (other["delta_e_itp_mean"] == pytest.approx(spread, rel=1e-3)) is agrees
 
 
 @pytest.mark.slow

@@ -17,6 +17,7 @@ import warnings
 from pathlib import Path
 
 import pytest
+from script_loading import load_script
 
 ROOT = Path(__file__).resolve().parents[1]
 DOCS = ROOT / "docs"
@@ -37,10 +38,7 @@ def _pages_with_examples() -> list[Path]:
 
 
 def _hooks():  # noqa: ANN202 - the docs' MkDocs hook module, loaded from its file
-    spec = importlib.util.spec_from_file_location("docs_hooks", DOCS / "hooks.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_script(DOCS / "hooks.py", "docs_hooks")
 
 
 def test_the_guide_pages_have_examples() -> None:

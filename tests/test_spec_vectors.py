@@ -4,13 +4,13 @@ reproduces the committed files."""
 
 from __future__ import annotations
 
-import importlib.util
 import json
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pytest
+from script_loading import load_script
 
 from brdfcodec import errors
 from brdfcodec.format.bvae import FLAG_METADATA_ZSTD, FORMAT_MAJOR, FORMAT_MINOR, GraftRecord, parse_bvae
@@ -21,11 +21,7 @@ ERROR_CLASSES = {key: getattr(errors, name) for key, name in MANIFEST["error_cla
 
 
 def _load_generator() -> Any:
-    spec = importlib.util.spec_from_file_location("make_vectors", VECTORS / "make_vectors.py")
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_script(VECTORS / "make_vectors.py")
 
 
 def test_manifest_covers_what_the_spec_asks_for() -> None:

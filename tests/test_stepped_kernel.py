@@ -118,3 +118,19 @@ def test_batch_decodes_on_two_threads_at_once_give_each_its_own_tables() -> None
         halves = list(pool.map(lambda part: list(decoder.decode_many(part, batch_size=1)), [records[:2], records[2:]]))
     for table, bits in zip(halves[0] + halves[1], expected, strict=True):
         np.testing.assert_array_equal(_bits(table), bits)
+
+
+def test_the_host_decode_split_over_two_threads_is_the_same_table(monkeypatch: pytest.MonkeyPatch) -> None:
+    """On a machine whose codec runs one thread the row split of the compiled passes never runs: run it here."""
+    from brdfcodec.runtime import threads
+
+    if threads.available_cores() < 2:
+        pytest.skip("one core: the codec runs one thread, its rows are not split")
+    monkeypatch.setattr(threads, "_chosen", None)  # restored after the test
+    rng = np.random.default_rng(8)
+    mapped = (rng.random((63, 90, 90)) * 1.5).astype(np.float32)
+    threads.set_num_threads(1)
+    one = table_from_mapped_host(mapped, scale=0.9, compiled=True)
+    threads.set_num_threads(2)
+    two = table_from_mapped_host(mapped, scale=0.9, compiled=True)
+    np.testing.assert_array_equal(_bits(two), _bits(one))

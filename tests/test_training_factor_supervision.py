@@ -10,7 +10,13 @@ import numpy as np
 import pytest
 import torch
 
-from brdfcodec.datasets.analytic import FACTOR_NAMES, factor_material, sample_factor_materials
+from brdfcodec.datasets.analytic import (
+    FACTOR_ALPHA_RANGE,
+    FACTOR_NAMES,
+    SATURATION_FACTOR,
+    factor_material,
+    sample_factor_materials,
+)
 from brdfcodec.datasets.hdf5 import build_dataset
 from brdfcodec.datasets.sources import analytic_sources
 from brdfcodec.models.config import TINY_CONFIG
@@ -169,15 +175,21 @@ def test_saturation_pool_ties_dimension_8_and_weights_the_hue_by_saturation() ->
     np.testing.assert_allclose(pool.weights[:, hue].numpy(), np.minimum(1.0, drawn.factors[:, 7] / 0.7), rtol=1e-6)
     others = np.delete(pool.weights.numpy(), hue, axis=1)
     assert (others == 1).all()
-    weights = factor_weights(np.array([[0.5] * 7 + [0.0], [0.5] * 7 + [0.35]]), drawn.names, 8)
+
+
+def test_a_grey_material_s_hue_costs_nothing_in_the_weighted_loss() -> None:
+    names = (*FACTOR_NAMES, SATURATION_FACTOR)
+    hue = FACTOR_NAMES.index("hue")
+    weights = factor_weights(np.array([[0.5] * 7 + [0.0], [0.5] * 7 + [0.35]]), names, 8)
     assert weights[0, hue] == 0 and weights[1, hue] == pytest.approx(0.5)
-    # The weighted loss: a grey material's hue costs nothing.
     targets = torch.from_numpy(factor_targets(np.array([[0.5] * 7 + [0.0]] * 2), 8))
     mu = targets.clone()
     mu[:, hue] += 1.0
     assert factor_supervision_loss(mu, targets, torch.from_numpy(weights)).item() == pytest.approx(0.25)
     assert factor_supervision_loss(mu, targets).item() == pytest.approx(1.0)
-    # Without saturation the pool's weights are all 1 and a latent of 7 is enough.
+
+
+def test_without_saturation_the_weights_are_1_and_a_latent_of_7_is_enough() -> None:
     plain = build_factor_pool(3, seed=4, latent_dim=7)
     assert (plain.weights == 1).all()
     with pytest.raises(ValueError, match="at least 8"):
@@ -197,8 +209,15 @@ def test_a_lower_alpha_min_draws_sharper_materials_from_the_same_factors() -> No
     np.testing.assert_array_equal(pool.targets.numpy(), factor_targets(plain.factors[:2], 8))
     x, _ = sharp.materials[1].kept_network_input()
     np.testing.assert_array_equal(pool.inputs[1].numpy(), x)
-    for bad in (0.0, 0.6, -1.0):
-        with pytest.raises(ValueError, match="alpha_min"):
-            factor_material([0.5] * 7, alpha_min=bad)
-        with pytest.raises(ValueError, match="factor_alpha_min"):
-            TrainConfig(factor_alpha_min=bad)
+
+
+def test_the_training_default_alpha_min_is_the_benchmark_s() -> None:
+    assert TrainConfig().factor_alpha_min == FACTOR_ALPHA_RANGE[0]
+
+
+@pytest.mark.parametrize("bad", [0.0, 0.6, -1.0])
+def test_an_alpha_min_outside_0_to_0_6_is_refused(bad: float) -> None:
+    with pytest.raises(ValueError, match="alpha_min"):
+        factor_material([0.5] * 7, alpha_min=bad)
+    with pytest.raises(ValueError, match="factor_alpha_min"):
+        TrainConfig(factor_alpha_min=bad)

@@ -538,8 +538,8 @@ def parse_arguments(argv: Sequence[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--spp", type=int, help="samples per pixel of the renders (default 64; --quick 2)")
     parser.add_argument("--width", type=int, help="render width (default 240; --quick 24)")
     parser.add_argument("--height", type=int, help="render height (default 135; --quick 14)")
-    parser.add_argument("--llvm-reference", type=Path, help="renders.npz of an earlier run whose llvm_ad_rgb renders "
-                        "stand in when llvm_ad_rgb cannot run here (same --spp, --width, --height)")
+    parser.add_argument("--llvm-reference", type=Path, help="renders.npz of an earlier run: its llvm_ad_rgb renders "
+                        "are used instead of rendering llvm_ad_rgb here (same --spp, --width, --height)")
     parser.add_argument("--renders", type=Path, help="renders.npz of an earlier run on a CUDA device: its cuda_ad_rgb "
                         "renders are compared (render stage) instead of rendering them")
     parser.add_argument("--stages", default=",".join(STAGES), help=f"stages to run (default {','.join(STAGES)})")
@@ -556,6 +556,9 @@ def parse_arguments(argv: Sequence[str] | None = None) -> argparse.Namespace:
         parser.error(f"unknown stage(s) {', '.join(unknown)}; choose from {', '.join(STAGES)}")
     if args.latents < 1 or min(args.batches) < 1 or args.spp < 1 or args.budget_s <= 0:
         parser.error("--latents, --batches and --spp must be at least 1, --budget-s positive")
+    for option, path in (("--llvm-reference", args.llvm_reference), ("--renders", args.renders)):
+        if path is not None and not path.is_file():
+            parser.error(f"{option} {path}: no such file")
     return args
 
 

@@ -46,29 +46,44 @@ def rewrite_wheel(source: Path, target: Path, keep: Callable[[str], bool]) -> tu
     -------
     tuple of int
         Members kept and dropped.
+
+    Raises
+    ------
+    ValueError
+        ``source`` holds no ``.dist-info/RECORD`` (not a wheel), or ``target`` is ``source``.
     """
+    if target.resolve() == source.resolve():
+        raise ValueError(f"{target}: the slimmed wheel would overwrite its source")
     kept = dropped = 0
     with zipfile.ZipFile(source) as wheel:
-        record = next(name for name in wheel.namelist() if name.endswith(".dist-info/RECORD"))
+        record = next((name for name in wheel.namelist() if name.endswith(".dist-info/RECORD")), None)
+        if record is None:
+            raise ValueError(f"{source}: not a wheel (no .dist-info/RECORD)")
         lines = []
-        with zipfile.ZipFile(target, "w", zipfile.ZIP_DEFLATED, compresslevel=9) as out:
-            for info in wheel.infolist():
-                if info.filename == record:
-                    continue
-                if not keep(info.filename):
-                    dropped += 1
-                    continue
-                data = wheel.read(info)
-                member = zipfile.ZipInfo(info.filename, date_time=info.date_time)
-                member.external_attr = info.external_attr
-                out.writestr(member, data, compress_type=zipfile.ZIP_DEFLATED, compresslevel=9)
-                digest = base64.urlsafe_b64encode(hashlib.sha256(data).digest()).rstrip(b"=").decode()
-                lines.append(f"{info.filename},sha256={digest},{len(data)}")
-                kept += 1
-            lines.append(f"{record},,")
-            member = zipfile.ZipInfo(record, date_time=(2020, 1, 1, 0, 0, 0))
-            member.external_attr = 0o644 << 16
-            out.writestr(member, "\n".join(lines) + "\n", compress_type=zipfile.ZIP_DEFLATED, compresslevel=9)
+        partial = target.with_name(target.name + ".part")  # renamed to target once whole
+        try:
+            with zipfile.ZipFile(partial, "w", zipfile.ZIP_DEFLATED, compresslevel=9) as out:
+                for info in wheel.infolist():
+                    if info.filename == record:
+                        continue
+                    if not keep(info.filename):
+                        dropped += 1
+                        continue
+                    data = wheel.read(info)
+                    member = zipfile.ZipInfo(info.filename, date_time=info.date_time)
+                    member.external_attr = info.external_attr
+                    out.writestr(member, data, compress_type=zipfile.ZIP_DEFLATED, compresslevel=9)
+                    digest = base64.urlsafe_b64encode(hashlib.sha256(data).digest()).rstrip(b"=").decode()
+                    lines.append(f"{info.filename},sha256={digest},{len(data)}")
+                    kept += 1
+                lines.append(f"{record},,")
+                member = zipfile.ZipInfo(record, date_time=(2020, 1, 1, 0, 0, 0))
+                member.external_attr = 0o644 << 16
+                out.writestr(member, "\n".join(lines) + "\n", compress_type=zipfile.ZIP_DEFLATED, compresslevel=9)
+        except BaseException:
+            partial.unlink(missing_ok=True)
+            raise
+    partial.replace(target)
     return kept, dropped
 
 
@@ -93,6 +108,16 @@ def keep_mitsuba(variant: str) -> Callable[[str], bool]:
     return keep
 
 
+def keep_colour_science(name: str) -> bool:
+    """colour-science's members but its coverage pages, tests and examples."""
+    return not ("/htmlcov/" in name or "/tests/" in name or name.startswith("colour/examples/"))
+
+
+def keep_zstandard(name: str) -> bool:
+    """zstandard's members but its cffi backend (the C backend is the one imported)."""
+    return not (name.startswith("zstandard/_cffi.") or name == "zstandard/backend_cffi.py")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("package", choices=("mitsuba", "colour-science", "zstandard"))
@@ -100,12 +125,14 @@ def main() -> None:
     parser.add_argument("target", type=Path)
     parser.add_argument("--variant", default="cuda_ad_rgb", help="the Mitsuba variant kept (default cuda_ad_rgb)")
     args = parser.parse_args()
-    keep = {
-        "mitsuba": keep_mitsuba(args.variant),
-        "colour-science": lambda n: not ("/htmlcov/" in n or "/tests/" in n or n.startswith("colour/examples/")),
-        "zstandard": lambda n: not (n.startswith("zstandard/_cffi.") or n == "zstandard/backend_cffi.py"),
-    }[args.package]
-    kept, dropped = rewrite_wheel(args.source, args.target, keep)
+    if not args.source.is_file():
+        parser.error(f"{args.source}: no such file")
+    keep = {"mitsuba": keep_mitsuba(args.variant), "colour-science": keep_colour_science,
+            "zstandard": keep_zstandard}[args.package]
+    try:
+        kept, dropped = rewrite_wheel(args.source, args.target, keep)
+    except (ValueError, zipfile.BadZipFile) as error:
+        parser.error(str(error))
     print(f"{args.target}: {kept} members kept, {dropped} dropped, {args.target.stat().st_size:,} bytes")
 
 

@@ -16,12 +16,12 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import math
 
 import numpy as np
 
 import brdfcodec as bc
 from brdfcodec.datasets.hdf5 import BrdfDataset
+from brdfcodec.layers.entropy_coding import MAX_BOUND, ideal_code_length_bits
 from brdfcodec.report.rows import stamp, write_rows
 from brdfcodec.representation.metrics import relae_mapped
 
@@ -36,10 +36,8 @@ STEPS = (1 / 32, 1 / 16, 1 / 8, 1 / 4)
 
 def ideal_bytes(q: np.ndarray, step: float) -> float:
     """Bytes of the integers ``q`` under N(0, 1) discretised at ``step`` (ideal code length), plus a step byte."""
-    def probability(k: float) -> float:
-        upper, lower = (k + 0.5) * step / math.sqrt(2), (k - 0.5) * step / math.sqrt(2)
-        return max(0.5 * (math.erf(upper) - math.erf(lower)), 1e-300)
-    return (sum(-math.log2(probability(float(k))) for k in q) + 8) / 8
+    spreads = np.full(len(q), 1.0 / step)  # the prior's σ in steps
+    return (ideal_code_length_bits(q.astype(np.int64), spreads, bound=MAX_BOUND, prior="gaussian") + 8) / 8
 
 
 def main() -> None:
@@ -47,7 +45,7 @@ def main() -> None:
     parser.add_argument("-o", "--output", default="reports/results/mu-step-probe.jsonl")
     args = parser.parse_args()
     with BrdfDataset(DATASET) as dataset:
-        rows = [i for i, family in enumerate(dataset.families) if family == "analytic"][:6]
+        rows = dataset.indices(family="analytic")[:6]
         items = [bc.MaterialInput(dataset.names[i], dataset.inputs([i])[0], dataset.table(i),
                                   dataset.input_masks([i])[0]) for i in rows]
     decoder = bc.BrdfDecoder(MODEL)

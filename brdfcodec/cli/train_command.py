@@ -68,10 +68,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
                         "alignment's seeds, 0 and 1)")
     parser.add_argument("--factor-saturation", action="store_true", default=None,
                         help="vary that pool's colour saturation too (grey to saturated; otherwise 0.7) and tie "
-                        "latent dimension 8 to it")
+                        "latent dimension 8 to it (only with --factor-weight > 0)")
     parser.add_argument("--factor-alpha-min", type=float, metavar="ALPHA",
                         help="that pool's sharpest GGX α: its roughness factor is log-uniform from ALPHA to 0.6 "
-                        "(default 0.03, the disentanglement benchmark's)")
+                        "(default 0.03, the disentanglement benchmark's; only with --factor-weight > 0)")
     parser.add_argument("--average-from-epoch", type=int,
                         help="average the weights of every step from this epoch on (stochastic weight averaging; "
                              "validation, best.pt and the export use the average; 0: never, the default)")

@@ -329,8 +329,9 @@ def table_from_mapped_host(
         Where to write the table (C-contiguous; a CPU tensor's ``.numpy()``, say); a new array by default.
     compiled : bool, default False
         The passes before and after the exponentials compiled (:mod:`~brdfcodec.representation.stepped_kernel`,
-        Numba), bit for bit the same table, faster; the batch decodes ask for them (their first use in a process
-        imports Numba: a one-time cost in time and memory).
+        Numba), bit for bit the same table, faster, each pass's θh rows split over the codec's threads
+        (:func:`~brdfcodec.representation.network_io.over_theta_h_rows`); the batch decodes ask for them (their
+        first use in a process imports Numba: a one-time cost in time and memory).
 
     Returns
     -------

@@ -39,6 +39,7 @@ __all__ = [
     "ANALYTIC_PRESETS",
     "FACTOR_ALPHA_RANGE",
     "FACTOR_NAMES",
+    "FACTOR_SATURATION",
     "SATURATION_FACTOR",
     "AnalyticBRDF",
     "FactorMaterials",
@@ -235,10 +236,12 @@ FACTOR_NAMES: tuple[str, ...] = ("albedo", "hue", "specular", "roughness", "graz
 #: The optional eighth factor of :func:`sample_factor_materials`: the base colour's HSV saturation.
 SATURATION_FACTOR = "saturation"
 
-_HUE_SATURATION = 0.7
+#: The HSV saturation of every colour of :func:`sample_factor_materials` without the saturation factor (the
+#: disentanglement benchmark's).
+FACTOR_SATURATION = 0.7
 
 
-def _hue_rgb(hue: float, saturation: float = _HUE_SATURATION) -> np.ndarray:
+def _hue_rgb(hue: float, saturation: float = FACTOR_SATURATION) -> np.ndarray:
     """An RGB colour of the given hue (0 red, 1/3 green, 2/3 blue) and HSV saturation (0 grey), mean 1."""
     import colorsys
 
@@ -289,7 +292,7 @@ def factor_material(factors: npt.ArrayLike, name: str = "factor-material", *,
         raise ValueError(f"factors must be {len(FACTOR_NAMES)} values in [0, 1] ({', '.join(FACTOR_NAMES)}), "
                          f"optionally followed by {SATURATION_FACTOR}, got {values.tolist()}")
     albedo, hue, specular, roughness, grazing, sheen, metallic = (float(v) for v in values[:len(FACTOR_NAMES)])
-    saturation = float(values[len(FACTOR_NAMES)]) if values.size > len(FACTOR_NAMES) else _HUE_SATURATION
+    saturation = float(values[len(FACTOR_NAMES)]) if values.size > len(FACTOR_NAMES) else FACTOR_SATURATION
     colour = np.minimum(_log_lerp(0.02, 0.8, albedo) * _hue_rgb(hue * 2.0 / 3.0, saturation), 1.0)
     f0 = (1.0 - metallic) * _log_lerp(0.02, 0.16, specular) + metallic * colour
     return AnalyticBRDF(name, tuple((1.0 - metallic) * colour), tuple(np.maximum(f0, 1e-3)),  # type: ignore[arg-type]

@@ -306,9 +306,19 @@ _SPANS: dict[int, tuple[np.ndarray, list[tuple[int, int] | None]]] = {}
 
 
 def over_theta_h_rows(kernel: Callable[..., None], *arguments: object, threads: int | None = None) -> None:
-    """Run a compiled pass ``kernel(*arguments, first_row, stop_row)`` over the 90 θh rows, split into disjoint
-    row ranges over ``threads`` threads (the codec's by default, :func:`~brdfcodec.runtime.threads.get_num_threads`).
-    The kernel must release the GIL and write only its own rows."""
+    """Run a compiled pass over the 90 θh rows, split into disjoint row ranges over threads.
+
+    Parameters
+    ----------
+    kernel : callable
+        Called as ``kernel(*arguments, first_row, stop_row)`` once per range; it must release the GIL and write
+        only the rows ``first_row`` … ``stop_row − 1`` of its outputs.
+    *arguments : object
+        The kernel's arguments before the row range.
+    threads : int, optional
+        Ranges run at once (at most 90): the codec's thread count by default
+        (:func:`~brdfcodec.runtime.threads.get_num_threads`); 1 runs the kernel once, on the calling thread.
+    """
     parts = max(1, min(get_num_threads() if threads is None else int(threads), N_THETA_H))
     if parts == 1:
         kernel(*arguments, 0, N_THETA_H)

@@ -9,10 +9,11 @@ the disentanglement benchmark and the factor alignment do not use), and each opt
     factor_weight · (1/B) Σ_b Σ_j (μ_bj − t_bj)²
 
 where the target ``t_bj`` of the latent dimension j < 7 is factor j standardised, ``(v_j − ½)·√12`` (mean 0,
-variance 1, as the prior), and 0 for the dimensions beyond the seventh: the analytic family has no eighth factor,
-so a free dimension is kept at the prior's mean on it and left to the real materials' other variation. Dimension j
-is so tied to factor j alone, in the order of :data:`~brdfcodec.datasets.analytic.FACTOR_NAMES` (the order of the
-shipped model's aligned axes, ``model.json`` ``info.alignment``).
+variance 1, as the prior), and 0 for the dimensions beyond the seventh: without ``factor_saturation`` the family
+has no eighth factor, so a free dimension is kept at the prior's mean on it and left to the real materials' other
+variation. Dimension j is so tied to factor j alone, in the order of
+:data:`~brdfcodec.datasets.analytic.FACTOR_NAMES` (the order of the shipped model's aligned axes, ``model.json``
+``info.alignment``).
 
 With ``TrainConfig.factor_saturation`` the pool's colours also vary in saturation (an eighth factor, grey to fully
 saturated; without it every colour has saturation 0.7, so a grey or white material is outside the family the
@@ -30,11 +31,9 @@ import numpy as np
 import numpy.typing as npt
 import torch
 
+from brdfcodec.datasets.analytic import FACTOR_ALPHA_RANGE, FACTOR_SATURATION, SATURATION_FACTOR
+
 __all__ = ["FactorPool", "build_factor_pool", "factor_supervision_loss", "factor_targets", "factor_weights"]
-
-#: The saturation at which (and above which) a colour's hue counts fully in the supervision.
-_FULL_HUE_SATURATION = 0.7
-
 
 def factor_targets(factors: npt.ArrayLike, latent_dim: int) -> npt.NDArray[np.float32]:
     """The latent targets of materials with known factors.
@@ -42,7 +41,8 @@ def factor_targets(factors: npt.ArrayLike, latent_dim: int) -> npt.NDArray[np.fl
     Parameters
     ----------
     factors : array_like, shape (N, K)
-        Factor values in [0, 1] (K = 7 for :func:`~brdfcodec.datasets.analytic.sample_factor_materials`).
+        Factor values in [0, 1] (K = 7 for :func:`~brdfcodec.datasets.analytic.sample_factor_materials`, 8 with
+        its saturation).
     latent_dim : int
         Latent size M ≥ K.
 
@@ -78,13 +78,14 @@ def factor_weights(factors: npt.ArrayLike, names: tuple[str, ...], latent_dim: i
     Returns
     -------
     ndarray of float32, shape (N, M)
-        1, except the hue column when ``saturation`` is a factor: min(1, saturation / 0.7).
+        1, except the hue column when ``saturation`` is a factor: min(1, saturation / 0.7), 0.7 the benchmark's
+        saturation (:data:`~brdfcodec.datasets.analytic.FACTOR_SATURATION`).
     """
     values = np.asarray(factors, dtype=np.float64)
     weights = np.ones((len(values), latent_dim), dtype=np.float32)
-    if "saturation" in names and "hue" in names:
-        saturation = values[:, names.index("saturation")]
-        weights[:, names.index("hue")] = np.minimum(1.0, saturation / _FULL_HUE_SATURATION)
+    if SATURATION_FACTOR in names and "hue" in names:
+        saturation = values[:, names.index(SATURATION_FACTOR)]
+        weights[:, names.index("hue")] = np.minimum(1.0, saturation / FACTOR_SATURATION)
     return weights
 
 
@@ -146,7 +147,7 @@ class FactorPool:
 
 
 def build_factor_pool(count: int, seed: int, latent_dim: int, *, saturation: bool = False,
-                      alpha_min: float | None = None) -> FactorPool:
+                      alpha_min: float = FACTOR_ALPHA_RANGE[0]) -> FactorPool:
     """Draw ``count`` factor materials of ``seed`` and tabulate their network inputs (about 0.1 s each).
 
     Parameters
@@ -160,17 +161,17 @@ def build_factor_pool(count: int, seed: int, latent_dim: int, *, saturation: boo
     saturation : bool, default False
         Vary the colours' saturation too, an eighth factor tied to dimension 8
         (:func:`~brdfcodec.datasets.analytic.sample_factor_materials`).
-    alpha_min : float, optional
-        The sharpest GGX α of the roughness factor (default: the benchmark's, 0.03).
+    alpha_min : float, default 0.03
+        The sharpest GGX α of the roughness factor, in (0, 0.6) (the default is the benchmark's,
+        :data:`~brdfcodec.datasets.analytic.FACTOR_ALPHA_RANGE`).
 
     Returns
     -------
     FactorPool
     """
-    from brdfcodec.datasets.analytic import FACTOR_ALPHA_RANGE, sample_factor_materials
+    from brdfcodec.datasets.analytic import sample_factor_materials
 
-    drawn = sample_factor_materials(count, seed=seed, saturation=saturation,
-                                    alpha_min=FACTOR_ALPHA_RANGE[0] if alpha_min is None else alpha_min)
+    drawn = sample_factor_materials(count, seed=seed, saturation=saturation, alpha_min=alpha_min)
     targets = torch.from_numpy(factor_targets(drawn.factors, latent_dim))
     weights = torch.from_numpy(factor_weights(drawn.factors, drawn.names, latent_dim))
     first_input, first_mask = drawn.materials[0].kept_network_input()

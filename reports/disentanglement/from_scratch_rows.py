@@ -169,32 +169,46 @@ STUDIES = {study.name: study for study in (FROM_SCRATCH_SUPERVISION, FREE_DIMENS
 
 def text(study: Study, rows: list[dict]) -> str:
     """The study's tables, from its rows."""
-    lines = [study.header]
+    lines = [study.header, *_disentanglement_lines(rows), *_reconstruction_lines(study, rows),
+             *_refinement_lines(rows), *_training_lines(study, rows)]
+    return "\n".join(lines) + "\n"
+
+
+def _disentanglement_lines(rows: list[dict]) -> list[str]:
+    """MIG and DCI per seed of the benchmark, then each dimension's dominant factor at seed 0."""
+    lines = []
+    scored = [row for row in rows if row.get("study") == "disentanglement"]
     for seed in (0, 2):
         lines.append(f"MIG and DCI, 300 analytic materials of seed {seed} (base RelAE: the model's decode of them)")
         lines.append(f"{'code':<28}{'MIG':>7}{'DCI-D':>7}{'DCI-C':>7}{'DCI-I':>7}{'base RelAE':>12}")
-        for row in rows:
-            if row.get("study") == "disentanglement" and row["seed"] == seed:
-                lines.append(f"{row['model']:<28}{row['mig']:7.3f}{row['dci_disentanglement']:7.3f}"
-                             f"{row['dci_completeness']:7.3f}{row['dci_informativeness']:7.3f}"
-                             f"{row['base_relae_kept_mapped']:12.4f}")
+        lines += [f"{row['model']:<28}{row['mig']:7.3f}{row['dci_disentanglement']:7.3f}"
+                  f"{row['dci_completeness']:7.3f}{row['dci_informativeness']:7.3f}{row['base_relae_kept_mapped']:12.4f}"
+                  for row in scored if row["seed"] == seed]
         lines.append("")
     lines.append("dominant factor of each dimension, seed 0 (share of the dimension's importance):")
-    for row in rows:
-        if row.get("study") == "disentanglement" and row["seed"] == 0 and row["code"] == "model":
+    for row in scored:
+        if row["seed"] == 0 and row["code"] == "model":
             pairs = zip(row["dominant_factor"], row["dominant_share"], strict=True)
             dims = ", ".join(f"z{i + 1} {factor} ({share:.2f})" for i, (factor, share) in enumerate(pairs))
             lines.append(f"  {row['model']}: {dims}")
-    lines.append("")
-    lines.append("Reconstruction, mapped RelAE of the encoder's μ decoded (effort 0), full tables:")
-    columns = {"merl": "MERL 90 (train)", "rgl": "RGL 30 (train)", "analytic-never": "analytic 24 (never)",
-               "rgl-never": "real RGL 1 (never)"}
-    widths = [16, 16, 21, 20]
-    training = [row for row in rows if row.get("kind") == "training"]
-    if any("analytic" in row["device_scores"]["relae"] for row in training):  # the runner scored never-seen ones
-        columns["analytic-device"] = "analytic 24 (device)"
-        widths.append(22)
-    lines.append(f"{'model':<28}" + "".join(f"{title:>{w}}" for title, w in zip(columns.values(), widths, strict=True)))
+    return [*lines, ""]
+
+
+def _device_analytic(row: dict) -> float | None:
+    """A training row's never-seen analytic error as the device runner scored it, where it did."""
+    if row.get("kind") != "training":
+        return None
+    return row["device_scores"]["relae"].get("analytic")
+
+
+def _reconstruction_lines(study: Study, rows: list[dict]) -> list[str]:
+    """Each model's mapped RelAE per family: trained on, never seen, and the device's own score where made."""
+    columns = {"merl": ("MERL 90 (train)", 16), "rgl": ("RGL 30 (train)", 16),
+               "analytic-never": ("analytic 24 (never)", 21), "rgl-never": ("real RGL 1 (never)", 20)}
+    if any(_device_analytic(row) is not None for row in rows):  # the runner scored never-seen ones
+        columns["analytic-device"] = ("analytic 24 (device)", 22)
+    lines = ["Reconstruction, mapped RelAE of the encoder's μ decoded (effort 0), full tables:",
+             f"{'model':<28}" + "".join(f"{title:>{width}}" for title, width in columns.values())]
     for model in study.models:
         cell = {}
         for row in rows:
@@ -204,30 +218,38 @@ def text(study: Study, rows: list[dict]) -> str:
                 cell[row["family"]] = row["relae_mapped"]
             if row.get("kind") == "evaluation" and row["split"] == "held-out":
                 cell[f"{row['family']}-never"] = row["mapped"]
-            if row.get("kind") == "training" and "analytic" in row["device_scores"]["relae"]:
-                cell["analytic-device"] = row["device_scores"]["relae"]["analytic"]
-        values = [cell.get(k) for k in columns]
-        lines.append(f"{model:<28}" + "".join(f"{'—' if v is None else f'{v:.4f}':>{w}}"
-                                              for v, w in zip(values, widths, strict=True)))
-    lines.append("")
+            if _device_analytic(row) is not None:
+                cell["analytic-device"] = _device_analytic(row)
+        lines.append(f"{model:<28}" + "".join(f"{'—' if cell.get(key) is None else f'{cell[key]:.4f}':>{width}}"
+                                              for key, (_, width) in columns.items()))
+    return [*lines, ""]
+
+
+def _refinement_lines(rows: list[dict]) -> list[str]:
+    """Mapped RelAE per encoder effort, where the study measured it."""
     refinement = [row for row in rows if row.get("kind") == "refinement"]
-    if refinement:
-        lines.append("Latent refinement (BrdfEncoder effort), every 4th of the 120 materials, mapped RelAE:")
-        for row in refinement:
-            per = ", ".join(f"{k} {v:.4f}" for k, v in sorted(row["relae_mapped"].items()))
-            lines.append(f"  {row['model']:<28} effort {row['effort']}: all {row['all']:.4f} ({per})")
-        lines.append("")
-    lines.append(study.training_title)
+    if not refinement:
+        return []
+    lines = ["Latent refinement (BrdfEncoder effort), every 4th of the 120 materials, mapped RelAE:"]
+    for row in refinement:
+        per = ", ".join(f"{k} {v:.4f}" for k, v in sorted(row["relae_mapped"].items()))
+        lines.append(f"  {row['model']:<28} effort {row['effort']}: all {row['all']:.4f} ({per})")
+    return [*lines, ""]
+
+
+def _training_lines(study: Study, rows: list[dict]) -> list[str]:
+    """Each run's schedule, stop and last epoch's losses."""
+    lines = [study.training_title]
     for row in rows:
         if row.get("kind") == "training":
             last = row["last_epoch"]
-            extra = "".join(f", {key.replace('_', ' ')} {row[key]}" for key in study.train_keys if key in row)
+            extra = "".join(f", {key.replace('_', ' ')} {row[key]}" for key in study.train_keys)
             lines.append(f"  {row['model']:<22} factor weight {row['factor_weight']:>7g}{extra}: "
                          f"{row['epochs_done']} of {row['epochs_planned']} epochs in {row['seconds']:.0f} s "
                          f"({row['stop_reason']}; weights of epoch {row['weights_epoch']}, learning rate "
                          f"{last['lr']:.1e} at the stop); last epoch: recon {last['recon']:.0f}, KL {last['kl']:.1f}, "
                          f"factor {last['factor']:.3f}")
-    return "\n".join(lines) + "\n"
+    return lines
 
 
 def main() -> None:

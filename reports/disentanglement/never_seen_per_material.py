@@ -14,18 +14,17 @@ import argparse
 import colorsys
 
 import numpy as np
+from from_scratch_rows import SATURATION
 
 import brdfcodec as bc
 from brdfcodec.datasets.analytic import random_analytic_materials
 from brdfcodec.datasets.hdf5 import BrdfDataset
-from brdfcodec.format.bvae import LatentRecord
 from brdfcodec.report.rows import stamp, write_rows
-from brdfcodec.representation.metrics import relae_mapped
+from brdfcodec.training.evaluation import MappedReference
 
 DATASET = "runs/v3-held-out.h5"
-MODELS = {"bvae-nbrdf-proxy-small-v3": "brdfcodec/data/models/default",
-          "bvae-scratch-sat-w10k": "runs/models/dev3-sat-w10k",
-          "bvae-scratch-sat-w5k": "runs/models/dev3-sat-w5k"}
+#: The shipped model and the study's two runs at one analytic material a step (its fb4 run left out).
+MODELS = {label: folder for label, folder in SATURATION.models.items() if not label.endswith("-fb4")}
 #: Materials sharper than this (GGX α) are counted apart: the factor family draws α from 0.03 (``factor_material``).
 SHARP_ALPHA = 0.06
 
@@ -35,20 +34,18 @@ def main() -> None:
     parser.add_argument("-o", "--output", default="reports/disentanglement/saturation-per-material.jsonl")
     args = parser.parse_args()
     with BrdfDataset(DATASET) as dataset:
-        rows = [i for i, family in enumerate(dataset.families) if family == "analytic"]
+        rows = dataset.indices(family="analytic")
         names = [dataset.names[i] for i in rows]
         inputs = dataset.inputs(rows)
-        references = [dataset.table(i) for i in rows]
-    materials = {m.name: m for m in random_analytic_materials(len(names), seed=0)}
+        reference = MappedReference(dataset, rows)
+        # the dataset's random materials, rebuilt from the seed it was built with (`bvae dataset build --seed`)
+        seed = int(dataset.attribute("split_seed"))
+        materials = {m.name: m for m in random_analytic_materials(len(names), seed=seed)}
     errors: dict[str, list[float]] = {}
     for label, folder in MODELS.items():
         encoder, decoder = bc.BrdfEncoder(folder, effort=0), bc.BrdfDecoder(folder)
         mu, _ = encoder.posterior_from_inputs(inputs)
-        errors[label] = [
-            relae_mapped(reference.values, np.asarray(decoder.decode(LatentRecord(name, code.astype(np.float32),
-                                                                                  np.ones_like(code, np.float32))),
-                                                      np.float64), reference.mask).overall
-            for name, code, reference in zip(names, mu, references, strict=True)]
+        errors[label] = reference.relae(decoder.decode_mapped(mu)).tolist()
     out = []
     for index, name in enumerate(names):
         material = materials[name]
@@ -58,11 +55,11 @@ def main() -> None:
         out.append({"material": name, "kind": "metal" if metal else "dielectric", "colour": colour.tolist(),
                     "saturation": saturation, "hue": hue, "alpha": material.roughness,
                     "mapped_relae": {label: values[index] for label, values in errors.items()}})
-    sharp = [row["alpha"] < SHARP_ALPHA for row in out]
+    sharp = np.array([row["alpha"] < SHARP_ALPHA for row in out])
     for label in MODELS:
         values = np.array([row["mapped_relae"][label] for row in out])
         print(f"{label}: all {values.mean():.4f}; α < {SHARP_ALPHA}: {values[sharp].mean():.4f} "
-              f"({sum(sharp)}); α ≥ {SHARP_ALPHA}: {values[~np.array(sharp)].mean():.4f} ({len(out) - sum(sharp)})")
+              f"({sharp.sum()}); α ≥ {SHARP_ALPHA}: {values[~sharp].mean():.4f} ({(~sharp).sum()})")
     write_rows(args.output, stamp(out, study="saturation-per-material", dataset=DATASET, models=MODELS,
                                   command="python reports/disentanglement/never_seen_per_material.py"))
 
