@@ -12,10 +12,12 @@ chooses the enhancement layers among candidate records, each with a rate R
   the base stored compact (μ as int8, :func:`compact_mu_storage`) where the
   budget cannot hold all K coefficients beside μ in the latent dtype
   (:func:`compact_base_pays`), else on the full base and on a compact one;
-- min(k, :data:`DETAIL_BASIS_COUNT`) int8 coefficients under a detail layer
-  whose quantisation step comes from a fixed ladder (:data:`STEP_LADDER`,
-  halving every two rungs), bisected to the finest rungs that fit, then
-  refined between the two that bracket the budget.
+- min(k, n) int8 coefficients under a detail layer, n each count of
+  :data:`DETAIL_BASIS_COUNTS` for a size budget (32 and 64) and
+  :data:`DETAIL_BASIS_COUNT` (32) for an error target, whose quantisation
+  step comes from a fixed ladder (:data:`STEP_LADDER`, halving every two
+  rungs), bisected to the finest rungs that fit, then refined between the
+  two that bracket the budget.
 
 One rate–distortion rule chooses among them (minimise D + λR, λ set by the
 target):
@@ -32,7 +34,7 @@ target):
   base's record stays a candidate past the budgets that store the base
   compact, so that a larger budget never returns a worse record than a
   smaller one (``tests/test_rate_monotone.py``). No error is traded for
-  decode time; the cap of :data:`DETAIL_BASIS_COUNT` coefficients under a
+  decode time; the cap of 64 coefficients under a
   detail layer bounds every layered record's decode time (documentation:
   Layers and rate control);
 - ``max_relae=X``: D is the measured RelAE (mapped or linear, full table,
@@ -78,8 +80,8 @@ from brdfcodec.representation.metrics import RelaeAgainst
 from brdfcodec.representation.network_io import table_from_network_output
 
 __all__ = [
-    "DETAIL_BASIS_COUNT", "STEP_LADDER", "BasisFit", "BasisOnlyFit", "Metric", "MuStorage", "RateResult",
-    "RatePoint", "compact_base_pays", "compact_mu_storage",
+    "DETAIL_BASIS_COUNT", "DETAIL_BASIS_COUNTS", "STEP_LADDER", "BasisFit", "BasisOnlyFit", "Metric", "MuStorage",
+    "RateResult", "RatePoint", "compact_base_pays", "compact_mu_storage",
     "encode_layers",
     "error_target_sequence", "layered_mapped", "lagrangian_hull", "lowest_distortion",
 ]
@@ -177,6 +179,12 @@ _Candidate = tuple[bool, int, float | None]
 #: buy more as detail, so the cap costs little error against also trying all K (documentation: Layers and rate
 #: control).
 DETAIL_BASIS_COUNT: Final = 32
+#: The basis coefficients a size budget tries under a detail layer, each a candidate of its own (the rate rule keeps
+#: the one of lower distortion): 32, and 64 where a budget's detail layer has room to spare, which lowers the error
+#: at 2-16 KB where 32 stalled (rows ``reports/results/rd-shipped-held-out-large*.jsonl``), its decode within the
+#: same 1.5 times the base (benchmark ``decode-layered``). An error target and a fixed step keep
+#: :data:`DETAIL_BASIS_COUNT`.
+DETAIL_BASIS_COUNTS: Final = (DETAIL_BASIS_COUNT, 64)
 
 
 def layered_mapped(base_mapped: np.ndarray, record: LatentRecord) -> np.ndarray:
@@ -436,8 +444,9 @@ def _budget_points(cands: _Candidates, bytes_budget: int, full: int, compact: bo
     The candidates, each the largest of its kind that fits (within a kind, more bytes lower the error): the base
     alone; the most basis coefficients that fit, in each of ``variants``, on the base ``cands`` stores (compact or
     not, :func:`compact_base_pays`) and, where that base is the full one, on a compact base too (so that a byte
-    more never loses what the compact base gave, issue 39); and min(k, :data:`DETAIL_BASIS_COUNT`) int8
-    coefficients under a detail layer at each step of the ladder search that fits (where a detail layer has room).
+    more never loses what the compact base gave, issue 39); and min(k, n) int8 coefficients, for each n of
+    :data:`DETAIL_BASIS_COUNTS`, under a detail layer at each step of the ladder search that fits (where a detail
+    layer has room).
     """
     pools = {compact: cands}
     options: list[tuple[bool, int, float | None, str | None]] = [(compact, 0, None, None)]
@@ -449,14 +458,14 @@ def _budget_points(cands: _Candidates, bytes_budget: int, full: int, compact: bo
         most = pools[True].most_coefficients(bytes_budget, full)
         if most:
             options += [(True, most, None, variant) for variant in variants]
-    under_detail = min(k, DETAIL_BASIS_COUNT)
     # A detail layer only where it fits beside its coefficients (no room at 64 B: 48 coefficients, no detail).
     empty = _empty_detail_bytes()
-    smallest_detail = (cands.layered_bytes + (STEP_BYTES + under_detail if under_detail else 0) + empty
-                       + cands.overhead(under_detail or None, empty))
-    if smallest_detail <= bytes_budget:
-        options += [(compact, under_detail, s, None)
-                    for s in _finest_fitting_steps(cands, under_detail, bytes_budget, tried)]
+    for under_detail in sorted({min(k, count) for count in DETAIL_BASIS_COUNTS}):
+        smallest_detail = (cands.layered_bytes + (STEP_BYTES + under_detail if under_detail else 0) + empty
+                           + cands.overhead(under_detail or None, empty))
+        if smallest_detail <= bytes_budget:
+            options += [(compact, under_detail, s, None)
+                        for s in _finest_fitting_steps(cands, under_detail, bytes_budget, tried)]
     points = []
     seen: set[int] = set()  # a variant the fit declines gives the same layer as another: one point
     for c, n, s, coding in dict.fromkeys(options):
