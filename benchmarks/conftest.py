@@ -42,7 +42,7 @@ TARGETS = {
     "mitsuba-vs-scalar": 1 / 50,  # the same render in llvm_ad_rgb vs the scalar_rgb plug-in (scaled from 32², 4 spp)
     "rgl-tabulate": 4.0,  # an RGL .bsdf through Mitsuba's measured plugin vs an NBRDF proxy fit, same MERL grid
     "studio-slider-to-paint": 1.5,  # browser: slider input → painted preview vs a server-side render before transfer
-    "decode-layered": 1.5,  # a layered record (base + 32 basis coefficients + 16 KB detail layer) vs its base alone
+    "decode-layered": 1.5,  # a 16 KB layered record (base + 64 basis coefficients + detail layer) vs its base alone
     "decode-layered-64B": 1.5,  # a 64 B float16 record (base + basis coefficients, no detail layer) vs its base alone
     # the same with its base projected on 50 basis vectors (what --project-base auto writes for most materials at
     # 16-128 B: a memory-bound pass over the basis' factors after the network)

@@ -122,7 +122,7 @@ def test_query_decoded_material(benchmark, decoder: BrdfDecoder, record: LatentR
 
 
 #: Benchmark group → (encoder options, has a detail layer): the high-rate record with all three parts
-#: (32 basis coefficients, the most a record with a detail layer carries, + a 16 KB detail layer; the default
+#: (64 basis coefficients, the most a record with a detail layer carries, + a detail layer at 16 KB; the default
 #: ``--project-base auto`` leaves a record with a detail layer unprojected), and the low-rate one (a 64 B record:
 #: compact base + 53 basis coefficients), with its base never and always projected on the shared basis (format
 #: 1.6; the default picks per material); all three with a latent (``latent="always"``: the baseline is the
