@@ -218,8 +218,9 @@ def _reconstruction_lines(study: Study, rows: list[dict]) -> list[str]:
                 cell[row["family"]] = row["relae_mapped"]
             if row.get("kind") == "evaluation" and row["split"] == "held-out":
                 cell[f"{row['family']}-never"] = row["mapped"]
-            if _device_analytic(row) is not None:
-                cell["analytic-device"] = _device_analytic(row)
+            scored = _device_analytic(row)
+            if scored is not None:
+                cell["analytic-device"] = scored
         lines.append(f"{model:<28}" + "".join(f"{'—' if cell.get(key) is None else f'{cell[key]:.4f}':>{width}}"
                                               for key, (_, width) in columns.items()))
     return [*lines, ""]
