@@ -34,7 +34,7 @@ target):
   base's record stays a candidate past the budgets that store the base
   compact, so that a larger budget never returns a worse record than a
   smaller one (``tests/test_rate_monotone.py``). No error is traded for
-  decode time; the cap of 64 coefficients under a
+  decode time; the cap of max(:data:`DETAIL_BASIS_COUNTS`) coefficients under a
   detail layer bounds every layered record's decode time (documentation:
   Layers and rate control);
 - ``max_relae=X``: D is the measured RelAE (mapped or linear, full table,
