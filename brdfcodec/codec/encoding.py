@@ -10,7 +10,7 @@ from typing import TYPE_CHECKING, Any, Literal, Protocol, get_args
 import numpy as np
 
 from brdfcodec.codec.basis_operator import BasisOperator
-from brdfcodec.codec.rate import BasisFit, BasisOnlyFit, Metric, MuStorage, encode_layers
+from brdfcodec.codec.rate import BasisFit, BasisOnlyFit, CompactAloneFit, Metric, MuStorage, encode_layers
 from brdfcodec.codec.refine import (
     EFFORT_STEPS,
     POLISH_PASSES,
@@ -275,6 +275,7 @@ def layer_records(
             store_sigma=options.store_sigma,
             basis_variants=() if basis is None else options.variants(
                 decoder.network.config.latent_dim if decoder.network.config.linear_basis else 0),
+            compact_alone_fit=_compact_alone_fit(decoder, base),
         )
         chosen = result.record
         # record_bytes: what the budget caps (payload and index descriptor); payload_bytes: the payload alone
@@ -288,6 +289,17 @@ def layer_records(
         new_meta = {**chosen.meta, "rate": rate}
         out.append(dataclasses.replace(chosen, meta=new_meta))
     return out
+
+
+def _compact_alone_fit(decoder: LayerDecoder, base: LatentRecord) -> CompactAloneFit:
+    """The base's μ as a compact form stores it, and its clamped decode (the base alone, no layer: rate control's
+    smallest record with a latent)."""
+
+    def fit(storage: str) -> tuple[np.ndarray, np.ndarray]:
+        code = compact_mu_values(base.mu, storage == MU_INT8_FIXED, f"{base.name}: mu")
+        return code, decoder.decode_mapped(code)
+
+    return fit
 
 
 def _as_stored(codes: np.ndarray, itemsize: int) -> np.ndarray:

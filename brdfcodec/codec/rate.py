@@ -4,7 +4,8 @@ Given a material's base code, its decode and its source, :func:`encode_layers`
 chooses the enhancement layers among candidate records, each with a rate R
 (bytes beyond its name: payload and descriptor) and a distortion D:
 
-- the base alone (μ in the latent dtype);
+- the base alone (μ in the latent dtype) and, in records without σ (format 2.2), the base alone with μ stored
+  compact (:class:`_CompactAlone`, 10 bytes for D = 8: the smallest record with a latent);
 - k coefficients on the model's shared basis (:mod:`brdfcodec.layers.basis`,
   when the model has one), as many as fit, in each variant of the basis fit
   (``basis_variants``: brdfcodec's writer starts the coefficients after
@@ -50,7 +51,8 @@ The achieved RelAE is measured on the returned record. A layered record
 stores σ compactly (one byte per dimension, ``spec/bvae-format.md`` §4.5) or
 not at all (format 2.2); a compact base stores μ as int8 on the fixed grid
 μ = q / 32 where it fits ±3.97, else with a float16 step (σ, when stored, as
-one shared byte), which makes budgets from 12 bytes possible.
+one shared byte), which makes budgets from 12 bytes possible; without σ, the base alone, μ compact and no
+layer, takes 10 (D = 8, a one-byte name).
 
 Records without a latent (format 2.1, ``spec/bvae-format.md`` §4.6) are candidates too when a
 :data:`BasisOnlyFit` is given (``EncodeOptions.latent = "auto"``): k coefficients from the basis' first vector
@@ -80,7 +82,8 @@ from brdfcodec.representation.metrics import RelaeAgainst
 from brdfcodec.representation.network_io import table_from_network_output
 
 __all__ = [
-    "DETAIL_BASIS_COUNT", "DETAIL_BASIS_COUNTS", "STEP_LADDER", "BasisFit", "BasisOnlyFit", "Metric", "MuStorage",
+    "DETAIL_BASIS_COUNT", "DETAIL_BASIS_COUNTS", "STEP_LADDER", "BasisFit", "BasisOnlyFit", "CompactAloneFit", "Metric",
+    "MuStorage",
     "RateResult", "RatePoint", "compact_base_pays", "compact_mu_storage",
     "encode_layers",
     "error_target_sequence", "layered_mapped", "lagrangian_hull", "lowest_distortion",
@@ -130,7 +133,8 @@ class RatePoint:
         Whether the base is stored compact (μ as int8).
     option : (int, float or None, str or None)
         Basis coefficients k (in int8-equivalent bytes for a packed or coded layer), detail step (None: no
-        detail layer) and the basis fit's variant (None: its own).
+        detail layer) and the basis fit's variant (None: its own); for the compact base alone (k 0, no detail
+        layer, ``compact``), how μ is stored (``"int8"`` or ``"int8-fixed"``).
     pool : object
         The candidates' builder (internal).
     """
@@ -145,8 +149,8 @@ class RatePoint:
     def label(self) -> str:
         """A short name: ``compact-mu k=48 variant=0``, ``mu k=32 detail=0.5``, ``mu alone``."""
         k, step, variant = self.option
-        if not k and step is None:
-            return "mu alone"  # the base record: μ in the latent dtype
+        if not k and step is None:  # the base record: μ in the latent dtype, or compact (no layer, no σ)
+            return "compact-mu alone" if self.compact else "mu alone"
         parts = ["compact-mu" if self.compact else "mu", f"k={k}"]
         if variant is not None:
             parts.append(f"variant={variant}")
@@ -169,6 +173,9 @@ BasisFit = Callable[[int, MuStorage, bool], tuple[LatentRecord, BasisLayer | Non
 #: 0 … k − 1: the layer (quantised as stored) and the decode's mapped kept slices before the clamp (the decoder's
 #: linear-path mean at the basis' entries plus the layer's sum).
 BasisOnlyFit = Callable[[int], tuple[BasisLayer, np.ndarray]]
+#: What a fit of the base alone stored compact returns (format 2.2: μ in a compact form, no σ and no layer), for
+#: a storage (``"int8"`` or ``"int8-fixed"``): the code as stored and the decoder's mapped output of it, clamped.
+CompactAloneFit = Callable[[str], tuple[np.ndarray, np.ndarray]]
 #: Basis sizes tried by an error target below the basis' full size.
 _BASIS_COUNTS: Final = (4, 8, 16, 32)
 #: A candidate of an error target: compact base or not, basis coefficients, detail step (None: no detail layer).
@@ -291,6 +298,7 @@ def encode_layers(
     basis_only_fit: BasisOnlyFit | None = None,
     store_sigma: bool = True,
     basis_variants: Sequence[str] = (),
+    compact_alone_fit: CompactAloneFit | None = None,
 ) -> RateResult:
     """A base record, layered to a size budget, an error target or a fixed step.
 
@@ -330,6 +338,11 @@ def encode_layers(
         first basis vector, ``("8", "0")``; any labels the fit understands, a coding for instance), each a
         candidate of its own: ``basis_fit`` is then called with the variant as a fourth argument. Empty:
         ``basis_fit`` takes three arguments. On a tie in error the variant listed first is kept.
+    compact_alone_fit : callable, optional
+        Decodes the base's μ as a compact form stores it; with it and ``store_sigma=False``, the base alone with
+        μ compact and no layer (format 2.2, ``spec/bvae-format.md`` §3.2: D bytes on the fixed grid, 2 + D with a
+        step) is a candidate of a size budget: the smallest record with a latent, so that every material fits
+        a budget from D bytes beside its descriptor (10 for D = 8 and a one-byte name).
 
     Raises
     ------
@@ -355,6 +368,10 @@ def encode_layers(
     base_bytes = cands.plain_bytes
     if full:
         base_bytes = min(base_bytes, cands.layered_bytes + STEP_BYTES + 1 + cands.overhead(1))
+    alone = None
+    if compact_alone_fit is not None and not store_sigma and bytes_budget is not None:
+        alone = _CompactAlone(base, compact_alone_fit, target, weights)
+        base_bytes = min(base_bytes, alone.bytes_of(MU_INT8_FIXED))
     if step is not None:
         count = min(full, DETAIL_BASIS_COUNT)
         return RateResult(cands.record(count, float(step)), cands.size(count, float(step)),
@@ -375,6 +392,9 @@ def encode_layers(
         points = _budget_points(cands, bytes_budget, full, compact, variants, tried,
                                 lambda: candidates(base, base_mapped, target, weights, latent_itemsize, basis_fit,
                                                    compact=True))
+        if alone is not None and alone.storage_for(bytes_budget) is not None:
+            # a candidate at every budget it fits, so that a byte more never loses what a smaller budget gave
+            points.append(alone.point(bytes_budget))
         chosen = lowest_distortion(points, bytes_budget)
         pool, option = points[chosen].pool, points[chosen].option
         if only is not None and without is not None and without.error(only) < points[chosen].distortion:
@@ -599,6 +619,56 @@ class _WithoutLatent:
         return None if bracket is None else bracket[1][1]
 
 
+class _CompactAlone:
+    """The base alone with μ stored compact, without σ and without a layer (format 2.2, ``spec/bvae-format.md``
+    §3.2): the smallest record with a latent. μ is stored as the compact base of a layered record would store it
+    (:func:`compact_mu_storage`), or on the fixed grid, its values past ±3.97 at the grid's end, where the budget
+    is too small for the step (spec §4.5)."""
+
+    def __init__(self, base: LatentRecord, fit: CompactAloneFit, inputs: np.ndarray, masks: np.ndarray) -> None:
+        self.base, self.fit, self.inputs, self.masks = base, fit, inputs, masks
+        self.fits: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+
+    def bytes_of(self, storage: str) -> int:
+        """Payload and descriptor: D bytes (2 + D with a step) and the descriptor of a record without layers."""
+        return _layered_base_bytes(self.base.latent_dim, 0, storage, store_sigma=False) + record_overhead(
+            self.base.name)
+
+    def size(self, k: int, s: float | None, storage: str) -> int:
+        """The size of a :meth:`point`'s option (``k`` 0, ``s`` None: no layer)."""
+        return self.bytes_of(storage)
+
+    def storage_for(self, bytes_budget: int) -> str | None:
+        """How μ is stored within the budget: as a compact base stores it, else on the fixed grid; None when even
+        that does not fit."""
+        for storage in dict.fromkeys((compact_mu_storage(self.base.mu), MU_INT8_FIXED)):
+            if self.bytes_of(storage) <= bytes_budget:
+                return storage
+        return None
+
+    def _fitted(self, storage: str) -> tuple[np.ndarray, np.ndarray]:
+        if storage not in self.fits:
+            self.fits[storage] = self.fit(storage)
+        return self.fits[storage]
+
+    def point(self, bytes_budget: int) -> RatePoint:
+        """The record within the budget as a rate point (its kept-slice mapped L1 error, clamped decode)."""
+        storage = self.storage_for(bytes_budget)
+        assert storage is not None
+        mapped = np.clip(self._fitted(storage)[1], 0.0, MAPPED_MAX)
+        return RatePoint(self.bytes_of(storage), float((np.abs(mapped - self.inputs) * self.masks).sum()), True,
+                         (0, None, storage), self)
+
+    def record(self, k: int, s: float | None, storage: str) -> LayeredRecord:
+        """The record of a :meth:`point`'s option (``k`` 0, ``s`` None: no layer)."""
+        code = self._fitted(storage)[0]
+        return LayeredRecord(self.base.name, code, self.base.sigma, self.base.meta, compact_mu=True,
+                             fixed_mu_grid=storage == MU_INT8_FIXED, store_sigma=False)
+
+    def mapped(self, k: int, s: float | None, storage: str) -> np.ndarray:
+        return self._fitted(storage)[1]
+
+
 def _coded_bytes(layer: BasisLayer | None) -> int | None:
     """An entropy-coded basis layer's bytes (its descriptor states them, format 2.4); None for any other."""
     return layer.nbytes if layer is not None and layer.prior is not None else None
@@ -726,9 +796,10 @@ def smallest_bytes_budget(
     """The smallest ``bytes_budget`` that any material can be encoded within, for a model's latent size.
 
     The smallest record is a compact base (μ on the fixed grid, one σ byte) with one basis coefficient, or, without
-    a basis layer, a latent record (μ and σ in the latent dtype); each with the descriptor of a one-byte name. Where
-    records without a latent may be written (format 2.1), one basis coefficient alone: 6 bytes. A
-    material whose μ leaves the fixed grid, or whose name is longer, needs a little more: :func:`encode_layers`
+    a basis layer, a latent record (μ and σ in the latent dtype); in records without σ (format 2.2), the base
+    alone with μ on the fixed grid (D bytes; a μ past the grid's ±3.97 is stored at its end); each with the
+    descriptor of a one-byte name. Where records without a latent may be written (format 2.1), one basis
+    coefficient alone: 6 bytes. A material whose name is longer needs a little more: :func:`encode_layers`
     refuses it then. Checked before any model is loaded (``bvae compress --bytes``).
 
     Parameters
@@ -750,6 +821,9 @@ def smallest_bytes_budget(
     int
     """
     plain = (2 if store_sigma else 1) * latent_dim * latent_itemsize + record_overhead("a")
+    if not store_sigma:  # the base alone, μ compact on the fixed grid, no layer (format 2.2)
+        alone = _layered_base_bytes(latent_dim, latent_itemsize, MU_INT8_FIXED, store_sigma=False)
+        plain = min(plain, alone + record_overhead("a"))
     if not basis:
         return plain
     if without_latent:
