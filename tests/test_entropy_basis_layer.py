@@ -211,3 +211,43 @@ def test_every_prefix_size_is_the_length_of_that_prefix_coded(seed: int) -> None
         q[-1] = MAX_MAGNITUDE - seed  # an escape at the end
     sizes = coded_prefix_sizes(q, codes)
     assert sizes == [len(encode_integers(q[:k], codes[:k])) for k in range(len(q) + 1)]
+
+
+def test_the_writer_declares_the_prior_under_which_the_coefficients_cost_least() -> None:
+    """``CODED_PRIORS``: a residual whose spread is what the first prior expects keeps it; one three times as wide
+    (a material unlike the training ones) gets the wider prior, and a smaller squared error in the same bytes than
+    under the first."""
+    from brdfcodec.codec.encoding import CODED_PRIOR, CODED_PRIORS, _coded_prior_and_count
+
+    rng = np.random.default_rng(3)
+    for latent, first in ((True, 8), (False, 0)):
+        priors = CODED_PRIORS[latent]
+        assert priors[0] == CODED_PRIOR[latent] and len(set(priors)) == len(priors)
+        amplitude, decay = priors[0]
+        vectors = np.arange(first + 1, first + 193, dtype=np.float64)
+        spread = 2.0 ** (amplitude / 16 - 4) * vectors ** (-decay / 32) / np.sqrt(2)  # the Laplace scale
+        assert _coded_prior_and_count(rng.laplace(0, 1, 192) * spread, first, 60, priors)[0] == priors[0]
+        wide = rng.laplace(0, 1, 192) * spread * 3
+        prior, count = _coded_prior_and_count(wide, first, 60, priors)
+        assert prior == priors[1] and count >= 1
+        under = {p: choose_coding(wide, first, 60, *p).error for p in priors}
+        assert under[priors[1]] < under[priors[0]]
+    with pytest.raises(ValueError, match="no coded basis layer fits"):
+        _coded_prior_and_count(np.ones(4), 0, 0, CODED_PRIORS[False])
+
+
+def test_records_under_two_priors_share_a_file_as_two_forms() -> None:
+    from brdfcodec.codec.encoding import CODED_PRIORS
+
+    rng = np.random.default_rng(2)
+    records = []
+    for name, prior in zip(("narrow", "wide"), CODED_PRIORS[True]):
+        layer = coded_coefficients(SHA, rng.laplace(0, 30, 40), 20, prior, first=8)
+        assert layer is not None and layer.prior == prior
+        records.append(LayeredRecord(name, np.zeros(8), np.ones(8), basis=layer, compact_mu=True,
+                                     fixed_mu_grid=True, store_sigma=False))
+    parsed = parse_bvae(encode_bvae(records, DECODER))
+    assert parsed.header.form_count == 2
+    for record in records:
+        back = parsed.record(record.name)
+        assert back.basis.prior == record.basis.prior and back.basis.q.tolist() == record.basis.q.tolist()

@@ -98,6 +98,16 @@ BasisCoding = Literal["auto", "coded", "packed", "int8"]
 #: (2^7.9·n^−1.27): power laws fitted to the least-squares coefficients of the seven analytic presets' residuals
 #: (with a refined latent: vectors 9 to 75; without: 1 to 75) on the shipped model.
 CODED_PRIOR: dict[bool, tuple[int, int]] = {True: (156, 28), False: (190, 41)}
+#: The priors a coded layer may declare, tried per record (the first is :data:`CODED_PRIOR`, kept on a tie): a
+#: material unlike the model's training materials leaves a residual whose spread falls more slowly with the
+#: vector's rank, and under a prior that expects the fast fall its larger later coefficients cost escape codes.
+#: The second prior of each kind spreads 2^(32/16) = 4 times wider past the linear path (a latent base: amplitude
+#: 188, vector n's spread 2^7.75·n^−0.875) or falls as n^−0.91 from the first vector (no latent: decay 29) —
+#: the spreads of the never-seen family's least-squares coefficients, which at one prior cost more coefficients
+#: than the bytes hold. The writer compares the priors on the least-squares coefficients of the layer's bytes
+#: (squared error of the layer's sum at those bytes, :func:`~brdfcodec.layers.coded_basis.choose_coding`) and
+#: fits the layer under the better one; each prior used in a file is a form of its own (spec §3.2, §4.8).
+CODED_PRIORS: dict[bool, tuple[tuple[int, int], ...]] = {True: ((156, 28), (188, 28)), False: ((190, 41), (190, 29))}
 _BASIS_CODINGS: tuple[str, ...] = get_args(BasisCoding)
 
 #: Most coefficients whose count takes one varint byte in a record's descriptor.
@@ -344,21 +354,25 @@ def _basis_only_fit(
     def fit_packed(k: int) -> tuple[BasisLayer, np.ndarray]:
         # in the bytes of k int8 coefficients: the count the least-squares coefficients pack to, then those fitted
         # (Adam) and packed, and the integers polished within their fields
-        prior = CODED_PRIOR[False]
         least_squares_of: dict[int, np.ndarray] = {}
+        prior_of: dict[int, tuple[int, int]] = {}  # the prior chosen for each size of layer tried
 
         def count_in(available: int, layer_bytes: int) -> int:
             if available not in least_squares_of:
                 least_squares_of[available] = fit_basis_only_coefficients(
                     target, weights, centre, BasisOperator.of(basis, 0, available), 0)
-            return _kept_count(options.coded, least_squares_of[available], 0, layer_bytes, prior)
+            if not options.coded:
+                return _packed_count(least_squares_of[available], 0, layer_bytes)
+            prior_of[layer_bytes], count = _coded_prior_and_count(least_squares_of[available], 0, layer_bytes - 1,
+                                                                  CODED_PRIORS[False])
+            return count
 
         count, layer_bytes = _layer_size(count_in, k, basis.count)
         max_bytes = layer_bytes - (1 if options.coded else 0)
         components = BasisOperator.of(basis, 0, count)
         coefficients = fit_basis_only_coefficients(target, weights, centre, components, options.effort)
         if options.coded:
-            coded = coded_coefficients(basis.sha256, coefficients, max_bytes, prior)
+            coded = coded_coefficients(basis.sha256, coefficients, max_bytes, prior_of[layer_bytes])
             assert coded is not None
             return coded, basis.on_grid(centre + basis.weighted_sum(coded.coefficients()))
         layer = packed_coefficients(basis.sha256, coefficients, max_bytes)
@@ -410,10 +424,14 @@ def _basis_fit(
             codings = ["packed", "coded"] if options.basis_coding == "auto" else [
                 "coded" if options.coded else "packed"]
             max_bytes, count_of = {}, {}
+            prior_of: dict[int, tuple[int, int]] = {}  # a coded layer's prior for each size of layer tried
             for c in codings:
                 def count_in(available: int, layer_bytes: int, coding: str = c) -> int:
-                    return _kept_count(coding == "coded", least_squares(first, available, p), first, layer_bytes,
-                                       CODED_PRIOR[True])
+                    if coding != "coded":
+                        return _packed_count(least_squares(first, available, p), first, layer_bytes)
+                    prior_of[layer_bytes], count = _coded_prior_and_count(
+                        least_squares(first, available, p), first, layer_bytes - 1, CODED_PRIORS[True])
+                    return count
                 try:
                     count_of[c], layer_bytes = _layer_size(count_in, k, basis.count - first)
                 except ValueError:  # no coded layer fits these bytes: under auto, the packed one alone
@@ -448,8 +466,8 @@ def _basis_fit(
             base_mapped: np.ndarray | None = None
             for coding in (c for c in codings if count_of[c] == count):
                 if coding == "coded":
-                    layer = coded_coefficients(basis.sha256, coefficients[0], max_bytes[coding], CODED_PRIOR[True],
-                                               first, p)
+                    layer = coded_coefficients(basis.sha256, coefficients[0], max_bytes[coding],
+                                               prior_of[max_bytes[coding] + 1], first, p)
                 elif coding == "packed":
                     layer = packed_coefficients(basis.sha256, coefficients[0], max_bytes[coding], first, p)
                 else:
@@ -498,20 +516,24 @@ def _basis_fit(
     return fit
 
 
-def _kept_count(coded: bool, coefficients: np.ndarray, first: int, layer_bytes: int, prior: tuple[int, int]) -> int:
-    """How many of these coefficients a coded or packed layer keeps in ``layer_bytes`` (the bytes k int8
-    coefficients and their step would take; a coded layer has one less: its length takes a descriptor byte)."""
-    if coded:
-        return _coded_count(coefficients, first, layer_bytes - 1, prior)
-    return _packed_count(coefficients, first, layer_bytes)
+def _coded_prior_and_count(coefficients: np.ndarray, first: int, max_bytes: int,
+                           priors: Sequence[tuple[int, int]]) -> tuple[tuple[int, int], int]:
+    """The prior (of ``priors``) under which the best coded layer of ``max_bytes`` leaves the least squared error
+    of these coefficients (of vectors ``first``, …; the first prior on a tie), and how many coefficients it keeps.
 
-
-def _coded_count(coefficients: np.ndarray, first: int, max_bytes: int, prior: tuple[int, int]) -> int:
-    """How many of these coefficients (of vectors ``first``, …) the best coded layer of ``max_bytes`` keeps."""
-    choice = choose_coding(coefficients, first, max_bytes, *prior)
-    if choice is None:
+    Raises
+    ------
+    ValueError
+        No coded layer fits (not even one coefficient) under any of the priors.
+    """
+    best: tuple[float, tuple[int, int], int] | None = None
+    for prior in priors:
+        choice = choose_coding(coefficients, first, max_bytes, *prior)
+        if choice is not None and (best is None or choice.error < best[0]):
+            best = (choice.error, prior, len(choice.q))
+    if best is None:
         raise ValueError(f"no coded basis layer fits in {max_bytes} bytes")
-    return len(choice.q)
+    return best[1], best[2]
 
 
 def _packed_count(coefficients: np.ndarray, first: int, max_bytes: int) -> int:
