@@ -352,8 +352,8 @@ def test_cli_latent_flag_and_the_bytes_floor(red_plastic_file: Path, tmp_path: P
     assert entry.layers["mu"] == "none" and entry.layers["basis"]["count"] >= 5  # packed: at least as many
     assert entry.length + entry.descriptor_bytes <= 10
     for flags, message in ((["--bytes", "5", "--latent", "auto"], "--bytes 5 is below the smallest record"),
-                           (["--bytes", "10", "--latent", "always"], "--bytes 10 is below the smallest record"),
-                           (["--bytes", "10"], "--bytes 10 is below the smallest record"),  # always, the default
+                           (["--bytes", "9", "--latent", "always"], "--bytes 9 is below the smallest record"),
+                           (["--bytes", "9"], "--bytes 9 is below the smallest record"),  # always, the default
                            (["--latent", "always"], "--latent chooses between the records of rate control")):
         bad = tmp_path / "bad.bvae"
         assert main(["compress", str(red_plastic_file), "-o", str(bad), *flags]) == 2

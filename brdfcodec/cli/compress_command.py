@@ -65,8 +65,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     target.add_argument("--bytes", type=int, metavar="N",
                         help="largest quality within N bytes per material: what each adds to the file beyond its "
                         "name, its record and its index entry (adds enhancement "
-                        "layers: basis coefficients, then a detail layer; from 12 B, where the base is stored "
-                        "compact: μ as int8 on a fixed grid, or with a step where it does not fit, one σ byte; "
+                        "layers: basis coefficients, then a detail layer; from 10 B, the base alone stored "
+                        "compact: μ as int8 on a fixed grid, or with a step where it does not fit and the budget "
+                        "has room, from 14 B with basis coefficients (with --sigma, from 15 B); "
                         "from 6 B with --latent auto, without a latent)")
     target.add_argument("--max-relae", type=float, metavar="X",
                         help="smallest record whose measured RelAE on its material is at most X (adds enhancement "
