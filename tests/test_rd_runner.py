@@ -132,3 +132,16 @@ def test_decode_time_plot_draws_every_timed_point_and_refuses_rows_without_times
     for k, row in enumerate(rows):
         row.update(decode_ms_median=10.0 + k, decode_machine="CPU: test")
     assert write_decode_time_plot(rows, tmp_path / "t.png").read_bytes()[:4] == b"\x89PNG"
+
+
+def test_a_library_is_over_its_budget_when_any_family_is() -> None:
+    """The file within N per material is not enough: a family whose records fill the budget while another's do
+    not exceeds N by a fraction of the header's share, and the runner lowers ``--bytes`` for it."""
+    from brdfcodec.report.generalisation import bytes_over_budget
+
+    records = {"a": 126, "b": 126, "c": 120, "d": 120}
+    families = ["merl", "merl", "rgl", "rgl"]
+    assert bytes_over_budget(records, 2.0, families, 128) == 0.0  # merl: 126 + 2
+    assert bytes_over_budget(records, 2.5, families, 128) == 0.5  # merl over by 0.5, the file (125.5) within
+    assert bytes_over_budget(records, 2.5, ["x"] * 4, 128) == -2.5  # one family: the file's mean
+    assert bytes_over_budget({"a": 140, "b": 100}, 0.0, ["merl", "rgl"], 128) == 12.0

@@ -15,7 +15,9 @@ materials, :func:`run_experiment` measures
   **file's** bytes less the materials' names (UTF-8), divided by the number
   of materials, is at most N; a family's bytes per material are its
   records' (descriptor and payload, names aside) plus an equal share of the
-  header per material;
+  header per material, and N' is lowered until every family's are at most N
+  too (a family whose records fill their budget while another's do not would
+  otherwise exceed N by a fraction of the header's share);
 - ``pca-*``: PCA of the mapped kept slices fitted on the *same training
   materials* as the model (as measured, ``pca``, and in all six colour
   orders, ``pca-perm``), with k coefficients as int8 plus one float16 scale
@@ -228,6 +230,37 @@ def _error_summary(errors: Sequence[tuple[float, float]]) -> dict[str, Any]:
             "linear_relae_mean": float(linear.mean()), "per_material_mapped": [float(v) for v in mapped]}
 
 
+def _record_bytes(library: Any, data: bytes, names: Sequence[str], name_bytes: int) -> tuple[dict[str, int], float]:
+    """Each material's record bytes (descriptor and payload, its name aside) and the header's share per material
+    (the file's bytes less the names and the records, divided by the number of materials)."""
+    entries = {entry.name: entry for entry in library.header.entries}
+    record_bytes = {n: entries[n].length + entries[n].descriptor_bytes for n in names}
+    return record_bytes, (len(data) - name_bytes - sum(record_bytes.values())) / len(names)
+
+
+def bytes_over_budget(record_bytes: dict[str, int], header_share: float, families: Sequence[str],
+                      budget: int) -> float:
+    """How far a library's bytes per material exceed the budget N: the most, over the file and each family, of
+    its mean record bytes (descriptor and payload, names aside) plus the header's share per material, less N
+    (≤ 0: within the budget).
+
+    Parameters
+    ----------
+    record_bytes : dict of str to int
+        Each material's record bytes, in the order of ``families``.
+    header_share : float
+        The file's bytes less the names and the records, per material.
+    families : sequence of str
+        Each material's family, in the order of ``record_bytes``.
+    budget : int
+        N, bytes per material.
+    """
+    sizes = np.array(list(record_bytes.values()), dtype=np.float64)
+    labels = np.asarray(families)
+    means = [sizes.mean(), *(sizes[labels == family].mean() for family in dict.fromkeys(families))]
+    return float(max(means) + header_share - budget)
+
+
 def _bvae_rows(model: Path, names: Sequence[str], families: Sequence[str], inputs: np.ndarray, masks: np.ndarray,
                references: Sequence[Any], budgets: Sequence[int], effort: int,
                error: Callable[[Any, np.ndarray], tuple[float, float]], latent: str = "auto",
@@ -242,21 +275,20 @@ def _bvae_rows(model: Path, names: Sequence[str], families: Sequence[str], input
     items = [bc.MaterialInput(n, x, r, m) for n, x, r, m in zip(names, inputs, references, masks, strict=True)]
     for budget in budgets:
         # The file's fixed header is shared by the materials: --bytes is lowered by its share (and again by
-        # the excess, if any) so that the file's bytes less the names stay within N per material.
+        # the excess, if any) so that the file's bytes less the names, and each family's, stay within N per
+        # material.
         flag = budget - math.ceil(_HEADER_ESTIMATE / len(names)) if header_in_budget else budget
         if flag < _SMALLEST_RECORD:  # too few materials to share the header within this budget: no point
             continue
-        for _ in range(4 if header_in_budget else 1):
+        for _ in range(6 if header_in_budget else 1):
             data = bc.encode(items, model=model, latent_dtype="float16", measure_error=False, effort=effort,
                              bytes=max(flag, 1), latent=latent)  # type: ignore[arg-type]
-            excess = len(data) - name_bytes - budget * len(names)
-            if excess <= 0 or flag <= 1:
+            library = bc.decode(data, decoder=decoder)
+            record_bytes, header_share = _record_bytes(library, data, names, name_bytes)
+            over = bytes_over_budget(record_bytes, header_share, families, budget)
+            if over <= 0 or flag <= 1 or not header_in_budget:
                 break
-            flag -= math.ceil(excess / len(names))
-        library = bc.decode(data, decoder=decoder)
-        entries = {entry.name: entry for entry in library.header.entries}
-        record_bytes = {n: entries[n].length + entries[n].descriptor_bytes for n in names}
-        header_share = (len(data) - name_bytes - sum(record_bytes.values())) / len(names)
+            flag -= math.ceil(over)
         library[names[0]].table(masked="unmeasured")  # warm-up (lazy imports, thread pools), not timed
         library.forget()
         for family in rows:
