@@ -15,9 +15,11 @@ materials, :func:`run_experiment` measures
   **file's** bytes less the materials' names (UTF-8), divided by the number
   of materials, is at most N; a family's bytes per material are its
   records' (descriptor and payload, names aside) plus an equal share of the
-  header per material, and N' is lowered until every family's are at most N
-  too (a family whose records fill their budget while another's do not would
-  otherwise exceed N by a fraction of the header's share);
+  header per material, and N' is the largest value found (from an estimate
+  of the header's share, then up or down by the bytes per material to spare
+  or in excess) for which every family's are at most N too (a family whose
+  records fill their budget while another's do not would otherwise exceed N
+  by a fraction of the header's share);
 - ``pca-*``: PCA of the mapped kept slices fitted on the *same training
   materials* as the model (as measured, ``pca``, and in all six colour
   orders, ``pca-perm``), with k coefficients as int8 plus one float16 scale
@@ -274,21 +276,39 @@ def _bvae_rows(model: Path, names: Sequence[str], families: Sequence[str], input
     rows: dict[str, list[dict[str, Any]]] = {family: [] for family in families}
     items = [bc.MaterialInput(n, x, r, m) for n, x, r, m in zip(names, inputs, references, masks, strict=True)]
     for budget in budgets:
-        # The file's fixed header is shared by the materials: --bytes is lowered by its share (and again by
-        # the excess, if any) so that the file's bytes less the names, and each family's, stay within N per
-        # material.
+        # The file's fixed header is shared by the materials: --bytes starts below N by an estimate of its
+        # share, then moves to the largest value for which the file's bytes less the names, and each family's,
+        # stay within N per material.
         flag = budget - math.ceil(_HEADER_ESTIMATE / len(names)) if header_in_budget else budget
         if flag < _SMALLEST_RECORD:  # too few materials to share the header within this budget: no point
             continue
-        for _ in range(6 if header_in_budget else 1):
+        fitting: tuple[int, bytes, Any, dict[str, int], float] | None = None  # the largest --bytes within N
+        tried: set[int] = set()
+        grown = True  # whether the last larger --bytes made larger records (else the records are full)
+        for _ in range(8 if header_in_budget else 1):
             data = bc.encode(items, model=model, latent_dtype="float16", measure_error=False, effort=effort,
                              bytes=max(flag, 1), latent=latent)  # type: ignore[arg-type]
             library = bc.decode(data, decoder=decoder)
             record_bytes, header_share = _record_bytes(library, data, names, name_bytes)
             over = bytes_over_budget(record_bytes, header_share, families, budget)
-            if over <= 0 or flag <= 1 or not header_in_budget:
+            tried.add(flag)
+            if over <= 0 and (fitting is None or flag > fitting[0]):
+                if fitting is not None:
+                    grown = sum(record_bytes.values()) > sum(fitting[3].values())
+                fitting = (flag, data, library, record_bytes, header_share)
+            # a byte or more per material to spare: a larger --bytes (at most N) may fit, the header's share
+            # having been estimated high, unless the records stopped growing; over: a smaller one, down to the
+            # largest known to fit
+            step = min(math.floor(-over), budget - flag) if over <= 0 else -math.ceil(over)
+            if not header_in_budget or step == 0 or flag + step in tried or flag + step < 1:
                 break
-            flag -= math.ceil(over)
+            if step > 0 and not grown:
+                break
+            if fitting is not None and step < 0 and flag + step <= fitting[0]:
+                break
+            flag += step
+        if fitting is not None:
+            flag, data, library, record_bytes, header_share = fitting
         library[names[0]].table(masked="unmeasured")  # warm-up (lazy imports, thread pools), not timed
         library.forget()
         for family in rows:
