@@ -425,6 +425,7 @@ def _basis_fit(
                 "coded" if options.coded else "packed"]
             max_bytes, count_of = {}, {}
             prior_of: dict[int, tuple[int, int]] = {}  # a coded layer's prior for each size of layer tried
+            coded_prior = CODED_PRIOR[True]  # the prior of the coded layer's size, once chosen
             for c in codings:
                 def count_in(available: int, layer_bytes: int, coding: str = c) -> int:
                     if coding != "coded":
@@ -439,6 +440,8 @@ def _basis_fit(
                         raise
                     continue
                 max_bytes[c] = layer_bytes - (1 if c == "coded" else 0)
+                if c == "coded":
+                    coded_prior = prior_of[layer_bytes]
             codings = [c for c in codings if c in count_of]
         else:
             first = basis_offset(linear_rank, basis.count, k)
@@ -466,8 +469,8 @@ def _basis_fit(
             base_mapped: np.ndarray | None = None
             for coding in (c for c in codings if count_of[c] == count):
                 if coding == "coded":
-                    layer = coded_coefficients(basis.sha256, coefficients[0], max_bytes[coding],
-                                               prior_of[max_bytes[coding] + 1], first, p)
+                    layer = coded_coefficients(basis.sha256, coefficients[0], max_bytes[coding], coded_prior,
+                                               first, p)
                 elif coding == "packed":
                     layer = packed_coefficients(basis.sha256, coefficients[0], max_bytes[coding], first, p)
                 else:

@@ -665,9 +665,6 @@ class _CompactAlone:
         return LayeredRecord(self.base.name, code, self.base.sigma, self.base.meta, compact_mu=True,
                              fixed_mu_grid=storage == MU_INT8_FIXED, store_sigma=False)
 
-    def mapped(self, k: int, s: float | None, storage: str) -> np.ndarray:
-        return self._fitted(storage)[1]
-
 
 def _coded_bytes(layer: BasisLayer | None) -> int | None:
     """An entropy-coded basis layer's bytes (its descriptor states them, format 2.4); None for any other."""
