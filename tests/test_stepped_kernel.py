@@ -9,7 +9,7 @@ import pytest
 from brdfcodec.codec.device_decode import _invalid_bins, table_from_mapped_host
 from brdfcodec.representation import stepped_kernel
 from brdfcodec.representation.network_io import stepped_table
-from brdfcodec.representation.stepped_kernel import invalid_runs
+from brdfcodec.representation.stepped_kernel import invalid_runs, whole_gaps
 
 pytest.importorskip("numba", reason="numba is a dependency; without it the compiled passes are not used")
 
@@ -92,6 +92,53 @@ def test_invalid_runs_cover_exactly_the_invalid_bins() -> None:
         rebuilt[h, d, low:high] = True
     np.testing.assert_array_equal(rebuilt, invalid)
     assert invalid_runs(np.zeros((2, 2, 5), dtype=bool)).shape == (2, 2, 1, 2)
+
+
+def test_whole_gaps_are_the_gaps_whose_nine_bins_are_all_invalid() -> None:
+    invalid = np.zeros((2, 3, 180), dtype=bool)
+    invalid[0, 0, 9:18] = True  # gap 1, whole
+    invalid[0, 1, 10:18] = True  # gap 1 less its first bin: not whole
+    invalid[1, 2, 171:180] = True  # the last gap, bin 179 included
+    whole = whole_gaps(invalid)
+    assert whole.shape == (2, 3, 20)
+    assert [tuple(index) for index in np.argwhere(whole)] == [(0, 0, 1), (1, 2, 19)]
+    np.testing.assert_array_equal(whole_gaps(_invalid_bins()),
+                                  _invalid_bins().reshape(90, 90, 20, 9).all(axis=-1))
+
+
+def test_a_mask_over_whole_gaps_and_the_last_bin_is_filled_by_the_compiled_pass() -> None:
+    """Gaps wholly invalid are filled without being stepped, and the last bin (written again from the last kept
+    slice) is still filled: the NumPy path's table, bit for bit."""
+    rng = np.random.default_rng(9)
+    start = np.exp(rng.standard_normal((3, 90, 90, 21)))
+    ratio = np.exp(rng.standard_normal((3, 90, 90, 20)) * 0.1)
+    factor = np.array([1e-3, 0.7, 2.0])
+    invalid = np.zeros((90, 90, 180), dtype=bool)
+    invalid[:, :45, 162:] = True  # the last two gaps, bin 179 with them
+    invalid[:, 45:, 10:30] = True  # part of gap 1, gap 2 whole, part of gap 3
+    invalid.setflags(write=False)
+    compiled = stepped_table(start, ratio, factor, invalid=invalid, fill=-1.0, compiled=True)
+    reference = stepped_table(start, ratio, factor, invalid=invalid, fill=-1.0)
+    np.testing.assert_array_equal(_bits(compiled), _bits(reference))
+    assert (compiled[:, :, :45, 162:] == -1.0).all() and (compiled[:, :, 45:, 10:30] == -1.0).all()
+
+
+def test_the_host_decode_takes_one_exp_on_both_paths_whichever_library(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Torch's float64 exp where NumPy's is not vectorised, NumPy's where it is: the single decode (no compiled
+    passes) and the batch decode's (compiled) give the same bits either way, within an ulp of each other."""
+    from brdfcodec.codec import device_decode
+
+    rng = np.random.default_rng(10)
+    mapped = (rng.random((63, 90, 90)) * 1.4).astype(np.float32)
+    tables = {}
+    for vectorised in (True, False):
+        monkeypatch.setattr(device_decode, "_numpy_exp_is_vectorised", lambda v=vectorised: v)
+        single = table_from_mapped_host(mapped, scale=0.7)
+        batch = table_from_mapped_host(mapped, scale=0.7, compiled=True)
+        np.testing.assert_array_equal(_bits(batch), _bits(single))
+        tables[vectorised] = single
+    valid = tables[True] >= 0
+    np.testing.assert_allclose(tables[False][valid], tables[True][valid], rtol=1e-6, atol=1e-12)
 
 
 def _not_compilable(value: object) -> None:

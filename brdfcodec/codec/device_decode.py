@@ -309,12 +309,13 @@ def table_from_mapped_host(
     """One full table in stored MERL units from clamped mapped slices, as a NumPy array (the host decode).
 
     :func:`~brdfcodec.representation.network_io.table_from_mapped` followed by the mask, in fewer passes: the
-    float64 exponentials (one per kept slice, one per gap) are taken with torch, whose ``exp`` is vectorised
-    (NumPy's float64 ``exp`` is not, on most CPUs: it was 40 % of a decode), on the calling thread's torch
-    threads; the steps through each gap and the one rounding to float32 are NumPy's
+    float64 exponentials (one per kept slice, one per gap) are taken with a vectorised ``exp``: NumPy's where it
+    runs on AVX-512 lanes, over θh rows on the codec's threads, else torch's on its threads (NumPy's is scalar
+    there: it was 40 % of a decode); the steps through each gap and the one rounding to float32 are NumPy's
     (:func:`~brdfcodec.representation.network_io.stepped_table`), with the below-horizon bins filled while each
-    block is in cache. The same operations in the same order as ``table_from_mapped``: equal to it up to the
-    last bit of the float64 ``exp`` of each library (``spec/bvae-format.md`` §9).
+    block is in cache (compiled: gaps wholly below the horizon filled, not stepped). The same operations in the
+    same order as ``table_from_mapped``: equal to it up to the last bit of the float64 ``exp`` of each library
+    (``spec/bvae-format.md`` §9; bit for bit where NumPy's is taken).
 
     Parameters
     ----------
@@ -350,20 +351,52 @@ def table_from_mapped_host(
     arguments = compiled_log_arguments() if compiled else None
     with torch.no_grad():
         if arguments is not None:  # x = L · m and (x_b − x_a) / n in one compiled pass, the same operations
-            x_array, gaps = _scratch()
+            start, ratio = _scratch()
             over_theta_h_rows(arguments, np.ascontiguousarray(array, dtype=np.float32).reshape(
-                N_CHANNELS, N_KEPT_SLICES, N_THETA_H, N_THETA_D), LOG_RANGE, _GAP_LENGTHS, x_array, gaps)
-            x, ratio = torch.from_numpy(x_array), torch.from_numpy(gaps).exp_()
+                N_CHANNELS, N_KEPT_SLICES, N_THETA_H, N_THETA_D), LOG_RANGE, _GAP_LENGTHS, start, ratio)
         else:
             kept = torch.from_numpy(np.require(array, np.float32, ("C", "W"))).view(
                 N_CHANNELS, N_KEPT_SLICES, N_THETA_H, N_THETA_D).permute(0, 2, 3, 1)
             x = torch.empty((N_CHANNELS, N_THETA_H, N_THETA_D, N_KEPT_SLICES), dtype=torch.float64)
             x.copy_(kept).mul_(LOG_RANGE)  # x = L · m, kept slice last
-            ratio = torch.sub(x[..., 1:], x[..., :-1]).div_(_constants(torch.device("cpu"))["steps"]).exp_()
-        start = x.exp_().mul_(torch.from_numpy(factor).reshape(N_CHANNELS, 1, 1, 1))
-    return stepped_table(start.numpy(), ratio.numpy(), factor,
+            gaps = torch.sub(x[..., 1:], x[..., :-1]).div_(_constants(torch.device("cpu"))["steps"])
+            start, ratio = x.numpy(), gaps.numpy()
+        _exponentials_in_place(start, ratio, factor)
+    return stepped_table(start, ratio, factor,
                          invalid=None if fill is None else _invalid_bins(), fill=fill or 0.0, out=out,
                          compiled=compiled)
+
+
+@functools.cache
+def _numpy_exp_is_vectorised() -> bool:
+    """Whether NumPy's float64 ``exp`` runs on SIMD lanes on this CPU (its AVX-512F loop, about twice torch's
+    speed on one thread); elsewhere NumPy's is scalar and torch's (Sleef, vectorised on every CPU) is taken."""
+    try:
+        from numpy._core._multiarray_umath import __cpu_features__
+    except ImportError:  # pragma: no cover - a NumPy without the module: torch's exp
+        return False
+    return bool(__cpu_features__.get("AVX512F", False))
+
+
+def _exponentials_in_place(start: np.ndarray, ratio: np.ndarray, factor: np.ndarray) -> None:
+    """``start ← factor_c · exp(start)`` and ``ratio ← exp(ratio)`` in place (float64, (3, 90, 90, 21) and
+    (3, 90, 90, 20)), with one library's ``exp`` per machine (:func:`_numpy_exp_is_vectorised`) whichever path
+    calls, so that the batch and single decodes give the same bits. NumPy's runs over θh rows on the codec's
+    threads (it releases the GIL, :func:`over_theta_h_rows`); torch's on its own."""
+    scale = factor.reshape(N_CHANNELS, 1, 1, 1)
+    if not _numpy_exp_is_vectorised():
+        torch.from_numpy(ratio).exp_()
+        torch.from_numpy(start).exp_().mul_(torch.from_numpy(scale))
+        return
+
+    def rows(first: int, stop: int) -> None:
+        part = ratio[:, first:stop]
+        np.exp(part, out=part)
+        part = start[:, first:stop]
+        np.exp(part, out=part)
+        np.multiply(part, scale, out=part)
+
+    over_theta_h_rows(rows)
 
 
 _SCRATCH = threading.local()

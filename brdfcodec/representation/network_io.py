@@ -47,7 +47,7 @@ from brdfcodec.representation.layout import (
 )
 from brdfcodec.representation.mapping import LOG_RANGE, clamp_mapped, map_values
 from brdfcodec.representation.mask import validity_mask
-from brdfcodec.representation.stepped_kernel import compiled_stepping, invalid_runs
+from brdfcodec.representation.stepped_kernel import compiled_stepping, invalid_runs, whole_gaps
 from brdfcodec.runtime.threads import get_num_threads
 
 __all__ = [
@@ -221,7 +221,8 @@ def stepped_table(
     stepped by ``q`` through each gap (:func:`_scaled_expm1`'s geometric sequence), float64 throughout.
 
     The exponentials may come from NumPy (:func:`_kept_exponentials`) or from another library (the codec's host
-    decode takes them from torch, whose float64 ``exp`` is vectorised): the steps, and so the rounding, are the same.
+    decode may take them from torch, whose float64 ``exp`` is vectorised on every CPU): the steps, and so the
+    rounding, are the same.
     Block by block of θh rows, each round writes one offset of every gap into a small contiguous float32 slab, and
     one transposed copy puts the slab in φd order, then the mask is applied while the block is in cache: a strided
     write per round, or whole-table passes, were several times slower (memory traffic, not arithmetic, is the cost).
@@ -273,7 +274,7 @@ def stepped_table(
         count = int(np.prod(lead[:-2]))
         arguments = (np.ascontiguousarray(start, dtype=np.float64).reshape(count, N_THETA_H, N_THETA_D, -1),
                      np.ascontiguousarray(ratio, dtype=np.float64).reshape(count, N_THETA_H, N_THETA_D, -1), scales,
-                     _runs_of(invalid), filler, invalid is not None,
+                     *_runs_of(invalid), filler, invalid is not None,
                      out.reshape(count, N_THETA_H, N_THETA_D, N_PHI_D))
         over_theta_h_rows(kernel, *arguments, threads=threads)
         return out
@@ -336,20 +337,26 @@ def _row_pool(threads: int) -> ThreadPoolExecutor:
 
 
 #: Per read-only ``invalid`` array (by identity, the array kept alive): its runs as the compiled pass reads them.
-_RUNS: dict[int, tuple[np.ndarray, np.ndarray]] = {}
-#: The runs of the compiled pass when no bin is filled.
-_NO_RUNS = np.zeros((N_THETA_H, N_THETA_D, 1, 2), dtype=np.int64)
+_RUNS: dict[int, tuple[np.ndarray, tuple[np.ndarray, np.ndarray]]] = {}
+#: The runs and whole gaps of the compiled pass when no bin is filled.
+_NO_RUNS = (np.zeros((N_THETA_H, N_THETA_D, 1, 2), dtype=np.int64),
+            np.zeros((N_THETA_H, N_THETA_D, N_KEPT_SLICES - 1), dtype=np.bool_))
 
 
-def _runs_of(invalid: np.ndarray | None) -> np.ndarray:
-    """:func:`~brdfcodec.representation.stepped_kernel.invalid_runs` of ``invalid`` (cached for a read-only
-    array)."""
+def _runs_of(invalid: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`~brdfcodec.representation.stepped_kernel.invalid_runs` and
+    :func:`~brdfcodec.representation.stepped_kernel.whole_gaps` of ``invalid`` (cached for a read-only array)."""
     if invalid is None:
         return _NO_RUNS
     cached = _RUNS.get(id(invalid))
     if cached is not None and cached[0] is invalid:
         return cached[1]
-    runs = invalid_runs(invalid)
+    whole = whole_gaps(invalid)
+    # the kernel fills the whole gaps itself: the runs cover only the bins of the other gaps, and the last bin
+    # (the last gap's ninth, which the kernel writes again from the last kept slice)
+    in_whole = np.repeat(whole, _GAP, axis=-1)
+    in_whole[..., -1] = False
+    runs = invalid_runs(invalid & ~in_whole), whole
     if not invalid.flags.writeable:
         if len(_RUNS) > 8:
             _RUNS.clear()

@@ -27,7 +27,7 @@ import numpy as np
 
 from brdfcodec.conventions import KEPT_PHI_D_SLICES, N_KEPT_SLICES
 
-__all__ = ["compiled_log_arguments", "compiled_stepping"]
+__all__ = ["compiled_log_arguments", "compiled_stepping", "invalid_runs", "whole_gaps"]
 
 #: Bins from one kept slice to the next (a compile-time constant of the kernel: its inner loop unrolled), and the
 #: gaps between the 21 kept slices (``conventions.KEPT_PHI_D_SLICES``: 20 gaps of 9 fill the 180 bins).
@@ -65,19 +65,24 @@ def _compiled(function: Callable[..., None], *example: object) -> Callable[..., 
 def compiled_stepping() -> Callable[..., None] | None:
     """The compiled stepping kernel, or None where Numba cannot be imported or ``BRDFCODEC_NO_JIT=1``.
 
-    The kernel's signature: ``kernel(start, ratio, factors, runs, fill, masked, out, first_row, stop_row)`` with
+    The kernel's signature: ``kernel(start, ratio, factors, runs, whole, fill, masked, out, first_row, stop_row)``
+    with
 
     - ``start`` float64 (N, 90, 90, 21) and ``ratio`` float64 (N, 90, 90, 20), C-contiguous, N the leading indices
       times the 3 channels (channel last of them);
     - ``factors`` float64 (3,): ``factor_c`` per channel;
     - ``runs`` int64 (90, 90, R, 2): per (θh, θd) cell, up to R runs ``[low, high)`` of φd bins set to ``fill``
       (float32) when ``masked`` (unused runs: ``low == high``; :func:`invalid_runs`);
+    - ``whole`` bool (90, 90, 20): gaps whose 9 bins are all set to ``fill`` when ``masked``, without being
+      stepped (:func:`whole_gaps`: about a fifth of a table's gaps lie wholly below the horizon; the runs then
+      need not cover them);
     - ``out`` float32 (N, 90, 90, 180), C-contiguous, written at θh rows ``first_row`` … ``stop_row − 1``
       (threads may write disjoint row ranges at once: the kernel releases the GIL).
     """
     kept = _GAP_COUNT + 1
     return _compiled(_stepping, np.ones((3, 1, 1, kept)), np.ones((3, 1, 1, kept - 1)), np.ones(3),
-                     np.zeros((1, 1, 1, 2), dtype=np.int64), np.float32(-1.0), True,
+                     np.zeros((1, 1, 1, 2), dtype=np.int64), np.zeros((1, 1, kept - 1), dtype=np.bool_),
+                     np.float32(-1.0), True,
                      np.empty((3, 1, 1, _GAP_COUNT * _GAP), dtype=np.float32), 0, 1)
 
 
@@ -111,8 +116,16 @@ def invalid_runs(invalid: np.ndarray) -> np.ndarray:
     return runs
 
 
-def _stepping(start: np.ndarray, ratio: np.ndarray, factors: np.ndarray, runs: np.ndarray, fill: np.float32,
-              masked: bool, out: np.ndarray, first_row: int, stop_row: int) -> None:  # pragma: no cover - compiled
+def whole_gaps(invalid: np.ndarray) -> np.ndarray:
+    """Per (θh, θd) cell and gap between kept slices, whether all of the gap's bins (``g·9 … g·9 + 8``) are True
+    in ``invalid`` (90, 90, 180): bool (90, 90, 20), as :func:`compiled_stepping` reads it."""
+    flags = np.asarray(invalid, dtype=bool)
+    return flags[..., : _GAP_COUNT * _GAP].reshape(*flags.shape[:-1], _GAP_COUNT, _GAP).all(axis=-1)
+
+
+def _stepping(start: np.ndarray, ratio: np.ndarray, factors: np.ndarray, runs: np.ndarray, whole: np.ndarray,
+              fill: np.float32, masked: bool, out: np.ndarray, first_row: int,
+              stop_row: int) -> None:  # pragma: no cover - compiled
     count, _, columns, kept = start.shape
     gaps = kept - 1
     last = gaps * _GAP - 1  # bin 179: the last gap's ninth step lands on it, then the last kept slice's value
@@ -121,9 +134,13 @@ def _stepping(start: np.ndarray, ratio: np.ndarray, factors: np.ndarray, runs: n
         for h in range(first_row, stop_row):
             for d in range(columns):
                 for g in range(gaps):
+                    first = g * _GAP
+                    if masked and whole[h, d, g]:  # every bin of the gap is filled: nothing to step
+                        for j in range(_GAP):
+                            out[n, h, d, first + j] = fill
+                        continue
                     current = start[n, h, d, g]
                     q = ratio[n, h, d, g]
-                    first = g * _GAP
                     for j in range(_GAP):
                         out[n, h, d, first + j] = np.float32(current - factor)
                         current *= q  # one step more than used at j = 8: the value is not read
@@ -138,10 +155,12 @@ def _log_arguments(mapped: np.ndarray, log_range: float, steps: np.ndarray, x: n
                    first_row: int, stop_row: int) -> None:  # pragma: no cover - compiled
     channels, kept, _, columns = mapped.shape
     for c in range(channels):
-        for h in range(first_row, stop_row):  # one θh row of x (90 × 21, in cache) at a time, read along θd
-            for k in range(kept):
-                for d in range(columns):
-                    x[c, h, d, k] = np.float64(mapped[c, k, h, d]) * log_range
+        for h in range(first_row, stop_row):  # one (θh, θd) cell at a time: its 21 slices read once, written in order
             for d in range(columns):
-                for k in range(kept - 1):
-                    gaps[c, h, d, k] = (x[c, h, d, k + 1] - x[c, h, d, k]) / steps[k]
+                previous = np.float64(mapped[c, 0, h, d]) * log_range
+                x[c, h, d, 0] = previous
+                for k in range(1, kept):
+                    value = np.float64(mapped[c, k, h, d]) * log_range
+                    x[c, h, d, k] = value
+                    gaps[c, h, d, k - 1] = (value - previous) / steps[k - 1]
+                    previous = value
