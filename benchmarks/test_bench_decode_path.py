@@ -3,11 +3,13 @@ costs little.
 
 32 random latents, CPU, one process: ``BrdfDecoder.decode_many`` (full tables, below-horizon entries −1, every
 table consumed), and ``BrdfDecoder.decode_many_tensor`` (the same tables as one torch tensor, computed with torch
-on the decoder's device), each against the decoder network alone on the same latents, in batches of the same
-size, on the same torch threads (``codec_threads``). Paired: each round times both, alternating, so that a shared
-machine's drift falls on both; the ratio checked is the median of the per-round ratios (targets in
-``conftest.TARGETS``, "decode-many-32", "decode-many-tensor-32" and "decode-many-tensor-out-32", the last
-decoding into one tensor reused from round to round, as a renderer that decodes batch after batch would).
+on the decoder's device), each against the decoder network alone on the same latents, in the batches the decodes
+give it (:meth:`BrdfDecoder.network_batch`: 2 on the CPU, whichever ``batch_size`` is asked; "decode-network-batch"
+checks that they are not slower than batches of 16), on the same torch threads (``codec_threads``). Paired: each
+round times both, alternating, so that a shared machine's drift falls on both; the ratio checked is the median of
+the per-round ratios (targets in ``conftest.TARGETS``, "decode-many-32", "decode-many-tensor-32" and
+"decode-many-tensor-out-32", the last decoding into one tensor reused from round to round, as a renderer that
+decodes batch after batch would).
 """
 
 from __future__ import annotations
@@ -36,10 +38,12 @@ def _paired_against_the_network(benchmark, group: str, label: str,  # noqa: ANN0
     codes = np.random.default_rng(0).standard_normal((_COUNT, decoder.latent_dim)).astype(np.float32)
     records = [LatentRecord(f"m{i}", codes[i], np.ones(decoder.latent_dim, np.float32)) for i in range(_COUNT)]
 
+    step = decoder.network_batch(_BATCH)  # the network's own batches in the decodes (2 on the CPU)
+
     def network_alone() -> None:
         with codec_threads(), torch.inference_mode():
-            for start in range(0, _COUNT, _BATCH):
-                decoder.network(torch.from_numpy(codes[start : start + _BATCH])).numpy()
+            for start in range(0, _COUNT, step):
+                decoder.network(torch.from_numpy(codes[start : start + step])).numpy()
 
     def decode() -> None:
         candidate(decoder, codes, records)
@@ -102,3 +106,39 @@ def test_evaluate_tensor_at_directions_against_the_network_alone(benchmark) -> N
 
     _paired_against_the_network(benchmark, "evaluate-tensor-32x4096", "evaluate_tensor (4,096 pairs)",
                                 evaluate_tensor)
+
+
+def test_the_network_in_the_decoders_cpu_batches_against_batches_of_sixteen(benchmark) -> None:  # noqa: ANN001
+    """The network on 32 latents in :meth:`BrdfDecoder.network_batch`'s batches (2 on the CPU) against batches of
+    16, paired: the smaller batches' buffers are not returned to the system and faulted in again on every call."""
+    benchmark.group = "decode-network-batch"
+    benchmark.extra_info["role"] = "candidate"
+    decoder = BrdfDecoder()
+    codes = np.random.default_rng(0).standard_normal((_COUNT, decoder.latent_dim)).astype(np.float32)
+
+    def network(step: int) -> None:
+        with codec_threads(), torch.inference_mode():
+            for start in range(0, _COUNT, step):
+                decoder.network(torch.from_numpy(codes[start : start + step])).numpy()
+
+    small = decoder.network_batch(_BATCH)
+    network(_BATCH)
+    network(small)
+    baseline: list[float] = []
+    ratios: list[float] = []
+
+    def time_sixteen() -> None:
+        start = time.perf_counter()
+        network(_BATCH)
+        baseline.append(time.perf_counter() - start)
+
+    def timed_small() -> None:
+        start = time.perf_counter()
+        network(small)
+        ratios.append((time.perf_counter() - start) / baseline[-1])
+
+    benchmark.pedantic(timed_small, setup=time_sixteen, rounds=_ROUNDS, iterations=1)
+    benchmark.extra_info["paired_baseline_s"] = statistics.median(baseline)
+    benchmark.extra_info["paired_ratio"] = statistics.median(ratios)
+    benchmark.extra_info["summary"] = (f"network in batches of {small} / of {_BATCH}, {_COUNT} latents: per-round "
+                                       "ratios " + ", ".join(f"{r:.2f}" for r in ratios))

@@ -190,7 +190,8 @@ def test_spec_decoder_on_huge_latents() -> None:
     for code, decoded in zip(codes, got, strict=True):
         want = spec_decode(code, tensors, config)
         np.testing.assert_allclose(decoded, want, rtol=0, atol=TOLERANCE)
-    assert np.array_equal(got[3], got[4])  # beyond the bound, the bound
+    # beyond the bound, the bound (each decoded alone: in batches of another size the network may round otherwise)
+    assert np.array_equal(_torch_decode("default", codes[3:4]), _torch_decode("default", codes[4:5]))
     assert all(g.max() > 1.0 for g in got)  # saturated network values, not an all-zero output
 
 

@@ -1,7 +1,7 @@
 """The host decode of full tables (issue 51, item 2): ``codec.device_decode.table_from_mapped_host``.
 
-``BrdfDecoder.decode`` (full tables) and ``decode_many`` take it: the float64 exponentials from torch, the steps
-through each gap and the mask from NumPy. It must give the reference path's table
+``BrdfDecoder.decode`` (full tables) and ``decode_many`` take it: the float64 exponentials from NumPy or torch
+(one library per machine), the steps through each gap and the mask from NumPy. It must give the reference path's table
 (``representation.table_from_mapped`` then the mask) up to the last bit of each library's float64 ``exp``, stay
 within 1e-6 mapped of a float64 decode (``spec/bvae-format.md`` §9; dark entries, saturated and extreme latents
 included), and stay finite.
@@ -149,3 +149,35 @@ def test_the_table_is_written_where_asked(mapped: np.ndarray) -> None:
                   np.empty((3, 90, 90, 360), np.float32)[..., ::2]):
         with pytest.raises(ValueError, match="out must be"):
             table_from_mapped_host(mapped[1], out=wrong)
+
+
+def test_the_cpu_network_takes_at_most_two_codes_at_once(monkeypatch: pytest.MonkeyPatch) -> None:
+    """``BrdfDecoder.network_batch``: the batched decodes on the CPU give the network pairs of codes, whatever
+    ``batch_size`` asks (its buffers then stay below glibc's mmap threshold); the tables are unchanged."""
+    from brdfcodec.codec.decoder import CPU_NETWORK_BATCH
+
+    decoder = BrdfDecoder()
+    assert CPU_NETWORK_BATCH == 2
+    assert [decoder.network_batch(n) for n in (1, 2, 16)] == [1, 2, 2]
+    with pytest.raises(ValueError, match="at least 1"):
+        decoder.network_batch(0)
+    codes = np.random.default_rng(12).standard_normal((5, decoder.latent_dim)).astype(np.float32)
+    records = [LatentRecord(f"m{i}", code, np.ones(decoder.latent_dim, np.float32)) for i, code in enumerate(codes)]
+    expected = [decoder.decode(record) for record in records]
+    sizes: list[int] = []
+    forward = type(decoder.network).forward
+
+    def counting(network, z):  # noqa: ANN001, ANN202 - the network's forward, counted
+        sizes.append(len(z))
+        return forward(network, z)
+
+    monkeypatch.setattr(type(decoder.network), "forward", counting)
+    tables = list(decoder.decode_many(records, batch_size=16))
+    assert sizes == [2, 2, 1]
+    for table, single in zip(tables, expected, strict=True):  # the network's rounding in pairs, not alone
+        assert np.array_equal(table < 0, single < 0)
+        valid = np.broadcast_to(single >= 0, single.shape)
+        np.testing.assert_allclose(map_values(table)[valid], map_values(single)[valid], rtol=0, atol=1e-5)
+    sizes.clear()
+    decoder.decode_many_tensor(codes, batch_size=16)
+    assert sizes == [2, 2, 1]

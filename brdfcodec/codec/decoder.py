@@ -51,7 +51,10 @@ from brdfcodec.codec.devices import indexed_device
 from brdfcodec.codec.prepare import MaskedEntries, ModelSpec, _apply_mask, resolve_model
 from brdfcodec.codec.projection import _has_latent, _projected_vectors, _ProjectionPlan
 
-__all__ = ["BrdfDecoder"]
+__all__ = ["CPU_NETWORK_BATCH", "BrdfDecoder"]
+
+#: The most codes the decoder network takes at once on the CPU (:meth:`BrdfDecoder.network_batch`).
+CPU_NETWORK_BATCH = 2
 
 
 def is_edited(record: Record) -> bool:
@@ -166,6 +169,20 @@ class BrdfDecoder:
         """Length of the latent code."""
         return self._latent_dim
 
+    def network_batch(self, batch_size: int) -> int:
+        """Codes the network takes at once when asked for ``batch_size``: at most :data:`CPU_NETWORK_BATCH` on
+        the CPU, ``batch_size`` on other devices.
+
+        On the CPU a network call's working buffers grow with the batch; above glibc's largest mmap threshold
+        (32 MB) they are returned to the system when the call ends and faulted in again by the next one, which
+        cost more than a batch saves: 5.8 ms a table in batches of 16 against 3.0 in pairs on 2 cores
+        (``benchmarks/test_bench_decode_path.py``, ``decode-network-batch``). Every batched decode of the CPU
+        runs its codes through the network in these batches, so that all see the same network output.
+        """
+        if batch_size < 1:
+            raise ValueError(f"batch_size must be at least 1, got {batch_size}")
+        return min(batch_size, CPU_NETWORK_BATCH) if self.device.type == "cpu" else batch_size
+
     @functools.cached_property
     def colour_dims(self) -> tuple[int, ...]:
         """Latent dimensions that control colour: from the manifest, else measured now by traversal."""
@@ -227,8 +244,7 @@ class BrdfDecoder:
 
     def _run(self, batch: np.ndarray, channels: tuple[int, ...] | None, batch_size: int) -> np.ndarray:
         """The batched network loop: clamped mapped output (:func:`~brdfcodec.representation.clamp_mapped`)."""
-        if batch_size < 1:
-            raise ValueError(f"batch_size must be at least 1, got {batch_size}")
+        batch_size = self.network_batch(batch_size)
         outputs = []
         with codec_threads(), torch.inference_mode(), _EvalMode(self.network):
             for start in range(0, len(batch), batch_size):
@@ -246,7 +262,8 @@ class BrdfDecoder:
         codes : array_like, shape (B, latent_dim) or (latent_dim,)
             Latent codes (any finite values; the output is clamped).
         batch_size : int, default 16
-            Codes run through the network at once.
+            Codes run through the network at once on a GPU; on the CPU at most :data:`CPU_NETWORK_BATCH`
+            (:meth:`network_batch`).
 
         Returns
         -------
@@ -574,8 +591,9 @@ class BrdfDecoder:
     ) -> Iterator[npt.NDArray[np.float32]]:
         """Full tables of many records, decoded ``batch_size`` at a time (a generator: one table built at a time).
 
-        The work after the network runs compiled (Numba, :mod:`brdfcodec.representation.stepped_kernel`), the
-        tables bit for bit :meth:`decode`'s: the first batch decode of a process imports Numba and loads the
+        The work after the network runs compiled (Numba, :mod:`brdfcodec.representation.stepped_kernel`), bit for
+        bit :meth:`decode`'s from the same network output (the network itself may round otherwise in batches of
+        another size: :meth:`network_batch`): the first batch decode of a process imports Numba and loads the
         kernels (a one-time cost in time and memory); ``BRDFCODEC_NO_JIT=1`` keeps the NumPy path.
         """
         for record in records:
@@ -629,7 +647,8 @@ class BrdfDecoder:
             The energy bound (``spec/bvae-format.md`` §6 step 5) for every table (True) or none (False); by
             default, exactly for edited records (:func:`is_edited`), never for bare codes.
         batch_size : int, default 16
-            Codes run through the network at once.
+            Codes run through the network at once on a GPU; on the CPU at most :data:`CPU_NETWORK_BATCH`
+            (:meth:`network_batch`).
         out : torch.Tensor of float32, shape (N, 3, 90, 90, 180), optional
             A contiguous tensor on :attr:`device` to write the tables into, for a renderer that decodes batch
             after batch into the same memory (a new 17.5 MB a table is otherwise allocated and first touched on
@@ -681,7 +700,8 @@ class BrdfDecoder:
         energy_bound : bool, optional
             As for :meth:`decode_many_tensor`: by default exactly for edited records, never for bare codes.
         batch_size : int, default 16
-            Codes run through the network at once.
+            Codes run through the network at once on a GPU; on the CPU at most :data:`CPU_NETWORK_BATCH`
+            (:meth:`network_batch`).
 
         Returns
         -------

@@ -429,8 +429,9 @@ def _network_mapped(decoder: BrdfDecoder, codes: torch.Tensor, batch_size: int) 
     network, was_training = decoder.network, decoder.network.training
     network.eval()  # under the caller's no_grad (inference tensors would refuse the in-place clamp), mode restored
     try:
-        for start in range(0, len(codes), batch_size):
-            outputs.append(network(codes[start : start + batch_size].to(decoder.dtype)).float())
+        step = decoder.network_batch(batch_size)  # the host decode's batches (BrdfDecoder.network_batch)
+        for start in range(0, len(codes), step):
+            outputs.append(network(codes[start : start + step].to(decoder.dtype)).float())
     finally:
         network.train(was_training)
     return clamp_mapped_tensor(torch.cat(outputs) if len(outputs) > 1 else outputs[0])
