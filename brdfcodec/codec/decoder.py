@@ -94,10 +94,12 @@ class _EvalMode:
 
     def __enter__(self) -> None:
         self.was_training = self.module.training
-        self.module.eval()
+        if self.was_training:  # a mode switch walks every submodule: only when needed
+            self.module.eval()
 
     def __exit__(self, *exc: object) -> None:
-        self.module.train(self.was_training)
+        if self.was_training:
+            self.module.train(True)
 
 
 class BrdfDecoder:

@@ -427,13 +427,15 @@ def _network_mapped(decoder: BrdfDecoder, codes: torch.Tensor, batch_size: int) 
         return torch.empty((0, N_CHANNELS * N_KEPT_SLICES, N_THETA_H, N_THETA_D), device=decoder.device)
     outputs = []
     network, was_training = decoder.network, decoder.network.training
-    network.eval()  # under the caller's no_grad (inference tensors would refuse the in-place clamp), mode restored
+    if was_training:  # under the caller's no_grad (inference tensors would refuse the in-place clamp)
+        network.eval()  # (a mode switch walks every submodule: only when needed, and restored)
     try:
         step = decoder.network_batch(batch_size)  # the host decode's batches (BrdfDecoder.network_batch)
         for start in range(0, len(codes), step):
             outputs.append(network(codes[start : start + step].to(decoder.dtype)).float())
     finally:
-        network.train(was_training)
+        if was_training:
+            network.train(True)
     return clamp_mapped_tensor(torch.cat(outputs) if len(outputs) > 1 else outputs[0])
 
 

@@ -126,7 +126,7 @@ def evaluate_tensor(
     batch_size: int = 16,
 ) -> torch.Tensor:
     """:meth:`BrdfDecoder.evaluate_tensor <brdfcodec.codec.BrdfDecoder.evaluate_tensor>` (see there)."""
-    from brdfcodec.codec.device_decode import _constants, _mapped_and_scales, records_or_codes
+    from brdfcodec.codec.device_decode import _mapped_and_scales, records_or_codes
     from brdfcodec.runtime.threads import codec_threads
 
     if batch_size < 1:
@@ -150,24 +150,45 @@ def evaluate_tensor(
     incoming = incoming.expand(shape).reshape(rows, directions, 3)
     outgoing = outgoing.expand(shape).reshape(rows, directions, 3)
     with codec_threads(), torch.no_grad():
-        mapped, scales = _mapped_and_scales(decoder, given, codes, energy_bound, batch_size)
-        h, d, p, above = merl_bins_tensor(incoming, outgoing)
-        h, d, p, above = (t.expand(count, directions) for t in (h, d, p, above))
-        plan, constants = _plan_on(device), _constants(device)
-        # flat indices into each material's (63, 90, 90) slices of the kept slot on either side, per channel
-        channel = torch.arange(N_CHANNELS, device=device) * N_KEPT_SLICES  # (3,)
-        cell = (h * N_THETA_D + d)[..., None]  # (B, N, 1)
-        plane = N_THETA_H * N_THETA_D
-        flat = mapped.reshape(count, -1)
-        low = flat.gather(1, ((channel + plan["left"][p][..., None]) * plane + cell).reshape(count, -1))
-        high = flat.gather(1, ((channel + plan["right"][p][..., None]) * plane + cell).reshape(count, -1))
-        low = low.reshape(count, directions, N_CHANNELS).double()
-        high = high.reshape(count, directions, N_CHANNELS).double()
-        t = plan["weight"][p][..., None]
-        x = ((1.0 - t) * low + t * high) * LOG_RANGE  # the interpolated argument (float64)
-        factor = constants["stored"].reshape(1, 1, N_CHANNELS)
-        if scales is not None:
-            factor = factor * scales.reshape(count, 1, 1)
-        value = torch.expm1(x) * factor
-        keep = above & ~constants["invalid"][h, d, p]
-        return torch.where(keep[..., None], value, torch.zeros_like(value)).float()
+        bins = merl_bins_tensor(incoming, outgoing)
+        # the materials a network batch at a time (BrdfDecoder.network_batch): their mapped slices are looked up
+        # and dropped, never all held at once (a new 65 MB for 32 materials, faulted in on every call)
+        step = decoder.network_batch(batch_size)
+        values = []
+        for start in range(0, count, step):
+            part = slice(start, min(start + step, count))
+            mapped, scales = _mapped_and_scales(decoder, None if given is None else given[part],
+                                                None if codes is None else codes[part], energy_bound, batch_size)
+            values.append(_values_at(mapped, scales, *(t if rows == 1 else t[part] for t in bins)))
+        return torch.cat(values) if len(values) > 1 else values[0]
+
+
+def _values_at(mapped: torch.Tensor, scales: torch.Tensor | None, h: torch.Tensor, d: torch.Tensor, p: torch.Tensor,
+               above: torch.Tensor) -> torch.Tensor:
+    """Stored values (B, N, 3) float32 of B materials' clamped mapped slices ``mapped`` (B, 63, 90, 90) at the
+    MERL bins ``h, d, p`` and horizon flags ``above`` of :func:`merl_bins_tensor` ((B or 1, N)), times the energy
+    bound's factors ``scales`` (B,) where given: the kept slots on either side interpolated in the mapped domain,
+    unmapped in float64, 0 below the horizon."""
+    from brdfcodec.codec.device_decode import _constants
+
+    count, device = len(mapped), mapped.device
+    directions = h.shape[-1]
+    h, d, p, above = (t.expand(count, directions) for t in (h, d, p, above))
+    plan, constants = _plan_on(device), _constants(device)
+    # flat indices into each material's (63, 90, 90) slices of the kept slot on either side, per channel
+    channel = torch.arange(N_CHANNELS, device=device) * N_KEPT_SLICES  # (3,)
+    cell = (h * N_THETA_D + d)[..., None]  # (B, N, 1)
+    plane = N_THETA_H * N_THETA_D
+    flat = mapped.reshape(count, -1)
+    low = flat.gather(1, ((channel + plan["left"][p][..., None]) * plane + cell).reshape(count, -1))
+    high = flat.gather(1, ((channel + plan["right"][p][..., None]) * plane + cell).reshape(count, -1))
+    low = low.reshape(count, directions, N_CHANNELS).double()
+    high = high.reshape(count, directions, N_CHANNELS).double()
+    t = plan["weight"][p][..., None]
+    x = ((1.0 - t) * low + t * high) * LOG_RANGE  # the interpolated argument (float64)
+    factor = constants["stored"].reshape(1, 1, N_CHANNELS)
+    if scales is not None:
+        factor = factor * scales.reshape(count, 1, 1)
+    value = torch.expm1(x) * factor
+    keep = above & ~constants["invalid"][h, d, p]
+    return torch.where(keep[..., None], value, torch.zeros_like(value)).float()
