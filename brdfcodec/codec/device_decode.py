@@ -512,9 +512,20 @@ def decode_many_tensor(
     if count == 0:
         return out if out is not None else torch.empty((0, N_CHANNELS, N_THETA_H, N_THETA_D, N_PHI_D),
                                                        device=decoder.device)
+    if out is None:
+        out = torch.empty((count, N_CHANNELS, N_THETA_H, N_THETA_D, N_PHI_D), dtype=torch.float32,
+                          device=decoder.device)
     with codec_threads(), torch.no_grad():
-        mapped, scales = _mapped_and_scales(decoder, given, codes, energy_bound, batch_size)
-        return tables_from_mapped_tensor(mapped, scales, masked=masked, out=out)
+        # a network batch of records at a time (BrdfDecoder.network_batch), unmapped into its rows of ``out``:
+        # the mapped slices of all records are never held at once (on the CPU, a new 65 MB for 32 records,
+        # faulted in on every call)
+        step = decoder.network_batch(batch_size)
+        for start in range(0, count, step):
+            part = slice(start, min(start + step, count))
+            mapped, scales = _mapped_and_scales(decoder, None if given is None else given[part],
+                                                None if codes is None else codes[part], energy_bound, batch_size)
+            tables_from_mapped_tensor(mapped, scales, masked=masked, out=out[part])
+        return out
 
 
 def records_or_codes(
