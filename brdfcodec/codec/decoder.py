@@ -256,6 +256,14 @@ class BrdfDecoder:
         out = np.concatenate(outputs) if len(outputs) > 1 else outputs[0]
         return clamp_mapped(out, out=out)
 
+    def _mapped_lazily(self, codes: np.ndarray, batch_size: int) -> Iterator[np.ndarray]:
+        """:meth:`decode_mapped` of ``codes`` one code at a time, run through the network a network batch at a
+        time as they are asked for (:meth:`network_batch`): no array of every code's slices is built."""
+        batch, _ = self._codes(codes)
+        step = self.network_batch(batch_size)
+        for start in range(0, len(batch), step):
+            yield from self._run(batch[start : start + step], None, step)
+
     def decode_mapped(self, codes: npt.ArrayLike, *, batch_size: int = 16) -> npt.NDArray[np.float32]:
         """Mapped slices of latent codes.
 
@@ -608,7 +616,7 @@ class BrdfDecoder:
                       and _has_latent(r)]
             batch: Iterator[np.ndarray] = iter(())
             if latent:
-                batch = iter(self.decode_mapped(np.stack([record.mu for record in latent]), batch_size=batch_size))
+                batch = self._mapped_lazily(np.stack([record.mu for record in latent]), batch_size)
             for record in chunk:  # grafts need two codes each: decoded on their own
                 with codec_threads():
                     if isinstance(record, LatentRecord) and not _projected_vectors(record) and _has_latent(record):
