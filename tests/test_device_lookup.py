@@ -104,6 +104,17 @@ def test_directions_per_material_and_codes(decoder: BrdfDecoder) -> None:
     assert decoder.evaluate_tensor([], wi, wo).shape == (0, 50, 3)
 
 
+def test_directions_per_material_follow_their_material_across_network_batches(decoder: BrdfDecoder) -> None:
+    """Five materials, each with its own directions: the lookup runs a network batch of materials at a time
+    (BrdfDecoder.network_batch, 2 on the CPU), each batch reading its own rows of the directions."""
+    codes = np.random.default_rng(7).standard_normal((5, decoder.latent_dim)).astype(np.float32)
+    pairs = [directions(40, seed) for seed in range(11, 16)]
+    per = decoder.evaluate_tensor(codes, np.stack([w for w, _ in pairs]), np.stack([w for _, w in pairs]))
+    assert per.shape == (5, 40, 3)
+    for i, (wi, wo) in enumerate(pairs):
+        torch.testing.assert_close(per[i], decoder.evaluate_tensor(codes[i : i + 1], wi, wo)[0])
+
+
 def test_bad_directions_are_refused_with_a_value_error(decoder: BrdfDecoder) -> None:
     codes = np.zeros((2, decoder.latent_dim), dtype=np.float32)
     up = np.array([[0.0, 0.0, 1.0]])

@@ -20,7 +20,7 @@ from __future__ import annotations
 import functools
 import math
 from collections.abc import Sequence
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 import numpy.typing as npt
@@ -150,7 +150,7 @@ def evaluate_tensor(
     incoming = incoming.expand(shape).reshape(rows, directions, 3)
     outgoing = outgoing.expand(shape).reshape(rows, directions, 3)
     with codec_threads(), torch.no_grad():
-        bins = merl_bins_tensor(incoming, outgoing)
+        lookup = _lookup(*merl_bins_tensor(incoming, outgoing))
         # the materials a network batch at a time (BrdfDecoder.network_batch): their mapped slices are looked up
         # and dropped, never all held at once (a new 65 MB for 32 materials, faulted in on every call)
         step = decoder.network_batch(batch_size)
@@ -159,36 +159,53 @@ def evaluate_tensor(
             part = slice(start, min(start + step, count))
             mapped, scales = _mapped_and_scales(decoder, None if given is None else given[part],
                                                 None if codes is None else codes[part], energy_bound, batch_size)
-            values.append(_values_at(mapped, scales, *(t if rows == 1 else t[part] for t in bins)))
+            values.append(_values_at(mapped, scales, lookup if rows == 1 else _Lookup(*(t[part] for t in lookup))))
         return torch.cat(values) if len(values) > 1 else values[0]
 
 
-def _values_at(mapped: torch.Tensor, scales: torch.Tensor | None, h: torch.Tensor, d: torch.Tensor, p: torch.Tensor,
-               above: torch.Tensor) -> torch.Tensor:
-    """Stored values (B, N, 3) float32 of B materials' clamped mapped slices ``mapped`` (B, 63, 90, 90) at the
-    MERL bins ``h, d, p`` and horizon flags ``above`` of :func:`merl_bins_tensor` ((B or 1, N)), times the energy
-    bound's factors ``scales`` (B,) where given: the kept slots on either side interpolated in the mapped domain,
-    unmapped in float64, 0 below the horizon."""
+class _Lookup(NamedTuple):
+    """Where :func:`evaluate_tensor` reads (B or 1, N) direction pairs: the flat indices (…, N·3) of the kept
+    slots on either side in a material's (63, 90, 90) slices, per channel; the interpolation weight (…, N, 1)
+    float64; whether the pair is measured (above the horizon and a valid bin)."""
+
+    low: torch.Tensor
+    high: torch.Tensor
+    weight: torch.Tensor
+    keep: torch.Tensor
+
+
+def _lookup(h: torch.Tensor, d: torch.Tensor, p: torch.Tensor, above: torch.Tensor) -> _Lookup:
+    """The :class:`_Lookup` of the MERL bins ``h, d, p`` and horizon flags ``above`` of :func:`merl_bins_tensor`
+    ((B or 1, N)): computed once per call, whatever the number of materials."""
     from brdfcodec.codec.device_decode import _constants
 
-    count, device = len(mapped), mapped.device
-    directions = h.shape[-1]
-    h, d, p, above = (t.expand(count, directions) for t in (h, d, p, above))
-    plan, constants = _plan_on(device), _constants(device)
-    # flat indices into each material's (63, 90, 90) slices of the kept slot on either side, per channel
+    device = h.device
+    plan = _plan_on(device)
     channel = torch.arange(N_CHANNELS, device=device) * N_KEPT_SLICES  # (3,)
-    cell = (h * N_THETA_D + d)[..., None]  # (B, N, 1)
+    cell = (h * N_THETA_D + d)[..., None]  # (…, N, 1)
     plane = N_THETA_H * N_THETA_D
+    rows = h.shape[0]
+    low = ((channel + plan["left"][p][..., None]) * plane + cell).reshape(rows, -1)
+    high = ((channel + plan["right"][p][..., None]) * plane + cell).reshape(rows, -1)
+    keep = above & ~_constants(device)["invalid"][h, d, p]
+    return _Lookup(low, high, plan["weight"][p][..., None], keep)
+
+
+def _values_at(mapped: torch.Tensor, scales: torch.Tensor | None, lookup: _Lookup) -> torch.Tensor:
+    """Stored values (B, N, 3) float32 of B materials' clamped mapped slices ``mapped`` (B, 63, 90, 90) where
+    ``lookup`` reads, times the energy bound's factors ``scales`` (B,) where given: the kept slots on either side
+    interpolated in the mapped domain, unmapped in float64, 0 below the horizon."""
+    from brdfcodec.codec.device_decode import _constants
+
+    count = len(mapped)
+    directions = lookup.keep.shape[-1]
     flat = mapped.reshape(count, -1)
-    low = flat.gather(1, ((channel + plan["left"][p][..., None]) * plane + cell).reshape(count, -1))
-    high = flat.gather(1, ((channel + plan["right"][p][..., None]) * plane + cell).reshape(count, -1))
-    low = low.reshape(count, directions, N_CHANNELS).double()
-    high = high.reshape(count, directions, N_CHANNELS).double()
-    t = plan["weight"][p][..., None]
+    low = flat.gather(1, lookup.low.expand(count, -1)).reshape(count, directions, N_CHANNELS).double()
+    high = flat.gather(1, lookup.high.expand(count, -1)).reshape(count, directions, N_CHANNELS).double()
+    t = lookup.weight
     x = ((1.0 - t) * low + t * high) * LOG_RANGE  # the interpolated argument (float64)
-    factor = constants["stored"].reshape(1, 1, N_CHANNELS)
+    factor = _constants(mapped.device)["stored"].reshape(1, 1, N_CHANNELS)
     if scales is not None:
         factor = factor * scales.reshape(count, 1, 1)
     value = torch.expm1(x) * factor
-    keep = above & ~constants["invalid"][h, d, p]
-    return torch.where(keep[..., None], value, torch.zeros_like(value)).float()
+    return torch.where(lookup.keep[..., None], value, torch.zeros_like(value)).float()
