@@ -14,6 +14,7 @@ import torch
 import brdfcodec as bc
 from brdfcodec.codec import BrdfDecoder, device_decode
 from brdfcodec.codec.device_decode import clamp_mapped_tensor, energy_bound_scales_tensor
+from brdfcodec.codec.device_lookup import merl_bins_tensor
 from brdfcodec.conventions import MAPPED_MAX
 from brdfcodec.edit.latent_edits import with_parameters
 from brdfcodec.examples import example_library
@@ -215,6 +216,43 @@ def test_every_record_kind_decodes_as_decode_many_does(decoder: BrdfDecoder, mix
     assert_same_tables(got, list(decoder.decode_many(mixed, batch_size=2)))
     base = decoder.decode_many_tensor([mixed[1].base()])[0].numpy()  # type: ignore[attr-defined]
     assert largest_mapped_difference(got[1].numpy(), mapped_of(base)) > 0.1  # the layers were added
+
+
+def test_mixed_records_at_any_batch_size_see_decode_many_s_network_batches(decoder: BrdfDecoder,
+                                                                         mixed: list[Record]) -> None:
+    """A graft before plain records, at the default batch size and at an odd one: the network takes the plain
+    codes in the batches decode_many gives it (its output differs in the last bits from batch to batch), so the
+    tables and the values at directions are decode_many's."""
+    from brdfcodec.codec.device_decode import network_batches
+
+    rng = np.random.default_rng(21)
+    plains = [LatentRecord(f"p{i}", rng.normal(size=8), np.ones(8)) for i in range(4)]
+    records = [mixed[3], *plains]  # the graft first: the pairs are of the plain records, not of positions
+    assert [(b.start, b.stop) for b in network_batches(decoder, 7, 3)] == [(0, 2), (2, 3), (3, 5), (5, 6), (6, 7)]
+    wi, wo = np.array([[0.3, 0.1, 0.9]]), np.array([[-0.2, 0.4, 0.8]])
+    for batch_size in (16, 3):
+        want = list(decoder.decode_many(records, batch_size=batch_size))
+        got = decoder.decode_many_tensor(records, batch_size=batch_size).numpy()
+        for table, expected in zip(got, want, strict=True):
+            np.testing.assert_allclose(table, expected, rtol=1e-6, atol=1e-9)
+        values = decoder.evaluate_tensor(records, wi, wo, batch_size=batch_size)[:, 0].numpy()
+        h, d, p, _ = (int(t.reshape(-1)[0]) for t in merl_bins_tensor(torch.from_numpy(wi), torch.from_numpy(wo)))
+        for value, table in zip(values, want, strict=True):  # decode_many's table at the direction's bin
+            np.testing.assert_allclose(value, table[:, h, d, p], rtol=5e-7)
+
+
+def test_a_bad_record_is_refused_before_any_row_is_written(decoder: BrdfDecoder) -> None:
+    from brdfcodec.errors import LatentDimensionError
+
+    rng = np.random.default_rng(22)
+    records = [LatentRecord(f"p{i}", rng.normal(size=8), np.ones(8)) for i in range(4)]
+    records.append(LatentRecord("wide", rng.normal(size=9), np.ones(9)))
+    out = torch.full((5, 3, 90, 90, 180), 7.0)
+    with pytest.raises((LatentDimensionError, ValueError)):
+        decoder.decode_many_tensor(records, out=out)
+    assert bool((out == 7.0).all())  # nothing written
+    with pytest.raises((LatentDimensionError, ValueError)):
+        decoder.evaluate_tensor(records, np.array([[0.0, 0.0, 1.0]]), np.array([[0.0, 0.0, 1.0]]))
 
 
 def test_the_energy_bound_can_be_forced_on_or_off(decoder: BrdfDecoder, mixed: list[Record]) -> None:

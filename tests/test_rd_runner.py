@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+from collections.abc import Callable
 from pathlib import Path
 
 import pytest
@@ -145,3 +146,54 @@ def test_a_library_is_over_its_budget_when_any_family_is() -> None:
     assert bytes_over_budget(records, 2.5, families, 128) == 0.5  # merl over by 0.5, the file (125.5) within
     assert bytes_over_budget(records, 2.5, ["x"] * 4, 128) == -2.5  # one family: the file's mean
     assert bytes_over_budget({"a": 140, "b": 100}, 0.0, ["merl", "rgl"], 128) == 12.0
+
+
+def _sizes(per_family: dict[str, Callable[[int], int]], families: list[str], share: float,
+           flags: list[int]) -> Callable[[int], tuple[int, dict[str, int], float]]:
+    """A stand-in for the runner's encode: each material's record bytes a function of ``--bytes`` per family, the
+    header's share fixed; the flags tried are appended to ``flags``."""
+
+    def encoded(flag: int) -> tuple[int, dict[str, int], float]:
+        flags.append(flag)
+        return flag, {f"m{i}": per_family[family](flag) for i, family in enumerate(families)}, share
+
+    return encoded
+
+
+def test_the_bytes_flag_search_moves_up_while_records_grow_and_down_when_over() -> None:
+    from brdfcodec.report.generalisation import search_bytes_flag
+
+    families = ["merl", "merl", "rgl"]
+    filled = {"merl": lambda flag: flag, "rgl": lambda flag: flag}  # records fill --bytes
+    flags: list[int] = []  # the header's share (3) was estimated high (6): the search moves up to 13
+    flag, result, records, share = search_bytes_flag(_sizes(filled, families, 3.0, flags), 10, 16, families)
+    assert (flag, result, share) == (13, 13, 3.0) and records["m0"] == 13 and flags == [10, 13]
+    flags.clear()  # estimated low: down by the excess, to 13
+    assert search_bytes_flag(_sizes(filled, families, 3.0, flags), 16, 16, families)[0] == 13
+    assert flags == [16, 13]
+    flags.clear()  # one family over while the file is within: lowered for that family
+    uneven = {"merl": lambda flag: flag + 2, "rgl": lambda flag: flag - 4}
+    assert search_bytes_flag(_sizes(uneven, families, 3.0, flags), 13, 16, families)[0] == 11
+    assert flags == [13, 11]
+
+
+def test_the_bytes_flag_search_stops_when_records_stop_growing_and_keeps_the_largest_fit() -> None:
+    from brdfcodec.report.generalisation import search_bytes_flag
+
+    families = ["merl", "rgl"]
+    flags: list[int] = []
+    full = {"merl": lambda flag: min(flag, 10), "rgl": lambda flag: min(flag, 10)}  # records full at 10 bytes
+    flag, _, records, _ = search_bytes_flag(_sizes(full, families, 2.0, flags), 8, 128, families)
+    # 8 → 126 (the spare), grown 8 → 10 bytes: one more, to N; not grown there: no fourth try
+    assert flags == [8, 126, 128] and flag == 128 and records == {"m0": 10, "m1": 10}
+    flags.clear()
+    stalled = {"merl": lambda flag: min(flag, 10), "rgl": lambda flag: min(flag, 10)}
+    assert search_bytes_flag(_sizes(stalled, families, 2.0, flags), 10, 128, families)[0] == 126
+    assert flags == [10, 126]  # full from the start: the larger flag made no larger records, no third try
+    flags.clear()  # never within: the flag falls by the excess and the last one tried is returned, not a next one
+    over = {"merl": lambda flag: max(flag, 8) + 10, "rgl": lambda flag: max(flag, 8) + 10}  # at least 18 bytes
+    flag, result, _, _ = search_bytes_flag(_sizes(over, families, 0.0, flags), 12, 16, families, tries=3)
+    assert flags == [12, 6, 4] and (flag, result) == (4, 4)
+    flags.clear()  # one try only (a single-material file with the header on top)
+    assert search_bytes_flag(_sizes(full, families, 2.0, flags), 8, 16, families, tries=1)[0] == 8
+    assert flags == [8]

@@ -181,3 +181,30 @@ def test_the_host_decode_split_over_two_threads_is_the_same_table(monkeypatch: p
     threads.set_num_threads(2)
     two = table_from_mapped_host(mapped, scale=0.9, compiled=True)
     np.testing.assert_array_equal(_bits(two), _bits(one))
+
+
+def _decode_in_child() -> None:
+    """The batch decodes' host passes (compiled: no torch operation, whose OpenMP pool is torch's own matter)."""
+    mapped = (np.random.default_rng(13).random((63, 90, 90)) * 1.5).astype(np.float32)
+    table_from_mapped_host(mapped, compiled=True)
+
+
+def test_a_forked_child_decodes_after_its_parent_split_rows_over_threads(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The row pool's threads do not survive a fork: a child (a DataLoader worker, multiprocessing's fork start
+    method) gets a pool of its own instead of waiting forever on the parent's."""
+    import multiprocessing
+
+    from brdfcodec.runtime import threads
+
+    if "fork" not in multiprocessing.get_all_start_methods():
+        pytest.skip("no fork on this platform")
+    monkeypatch.setattr(threads, "_chosen", None)  # restored after the test
+    threads.set_num_threads(2)  # the rows split over a pool, even on one core
+    _decode_in_child()  # the parent's pool started
+    child = multiprocessing.get_context("fork").Process(target=_decode_in_child)
+    child.start()
+    child.join(timeout=120)
+    if child.is_alive():
+        child.kill()
+        pytest.fail("the forked child's decode did not finish within 120 s (the parent's pool inherited)")
+    assert child.exitcode == 0

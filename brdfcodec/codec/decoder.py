@@ -46,7 +46,7 @@ if TYPE_CHECKING:
     from brdfcodec.format.layered_record import LayeredRecord
     from brdfcodec.layers.basis import SharedBasis
 
-from brdfcodec.codec.device_decode import table_from_mapped_host
+from brdfcodec.codec.device_decode import _EvalMode, network_batches, table_from_mapped_host
 from brdfcodec.codec.devices import indexed_device
 from brdfcodec.codec.prepare import MaskedEntries, ModelSpec, _apply_mask, resolve_model
 from brdfcodec.codec.projection import _has_latent, _projected_vectors, _ProjectionPlan
@@ -84,22 +84,6 @@ def _table(
     if bins is None:
         return table_from_mapped_host(mapped, scale=scale, masked=masked, compiled=compiled)
     return _apply_mask(table_from_mapped(mapped, phi_d_bins=bins, scale=scale), bins, masked)
-
-
-class _EvalMode:
-    """Puts a module in evaluation mode for a ``with`` block and restores its mode after."""
-
-    def __init__(self, module: torch.nn.Module) -> None:
-        self.module = module
-
-    def __enter__(self) -> None:
-        self.was_training = self.module.training
-        if self.was_training:  # a mode switch walks every submodule: only when needed
-            self.module.eval()
-
-    def __exit__(self, *exc: object) -> None:
-        if self.was_training:
-            self.module.train(True)
 
 
 class BrdfDecoder:
@@ -178,8 +162,9 @@ class BrdfDecoder:
         On the CPU a network call's working buffers grow with the batch; above glibc's largest mmap threshold
         (32 MB) they are returned to the system when the call ends and faulted in again by the next one, which
         cost more than a batch saves: 5.8 ms a table in batches of 16 against 3.0 in pairs on 2 cores
-        (``benchmarks/test_bench_decode_path.py``, ``decode-network-batch``). Every batched decode of the CPU
-        runs its codes through the network in these batches, so that all see the same network output.
+        (``benchmarks/test_bench_decode_path.py``, ``decode-network-batch``). Every batched decode runs its codes
+        through the network in the same batches (:func:`~brdfcodec.codec.device_decode.network_batches`), so that
+        all see the same network output.
         """
         if batch_size < 1:
             raise ValueError(f"batch_size must be at least 1, got {batch_size}")
@@ -245,12 +230,12 @@ class BrdfDecoder:
         return batch, single
 
     def _run(self, batch: np.ndarray, channels: tuple[int, ...] | None, batch_size: int) -> np.ndarray:
-        """The batched network loop: clamped mapped output (:func:`~brdfcodec.representation.clamp_mapped`)."""
-        batch_size = self.network_batch(batch_size)
+        """The batched network loop (:func:`~brdfcodec.codec.device_decode.network_batches`): clamped mapped
+        output (:func:`~brdfcodec.representation.clamp_mapped`)."""
         outputs = []
         with codec_threads(), torch.inference_mode(), _EvalMode(self.network):
-            for start in range(0, len(batch), batch_size):
-                z = torch.from_numpy(batch[start : start + batch_size]).to(self.device, self.dtype)
+            for part in network_batches(self, len(batch), batch_size):
+                z = torch.from_numpy(batch[part]).to(self.device, self.dtype)
                 out = self.network(z) if channels is None else self.network.forward_channels(z, channels)
                 outputs.append(out.float().cpu().numpy())
         out = np.concatenate(outputs) if len(outputs) > 1 else outputs[0]
@@ -260,9 +245,8 @@ class BrdfDecoder:
         """:meth:`decode_mapped` of ``codes`` one code at a time, run through the network a network batch at a
         time as they are asked for (:meth:`network_batch`): no array of every code's slices is built."""
         batch, _ = self._codes(codes)
-        step = self.network_batch(batch_size)
-        for start in range(0, len(batch), step):
-            yield from self._run(batch[start : start + step], None, step)
+        for part in network_batches(self, len(batch), batch_size):
+            yield from self._run(batch[part], None, part.stop - part.start)
 
     def decode_mapped(self, codes: npt.ArrayLike, *, batch_size: int = 16) -> npt.NDArray[np.float32]:
         """Mapped slices of latent codes.

@@ -426,17 +426,38 @@ def _network_mapped(decoder: BrdfDecoder, codes: torch.Tensor, batch_size: int) 
     if not len(codes):
         return torch.empty((0, N_CHANNELS * N_KEPT_SLICES, N_THETA_H, N_THETA_D), device=decoder.device)
     outputs = []
-    network, was_training = decoder.network, decoder.network.training
-    if was_training:  # under the caller's no_grad (inference tensors would refuse the in-place clamp)
-        network.eval()  # (a mode switch walks every submodule: only when needed, and restored)
-    try:
-        step = decoder.network_batch(batch_size)  # the host decode's batches (BrdfDecoder.network_batch)
-        for start in range(0, len(codes), step):
-            outputs.append(network(codes[start : start + step].to(decoder.dtype)).float())
-    finally:
-        if was_training:
-            network.train(True)
+    with _EvalMode(decoder.network):  # under the caller's no_grad (inference tensors refuse the in-place clamp)
+        for batch in network_batches(decoder, len(codes), batch_size):
+            outputs.append(decoder.network(codes[batch].to(decoder.dtype)).float())
     return clamp_mapped_tensor(torch.cat(outputs) if len(outputs) > 1 else outputs[0])
+
+
+def network_batches(decoder: BrdfDecoder, count: int, batch_size: int) -> list[slice]:
+    """The batches in which the batched decodes run ``count`` codes through the network: ``batch_size`` codes at
+    a time, each split into :meth:`BrdfDecoder.network_batch` ``(batch_size)`` codes (on the CPU, pairs; the
+    last of a group of odd size alone): the network's output depends on the batch in its last bits, so every
+    batched decode takes the same ones."""
+    step = decoder.network_batch(batch_size)
+    return [slice(low, min(low + step, group + batch_size, count))
+            for group in range(0, count, batch_size) for low in range(group, min(group + batch_size, count), step)]
+
+
+class _EvalMode:
+    """Puts a module and its submodules in evaluation mode for a ``with`` block and restores each one's mode
+    after; a module already wholly in evaluation mode is left alone (a mode switch walks every submodule)."""
+
+    def __init__(self, module: torch.nn.Module) -> None:
+        self.module = module
+        self.training: list[torch.nn.Module] = []
+
+    def __enter__(self) -> None:
+        self.training = [module for module in self.module.modules() if module.training]
+        for module in self.training:
+            module.training = False
+
+    def __exit__(self, *exc: object) -> None:
+        for module in self.training:
+            module.training = True
 
 
 def _codes_tensor(decoder: BrdfDecoder, codes: torch.Tensor | npt.ArrayLike) -> torch.Tensor:
@@ -512,16 +533,17 @@ def decode_many_tensor(
     if count == 0:
         return out if out is not None else torch.empty((0, N_CHANNELS, N_THETA_H, N_THETA_D, N_PHI_D),
                                                        device=decoder.device)
+    for record in given or ():  # every record refused before any work
+        decoder._check_record(record)
     if out is None:
         out = torch.empty((count, N_CHANNELS, N_THETA_H, N_THETA_D, N_PHI_D), dtype=torch.float32,
                           device=decoder.device)
     with codec_threads(), torch.no_grad():
-        # a network batch of records at a time (BrdfDecoder.network_batch), unmapped into its rows of ``out``:
-        # the mapped slices of all records are never held at once (on the CPU, a new 65 MB for 32 records,
-        # faulted in on every call)
-        step = decoder.network_batch(batch_size)
-        for start in range(0, count, step):
-            part = slice(start, min(start + step, count))
+        # ``batch_size`` records at a time, as decode_many takes them (so that the network sees the same batches:
+        # BrdfDecoder.network_batch), unmapped into their rows of ``out``: the mapped slices of all records are
+        # never held at once
+        for start in range(0, count, batch_size):
+            part = slice(start, min(start + batch_size, count))
             mapped, scales = _mapped_and_scales(decoder, None if given is None else given[part],
                                                 None if codes is None else codes[part], energy_bound, batch_size)
             tables_from_mapped_tensor(mapped, scales, masked=masked, out=out[part])

@@ -139,6 +139,8 @@ def evaluate_tensor(
         raise ValueError(f"wi and wo do not broadcast together: shapes {tuple(incoming.shape)} and "
                          f"{tuple(outgoing.shape)}") from None
     given, codes, count = records_or_codes(decoder, records)
+    for record in given or ():  # every record refused before any work
+        decoder._check_record(record)
     lead = tuple(shape[:-1])
     if len(lead) > 2 or (len(lead) == 2 and lead[0] not in (1, count)):
         raise ValueError(f"directions must have shape (N, 3), or (B, N, 3) with B = {count} materials; "
@@ -151,12 +153,11 @@ def evaluate_tensor(
     outgoing = outgoing.expand(shape).reshape(rows, directions, 3)
     with codec_threads(), torch.no_grad():
         lookup = _lookup(*merl_bins_tensor(incoming, outgoing))
-        # the materials a network batch at a time (BrdfDecoder.network_batch): their mapped slices are looked up
-        # and dropped, never all held at once (a new 65 MB for 32 materials, faulted in on every call)
-        step = decoder.network_batch(batch_size)
+        # ``batch_size`` materials at a time, as decode_many takes them (the network sees the same batches): their
+        # mapped slices are looked up and dropped, never all held at once
         values = []
-        for start in range(0, count, step):
-            part = slice(start, min(start + step, count))
+        for start in range(0, count, batch_size):
+            part = slice(start, min(start + batch_size, count))
             mapped, scales = _mapped_and_scales(decoder, None if given is None else given[part],
                                                 None if codes is None else codes[part], energy_bound, batch_size)
             values.append(_values_at(mapped, scales, lookup if rows == 1 else _Lookup(*(t[part] for t in lookup))))

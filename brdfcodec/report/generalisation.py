@@ -263,6 +263,66 @@ def bytes_over_budget(record_bytes: dict[str, int], header_share: float, familie
     return float(max(means) + header_share - budget)
 
 
+def search_bytes_flag(
+    encoded: Callable[[int], tuple[Any, dict[str, int], float]], flag: int, budget: int, families: Sequence[str],
+    *, tries: int = 8,
+) -> tuple[int, Any, dict[str, int], float]:
+    """The largest ``--bytes`` value for which a library's bytes per material, over the file and each family, stay
+    within the budget N (:func:`bytes_over_budget`), searched from ``flag``.
+
+    Each try encodes once. Over the budget, the flag is lowered by the excess (rounded up), never to one known to
+    fit or below 1; within it with a byte or more per material to spare, it is raised by the spare (at most to
+    N: the header's share may have been estimated high), unless the last larger flag made no larger records (the
+    records are full). The search stops at a flag already tried, after ``tries`` encodes, or when no step is left.
+
+    Parameters
+    ----------
+    encoded : callable
+        ``encoded(flag)`` → ``(result, record_bytes, header_share)``: the library written with ``--bytes flag``
+        (``result`` is handed back as it is), its materials' record bytes in the order of ``families``, and the
+        header's share per material.
+    flag : int
+        The first ``--bytes`` to try (N less an estimate of the header's share).
+    budget : int
+        N, bytes per material.
+    families : sequence of str
+        Each material's family.
+    tries : int, default 8
+        Most encodes (1: ``flag`` only).
+
+    Returns
+    -------
+    flag, result, record_bytes, header_share
+        Of the largest flag tried that fits, else of the last one tried.
+    """
+    fitting: tuple[int, Any, dict[str, int], float] | None = None  # the largest --bytes within N
+    last: tuple[int, Any, dict[str, int], float] | None = None
+    tried: set[int] = set()
+    grown = True  # whether the last larger --bytes made larger records (else the records are full)
+    for _ in range(max(1, tries)):
+        result, record_bytes, header_share = encoded(flag)
+        last = (flag, result, record_bytes, header_share)
+        over = bytes_over_budget(record_bytes, header_share, families, budget)
+        tried.add(flag)
+        if over <= 0 and (fitting is None or flag > fitting[0]):
+            if fitting is not None:
+                grown = sum(record_bytes.values()) > sum(fitting[2].values())
+            fitting = last
+        # a byte or more per material to spare: a larger --bytes (at most N) may fit, the header's share
+        # having been estimated high, unless the records stopped growing; over: a smaller one, down to the
+        # largest known to fit
+        step = min(math.floor(-over), budget - flag) if over <= 0 else -math.ceil(over)
+        if tries <= 1 or step == 0 or flag + step in tried or flag + step < 1:
+            break
+        if step > 0 and not grown:
+            break
+        if fitting is not None and step < 0 and flag + step <= fitting[0]:
+            break
+        flag += step
+    assert last is not None
+    return fitting if fitting is not None else last
+
+
 def _bvae_rows(model: Path, names: Sequence[str], families: Sequence[str], inputs: np.ndarray, masks: np.ndarray,
                references: Sequence[Any], budgets: Sequence[int], effort: int,
                error: Callable[[Any, np.ndarray], tuple[float, float]], latent: str = "auto",
@@ -282,33 +342,14 @@ def _bvae_rows(model: Path, names: Sequence[str], families: Sequence[str], input
         flag = budget - math.ceil(_HEADER_ESTIMATE / len(names)) if header_in_budget else budget
         if flag < _SMALLEST_RECORD:  # too few materials to share the header within this budget: no point
             continue
-        fitting: tuple[int, bytes, Any, dict[str, int], float] | None = None  # the largest --bytes within N
-        tried: set[int] = set()
-        grown = True  # whether the last larger --bytes made larger records (else the records are full)
-        for _ in range(8 if header_in_budget else 1):
+        def encoded(value: int) -> tuple[tuple[bytes, Any], dict[str, int], float]:
             data = bc.encode(items, model=model, latent_dtype="float16", measure_error=False, effort=effort,
-                             bytes=max(flag, 1), latent=latent)  # type: ignore[arg-type]
+                             bytes=max(value, 1), latent=latent)  # type: ignore[arg-type]
             library = bc.decode(data, decoder=decoder)
-            record_bytes, header_share = _record_bytes(library, data, names, name_bytes)
-            over = bytes_over_budget(record_bytes, header_share, families, budget)
-            tried.add(flag)
-            if over <= 0 and (fitting is None or flag > fitting[0]):
-                if fitting is not None:
-                    grown = sum(record_bytes.values()) > sum(fitting[3].values())
-                fitting = (flag, data, library, record_bytes, header_share)
-            # a byte or more per material to spare: a larger --bytes (at most N) may fit, the header's share
-            # having been estimated high, unless the records stopped growing; over: a smaller one, down to the
-            # largest known to fit
-            step = min(math.floor(-over), budget - flag) if over <= 0 else -math.ceil(over)
-            if not header_in_budget or step == 0 or flag + step in tried or flag + step < 1:
-                break
-            if step > 0 and not grown:
-                break
-            if fitting is not None and step < 0 and flag + step <= fitting[0]:
-                break
-            flag += step
-        if fitting is not None:
-            flag, data, library, record_bytes, header_share = fitting
+            return (data, library), *_record_bytes(library, data, names, name_bytes)
+
+        flag, (data, library), record_bytes, header_share = search_bytes_flag(
+            encoded, flag, budget, families, tries=8 if header_in_budget else 1)
         library[names[0]].table(masked="unmeasured")  # warm-up (lazy imports, thread pools), not timed
         library.forget()
         for family in rows:

@@ -22,6 +22,7 @@ array([1., 1., 1.])
 from __future__ import annotations
 
 import functools
+import os
 from collections.abc import Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor
 
@@ -332,8 +333,13 @@ def over_theta_h_rows(kernel: Callable[..., None], *arguments: object, threads: 
 
 @functools.cache
 def _row_pool(threads: int) -> ThreadPoolExecutor:
-    """The threads that run the compiled pass over disjoint θh rows (one pool per thread count, kept)."""
+    """The threads that run the compiled pass over disjoint θh rows (one pool per thread count, kept; a forked
+    child starts without them: its inherited pools have no threads, and would never run a job)."""
     return ThreadPoolExecutor(max_workers=threads, thread_name_prefix="brdfcodec-step")
+
+
+if hasattr(os, "register_at_fork"):  # not on Windows, which does not fork
+    os.register_at_fork(after_in_child=_row_pool.cache_clear)
 
 
 #: Per read-only ``invalid`` array (by identity, the array kept alive): its runs as the compiled pass reads them.
