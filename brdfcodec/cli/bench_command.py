@@ -77,12 +77,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
 def run_rd(args: argparse.Namespace) -> int:
     """Run a rate–distortion configuration, write its rows, print the summary."""
     from brdfcodec.report.generalisation import load_config, run_config
-    from brdfcodec.report.rows import stamp, summary_markdown, write_rows
+    from brdfcodec.report.rows import current_commit, stamp, summary_markdown, write_rows
 
     config = load_config(args.config)
     start = time.perf_counter()
+    measured = current_commit()  # the checkout the run loaded, not the one when its rows are written (an hour on)
     rows = run_config(config, progress=None if args.quiet else lambda line: print(line, flush=True))
-    rows = stamp(rows, study="rd", config=str(args.config), dataset=str(config.dataset))
+    rows = stamp(rows, study="rd", config=str(args.config), dataset=str(config.dataset), commit=measured)
     write_rows(args.output, rows)
     print(summary_markdown(rows))
     print(f"wrote {args.output} ({len(rows)} rows) in {time.perf_counter() - start:.0f} s")
