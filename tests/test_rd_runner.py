@@ -197,3 +197,29 @@ def test_the_bytes_flag_search_stops_when_records_stop_growing_and_keeps_the_lar
     flags.clear()  # one try only (a single-material file with the header on top)
     assert search_bytes_flag(_sizes(full, families, 2.0, flags), 8, 16, families, tries=1)[0] == 8
     assert flags == [8]
+
+
+def test_rd_rows_name_the_commit_the_run_started_at(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                                     capsys: pytest.CaptureFixture[str]) -> None:
+    """A run takes an hour: a commit made meanwhile is not the code it measured."""
+    import argparse
+
+    from brdfcodec.cli import bench_command
+    from brdfcodec.report import generalisation, rows
+
+    config = tmp_path / "config.json"
+    config.write_text(json.dumps({"dataset": "data.h5", "experiments": [{"label": "x", "model": "m"}]}))
+    checkout = {"commit": "started-at"}
+
+    def run_config(config, progress=None):  # noqa: ANN001, ANN202 - the run, during which a commit is made
+        checkout["commit"] = "written-at"
+        return [{"point": "bvae", "budget_bytes": 16, "family": "merl", "group": "x", "experiment": "x",
+                 "mapped_relae_mean": 0.1}]
+
+    monkeypatch.setattr(rows, "current_commit", lambda: checkout["commit"])
+    monkeypatch.setattr(generalisation, "run_config", run_config)
+    monkeypatch.setattr(rows, "summary_markdown", lambda rows: "")
+    output = tmp_path / "rows.jsonl"
+    assert bench_command.run_rd(argparse.Namespace(config=config, output=output, quiet=True)) == 0
+    written = [json.loads(line) for line in output.read_text().splitlines()]
+    assert [row["commit"] for row in written] == ["started-at"]
