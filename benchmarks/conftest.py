@@ -58,8 +58,8 @@ TARGETS = {
     # paired (issue 51, 2)
     "decode-many-32": 1.5,
     # the network on the same 32 latents in the decoder's CPU batches (BrdfDecoder.network_batch: 2) vs batches of
-    # 16, paired: the batch the decodes take must not be slower than the larger one (0.56-0.99 on 2 cores: a
-    # process whose allocator keeps batch 16's buffers does as well with them; 5 % for the noise)
+    # 16, paired: the batch the decodes take must not be slower than the larger one (a process whose allocator
+    # keeps batch 16's buffers does about as well with them: 5 % for the noise)
     "decode-network-batch": 1.05,
     # decode_many_tensor (torch on the decoder's device) of the same 32 latents vs the network alone, paired, on the
     # CPU: reported (5.7-6.9 on 2 busy cores); its real target is on a GPU (issue 51, 1: ≥ 15 % of the network alone)

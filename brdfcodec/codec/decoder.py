@@ -161,8 +161,8 @@ class BrdfDecoder:
 
         On the CPU a network call's working buffers grow with the batch; above glibc's largest mmap threshold
         (32 MB) they are returned to the system when the call ends and faulted in again by the next one, which
-        cost more than a batch saves: 5.8 ms a table in batches of 16 against 3.0 in pairs on 2 cores
-        (``benchmarks/test_bench_decode_path.py``, ``decode-network-batch``). Every batched decode runs its codes
+        cost more than a batch saves (measured by ``benchmarks/test_bench_decode_path.py``, group
+        ``decode-network-batch``). Every batched decode runs its codes
         through the network in the same batches (:func:`~brdfcodec.codec.device_decode.network_batches`), so that
         all see the same network output.
         """

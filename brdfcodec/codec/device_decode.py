@@ -369,8 +369,8 @@ def table_from_mapped_host(
 
 @functools.cache
 def _numpy_exp_is_vectorised() -> bool:
-    """Whether NumPy's float64 ``exp`` runs on SIMD lanes on this CPU (its AVX-512F loop, about twice torch's
-    speed on one thread); elsewhere NumPy's is scalar and torch's (Sleef, vectorised on every CPU) is taken."""
+    """Whether NumPy's float64 ``exp`` runs on SIMD lanes on this CPU (its AVX-512F loop, faster than torch's
+    on one thread); elsewhere NumPy's is scalar and torch's (Sleef, vectorised on every CPU) is taken."""
     try:
         from numpy._core._multiarray_umath import __cpu_features__
     except ImportError:  # pragma: no cover - a NumPy without the module: torch's exp
