@@ -200,3 +200,28 @@ def test_encode_default_effort(benchmark, merl_file: Path) -> None:
     benchmark.extra_info["role"] = "candidate"
     record = benchmark.pedantic(lambda: encoder.encode(read_merl(merl_file)), rounds=3, iterations=1)
     assert record.meta["effort"] == 1
+
+
+# --- issue 48: the integer polish of a latent record's basis layer, at the budget the issue times (64 B)
+
+
+def test_encode_64b_baseline_without_layer_polish(benchmark, merl_file: Path, monkeypatch) -> None:
+    """Read and encode at 64 B with the layer polish off (``LAYER_POLISH_PASSES`` 0 at effort 1)."""
+    from brdfcodec.codec import refine
+
+    monkeypatch.setitem(refine.LAYER_POLISH_PASSES, 1, 0)
+    encoder = BrdfEncoder(bytes=64, latent_dtype="float16")
+    encoder.decoder  # noqa: B018
+    benchmark.group = "encode-64B-layer-polish"
+    benchmark.extra_info["role"] = "baseline"
+    benchmark.pedantic(lambda: encoder.encode(read_merl(merl_file)), rounds=3, iterations=1)
+
+
+def test_encode_64b_with_layer_polish(benchmark, merl_file: Path) -> None:
+    """The same encode with the default polish of every packed or coded candidate layer."""
+    encoder = BrdfEncoder(bytes=64, latent_dtype="float16")
+    encoder.decoder  # noqa: B018
+    benchmark.group = "encode-64B-layer-polish"
+    benchmark.extra_info["role"] = "candidate"
+    record = benchmark.pedantic(lambda: encoder.encode(read_merl(merl_file)), rounds=3, iterations=1)
+    assert record.has_latent and record.meta["rate"]["record_bytes"] <= 64

@@ -220,6 +220,42 @@ def test_rd_rows_name_the_commit_the_run_started_at(tmp_path: Path, monkeypatch:
     monkeypatch.setattr(generalisation, "run_config", run_config)
     monkeypatch.setattr(rows, "summary_markdown", lambda rows: "")
     output = tmp_path / "rows.jsonl"
-    assert bench_command.run_rd(argparse.Namespace(config=config, output=output, quiet=True)) == 0
+    assert bench_command.run_rd(argparse.Namespace(config=config, output=output, quiet=True, budgets=None)) == 0
     written = [json.loads(line) for line in output.read_text().splitlines()]
     assert [row["commit"] for row in written] == ["started-at"]
+
+
+def test_budgets_option_replaces_the_configurations_and_refuses_bad_lists(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
+    """``bvae bench rd --budgets 32,64`` runs those budgets only; a list that is not positive integers exits 2
+    with a message naming the option, before any work."""
+    from brdfcodec.cli import bench_command
+    from brdfcodec.cli.main import main
+    from brdfcodec.report import generalisation, rows
+
+    config = tmp_path / "config.json"
+    config.write_text(json.dumps({"dataset": "data.h5", "budgets": [16, 32, 64, 128],
+                                  "experiments": [{"label": "x", "model": "m"}]}))
+    ran: list[tuple[int, ...]] = []
+
+    def run_config(config, progress=None):  # noqa: ANN001, ANN202
+        ran.append(config.budgets)
+        return [{"point": "bvae", "budget_bytes": b, "family": "merl", "group": "x", "experiment": "x",
+                 "mapped_relae_mean": 0.1} for b in config.budgets]
+
+    monkeypatch.setattr(generalisation, "run_config", run_config)
+    monkeypatch.setattr(rows, "current_commit", lambda: "abc")
+    monkeypatch.setattr(rows, "summary_markdown", lambda rows: "")
+    output = tmp_path / "rows.jsonl"
+    assert main(["bench", "rd", "--config", str(config), "-o", str(output), "--quiet", "--budgets", "32,64"]) == 0
+    assert ran == [(32, 64)]
+    assert [json.loads(line)["budget_bytes"] for line in output.read_text().splitlines()] == [32, 64]
+    assert main(["bench", "rd", "--config", str(config), "-o", str(output), "--quiet"]) == 0
+    assert ran[-1] == (16, 32, 64, 128)
+    capsys.readouterr()
+    for bad in ("0,32", "32,x", ""):
+        assert main(["bench", "rd", "--config", str(config), "-o", str(tmp_path / "bad.jsonl"), "--budgets",
+                     bad]) == 2
+        assert "--budgets" in capsys.readouterr().err
+    assert len(ran) == 2 and not (tmp_path / "bad.jsonl").exists()
+    assert bench_command._budget_list("8") == (8,)

@@ -54,6 +54,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     )
     rd.add_argument("--config", type=Path, required=True, help="runner configuration (JSON)")
     rd.add_argument("-o", "--output", type=Path, required=True, help="rows to write (.jsonl)")
+    rd.add_argument("--budgets", type=_budget_list, metavar="N,N,...",
+                    help="only these size budgets (bytes per material), in place of the configuration's: a "
+                    "quicker look at some cells; the rows say which budgets they hold")
     rd.add_argument("--quiet", action="store_true", help="no progress lines")
     rd.set_defaults(handler=run_rd)
     table = ops.add_parser("table", help="print the summary table of result rows (.jsonl files)",
@@ -74,12 +77,27 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     register_fuzz(ops)  # bvae bench fuzz (issue 49)
 
 
+def _budget_list(text: str) -> tuple[int, ...]:
+    """``--budgets 32,64``: positive integers, comma-separated."""
+    try:
+        budgets = tuple(int(part) for part in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected positive integers separated by commas, got {text!r}") from None
+    if not budgets or min(budgets) < 1:
+        raise argparse.ArgumentTypeError(f"expected positive integers separated by commas, got {text!r}")
+    return budgets
+
+
 def run_rd(args: argparse.Namespace) -> int:
     """Run a rate–distortion configuration, write its rows, print the summary."""
+    import dataclasses
+
     from brdfcodec.report.generalisation import load_config, run_config
     from brdfcodec.report.rows import current_commit, stamp, summary_markdown, write_rows
 
     config = load_config(args.config)
+    if args.budgets is not None:
+        config = dataclasses.replace(config, budgets=args.budgets)
     start = time.perf_counter()
     measured = current_commit()  # the checkout the run loaded, not the one when its rows are written (an hour on)
     rows = run_config(config, progress=None if args.quiet else lambda line: print(line, flush=True))

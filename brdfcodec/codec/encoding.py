@@ -13,6 +13,7 @@ from brdfcodec.codec.basis_operator import BasisOperator
 from brdfcodec.codec.rate import BasisFit, BasisOnlyFit, CompactAloneFit, Metric, MuStorage, encode_layers
 from brdfcodec.codec.refine import (
     EFFORT_STEPS,
+    LAYER_POLISH_PASSES,
     POLISH_PASSES,
     fit_basis_coefficients,
     fit_basis_only_coefficients,
@@ -33,8 +34,14 @@ from brdfcodec.layers.basis import (
     quantise_coefficients,
 )
 from brdfcodec.layers.basis_layer import coded_coefficients
-from brdfcodec.layers.coded_basis import choose_coding
-from brdfcodec.layers.packed import choose_packing, packed_widths
+from brdfcodec.layers.coded_basis import (
+    CODED_HEADER_BYTES,
+    MAX_MAGNITUDE,
+    choose_coding,
+    encode_integers,
+    prior_codes,
+)
+from brdfcodec.layers.packed import choose_packing, packed_step_code, packed_widths
 
 if TYPE_CHECKING:
     from brdfcodec.io.merl import MerlBRDF
@@ -481,6 +488,9 @@ def _basis_fit(
                     base_mapped = decoder.decode_mapped(code)
                     decoder.project_base(LayeredRecord(base.name, code, base.sigma, base.meta, basis=layer),
                                          base_mapped)
+                if coding != "int8":
+                    layer = _polished_layer(layer, base_mapped, basis, target, weights, max_bytes[coding],
+                                            LAYER_POLISH_PASSES[options.effort])
                 made_layers.append((codings.index(coding),
                                     (record, layer, base_mapped + basis.residual(layer.coefficients(), first))))
         if not made_layers:  # no layer at all: the candidate is the base (encode_layers' stage for k = 0)
@@ -517,6 +527,39 @@ def _basis_fit(
         return best
 
     return fit
+
+
+def _polished_layer(layer: BasisLayer, base_mapped: np.ndarray, basis: SharedBasis, target: np.ndarray,
+                    weights: np.ndarray, max_bytes: int, passes: int) -> BasisLayer:
+    """A packed or entropy-coded basis layer of a record with a latent, its integers polished on the mapped L1
+    error of the clamped decode ``clamp(base + Σ s·qᵢ bᵢ)`` over the valid entries
+    (:func:`~brdfcodec.codec.refine.polish_quantised_coefficients`), within its fields (packed) or its bytes
+    (coded: a move is kept only where the coder's output, with the step code, still fits ``max_bytes``).
+
+    The layer was chosen closest to the float coefficients in squared coefficient error; the polish measures
+    what rate control ranks candidates by (the L1 norm, after the clamp, on the base as decoded).
+    """
+    if not passes:
+        return layer
+    x, w, centre = (np.asarray(a, dtype=np.float32).reshape(-1)[basis.entries]
+                    for a in (target, weights, base_mapped))
+    fits = None
+    if layer.prior is not None:
+        codes = prior_codes(layer.prior[0], layer.prior[1], packed_step_code(layer.step), layer.first, layer.count)
+        room = max_bytes - CODED_HEADER_BYTES
+        bounds = (np.full(layer.count, -MAX_MAGNITUDE), np.full(layer.count, MAX_MAGNITUDE))
+
+        def coder_fits(q: np.ndarray) -> bool:
+            return len(encode_integers(q, codes)) <= room
+
+        fits = coder_fits
+    else:
+        widths = packed_widths(layer.top, layer.first, layer.count)
+        bounds = (-(1 << (widths - 1)), (1 << (widths - 1)) - 1)
+    q = polish_quantised_coefficients(layer.step, layer.q, x, w, centre,
+                                      BasisOperator.of(basis, layer.first, layer.count), passes, bounds=bounds,
+                                      fits=fits)
+    return dataclasses.replace(layer, q=np.asarray(q, dtype=np.int64))
 
 
 def _coded_prior_and_count(coefficients: np.ndarray, first: int, max_bytes: int,

@@ -24,6 +24,7 @@ __all__ = [
     "BASIS_ONLY_STEPS",
     "BASIS_STEPS",
     "EFFORT_STEPS",
+    "LAYER_POLISH_PASSES",
     "POLISH_PASSES",
     "fit_basis_coefficients",
     "fit_basis_only_coefficients",
@@ -278,6 +279,9 @@ BASIS_ONLY_STEPS: Final = {0: 0, 1: 40, 2: 100, 3: 250}
 BASIS_ONLY_RATE: Final = 0.2
 #: Passes of the integer polish of a quantised basis layer without a latent, per effort level.
 POLISH_PASSES: Final = {0: 0, 1: 2, 2: 4, 3: 8}
+#: Passes of the integer polish of a packed or coded basis layer beside a latent (on the base as decoded), per
+#: effort level: a pass costs no network evaluation, and a sweep that moves nothing ends the polish early.
+LAYER_POLISH_PASSES: Final = {0: 0, 1: 4, 2: 8, 3: 16}
 
 
 def fit_basis_only_coefficients(
@@ -351,6 +355,7 @@ def polish_quantised_coefficients(
     components: npt.ArrayLike | BasisOperator,
     passes: int,
     bounds: tuple[npt.ArrayLike, npt.ArrayLike] | None = None,
+    fits: Callable[[npt.NDArray[np.int64]], bool] | None = None,
 ) -> npt.NDArray[np.int8] | npt.NDArray[np.int64]:
     """Integer coefficients moved a step at a time while that lowers the mapped L1 error of clamp(m + s·Σ qᵢ vᵢ).
 
@@ -371,6 +376,9 @@ def polish_quantised_coefficients(
     passes : int
     bounds : (low, high) of array_like of int, shape (k,), optional
         Each integer's range (a packed layer's fields, :mod:`brdfcodec.layers.packed`); default −127 … 127.
+    fits : callable, optional
+        ``fits(integers)`` → whether the layer of these integers still fits its bytes (an entropy-coded layer,
+        whose size depends on its values): a move that lowers the error is kept only where it does.
 
     Returns
     -------
@@ -407,6 +415,12 @@ def polish_quantised_coefficients(
                     trial_error = error(trial)
                     if trial_error >= current:
                         break
+                    if fits is not None:
+                        codes[i] += direction
+                        fitting = fits(codes)
+                        codes[i] -= direction
+                        if not fitting:
+                            break
                     decoded, current, codes[i], steps = trial, trial_error, codes[i] + direction, steps + 1
                 if steps:  # moved up: no need to try down
                     moved = True
