@@ -360,7 +360,7 @@ def _basis_only_fit(
 
     def fit_packed(k: int) -> tuple[BasisLayer, np.ndarray]:
         # in the bytes of k int8 coefficients: the count the least-squares coefficients pack to, then those fitted
-        # (Adam) and packed, and the integers polished within their fields
+        # (Adam), packed or coded, and the integers polished within their fields or bytes
         least_squares_of: dict[int, np.ndarray] = {}
         prior_of: dict[int, tuple[int, int]] = {}  # the prior chosen for each size of layer tried
 
@@ -379,17 +379,11 @@ def _basis_only_fit(
         components = BasisOperator.of(basis, 0, count)
         coefficients = fit_basis_only_coefficients(target, weights, centre, components, options.effort)
         if options.coded:
-            coded = coded_coefficients(basis.sha256, coefficients, max_bytes, prior_of[layer_bytes])
-            assert coded is not None
-            return coded, basis.on_grid(centre + basis.weighted_sum(coded.coefficients()))
-        layer = packed_coefficients(basis.sha256, coefficients, max_bytes)
+            layer = coded_coefficients(basis.sha256, coefficients, max_bytes, prior_of[layer_bytes])
+        else:
+            layer = packed_coefficients(basis.sha256, coefficients, max_bytes)
         assert layer is not None
-        if POLISH_PASSES[options.effort]:
-            widths = packed_widths(layer.top, 0, layer.count)
-            q = polish_quantised_coefficients(layer.step, layer.q, target, weights, centre,
-                                              BasisOperator.of(basis, 0, layer.count), POLISH_PASSES[options.effort],
-                                              bounds=(-(1 << (widths - 1)), (1 << (widths - 1)) - 1))
-            layer = BasisLayer(basis.sha256, layer.step, q, 0, 0, layer.top)
+        layer = _polished_layer(layer, target, weights, centre, basis, max_bytes, POLISH_PASSES[options.effort])
         return layer, basis.on_grid(centre + basis.weighted_sum(layer.coefficients()))
 
     return fit
@@ -489,8 +483,9 @@ def _basis_fit(
                     decoder.project_base(LayeredRecord(base.name, code, base.sigma, base.meta, basis=layer),
                                          base_mapped)
                 if coding != "int8":
-                    layer = _polished_layer(layer, base_mapped, basis, target, weights, max_bytes[coding],
-                                            LAYER_POLISH_PASSES[options.effort])
+                    layer = _polished_layer(layer, *(np.asarray(a, dtype=np.float32).reshape(-1)[basis.entries]
+                                                     for a in (target, weights, base_mapped)),
+                                            basis, max_bytes[coding], LAYER_POLISH_PASSES[options.effort])
                 made_layers.append((codings.index(coding),
                                     (record, layer, base_mapped + basis.residual(layer.coefficients(), first))))
         if not made_layers:  # no layer at all: the candidate is the base (encode_layers' stage for k = 0)
@@ -529,20 +524,31 @@ def _basis_fit(
     return fit
 
 
-def _polished_layer(layer: BasisLayer, base_mapped: np.ndarray, basis: SharedBasis, target: np.ndarray,
-                    weights: np.ndarray, max_bytes: int, passes: int) -> BasisLayer:
-    """A packed or entropy-coded basis layer of a record with a latent, its integers polished on the mapped L1
-    error of the clamped decode ``clamp(base + Σ s·qᵢ bᵢ)`` over the valid entries
+def _polished_layer(layer: BasisLayer, target: np.ndarray, weights: np.ndarray, base: np.ndarray,
+                    basis: SharedBasis, max_bytes: int, passes: int) -> BasisLayer:
+    """A packed or entropy-coded basis layer, its integers polished on the mapped L1 error of the clamped decode
+    ``clamp(base + Σ s·qᵢ bᵢ)`` over the valid entries
     (:func:`~brdfcodec.codec.refine.polish_quantised_coefficients`), within its fields (packed) or its bytes
     (coded: a move is kept only where the coder's output, with the step code, still fits ``max_bytes``).
 
     The layer was chosen closest to the float coefficients in squared coefficient error; the polish measures
-    what rate control ranks candidates by (the L1 norm, after the clamp, on the base as decoded).
+    what rate control ranks candidates by (the L1 norm, after the clamp, on the base as decoded: a record's
+    clamped and projected base decode, or the decoder's linear-path mean for a record without a latent).
+
+    Parameters
+    ----------
+    layer : BasisLayer
+        Packed (``top``) or coded (``prior``).
+    target, weights, base : ndarray of float32, shape (E,)
+        The material's mapped kept slices, their validity (0 or 1) and the base, at the basis' entries.
+    basis : SharedBasis
+    max_bytes : int
+        A coded layer's bytes, step code included, as rate control sized it.
+    passes : int
+        At most this many sweeps (0: the layer as it is).
     """
     if not passes:
         return layer
-    x, w, centre = (np.asarray(a, dtype=np.float32).reshape(-1)[basis.entries]
-                    for a in (target, weights, base_mapped))
     fits = None
     if layer.prior is not None:
         codes = prior_codes(layer.prior[0], layer.prior[1], packed_step_code(layer.step), layer.first, layer.count)
@@ -556,7 +562,7 @@ def _polished_layer(layer: BasisLayer, base_mapped: np.ndarray, basis: SharedBas
     else:
         widths = packed_widths(layer.top, layer.first, layer.count)
         bounds = (-(1 << (widths - 1)), (1 << (widths - 1)) - 1)
-    q = polish_quantised_coefficients(layer.step, layer.q, x, w, centre,
+    q = polish_quantised_coefficients(layer.step, layer.q, target, weights, base,
                                       BasisOperator.of(basis, layer.first, layer.count), passes, bounds=bounds,
                                       fits=fits)
     return dataclasses.replace(layer, q=np.asarray(q, dtype=np.int64))

@@ -12,7 +12,8 @@ chooses the enhancement layers among candidate records, each with a rate R
   the decoder's linear path or at the first vector), on
   the base stored compact (μ as int8, :func:`compact_mu_storage`) where the
   budget cannot hold all K coefficients beside μ in the latent dtype
-  (:func:`compact_base_pays`), else on the full base and on a compact one;
+  (:func:`compact_base_pays`), else on the full base and on a compact one (the builder,
+  :mod:`brdfcodec.codec.encoding`, polishes a packed or coded layer's integers on D before they are ranked);
 - min(k, n) int8 coefficients under a detail layer, n each count of
   :data:`DETAIL_BASIS_COUNTS` for a size budget (32 and 64) and
   :data:`DETAIL_BASIS_COUNT` (32) for an error target, whose quantisation
