@@ -402,6 +402,8 @@ def _basis_fit(
     project = projected_base_vectors(decoder, basis) if options.project_base != "never" else 0
     ways = [project] if options.project_base == "always" or not project else [0, project]
     target, weights = np.asarray(inputs, dtype=np.float32), np.asarray(masks, dtype=np.float32)
+    # what the polish of every packed or coded candidate measures against, taken once per material
+    target_on_basis, weights_on_basis = target.reshape(-1)[basis.entries], weights.reshape(-1)[basis.entries]
     made: dict[tuple[int, MuStorage, int, bool, int], tuple[LatentRecord, BasisLayer | None, np.ndarray]] = {}
     least_squares_of: dict[tuple[int, int, int], np.ndarray] = {}
     projected_as: dict[tuple[int, MuStorage], int] = {}  # the projection the first variant kept, per size and μ
@@ -483,9 +485,9 @@ def _basis_fit(
                     decoder.project_base(LayeredRecord(base.name, code, base.sigma, base.meta, basis=layer),
                                          base_mapped)
                 if coding != "int8":
-                    layer = _polished_layer(layer, *(np.asarray(a, dtype=np.float32).reshape(-1)[basis.entries]
-                                                     for a in (target, weights, base_mapped)),
-                                            basis, max_bytes[coding], LAYER_POLISH_PASSES[options.effort])
+                    layer = _polished_layer(layer, target_on_basis, weights_on_basis,
+                                            base_mapped.reshape(-1)[basis.entries], basis, max_bytes[coding],
+                                            LAYER_POLISH_PASSES[options.effort])
                 made_layers.append((codings.index(coding),
                                     (record, layer, base_mapped + basis.residual(layer.coefficients(), first))))
         if not made_layers:  # no layer at all: the candidate is the base (encode_layers' stage for k = 0)
