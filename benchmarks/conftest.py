@@ -51,6 +51,8 @@ TARGETS = {
     # read + encode at 64 B with the integer polish of every packed or coded candidate layer vs without it (issue 48:
     # encode time at --bytes 64 within 2x of the issue's; the polish is this share of it)
     "encode-64B-layer-polish": 1.5,
+    # a 64 B encode with the coded-μ candidates (format 2.5, issue 48) vs without: one more pool of basis fits
+    "encode-64B-coded-mu": 1.6,
     "rgl-write": 40.0,  # one material as an RGL .bsdf (parameterisation + tensor file) vs as a MERL .binary (issue 38)
     # a 16 KB encode through the library with its default threads, beside one CPU-bound process per core, vs the
     # best explicit bc.set_num_threads(n) in the same rounds (issue 39)

@@ -225,3 +225,29 @@ def test_encode_64b_with_layer_polish(benchmark, merl_file: Path) -> None:
     benchmark.extra_info["role"] = "candidate"
     record = benchmark.pedantic(lambda: encoder.encode(read_merl(merl_file)), rounds=3, iterations=1)
     assert record.has_latent and record.meta["rate"]["record_bytes"] <= 64
+
+
+# --- issue 48: records whose μ rides in the coded layer (format 2.5), offered beside the fixed-grid ones
+
+
+def test_encode_64b_baseline_without_coded_mu(benchmark, merl_file: Path, monkeypatch) -> None:
+    """Read and encode at 64 B without the coded-μ candidates (``CODED_MU_STEP_LOG2`` 0)."""
+    from brdfcodec.codec import encoding
+
+    monkeypatch.setattr(encoding, "CODED_MU_STEP_LOG2", 0)
+    encoder = BrdfEncoder(bytes=64, latent_dtype="float16")
+    encoder.decoder  # noqa: B018
+    benchmark.group = "encode-64B-coded-mu"
+    benchmark.extra_info["role"] = "baseline"
+    record = benchmark.pedantic(lambda: encoder.encode(read_merl(merl_file)), rounds=3, iterations=1)
+    assert not record.coded_mu
+
+
+def test_encode_64b_with_coded_mu(benchmark, merl_file: Path) -> None:
+    """The same encode with the default candidates, coded μ among them."""
+    encoder = BrdfEncoder(bytes=64, latent_dtype="float16")
+    encoder.decoder  # noqa: B018
+    benchmark.group = "encode-64B-coded-mu"
+    benchmark.extra_info["role"] = "candidate"
+    record = benchmark.pedantic(lambda: encoder.encode(read_merl(merl_file)), rounds=3, iterations=1)
+    assert record.has_latent and record.meta["rate"]["record_bytes"] <= 64

@@ -149,6 +149,8 @@ def _record_summary(entry: RecordEntry, latent_dtype: str) -> dict[str, Any]:
     }
     if entry.graft_dims:
         item["graft_dims"] = list(entry.graft_dims)
+    if "mu_step" in layers.get("basis", {}):  # a coded μ (format 2.5): its grid 2^-g
+        item["mu_step"] = layers["basis"]["mu_step"]
     if "basis" in layers:
         basis = layers["basis"]
         item["basis"] = {"count": basis["count"], "first": basis.get("first", 0), "project": basis.get("project", 0),
@@ -164,7 +166,8 @@ def _record_summary(entry: RecordEntry, latent_dtype: str) -> dict[str, Any]:
 
 def _stored_forms(item: dict[str, Any], latent_dtype: str) -> str:
     """One line of what a record stores: μ, σ, the layers."""
-    mu = {"int8-fixed": "μ int8 grid", "int8": "μ int8+step"}.get(item["mu"], f"μ {item['mu']}")
+    mu = {"int8-fixed": "μ int8 grid", "int8": "μ int8+step",
+          "coded": f"μ coded in the basis layer, grid 2^-{item.get('mu_step', '?')}"}.get(item["mu"], f"μ {item['mu']}")
     sigma = {"log2-u8": "σ u8", "log2-u8-shared": "σ shared u8"}.get(item["sigma"], f"σ {item['sigma']}")
     parts = [mu, sigma] if item["latent"] else ["latent: none (basis only)"]
     if item["kind"] == "graft":  # parameters numbered from 1, like every number the CLI shows

@@ -22,7 +22,7 @@ from brdfcodec.codec.refine import (
 )
 from brdfcodec.conventions import MAPPED_MAX
 from brdfcodec.format.bvae import LatentRecord, descriptor_size
-from brdfcodec.format.layered_record import MU_INT8_FIXED, LayeredRecord, compact_mu_values
+from brdfcodec.format.layered_record import MU_CODED, MU_INT8_FIXED, LayeredRecord, compact_mu_values
 from brdfcodec.layers.basis import (
     MAX_BASIS_COUNT,
     STEP_BYTES,
@@ -38,6 +38,7 @@ from brdfcodec.layers.coded_basis import (
     CODED_HEADER_BYTES,
     MAX_MAGNITUDE,
     choose_coding,
+    coded_mu_codes,
     encode_integers,
     prior_codes,
 )
@@ -115,6 +116,12 @@ CODED_PRIOR: dict[bool, tuple[int, int]] = {True: (156, 28), False: (190, 41)}
 #: (squared error of the layer's sum at those bytes, :func:`~brdfcodec.layers.coded_basis.choose_coding`) and
 #: fits the layer under the better one; each prior used in a file is a form of its own (spec §3.2, §4.8).
 CODED_PRIORS: dict[bool, tuple[tuple[int, int], ...]] = {True: ((156, 28), (188, 28)), False: ((190, 41), (190, 29))}
+#: The grid a size budget's records entropy-code μ on, beside the fixed grid's 8 bytes (format 2.5, spec §4.9):
+#: μ = q · 2^−3. Under the unit Laplace prior a held-out material's μ (D = 8) codes to about 5 bytes in the layer's
+#: stream; the layer refitted to the coarser μ makes up most of what the grid loses. 2^−3 lowered the error of
+#: held-out materials more than 2^−4 at 28 B in a probe of CV fold 1; rows of the budgets it was measured at:
+#: ``reports/results/rd-*-coded-mu-*.jsonl``. 0 turns the candidates off.
+CODED_MU_STEP_LOG2: int = 3
 _BASIS_CODINGS: tuple[str, ...] = get_args(BasisCoding)
 
 #: Most coefficients whose count takes one varint byte in a record's descriptor.
@@ -293,6 +300,7 @@ def layer_records(
             basis_variants=() if basis is None else options.variants(
                 decoder.network.config.latent_dim if decoder.network.config.linear_basis else 0),
             compact_alone_fit=_compact_alone_fit(decoder, base),
+            coded_mu_step=CODED_MU_STEP_LOG2 if options.packed and options.basis_coding in ("auto", "coded") else 0,
         )
         chosen = result.record
         # record_bytes: what the budget caps (payload and index descriptor); payload_bytes: the payload alone
@@ -422,10 +430,14 @@ def _basis_fit(
         # Each coding asked for: the bytes of its layer and how many coefficients it keeps. --basis-coding auto makes
         # a packed and a coded layer, of one fit where they keep as many coefficients (from about 64 B: all), else
         # of a fit each, and keeps the lower error (packed first: kept on a tie, readable by 2.3 readers).
+        coded_mu = mu_storage == MU_CODED  # μ rides in the coded layer's stream (format 2.5): coded layers only
+        lead = None if not coded_mu else coded_mu_lead(base.mu)
         if packed:  # in the bytes of k int8 coefficients: as many as the least-squares coefficients pack to
             first = min(start, basis.count - 1)
             codings = ["packed", "coded"] if options.basis_coding == "auto" else [
                 "coded" if options.coded else "packed"]
+            if coded_mu:
+                codings = ["coded"]
             max_bytes, count_of = {}, {}
             prior_of: dict[int, tuple[int, int]] = {}  # a coded layer's prior for each size of layer tried
             coded_prior = CODED_PRIOR[True]  # the prior of the coded layer's size, once chosen
@@ -434,12 +446,12 @@ def _basis_fit(
                     if coding != "coded":
                         return _packed_count(least_squares(first, available, p), first, layer_bytes)
                     prior_of[layer_bytes], count = _coded_prior_and_count(
-                        least_squares(first, available, p), first, layer_bytes - 1, CODED_PRIORS[True])
+                        least_squares(first, available, p), first, layer_bytes - 1, CODED_PRIORS[True], lead)
                     return count
                 try:
                     count_of[c], layer_bytes = _layer_size(count_in, k, basis.count - first)
                 except ValueError:  # no coded layer fits these bytes: under auto, the packed one alone
-                    if options.basis_coding != "auto":
+                    if options.basis_coding != "auto" and not coded_mu:
                         raise
                     continue
                 max_bytes[c] = layer_bytes - (1 if c == "coded" else 0)
@@ -459,9 +471,10 @@ def _basis_fit(
                 )
             codes, coefficients = joint[first, count, p]
             if mu_storage is not None:
-                # μ as a compact record stores it (int8 on the fixed grid or with a step), then the coefficients
-                # refitted to that code.
-                code = compact_mu_values(codes[0], mu_storage == MU_INT8_FIXED, f"{base.name}: mu")
+                # μ as a compact record stores it (int8 on the fixed grid or with a step, or entropy-coded on the
+                # grid 2^−g), then the coefficients refitted to that code.
+                code = (coded_mu_values(codes[0]) if coded_mu else
+                        compact_mu_values(codes[0], mu_storage == MU_INT8_FIXED, f"{base.name}: mu"))
                 _, coefficients = fit_basis_coefficients(
                     decoder.network, code[None], inputs[None], masks[None], components, basis.entries,
                     options.effort, fit_latent=False, projection=projection,
@@ -473,7 +486,7 @@ def _basis_fit(
             for coding in (c for c in codings if count_of[c] == count):
                 if coding == "coded":
                     layer = coded_coefficients(basis.sha256, coefficients[0], max_bytes[coding], coded_prior,
-                                               first, p)
+                                               first, p, coded_mu=None if not coded_mu else coded_mu_lead(code))
                 elif coding == "packed":
                     layer = packed_coefficients(basis.sha256, coefficients[0], max_bytes[coding], first, p)
                 else:
@@ -526,6 +539,18 @@ def _basis_fit(
     return fit
 
 
+def coded_mu_lead(mu: np.ndarray) -> tuple[int, np.ndarray]:
+    """A coded μ's ``(g, q)`` on brdfcodec's grid 2^−:data:`CODED_MU_STEP_LOG2` (format 2.5): q = round(μ · 2^g)."""
+    g = CODED_MU_STEP_LOG2
+    return g, np.rint(np.asarray(mu, dtype=np.float64) * float(1 << g)).astype(np.int64)
+
+
+def coded_mu_values(mu: np.ndarray) -> np.ndarray:
+    """The float32 values a coded μ decodes to (what an encoder fits the layer to)."""
+    g, q = coded_mu_lead(mu)
+    return (q / float(1 << g)).astype(np.float32)
+
+
 def _polished_layer(layer: BasisLayer, target: np.ndarray, weights: np.ndarray, base: np.ndarray,
                     basis: SharedBasis, max_bytes: int, passes: int) -> BasisLayer:
     """A packed or entropy-coded basis layer, its integers polished on the mapped L1 error of the clamped decode
@@ -553,12 +578,14 @@ def _polished_layer(layer: BasisLayer, target: np.ndarray, weights: np.ndarray, 
         return layer
     fits = None
     if layer.prior is not None:
-        codes = prior_codes(layer.prior[0], layer.prior[1], packed_step_code(layer.step), layer.first, layer.count)
+        lead_q, lead_codes = layer.stream_codes()  # a coded μ's integers, ahead in the stream (format 2.5)
+        codes = np.concatenate([lead_codes, prior_codes(layer.prior[0], layer.prior[1], packed_step_code(layer.step),
+                                                        layer.first, layer.count)])
         room = max_bytes - CODED_HEADER_BYTES
         bounds = (np.full(layer.count, -MAX_MAGNITUDE), np.full(layer.count, MAX_MAGNITUDE))
 
         def coder_fits(q: np.ndarray) -> bool:
-            return len(encode_integers(q, codes)) <= room
+            return len(encode_integers(np.concatenate([lead_q, np.asarray(q, dtype=np.int64)]), codes)) <= room
 
         fits = coder_fits
     else:
@@ -571,9 +598,11 @@ def _polished_layer(layer: BasisLayer, target: np.ndarray, weights: np.ndarray, 
 
 
 def _coded_prior_and_count(coefficients: np.ndarray, first: int, max_bytes: int,
-                           priors: Sequence[tuple[int, int]]) -> tuple[tuple[int, int], int]:
+                           priors: Sequence[tuple[int, int]],
+                           coded_mu: tuple[int, np.ndarray] | None = None) -> tuple[tuple[int, int], int]:
     """The prior (of ``priors``) under which the best coded layer of ``max_bytes`` leaves the least squared error
-    of these coefficients (of vectors ``first``, …; the first prior on a tie), and how many coefficients it keeps.
+    of these coefficients (of vectors ``first``, …; the first prior on a tie), and how many coefficients it keeps
+    (after a coded μ's integers, ``(g, q)``, when given: format 2.5).
 
     Raises
     ------
@@ -581,8 +610,9 @@ def _coded_prior_and_count(coefficients: np.ndarray, first: int, max_bytes: int,
         No coded layer fits (not even one coefficient) under any of the priors.
     """
     best: tuple[float, tuple[int, int], int] | None = None
+    lead = None if coded_mu is None else (coded_mu[1], coded_mu_codes(coded_mu[0], len(coded_mu[1])))
     for prior in priors:
-        choice = choose_coding(coefficients, first, max_bytes, *prior)
+        choice = choose_coding(coefficients, first, max_bytes, *prior, lead=lead)
         if choice is not None and (best is None or choice.error < best[0]):
             best = (choice.error, prior, len(choice.q))
     if best is None:

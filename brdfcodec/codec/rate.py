@@ -76,7 +76,7 @@ import numpy.typing as npt
 from brdfcodec.conventions import MAPPED_MAX, NETWORK_INPUT_SHAPE
 from brdfcodec.errors import RateTargetError
 from brdfcodec.format.bvae import LatentRecord, record_overhead
-from brdfcodec.format.layered_record import MU_INT8, MU_INT8_FIXED, LayeredRecord
+from brdfcodec.format.layered_record import MU_CODED, MU_INT8, MU_INT8_FIXED, LayeredRecord
 from brdfcodec.layers.basis import STEP_BYTES, BasisLayer, fits_fixed_mu_grid
 from brdfcodec.layers.detail import DetailLayer, decode_detail, encode_detail
 from brdfcodec.representation.metrics import RelaeAgainst
@@ -152,7 +152,8 @@ class RatePoint:
         k, step, variant = self.option
         if not k and step is None:  # the base record: μ in the latent dtype, or compact (no layer, no σ)
             return "compact-mu alone" if self.compact else "mu alone"
-        parts = ["compact-mu" if self.compact else "mu", f"k={k}"]
+        coded = getattr(self.pool, "mu_storage", None) == MU_CODED
+        parts = ["coded-mu" if coded else "compact-mu" if self.compact else "mu", f"k={k}"]
         if variant is not None:
             parts.append(f"variant={variant}")
         if step is not None:
@@ -161,7 +162,8 @@ class RatePoint:
 
 
 #: How a record stores μ: None in the file's latent dtype, else compact (``layers.mu``): ``"int8"`` (a float16
-#: step and D int8 values) or ``"int8-fixed"`` (D int8 values on the fixed grid μ = q / 32).
+#: step and D int8 values), ``"int8-fixed"`` (D int8 values on the fixed grid μ = q / 32) or ``"coded"``
+#: (entropy-coded in the coded basis layer's stream, format 2.5).
 MuStorage = str | None
 #: What a basis fit returns for k coefficients, how μ is stored (when compact, the code it returns is the
 #: quantised one, and the coefficients are fitted to it) and whether a detail layer will follow (the writer may
@@ -207,13 +209,16 @@ class _Candidates:
 
     def __init__(self, base: LatentRecord, base_mapped: np.ndarray, inputs: np.ndarray, masks: np.ndarray,
                  latent_itemsize: int, basis_fit: BasisFit | None, compact: bool = False,
-                 fixed_grid: bool = False, store_sigma: bool = True) -> None:
+                 fixed_grid: bool = False, store_sigma: bool = True, coded_mu_step: int = 0) -> None:
         self.base, self.inputs, self.masks = base, inputs, masks
         self.store_sigma = store_sigma
         d = base.latent_dim
         # the base alone: μ (and σ, when stored) in the latent dtype, and its descriptor
         self.plain_bytes = (2 if store_sigma else 1) * d * latent_itemsize + record_overhead(base.name)
         self.mu_storage = (MU_INT8_FIXED if fixed_grid else compact_mu_storage(base.mu)) if compact else None
+        self.coded_mu_step = coded_mu_step  # g > 0: μ entropy-coded in the layer (its bytes counted there)
+        if coded_mu_step:
+            self.mu_storage = MU_CODED
         self.layered_bytes = _layered_base_bytes(d, latent_itemsize, self.mu_storage, store_sigma)
         self.basis_fit = basis_fit
         self.stages: dict[tuple[int, bool, str | None], tuple[LatentRecord, BasisLayer | None, np.ndarray]] = {}
@@ -247,9 +252,13 @@ class _Candidates:
             return base
         detail = None if s is None else self.detail(k, s)
         storage: dict[str, bool] = {"compact_sigma": True} if self.store_sigma else {"store_sigma": False}
-        if self.mu_storage is not None:
-            storage = {"compact_mu": True, "fixed_mu_grid": self.mu_storage == MU_INT8_FIXED,
-                       **({"shared_sigma": True} if self.store_sigma else {"store_sigma": False})}
+        sigma: dict[str, Any] = {"shared_sigma": True} if self.store_sigma else {"store_sigma": False}
+        if self.mu_storage == MU_CODED:
+            if basis is None or basis.prior is None:  # no coded layer to carry μ (the fit gave none)
+                return base
+            storage = {"coded_mu": self.coded_mu_step, **sigma}
+        elif self.mu_storage is not None:
+            storage = {"compact_mu": True, "fixed_mu_grid": self.mu_storage == MU_INT8_FIXED, **sigma}
         return LayeredRecord(base.name, base.mu, base.sigma, base.meta, detail=detail, basis=basis, **storage)
 
     def size(self, k: int, s: float | None, variant: str | None = None) -> int:
@@ -300,6 +309,7 @@ def encode_layers(
     store_sigma: bool = True,
     basis_variants: Sequence[str] = (),
     compact_alone_fit: CompactAloneFit | None = None,
+    coded_mu_step: int = 0,
 ) -> RateResult:
     """A base record, layered to a size budget, an error target or a fixed step.
 
@@ -344,6 +354,10 @@ def encode_layers(
         μ compact and no layer (format 2.2, ``spec/bvae-format.md`` §3.2: D bytes on the fixed grid, 2 + D with a
         step) is a candidate of a size budget: the smallest record with a latent, so that every material fits
         a budget from D bytes beside its descriptor (10 for D = 8 and a one-byte name).
+    coded_mu_step : int, default 0
+        g > 0: a size budget's candidates include records whose μ is entropy-coded on the grid 2^−g in their
+        coded basis layer (format 2.5, ``spec/bvae-format.md`` §4.9), in each of ``basis_variants``; ``basis_fit``
+        then receives ``"coded"`` as the μ storage and must make a coded layer that carries μ. 0: none.
 
     Raises
     ------
@@ -392,7 +406,10 @@ def encode_layers(
             raise RateTargetError(f"{base.name}: {bytes_budget} bytes is below the {what} {smallest} bytes")
         points = _budget_points(cands, bytes_budget, full, compact, variants, tried,
                                 lambda: candidates(base, base_mapped, target, weights, latent_itemsize, basis_fit,
-                                                   compact=True))
+                                                   compact=True),
+                                None if not (full and coded_mu_step) else
+                                lambda: candidates(base, base_mapped, target, weights, latent_itemsize, basis_fit,
+                                                   compact=True, coded_mu_step=coded_mu_step))
         if alone is not None and alone.storage_for(bytes_budget) is not None:
             # a candidate at every budget it fits, so that a byte more never loses what a smaller budget gave
             points.append(alone.point(bytes_budget))
@@ -459,7 +476,8 @@ def encode_layers(
 
 def _budget_points(cands: _Candidates, bytes_budget: int, full: int, compact: bool,
                    variants: tuple[str | None, ...], tried: list[tuple[float | None, int, float | None]],
-                   compact_pool: Callable[[], _Candidates]) -> list[RatePoint]:
+                   compact_pool: Callable[[], _Candidates],
+                   coded_pool: Callable[[], _Candidates] | None = None) -> list[RatePoint]:
     """Every candidate record of a size budget that fits it, with its rate and kept-slice distortion.
 
     The candidates, each the largest of its kind that fits (within a kind, more bytes lower the error): the base
@@ -467,10 +485,11 @@ def _budget_points(cands: _Candidates, bytes_budget: int, full: int, compact: bo
     not, :func:`compact_base_pays`) and, where that base is the full one, on a compact base too (so that a byte
     more never loses what the compact base gave, issue 39); and min(k, n) int8 coefficients, for each n of
     :data:`DETAIL_BASIS_COUNTS`, under a detail layer at each step of the ladder search that fits (where a detail
-    layer has room).
+    layer has room); and, with ``coded_pool``, the most coefficients that fit beside a μ entropy-coded in their
+    layer (format 2.5), in each of ``variants``.
     """
-    pools = {compact: cands}
-    options: list[tuple[bool, int, float | None, str | None]] = [(compact, 0, None, None)]
+    pools: dict[bool | str, _Candidates] = {compact: cands}
+    options: list[tuple[bool | str, int, float | None, str | None]] = [(compact, 0, None, None)]
     k = cands.most_coefficients(bytes_budget, full)
     if k:
         options += [(compact, k, None, variant) for variant in variants]
@@ -479,6 +498,11 @@ def _budget_points(cands: _Candidates, bytes_budget: int, full: int, compact: bo
         most = pools[True].most_coefficients(bytes_budget, full)
         if most:
             options += [(True, most, None, variant) for variant in variants]
+    if coded_pool is not None:
+        pools[MU_CODED] = coded_pool()
+        most = pools[MU_CODED].most_coefficients(bytes_budget, full)
+        if most:
+            options += [(MU_CODED, most, None, variant) for variant in variants]
     # A detail layer only where it fits beside its coefficients (no room at 64 B: 48 coefficients, no detail).
     empty = _empty_detail_bytes()
     for under_detail in sorted({min(k, count) for count in DETAIL_BASIS_COUNTS}):
@@ -498,7 +522,7 @@ def _budget_points(cands: _Candidates, bytes_budget: int, full: int, compact: bo
         seen.add(id(layer))
         if size <= bytes_budget:
             mapped = np.clip(pool.mapped(n, s, coding), 0.0, MAPPED_MAX)
-            points.append(RatePoint(size, float((np.abs(mapped - pool.inputs) * pool.masks).sum()), c,
+            points.append(RatePoint(size, float((np.abs(mapped - pool.inputs) * pool.masks).sum()), c is not False,
                                     (n, s, coding), pool))
     return points
 
@@ -728,6 +752,8 @@ def _layered_base_bytes(latent_dim: int, latent_itemsize: int, mu_storage: MuSto
     is not stored (format 2.2)."""
     if mu_storage is None:
         return latent_dim * latent_itemsize + (latent_dim if store_sigma else 0)
+    if mu_storage == MU_CODED:  # μ's bytes are the coded layer's (format 2.5)
+        return 1 if store_sigma else 0
     return latent_dim + (1 if store_sigma else 0) + (STEP_BYTES if mu_storage == MU_INT8 else 0)
 
 

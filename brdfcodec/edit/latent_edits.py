@@ -108,8 +108,8 @@ def with_parameters(
 def _layered_with_code(
     record: Any, mu: np.ndarray, *, name: str, sigma: np.ndarray, meta: dict[str, Any]
 ) -> Record:
-    """``record`` (layered) with a new ``mu``: the same layers and σ form; compact μ only where it holds ``mu``
-    exactly."""
+    """``record`` (layered) with a new ``mu``: the same layers and σ form; compact or coded μ (format 2.5) only where
+    it holds ``mu`` exactly (else μ in the file's latent dtype, and a coded layer's stream without it)."""
     import dataclasses
 
     from brdfcodec.format.layered_record import compact_mu_values
@@ -120,8 +120,13 @@ def _layered_with_code(
             compact = bool(np.array_equal(compact_mu_values(mu, record.fixed_mu_grid), mu))
         except ValueError:  # not storable in the compact form at all
             compact = False
+    coded = int(getattr(record, "coded_mu", 0))
+    if coded:
+        scaled = np.asarray(mu, dtype=np.float64) * float(1 << coded)
+        coded = coded if bool(np.isfinite(scaled).all() and np.array_equal(np.rint(scaled), scaled)
+                              and np.abs(scaled).max(initial=0.0) < 2 ** 21) else 0
     return dataclasses.replace(record, name=name, mu=mu, sigma=sigma, meta=meta, compact_mu=compact,
-                               fixed_mu_grid=compact and record.fixed_mu_grid)
+                               fixed_mu_grid=compact and record.fixed_mu_grid, coded_mu=coded)
 
 
 def traverse(

@@ -45,7 +45,7 @@ FORMAT_MAJOR = 2
 #: 2.3: packed basis layers (form layer bit 2 and a top width: spec §4.7).
 #: 2.4: entropy-coded basis layers (form layer bit 3, a prior of two bytes, a length per record: spec §4.8).
 #: A writer states the lowest minor version a file needs (2.1 unless a record leaves σ out, packs or codes its basis).
-FORMAT_MINOR = 4
+FORMAT_MINOR = 5
 #: Largest stored header (binary index and stored metadata block), in bytes.
 MAX_HEADER_BYTES = 1 << 24
 #: Largest metadata block, decompressed, in bytes.

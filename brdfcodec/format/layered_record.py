@@ -16,6 +16,7 @@ latent it does not have fails loudly instead of using a made-up code); edits ref
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any, Literal
@@ -37,12 +38,13 @@ from brdfcodec.layers.basis import (
     int8_step_bytes,
     int8_with_step,
 )
+from brdfcodec.layers.coded_basis import MAX_CODED_BYTES, MAX_MAGNITUDE, MAX_MU_STEP_LOG2
 from brdfcodec.layers.detail import _DTYPES, DETAIL_TRANSFORM, MAX_STEP, MIN_STEP, DetailLayer, check_detail_frame
-from brdfcodec.layers.coded_basis import MAX_CODED_BYTES
 from brdfcodec.layers.packed import MAX_TOP_WIDTH, packed_bytes, packed_widths
 
 __all__ = [
     "LAYERED_KIND",
+    "MU_CODED",
     "MU_INT8",
     "MU_INT8_FIXED",
     "MU_NONE",
@@ -72,6 +74,8 @@ SIGMA_LOG2_U8_SHARED = "log2-u8-shared"
 MU_INT8 = "int8"
 #: ``layers.mu`` of a record that stores μ as D int8 values q on the fixed grid: μ = q / 32 (since 1.5).
 MU_INT8_FIXED = "int8-fixed"
+#: ``layers.mu`` of a record that entropy-codes μ on the grid 2^−g in its coded basis layer's stream (since 2.5).
+MU_CODED = "coded"
 #: ``layers.mu`` (and ``layers.sigma``, :data:`SIGMA_NONE`) of a basis-only record, which stores no latent (since 2.1).
 MU_NONE = "none"
 #: ``layers.sigma`` of a basis-only record: no σ (only with ``layers.mu = "none"``).
@@ -149,6 +153,11 @@ class LayeredRecord(LatentRecord):
         never re-quantised when it is read (q = −128 and any positive finite binary16 step included); None (a
         writer's record): the code is made from ``mu`` (:func:`compact_mu_code`), and ``mu`` holds its values. A
         code that does not give ``mu`` (a record copied with a new ``mu``) is made anew from ``mu`` too.
+    coded_mu : int, default 0
+        g > 0: μ is entropy-coded on the grid μ = q · 2^−g (g = 1 … 5) ahead of the coefficients in the record's
+        coded basis layer (``layers.mu = "coded"``, format 2.5, ``spec/bvae-format.md`` §4.9): about 6 bytes for
+        D = 8 at g = 4, against 8 on the fixed grid. Needs an entropy-coded basis layer; ``mu`` then holds the
+        values on the grid (rounded to nearest), and the layer's ``coded_mu`` is made from them. 0: not coded.
     has_latent : bool
         False: a basis-only record (format 2.1, ``layers.mu = layers.sigma = "none"``; make one with
         :meth:`without_latent`). It stores neither μ nor σ; its base is the decoder's linear-path mean
@@ -167,6 +176,7 @@ class LayeredRecord(LatentRecord):
     has_latent: bool = True
     store_sigma: bool = True
     stored_mu: tuple[float, np.ndarray] | None = field(default=None, compare=False, repr=False)
+    coded_mu: int = 0
 
     @classmethod
     def without_latent(
@@ -230,6 +240,30 @@ class LayeredRecord(LatentRecord):
         object.__setattr__(self, "stored_mu", code)
         if code is not None:
             self._hold("mu", dequantise_int8(*code))
+        if self.coded_mu:
+            self._code_mu_in_layer()
+        elif self.basis is not None and self.basis.coded_mu is not None:
+            object.__setattr__(self, "basis", dataclasses.replace(self.basis, coded_mu=None))
+
+    def _code_mu_in_layer(self) -> None:
+        """A coded μ (format 2.5): ``mu`` rounded to the grid 2^−g, and its integers set in the coded layer."""
+        g = self.coded_mu
+        if isinstance(g, bool) or not isinstance(g, int | np.integer) or not 1 <= g <= MAX_MU_STEP_LOG2:
+            raise ValueError(f"{self.name}: a coded mu's grid exponent must be an integer 1 to {MAX_MU_STEP_LOG2}, "
+                             f"got {g!r}")
+        if not self.has_latent or self.compact_mu:
+            raise ValueError(f"{self.name}: a coded mu is a record's latent, stored neither compact nor absent")
+        if self.basis is None or self.basis.prior is None:
+            raise ValueError(f"{self.name}: a coded mu rides in an entropy-coded basis layer, which it lacks")
+        scaled = np.rint(np.asarray(self.mu, dtype=np.float64) * float(1 << g))
+        if not np.isfinite(scaled).all() or np.abs(scaled).max(initial=0.0) > MAX_MAGNITUDE:
+            raise ValueError(f"{self.name}: mu is past a coded mu's range (±{MAX_MAGNITUDE} steps of 2^-{g})")
+        q = scaled.astype(np.int64)
+        q.setflags(write=False)
+        self._hold("mu", q / float(1 << g))  # exact in float32 (|q| < 2^22)
+        given = self.basis.coded_mu
+        if given is None or given[0] != g or not np.array_equal(given[1], q):
+            object.__setattr__(self, "basis", dataclasses.replace(self.basis, coded_mu=(int(g), q)))
 
     def _stored_code(self) -> tuple[float, np.ndarray]:
         """The compact μ's ``(t, q)``: the one given when it is a code of this form that gives ``mu`` exactly
@@ -272,6 +306,8 @@ class LayeredRecord(LatentRecord):
         or :data:`MU_NONE` (no latent)."""
         if not self.has_latent:
             return MU_NONE
+        if self.coded_mu:
+            return MU_CODED
         if self.compact_mu:
             return MU_INT8_FIXED if self.fixed_mu_grid else MU_INT8
         return None
@@ -281,7 +317,8 @@ class LayeredRecord(LatentRecord):
         (none for a record without a latent)."""
         if not self.has_latent:
             return np.zeros(0, dtype=np.float32)
-        parts = ([] if self.compact_mu else [self.mu]) + ([self.sigma] if self.sigma_in_values else [])
+        in_values = not (self.compact_mu or self.coded_mu)
+        parts = ([self.mu] if in_values else []) + ([self.sigma] if self.sigma_in_values else [])
         return np.concatenate(parts) if parts else np.zeros(0, dtype=np.float32)
 
     def base(self) -> LatentRecord:
@@ -331,6 +368,8 @@ def layers_entry(record: LayeredRecord) -> dict[str, Any]:
         entry["sigma"] = SIGMA_NONE
     if record.compact_mu:
         entry["mu"] = MU_INT8_FIXED if record.fixed_mu_grid else MU_INT8
+    if record.coded_mu:
+        entry["mu"] = MU_CODED
     if record.compact_sigma:
         entry["sigma"] = SIGMA_LOG2_U8
     if record.shared_sigma:
@@ -381,6 +420,13 @@ def layers_length(layers: object, where: str, latent_dim: int = 0) -> int:
             raise ValueError(f"{where} stores no latent and no basis layer (a record without a latent needs one)")
         if isinstance(layers["basis"], Mapping) and layers["basis"].get("project", 0) != 0:
             raise ValueError(f"{where} stores no latent but projects its base on the basis (project must be 0)")
+    elif layers.get("mu") == MU_CODED:  # format 2.5: in the coded basis layer's stream, which it needs
+        basis = layers.get("basis")
+        if not isinstance(basis, Mapping) or "prior" not in basis or "mu_step" not in basis:
+            raise ValueError(f"{where} codes mu in a basis layer that is not entropy-coded (or names no mu step)")
+        g = basis["mu_step"]
+        if not isinstance(g, int) or isinstance(g, bool) or not 1 <= g <= MAX_MU_STEP_LOG2:
+            raise ValueError(f"{where} coded mu step {g!r} is not an integer in [1, {MAX_MU_STEP_LOG2}]")
     elif "mu" in layers:
         if layers["mu"] not in _MU_MODES:
             raise UnsupportedLayerError(
@@ -405,7 +451,7 @@ def layers_length(layers: object, where: str, latent_dim: int = 0) -> int:
 def _basis_length(basis: object, where: str) -> int:
     if not isinstance(basis, Mapping):
         raise ValueError(f"{where} layers.basis is not a JSON object")
-    unknown = sorted(set(basis) - {"sha256", "count", "first", "project", "top", "prior", "length"})
+    unknown = sorted(set(basis) - {"sha256", "count", "first", "project", "top", "prior", "length", "mu_step"})
     if unknown:
         raise UnsupportedLayerError(
             f"{where} basis layer has fields {unknown}, unknown to this reader; upgrade brdfcodec"
@@ -422,6 +468,8 @@ def _basis_length(basis: object, where: str) -> int:
         )
     if not isinstance(project, int) or isinstance(project, bool) or not 1 <= project <= MAX_BASIS_COUNT:
         raise ValueError(f"{where} basis project {project!r} is not an integer in [1, {MAX_BASIS_COUNT}]")
+    if "mu_step" in basis and "prior" not in basis:
+        raise ValueError(f"{where} basis layer carries a coded mu but is not entropy-coded")
     if "prior" in basis or "length" in basis:  # entropy-coded (format 2.4, spec §4.8)
         return _coded_length(basis, where)
     if "top" in basis:
@@ -498,6 +546,7 @@ def layered_from_payload(
             residual = DetailLayer(float(entry["step"]), str(entry["dtype"]), bytes(tail[size:]))
             check_detail_frame(residual.data, residual.dtype)  # decompressed whole at read, as below
         return LayeredRecord.without_latent(name, d, coefficients, detail=residual, meta=meta)
+    coded_mu = layers.get("mu") == MU_CODED
     compact_mu = layers.get("mu") in _MU_MODES
     fixed_mu_grid = layers.get("mu") == MU_INT8_FIXED
     stored_mu = None  # a compact μ is μ = t·q exactly as stored (§4.5): the record keeps the code, never re-quantised
@@ -507,7 +556,7 @@ def layered_from_payload(
     elif compact_mu:
         stored_mu = int8_from_step_bytes(tail[: STEP_BYTES + d], "compact mu step")
         tail = tail[STEP_BYTES + d :]
-    else:
+    elif not coded_mu:
         mu, values = values[:d], values[d:]
     if stored_mu is not None:
         mu = dequantise_int8(*stored_mu)
@@ -524,13 +573,17 @@ def layered_from_payload(
         tail = tail[1:]
     else:
         sigma = values[:d]
-    flags = {"compact_sigma": compact, "shared_sigma": shared, "compact_mu": compact_mu,
-             "fixed_mu_grid": fixed_mu_grid, "store_sigma": store_sigma, "stored_mu": stored_mu}
+    flags: dict[str, Any] = {"compact_sigma": compact, "shared_sigma": shared, "compact_mu": compact_mu,
+                             "fixed_mu_grid": fixed_mu_grid, "store_sigma": store_sigma, "stored_mu": stored_mu}
     basis = None
     if "basis" in layers:
         size = _basis_length(layers["basis"], name)
-        basis = basis_layer_from_bytes(layers["basis"], bytes(tail[:size]))
+        basis = basis_layer_from_bytes(layers["basis"], bytes(tail[:size]), d)
         tail = tail[size:]
+    if coded_mu:  # format 2.5: μ = q · 2^−g, its integers the first D of the coded layer's stream (§4.9)
+        assert basis is not None and basis.coded_mu is not None
+        g, q = basis.coded_mu
+        mu, flags["coded_mu"] = (np.asarray(q, dtype=np.float64) / float(1 << g)).astype(np.float32), g
     if "detail" not in layers:
         return LayeredRecord(name, mu, sigma, meta, basis=basis, **flags)
     detail = layers["detail"]

@@ -58,6 +58,7 @@ from brdfcodec.format.records import GraftRecord, LatentRecord, meta_problem
 from brdfcodec.format.strict_json import _check_json_text
 from brdfcodec.format.writer import _DETAIL_CODES, _KIND_CODES, _MU_CODES, _SIGMA_CODES
 from brdfcodec.layers.basis import MAX_BASIS_COUNT
+from brdfcodec.layers.coded_basis import MAX_MU_STEP_LOG2
 from brdfcodec.layers.packed import MAX_TOP_WIDTH
 
 __all__ = ["BvaeReader", "parse_bvae", "read_bvae", "read_header"]
@@ -182,6 +183,9 @@ def _parse_form(path: str, cursor: _Cursor, i: int, latent_dim: int, basis_sha: 
     if layer_bits & _LAYER_CODED and (not layer_bits & _LAYER_BASIS or layer_bits & _LAYER_PACKED):
         raise _fail(path, f"{where} entropy-codes a basis layer it does not have, or one it packs (layer bit 3 "
                     "needs bit 0 and excludes bit 2)")
+    if mus[mu_code] == "coded" and not layer_bits & _LAYER_CODED:
+        raise _fail(path, f"{where} codes mu in an entropy-coded basis layer it does not have (mu 4 needs layer "
+                    "bit 3)")
     layers: dict[str, Any] = {}
     if mus[mu_code] is not None:
         layers["mu"] = mus[mu_code]
@@ -208,6 +212,11 @@ def _parse_form(path: str, cursor: _Cursor, i: int, latent_dim: int, basis_sha: 
         if layer_bits & _LAYER_CODED:  # format 2.4: the prior's amplitude and decay (spec §4.8)
             coded = {"prior": [cursor.u8(f"{where}'s prior amplitude"), cursor.u8(f"{where}'s prior decay")],
                      "length": 1}
+            if mus[mu_code] == "coded":  # format 2.5: the coded μ's grid exponent g, μ = q · 2^−g (spec §4.9)
+                g = cursor.u8(f"{where}'s mu step")
+                if not 1 <= g <= MAX_MU_STEP_LOG2:
+                    raise _fail(path, f"{where} codes mu on the grid 2^-{g}, outside 1 to {MAX_MU_STEP_LOG2}")
+                coded["mu_step"] = g
         # as brdfcodec.format.layered_record.layers_entry writes it: ``first``, ``project`` and ``top`` only when
         # not 0
         layers["basis"] = {"sha256": basis_sha, "count": 1, **({"first": first} if first else {}),

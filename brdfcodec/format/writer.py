@@ -127,7 +127,7 @@ def _payload(record: Record, dtype: np.dtype) -> bytes:
 
 #: Codes of the form table (§3.2): record kinds, how μ and σ are stored, the detail layer's coefficient type.
 _KIND_CODES = {"latent": 0, "graft": 1, "layered": 2}
-_MU_CODES: dict[str | None, int] = {None: 0, "int8": 1, "int8-fixed": 2, "none": 3}
+_MU_CODES: dict[str | None, int] = {None: 0, "int8": 1, "int8-fixed": 2, "none": 3, "coded": 4}
 _SIGMA_CODES: dict[str | None, int] = {None: 0, "log2-u8": 1, "log2-u8-shared": 2, "none": 3}
 _DETAIL_CODES = {"int16": 0, "int32": 1}  # transform "dct3-ycc", the only one
 #: Most entries of a file's form table (its count is one byte).
@@ -145,7 +145,8 @@ def _form_of(record: Record) -> tuple[Any, ...]:
     return ("layered", layers.get("mu"), layers.get("sigma"),
             None if basis is None else (int(basis.get("first", 0)), int(basis.get("project", 0)),
                                         int(basis.get("top", 0)),
-                                        tuple(basis["prior"]) if "prior" in basis else None),
+                                        tuple(basis["prior"]) if "prior" in basis else None,
+                                        int(basis.get("mu_step", 0))),
             None if detail is None else str(detail["dtype"]))
 
 
@@ -168,16 +169,20 @@ def _form_bytes(form: tuple[Any, ...]) -> bytes:
                 out += bytes([basis[2]])
             if basis[3] is not None:  # the coded layer's prior (format 2.4): amplitude, decay
                 out += bytes(basis[3])
+            if basis[4]:  # a coded μ's grid exponent (format 2.5)
+                out += bytes([basis[4]])
         if detail is not None:
             out += bytes([_DETAIL_CODES[detail]])
     return out
 
 
 def _minor_needed(records: Sequence[Record]) -> int:
-    """The lowest minor version that holds these records (§2): 4 once a basis layer is entropy-coded, 3 once one
-    is packed, 2 once a record stores a latent without σ, else 1."""
-    if any(getattr(getattr(r, "basis", None), "prior", None) is not None for r in records):
+    """The lowest minor version that holds these records (§2): 5 once a record entropy-codes μ, 4 once a basis
+    layer is entropy-coded, 3 once one is packed, 2 once a record stores a latent without σ, else 1."""
+    if any(getattr(r, "coded_mu", 0) for r in records):
         return FORMAT_MINOR
+    if any(getattr(getattr(r, "basis", None), "prior", None) is not None for r in records):
+        return 4
     if any(getattr(getattr(r, "basis", None), "top", 0) for r in records):
         return 3
     without_sigma = any(getattr(r, "has_latent", False) and not getattr(r, "store_sigma", True) for r in records)

@@ -20,6 +20,7 @@ from brdfcodec.layers.coded_basis import (
     MAX_CODED_BYTES,
     MAX_MAGNITUDE,
     choose_coding,
+    coded_mu_codes,
     decode_integers,
     encode_integers,
     prior_codes,
@@ -85,6 +86,11 @@ class BasisLayer:
         An entropy-coded layer (format 2.4, :mod:`brdfcodec.layers.coded_basis`): the form's Laplace prior
         (amplitude A, decay d, 0 … 255 each; vector n's spread 2^(A/16 − 4)·n^(−d/32) mapped units); the step
         is a packed step. None: not coded.
+    coded_mu : (int, ndarray of int64) or None, default None
+        A coded layer only: ``(g, q)``, a record's μ = q · 2^−g entropy-coded ahead of the coefficients in the
+        layer's stream (format 2.5, ``spec/bvae-format.md`` §4.9); the layer's bytes and length include it. Set
+        by :class:`~brdfcodec.format.layered_record.LayeredRecord` from its ``mu``. None: the stream holds the
+        coefficients alone.
     """
 
     sha256: str
@@ -94,11 +100,14 @@ class BasisLayer:
     project: int = 0
     top: int = 0
     prior: tuple[int, int] | None = None
+    coded_mu: tuple[int, npt.NDArray[np.int64]] | None = None
 
     def __post_init__(self) -> None:
         if not is_sha256_hex(self.sha256):
             raise ValueError(f"basis sha256 must be 64 lower-case hex digits, got {self.sha256!r}")
         q = np.asarray(self.q)
+        if self.coded_mu is not None:
+            self._check_coded_mu()
         if self.prior is not None:
             self._check_coded(q)
         elif self.top:
@@ -133,13 +142,37 @@ class BasisLayer:
         if int(np.abs(q.astype(np.int64)).max()) > MAX_MAGNITUDE:
             raise ValueError(f"a coded basis coefficient exceeds ±{MAX_MAGNITUDE}")
 
+    def _check_coded_mu(self) -> None:
+        """A coded μ: only in a coded layer, a grid exponent of 1 … 5, integers within the coder's range."""
+        if self.prior is None:
+            raise ValueError("a coded mu rides in an entropy-coded basis layer (prior) only")
+        given = self.coded_mu
+        if not isinstance(given, tuple) or len(given) != 2:
+            raise ValueError(f"coded_mu must be (g, q), got {given!r}")
+        coded_mu_codes(given[0], 1)  # the grid exponent's range
+        q = np.asarray(given[1])
+        if q.ndim != 1 or not len(q) or not np.issubdtype(q.dtype, np.integer):
+            raise ValueError("a coded mu's integers must be a non-empty 1-D integer array")
+        if int(np.abs(q.astype(np.int64)).max()) > MAX_MAGNITUDE:
+            raise ValueError(f"a coded mu integer exceeds ±{MAX_MAGNITUDE}")
+
+    def stream_codes(self) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]:
+        """A coded layer's lead in its stream: the coded μ's integers and prior codes (empty without one), which
+        come before the coefficients'."""
+        if self.coded_mu is None:
+            return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
+        g, q = self.coded_mu
+        return np.asarray(q, dtype=np.int64), coded_mu_codes(g, len(q))
+
     @functools.cached_property
     def _coded(self) -> bytes:
-        """A coded layer's bytes: the step code, then the coder's bytes (§4.8)."""
+        """A coded layer's bytes: the step code, then the coder's bytes (§4.8), a coded μ's integers first (§4.9)."""
         assert self.prior is not None
         code = packed_step_code(self.step)
         codes = prior_codes(self.prior[0], self.prior[1], code, self.first, self.count)
-        return bytes([code]) + encode_integers(self.q, codes)
+        lead_q, lead_codes = self.stream_codes()
+        return bytes([code]) + encode_integers(np.concatenate([lead_q, np.asarray(self.q, dtype=np.int64)]),
+                                               np.concatenate([lead_codes, codes]))
 
     def _check_packed(self, q: np.ndarray) -> None:
         """The packed layer's own rules: top width, step code, integer fields of width ≥ 1 that hold q."""
@@ -202,6 +235,8 @@ class BasisLayer:
         if self.prior is not None:
             entry["prior"] = [int(self.prior[0]), int(self.prior[1])]
             entry["length"] = self.nbytes
+        if self.coded_mu is not None:
+            entry["mu_step"] = int(self.coded_mu[0])
         return entry
 
 def quantise_coefficients(sha256: str, coefficients: npt.ArrayLike, first: int = 0, project: int = 0) -> BasisLayer:
@@ -222,15 +257,21 @@ def packed_coefficients(sha256: str, coefficients: npt.ArrayLike, max_bytes: int
     return BasisLayer(sha256, packed_step(choice.step_code), choice.q, int(first), int(project), choice.top)
 
 def coded_coefficients(sha256: str, coefficients: npt.ArrayLike, max_bytes: int, prior: tuple[int, int],
-                       first: int = 0, project: int = 0, *, count: int | None = None) -> BasisLayer | None:
+                       first: int = 0, project: int = 0, *, count: int | None = None,
+                       coded_mu: tuple[int, npt.NDArray[np.int64]] | None = None) -> BasisLayer | None:
     """An entropy-coded basis layer (format 2.4) of at most ``max_bytes`` closest to ``coefficients`` (of vectors
-    ``first``, …; the leading ones that fit, or exactly ``count`` of them), under the form's ``prior``; None when
-    not even one coefficient fits (:func:`~brdfcodec.layers.coded_basis.choose_coding`)."""
-    choice = choose_coding(coefficients, int(first), int(max_bytes), int(prior[0]), int(prior[1]), count=count)
+    ``first``, …; the leading ones that fit, or exactly ``count`` of them), under the form's ``prior``, after a
+    coded μ's integers when given (format 2.5: they take their bytes first); None when not even one coefficient
+    fits (:func:`~brdfcodec.layers.coded_basis.choose_coding`)."""
+    lead = None
+    if coded_mu is not None:
+        lead = (np.asarray(coded_mu[1], dtype=np.int64), coded_mu_codes(coded_mu[0], len(coded_mu[1])))
+    choice = choose_coding(coefficients, int(first), int(max_bytes), int(prior[0]), int(prior[1]), count=count,
+                           lead=lead)
     if choice is None:
         return None
     return BasisLayer(sha256, packed_step(choice.step_code), choice.q, int(first), int(project),
-                      prior=(int(prior[0]), int(prior[1])))
+                      prior=(int(prior[0]), int(prior[1])), coded_mu=coded_mu)
 
 def check_basis_layers(
     entries: Sequence[Any], basis_named: Callable[[str], SharedBasis | None], where: str, own: str | None
@@ -316,8 +357,9 @@ def check_records_without_latent(
             raise BasisError(f"{where}: record {entry.name!r} has no latent (format 2.1) and decodes from the "
                              f"decoder's linear-path mean, but {problem}")
 
-def basis_layer_from_bytes(entry: Mapping[str, Any], data: bytes) -> BasisLayer:
-    """A basis layer from its validated index entry and its payload bytes."""
+def basis_layer_from_bytes(entry: Mapping[str, Any], data: bytes, latent_dim: int = 0) -> BasisLayer:
+    """A basis layer from its validated index entry and its payload bytes (``latent_dim``: the file's D, the
+    integers of a coded μ, ``entry["mu_step"]``, that come first in a coded layer's stream)."""
     count = int(entry["count"])
     top, first = int(entry.get("top", 0)), int(entry.get("first", 0))
     if "prior" in entry:
@@ -325,9 +367,15 @@ def basis_layer_from_bytes(entry: Mapping[str, Any], data: bytes) -> BasisLayer:
         if not CODED_HEADER_BYTES <= len(data) <= MAX_CODED_BYTES:
             raise ValueError(f"coded basis layer holds {len(data)} bytes, expected 1 to {MAX_CODED_BYTES}")
         codes = prior_codes(prior[0], prior[1], data[0], first, count)
+        coded_mu = None
+        if "mu_step" in entry:
+            g = int(entry["mu_step"])
+            codes = np.concatenate([coded_mu_codes(g, latent_dim), codes])
         q = decode_integers(data[CODED_HEADER_BYTES:], codes)
+        if "mu_step" in entry:
+            coded_mu, q = (int(entry["mu_step"]), q[:latent_dim]), q[latent_dim:]
         layer = BasisLayer(str(entry["sha256"]), packed_step(data[0]), q, first, int(entry.get("project", 0)),
-                           prior=prior)
+                           prior=prior, coded_mu=coded_mu)
         if layer.data != bytes(data):
             raise ValueError("a coded basis layer's bytes are not the shortest coding of its integers (§4.8)")
         return layer

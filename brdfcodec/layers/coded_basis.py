@@ -50,7 +50,9 @@ __all__ = [
     "STOP_PROBABILITY",
     "ZERO_PROBABILITY",
     "CodedChoice",
+    "MAX_MU_STEP_LOG2",
     "choose_coding",
+    "coded_mu_codes",
     "coded_prefix_sizes",
     "decode_integers",
     "encode_integers",
@@ -63,6 +65,8 @@ CODED_HEADER_BYTES: Final = 1
 MAX_CODED_BYTES: Final = 1 << 20
 #: Prior codes are clipped to ±80 (σ/s from 2⁻⁵ to 2⁵).
 PRIOR_CODE_LIMIT: Final = 80
+#: Finest grid of a coded μ (format 2.5): μ = q · 2^−g for g = 1 … 5, its prior codes 16·g within ±80.
+MAX_MU_STEP_LOG2: Final = 5
 #: Unary magnitude bits before the escape.
 _UNARY: Final = 14
 #: Longest Exp-Golomb prefix of an escaped magnitude (m ≤ 15 + 2²¹ − 2).
@@ -107,6 +111,21 @@ def prior_codes(amplitude: int, decay: int, step_code: int, first: int, count: i
 
 #: Enough ones for the longest run of set bits one integer binarises to.
 _ONES: Final = (1,) * max(_UNARY, MAX_ESCAPE_PREFIX)
+
+
+def coded_mu_codes(step_log2: int, latent_dim: int) -> npt.NDArray[np.int64]:
+    """Prior codes of a coded μ's D integers on the grid 2^−g (format 2.5, ``spec/bvae-format.md`` §4.9): 16·g
+    each, a Laplace prior of spread 1 latent unit (the β-VAE prior's) in steps of 2^−g.
+
+    Raises
+    ------
+    ValueError
+        g outside 1 … :data:`MAX_MU_STEP_LOG2`.
+    """
+    g = int(step_log2)
+    if not 1 <= g <= MAX_MU_STEP_LOG2:
+        raise ValueError(f"a coded mu's grid exponent must be 1 to {MAX_MU_STEP_LOG2}, got {step_log2!r}")
+    return np.full(int(latent_dim), 16 * g, dtype=np.int64)
 
 
 def _binarise(q: npt.NDArray[np.int64], codes: npt.NDArray[np.int64]) -> tuple[list[int], list[int], list[int]]:
@@ -306,7 +325,8 @@ def _quantise(c: npt.NDArray[np.float64], s: float, offset: float) -> npt.NDArra
 
 
 def choose_coding(coefficients: npt.ArrayLike, first: int, max_bytes: int, amplitude: int, decay: int,
-                  *, count: int | None = None) -> CodedChoice | None:
+                  *, count: int | None = None, lead: tuple[npt.ArrayLike, npt.ArrayLike] | None = None,
+                  ) -> CodedChoice | None:
     """The coded layer of at most ``max_bytes`` (step code included) closest to the coefficients.
 
     For each rounding offset of :data:`ROUNDING_OFFSETS`, finds by bisection the finest step code whose integers
@@ -325,8 +345,12 @@ def choose_coding(coefficients: npt.ArrayLike, first: int, max_bytes: int, ampli
         The form's prior (0 … 255 each).
     count : int, optional
         Keep at most this many coefficients.
+    lead : (array_like of int, array_like of int), optional
+        Integers and their prior codes coded ahead of the coefficients in the same stream (a coded μ, format
+        2.5, ``spec/bvae-format.md`` §4.9): they take their bytes first, and ``data`` holds them too.
     """
     c = np.asarray(coefficients, dtype=np.float64).reshape(-1)
+    lead_q, lead_codes = _checked(*(lead if lead is not None else ((), ())))
     if not np.isfinite(c).all():
         raise ValueError("basis coefficients must be finite")
     if count is not None:
@@ -338,10 +362,13 @@ def choose_coding(coefficients: npt.ArrayLike, first: int, max_bytes: int, ampli
     codes_of = functools.cache(lambda e: prior_codes(amplitude, decay, e, first, len(c)))  # per step code
     best: CodedChoice | None = None
 
+    def stream(q: npt.NDArray[np.int64], e: int, k: int) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]:
+        return np.concatenate([lead_q, q[:k]]), np.concatenate([lead_codes, codes_of(e)[:k]])
+
     def size(q: npt.NDArray[np.int64], e: int) -> int:
         nonzero = np.flatnonzero(q)
         k = int(nonzero[-1]) + 1 if len(nonzero) else 0
-        return len(encode_integers(q[:k], codes_of(e)[:k])) if k else 0
+        return len(encode_integers(*stream(q, e, k)))
 
     for offset in ROUNDING_OFFSETS:
         lo, hi = 0, 255  # bisect the finest step code whose whole layer fits (sizes fall as the step grows)
@@ -358,7 +385,7 @@ def choose_coding(coefficients: npt.ArrayLike, first: int, max_bytes: int, ampli
             q = _quantise(c, s, offset)
             nonzero = np.flatnonzero(q)
             k = int(nonzero[-1]) + 1 if len(nonzero) else 0
-            sizes = coded_prefix_sizes(q[:k], codes_of(e)[:k])
+            sizes = coded_prefix_sizes(*stream(q, e, k))[len(lead_q):]  # sizes[j]: the lead and j coefficients
             if sizes[k] > budget:  # fewer coefficients: bisect the most that fit (on every prefix's size)
                 low, high = 0, k
                 while high - low > 1:
@@ -372,5 +399,5 @@ def choose_coding(coefficients: npt.ArrayLike, first: int, max_bytes: int, ampli
                 continue
             error = float(((c[:k] - q[:k] * s) ** 2).sum() + energy_after[k])
             if best is None or error < best.error:
-                best = CodedChoice(e, q[:k].copy(), encode_integers(q[:k], codes_of(e)[:k]), error)
+                best = CodedChoice(e, q[:k].copy(), encode_integers(*stream(q, e, k)), error)
     return best

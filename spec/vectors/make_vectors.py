@@ -302,8 +302,8 @@ def invalid_vectors() -> dict[str, tuple[bytes, str, str]]:
         "malformed", "a shared basis named (flag bit 1) in a file without basis layers")
     # Compact mu and the shared sigma byte: mu as a float16 step and int8 values, one sigma byte.
     compact_payload = f16(0.5) + bytes([2, 254]) + bytes([160]) + basis_payload[10:]
-    add("compact-mu-unknown", basis_file(layered_form(4, 2, basis=(0, 0)), compact_payload), "unsupported",
-        "mu code 4")
+    add("compact-mu-unknown", basis_file(layered_form(5, 2, basis=(0, 0)), compact_payload), "unsupported",
+        "mu code 5 (code 4, a coded mu, is known since 2.5)")
     add("compact-mu-step-nan", basis_file(layered_form(1, 2, basis=(0, 0)), f16(np.nan) + compact_payload[2:]),
         "malformed", "the compact mu step is NaN (payload CRC valid)")
     add("compact-sigma-length", basis_file(layered_form(1, 1, basis=(0, 0)), compact_payload), "malformed",
@@ -365,6 +365,17 @@ def invalid_vectors() -> dict[str, tuple[bytes, str, str]]:
         "malformed", "layer bit 3 (an entropy-coded basis layer) without bit 0 (a basis layer)")
     add("coded-length-zero", coded_file(coded_form, b"", length=0), "malformed",
         "a coded basis layer of length 0 (it holds at least the step code)")
+    # A coded mu (2.5, §4.9): mu code 4, sigma 3, layer bits 0 and 3, the prior, then the grid exponent g.
+    coded_mu_form = bytes([2, 4, 3, 1 | 8]) + varint(0) + varint(0) + bytes([64, 32])
+    add("coded-mu-step-zero", coded_file(coded_mu_form + bytes([0]), coded), "malformed",
+        "a coded mu on the grid 2^-0 (g is 1 to 5)")
+    add("coded-mu-step-six", coded_file(coded_mu_form + bytes([6]), coded), "malformed",
+        "a coded mu on the grid 2^-6 (g is 1 to 5: its prior code 96 is past the tables' 80)")
+    add("coded-mu-packed-layer", basis_file(layered_form(4, 3, basis=(0, 0), top=9), packed), "malformed",
+        "mu code 4 (coded in an entropy-coded layer's stream) with a packed basis layer (layer bit 3 clear)")
+    add("coded-mu-short", coded_file(coded_mu_form + bytes([4]), coded), "malformed",
+        "a coded mu whose stream holds the 3 coefficients' integers only: the 8 mu integers read first, and the "
+        "bytes are not the shortest coding of what they decode to")
     for label, name, why in [
         ("name-parent", "../UP", "a name holding '/' and '..'"),
         ("name-absolute", "/tmp/ESCAPED", "an absolute path as a name"),
@@ -510,6 +521,26 @@ def coded_records() -> tuple[list, DecoderReference, str, bool | None]:
             TEST_DECODER, "float32", False)
 
 
+def coded_mu_records() -> tuple[list, DecoderReference, str, bool | None]:
+    """Records whose μ is entropy-coded in their coded basis layer (since 2.5): on the grids 2^−4 and 2^−1, one
+    with a shared σ byte, one with a μ of zeros and a coefficient of magnitude 20 (an escape)."""
+    from brdfcodec.format.layered_record import LayeredRecord
+    from brdfcodec.layers.basis import BasisLayer
+    from brdfcodec.layers.packed import packed_step
+
+    rng = np.random.default_rng(2031)  # its own draws: the other vectors keep their values
+    mu = lambda: (np.round(rng.normal(size=8) * 16) / 16).astype(np.float32)  # noqa: E731 - on the grid 2^-4
+    sigma = (2.0 ** -rng.integers(1, 6, size=8)).astype(np.float32)
+    sha = "cd" * 32
+    after = BasisLayer(sha, packed_step(100), np.array([25, -17, 0, 9, -2, 1]), 8, 0, prior=(128, 32))
+    escape = BasisLayer(sha, packed_step(120), np.array([20, 0, -3]), 8, 0, prior=(156, 28))
+    return ([LayeredRecord("gold.coded-mu", mu(), sigma, {"effort": 1}, basis=after, coded_mu=4, store_sigma=False),
+             LayeredRecord("gold.coded-mu-half", mu(), sigma, basis=after, coded_mu=1, shared_sigma=True),
+             LayeredRecord("gold.coded-mu-zero", np.zeros(8, np.float32), sigma, basis=escape, coded_mu=4,
+                           store_sigma=False)],
+            TEST_DECODER, "float32", False)
+
+
 def packed_records() -> tuple[list, DecoderReference, str, bool | None]:
     """Records whose basis layer is packed (since 2.3): one without a latent, one on a compact base from vector 8,
     and one on a float32 base, beside an int8 layer (written as 2.3)."""
@@ -601,6 +632,7 @@ def valid_records() -> dict[str, tuple[list, DecoderReference, str, bool | None]
         "no-sigma": no_sigma_records(),
         "packed-basis": packed_records(),
         "coded-basis": coded_records(),
+        "coded-mu": coded_mu_records(),
     }
 
 
@@ -666,7 +698,7 @@ def generate(folder: Path, *, with_reference: bool = True) -> dict[str, Any]:
     (folder / "valid").mkdir(parents=True, exist_ok=True)
     (folder / "invalid").mkdir(parents=True, exist_ok=True)
     manifest: dict[str, Any] = {
-        "format_version": "2.4",
+        "format_version": "2.5",
         "error_classes": {
             "malformed": "BvaeFormatError",
             "checksum": "BvaeChecksumError",

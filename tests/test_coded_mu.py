@@ -1,0 +1,221 @@
+"""Entropy-coded μ (format 2.5, ``spec/bvae-format.md`` §4.9): μ's integers ride ahead of the coefficients in a coded
+basis layer's stream."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from brdfcodec.format.bvae import DecoderReference, encode_bvae, parse_bvae, record_size
+from brdfcodec.format.layered_record import LayeredRecord
+from brdfcodec.layers.basis_layer import BasisLayer, coded_coefficients
+from brdfcodec.layers.coded_basis import (
+    MAX_MAGNITUDE,
+    choose_coding,
+    coded_mu_codes,
+    decode_integers,
+    encode_integers,
+    prior_codes,
+)
+from brdfcodec.layers.packed import packed_step
+
+SHA = "cd" * 32
+DECODER = DecoderReference("ab" * 32, "test")
+
+
+def _coefficients(seed: int = 1, k: int = 60) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    return rng.laplace(0, 1, k) * np.arange(9, 9 + k) ** -0.8
+
+
+def _mu(seed: int = 2) -> np.ndarray:
+    return np.random.default_rng(seed).normal(size=8).astype(np.float32)
+
+
+def _coded_mu_record(name: str = "gold", g: int = 4, max_bytes: int = 24) -> LayeredRecord:
+    mu = _mu()
+    q = np.rint(mu.astype(np.float64) * 2 ** g).astype(np.int64)
+    layer = coded_coefficients(SHA, _coefficients(), max_bytes, (128, 40), first=8, coded_mu=(g, q))
+    assert layer is not None
+    return LayeredRecord(name, mu, np.ones(8), basis=layer, coded_mu=g, store_sigma=False)
+
+
+def test_mu_is_on_the_grid_and_the_record_round_trips_as_2_5() -> None:
+    record = _coded_mu_record()
+    np.testing.assert_array_equal(record.mu, np.rint(_mu().astype(np.float64) * 16) / 16)
+    assert record.mu_storage == "coded" and record.payload_values().size == 0
+    data = encode_bvae([record], DECODER, latent_dtype="float16")
+    assert data[8:12] == bytes([2, 0, 5, 0])
+    parsed = parse_bvae(data)
+    back = parsed.record("gold")
+    assert isinstance(back, LayeredRecord) and back.coded_mu == 4 and back.basis is not None
+    np.testing.assert_array_equal(back.mu, record.mu)
+    assert back.basis.q.tolist() == record.basis.q.tolist()
+    (entry,) = parsed.header.entries
+    assert entry.layers["mu"] == "coded" and entry.layers["basis"]["mu_step"] == 4
+    assert entry.length + entry.descriptor_bytes == record_size(record)
+    assert encode_bvae([back], DECODER, latent_dtype="float16") == data  # read and written again: the same bytes
+
+
+def test_the_stream_holds_mu_first_then_the_coefficients() -> None:
+    """Decoded independently of the layer class: D integers under 16·g, then k under the form's prior codes."""
+    record = _coded_mu_record(g=3)
+    layer = record.basis
+    assert layer is not None and layer.prior is not None
+    data = layer.data
+    codes = np.concatenate([np.full(8, 48), prior_codes(128, 40, data[0], 8, layer.count)])
+    q = decode_integers(data[1:], codes)
+    np.testing.assert_array_equal(q[:8], np.rint(record.mu.astype(np.float64) * 8))
+    np.testing.assert_array_equal(q[8:], layer.q)
+    assert encode_integers(q, codes) == data[1:]
+
+
+def test_sharing_the_stream_costs_fewer_bytes_than_mu_on_the_fixed_grid() -> None:
+    """The μ of a unit-variance code takes fewer bytes at 2^−4 in the layer's stream than 8 on the fixed grid."""
+    sizes = []
+    for seed in range(20):
+        q = np.rint(_mu(seed).astype(np.float64) * 16).astype(np.int64)
+        c = _coefficients(seed)
+        alone = choose_coding(c, 8, 40, 128, 40)
+        step = alone.step_code if alone is not None else 100
+        k = len(alone.q) if alone is not None else 0
+        with_mu = encode_integers(np.concatenate([q, alone.q if alone else []]),
+                                  np.concatenate([coded_mu_codes(4, 8), prior_codes(128, 40, step, 8, k)]))
+        sizes.append(len(with_mu) - len(alone.data if alone else b""))
+    assert np.mean(sizes) < 7.5
+
+
+def test_choose_coding_counts_the_lead_in_its_bytes() -> None:
+    c = _coefficients()
+    q = np.rint(_mu().astype(np.float64) * 16).astype(np.int64)
+    lead = (q, coded_mu_codes(4, 8))
+    alone = choose_coding(c, 8, 20, 128, 40)
+    shared = choose_coding(c, 8, 20, 128, 40, lead=lead)
+    assert alone is not None and shared is not None
+    assert 1 + len(shared.data) <= 20 and len(shared.q) < len(alone.q)
+    assert shared.data == encode_integers(np.concatenate([q, shared.q]),
+                                          np.concatenate([lead[1], prior_codes(128, 40, shared.step_code, 8,
+                                                                               len(shared.q))]))
+    assert choose_coding(c, 8, 3, 128, 40, lead=lead) is None  # not even the lead fits
+
+
+def test_an_edit_moves_mu_on_the_grid_and_the_layer_follows() -> None:
+    record = _coded_mu_record()
+    edited = dataclasses.replace(record, mu=record.mu + np.float32(0.3))
+    assert edited.basis is not None and edited.basis.coded_mu is not None
+    np.testing.assert_array_equal(edited.basis.coded_mu[1], np.rint((record.mu + np.float32(0.3)) * 16))
+    back = parse_bvae(encode_bvae([edited], DECODER)).record("gold")
+    np.testing.assert_array_equal(back.mu, edited.mu)
+    # the same layer without the coded μ: μ back in the latent dtype, the stream the coefficients' alone
+    plain = dataclasses.replace(record, coded_mu=0)
+    assert plain.basis is not None and plain.basis.coded_mu is None and plain.payload_values().size == 8
+    assert plain.basis.nbytes < record.basis.nbytes
+
+
+@pytest.mark.parametrize("bad", [np.full(8, 1e9), np.array([np.nan] + [0.0] * 7)])
+def test_a_mu_past_the_coder_range_is_refused(bad: np.ndarray) -> None:
+    record = _coded_mu_record()
+    with pytest.raises(ValueError, match="range|finite"):
+        dataclasses.replace(record, mu=bad.astype(np.float32))
+
+
+def test_extreme_but_representable_mu_round_trips_finite() -> None:
+    record = _coded_mu_record()
+    big = np.full(8, (MAX_MAGNITUDE - 1) / 16, dtype=np.float32)
+    edited = dataclasses.replace(record, mu=big)
+    back = parse_bvae(encode_bvae([edited], DECODER)).record("gold")
+    assert np.isfinite(back.mu).all() and back.mu.tolist() == edited.mu.tolist()
+
+
+def test_a_coded_mu_needs_a_coded_layer_and_a_grid_of_1_to_5() -> None:
+    record = _coded_mu_record()
+    packed = BasisLayer(SHA, packed_step(100), np.array([3, -2, 1]), 8, 0, top=9)
+    with pytest.raises(ValueError, match="entropy-coded"):
+        LayeredRecord("a", _mu(), np.ones(8), basis=packed, coded_mu=4, store_sigma=False)
+    with pytest.raises(ValueError, match="entropy-coded"):
+        LayeredRecord("a", _mu(), np.ones(8), basis=None, detail=None, coded_mu=4, store_sigma=False)
+    for g in (0, 6, True):
+        if g == 0:
+            continue  # 0 means: not coded
+        with pytest.raises(ValueError, match="grid exponent"):
+            dataclasses.replace(record, coded_mu=g)
+    with pytest.raises(ValueError, match="compact"):
+        dataclasses.replace(record, compact_mu=True)
+    with pytest.raises(ValueError, match="grid exponent"):
+        coded_mu_codes(6, 8)
+
+
+def test_info_says_mu_is_coded(tmp_path, capsys) -> None:
+    import json
+
+    from brdfcodec.cli.main import main
+
+    path = tmp_path / "coded-mu.bvae"
+    path.write_bytes(encode_bvae([_coded_mu_record()], DECODER))
+    assert main(["info", str(path)]) == 0
+    out = capsys.readouterr().out
+    assert "format 2.5" in out and "μ coded in the basis layer, grid 2^-4" in out
+    assert main(["info", "--json", str(path)]) == 0
+    (item,) = json.loads(capsys.readouterr().out)["materials"]
+    assert item["mu"] == "coded" and item["mu_step"] == 4
+
+
+@pytest.mark.slow  # encodes with the shipped model
+def test_rate_control_offers_coded_mu_and_keeps_the_least_error(red_plastic_file, tmp_path) -> None:
+    """``bvae compress --bytes 32``: the chosen record fits, keeps a latent, decodes to what it measured; its rate
+    points include records with a coded μ, and the one kept errs least among those that fit; ``--basis-coding
+    packed`` writes none."""
+    from brdfcodec.cli.main import main
+    from brdfcodec.codec import BrdfDecoder
+    from brdfcodec.format.bvae import read_bvae
+
+    out = tmp_path / "auto.bvae"
+    assert main(["compress", str(red_plastic_file), "-o", str(out), "--bytes", "32", "--no-measure"]) == 0
+    (record,) = read_bvae(out).records
+    (entry,) = parse_bvae(out.read_bytes()).header.entries
+    assert record.has_latent and entry.length + entry.descriptor_bytes <= 32
+    assert np.isfinite(BrdfDecoder().decode(record)).all()
+    packed = tmp_path / "packed.bvae"
+    assert main(["compress", str(red_plastic_file), "-o", str(packed), "--bytes", "32", "--basis-coding", "packed",
+                 "--no-measure"]) == 0
+    (record,) = read_bvae(packed).records
+    assert record.coded_mu == 0 and record.basis is not None and record.basis.prior is None
+
+
+@pytest.mark.slow  # encodes with the shipped model
+def test_the_rate_points_include_coded_mu_records(red_plastic_file, monkeypatch) -> None:
+    import brdfcodec as bc
+    import brdfcodec.codec.rate as rate
+    from brdfcodec.codec.rate import lowest_distortion
+
+    seen: dict[str, list] = {}
+
+    def spy(points, budget):
+        seen["points"] = list(points)
+        return lowest_distortion(points, budget)
+
+    monkeypatch.setattr(rate, "lowest_distortion", spy)
+    data = bc.encode([str(red_plastic_file)], bytes=32, measure_error=False)
+    monkeypatch.undo()
+    labels = [p.label for p in seen["points"]]
+    assert any(label.startswith("coded-mu") for label in labels), labels
+    chosen = seen["points"][lowest_distortion(seen["points"], 32)]
+    assert all(p.distortion >= chosen.distortion for p in seen["points"] if p.rate <= 32)
+    record = bc.decode(data).record(bc.decode(data).names[0])
+    assert (record.coded_mu != 0) == chosen.label.startswith("coded-mu")
+
+
+def test_an_edit_off_the_grid_stores_mu_in_the_latent_dtype_and_keeps_the_coefficients() -> None:
+    from brdfcodec.edit.latent_edits import traverse
+
+    record = _coded_mu_record()
+    (on_grid,) = traverse(record, 0, [0.25])  # σ-less records: offsets in units of the prior's width, 1
+    (off_grid,) = traverse(record, 0, [0.01])
+    assert on_grid.coded_mu == 4 and off_grid.coded_mu == 0
+    assert off_grid.mu[0] == np.float32(record.mu[0] + np.float32(0.01))
+    assert off_grid.basis.q.tolist() == record.basis.q.tolist() and off_grid.basis.coded_mu is None
+    for edited in (on_grid, off_grid):
+        back = parse_bvae(encode_bvae([edited], DECODER)).record(edited.name)
+        np.testing.assert_array_equal(back.mu, edited.mu)
