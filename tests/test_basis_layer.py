@@ -504,12 +504,19 @@ def test_cli_bytes_writes_the_basis_layer(red_plastic_file, tmp_path, capsys) ->
     assert main(["info", str(smallest)]) == 0
     shown = capsys.readouterr().out
     assert "μ int8 grid, σ none, basis 1 (vector 9)" in shown and "11 B payload, 14 B with its index" in shown
-    # below the smallest layered record: the compact base alone, no layer (10 B with its index entry)
+    # below the smallest packed layered record: the compact base alone, no layer (10 B with its index entry) ...
     alone = tmp_path / "alone.bvae"
-    assert main(["compress", str(red_plastic_file), "-o", str(alone), "--bytes", "13", "--latent", "always"]) == 0
+    assert main(["compress", str(red_plastic_file), "-o", str(alone), "--bytes", "13", "--latent", "always",
+                 "--basis-coding", "packed"]) == 0
     capsys.readouterr()
     assert main(["info", str(alone)]) == 0
     assert "μ int8 grid, σ none; 8 B payload, 10 B with its index entry" in capsys.readouterr().out
+    # ... where, by default, μ coded in a coded layer's stream (format 2.5) leaves room for coefficients
+    coded = tmp_path / "coded.bvae"
+    assert main(["compress", str(red_plastic_file), "-o", str(coded), "--bytes", "13", "--latent", "always"]) == 0
+    capsys.readouterr()
+    assert main(["info", str(coded)]) == 0
+    assert "μ coded in the basis layer, grid 2^-3, σ none, basis" in capsys.readouterr().out
     assert main(["compress", str(red_plastic_file), "-o", str(tmp_path / "t.bvae"), "--bytes", "9",
                  "--latent", "always"]) != 0
     assert "--bytes 9 is below the smallest record" in capsys.readouterr().err

@@ -205,7 +205,7 @@ def test_a_projected_compact_record_edits_by_the_same_rule(layered: dict[str, An
     source, path = folder / "rp.binary", folder / "rp64.bvae"
     write_merl(source, ANALYTIC_PRESETS["red-plastic"].to_merl(), overwrite=True)
     assert main(["compress", str(source), "--bytes", "64", "--project-base", "always", "--latent", "always",
-                 "--no-measure", "-o", str(path), "--force"]) == 0  # a record with a latent, to edit
+                 "--basis-coding", "packed", "--no-measure", "-o", str(path), "--force"]) == 0  # μ on the grid
     record = read_bvae(path).records[0]
     assert isinstance(record, LayeredRecord) and record.basis is not None and record.basis.project > 0
     assert record.compact_mu and record.fixed_mu_grid and record.detail is None

@@ -64,13 +64,15 @@ def test_a_move_that_does_not_fit_is_not_kept() -> None:
 
 @pytest.mark.slow  # two encodes with the shipped model
 @pytest.mark.parametrize(("coding", "latent", "budget"),
-                         [("coded", "always", 32), ("packed", "always", 32), ("coded", "auto", 16)])
+                         [("coded", "always", 32), ("packed", "always", 32), ("coded", "auto", 16),
+                          ("coded", "always", 16)])
 def test_the_polished_record_is_no_worse_and_fits_its_budget(red_plastic_file, monkeypatch, coding: str,
                                                              latent: str, budget: int) -> None:
     """The record chosen with the layer polish has a kept-slice mapped L1 error (rate control's D) no higher
-    than the one chosen without it, and both fit the budget: with a latent, and (``latent="auto"`` at 16 B,
-    where this material's record has none) without one."""
-    from brdfcodec.codec import BrdfDecoder, BrdfEncoder, refine
+    than the one chosen without it, and both fit the budget: with a latent (at 16 B, μ coded in the layer's stream,
+    format 2.5), and (``latent="auto"`` at 16 B with the coded-μ records off, where this material's record then has
+    none) without one."""
+    from brdfcodec.codec import BrdfDecoder, BrdfEncoder, encoding, refine
     from brdfcodec.io.merl import read_merl
     from brdfcodec.representation.network_io import network_input_from_table
 
@@ -82,9 +84,13 @@ def test_the_polished_record_is_no_worse_and_fits_its_budget(red_plastic_file, m
         if not polish:  # both polishes off: beside a latent, and of records without one
             monkeypatch.setitem(refine.LAYER_POLISH_PASSES, 1, 0)
             monkeypatch.setitem(refine.POLISH_PASSES, 1, 0)
+        if latent == "auto":
+            monkeypatch.setattr(encoding, "CODED_MU_STEP_LOG2", 0)
         record = BrdfEncoder(bytes=budget, basis_coding=coding, latent=latent, latent_dtype="float16").encode(
             source, name="red")
         assert record.basis is not None and record.has_latent == (latent == "always")
+        if latent == "always" and budget == 16:
+            assert record.coded_mu  # the only layered record with a latent in 16 B
         mapped = np.clip(decoder.mapped_record(record, energy_bound=False), 0.0, MAPPED_MAX)
         errors.append(float((np.abs(mapped - inputs) * masks).sum()))
         sizes.append(record.meta["rate"]["record_bytes"])

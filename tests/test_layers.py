@@ -174,8 +174,9 @@ def test_rate_control_meets_budgets_and_targets(analytic_tables) -> None:
     encoder = BrdfEncoder(effort=0, max_relae=0.02)
     record = measure(encoder.encode(brdf, name="m"), encoder.decoder, brdf)
     assert record.meta["relae"]["mapped"] <= 0.02
-    # below the smallest layered record with a latent (14 B with a one-byte name): the compact base alone, 10 B
-    alone = BrdfEncoder(effort=0, bytes=11, latent="always").encode(brdf, name="m")
+    # below the smallest layered record with a latent (11 B with a one-byte name, μ coded in the layer's stream,
+    # format 2.5; 14 B with μ on the fixed grid): the compact base alone, 10 B
+    alone = BrdfEncoder(effort=0, bytes=10, latent="always").encode(brdf, name="m")
     assert isinstance(alone, LayeredRecord) and alone.basis is None and alone.detail is None
     assert alone.compact_mu and alone.meta["rate"]["record_bytes"] == 10
     with pytest.raises(RateTargetError):  # below that (without a latent, from 6 B: test_basis_only.py)

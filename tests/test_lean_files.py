@@ -68,8 +68,10 @@ def test_every_material_of_a_library_keeps_within_its_budget(
     # 2.3: packed basis layers; 2.4 when rate control (--basis-coding auto) entropy-codes one (§4.8)
     assert summary["format_version"] in ("2.3", "2.4", "2.5") and summary["metadata"] is False
     for item in summary["materials"]:
-        # a compact base without σ (format 2.2), or (format 2.1) no latent at all where that was better
-        assert (item["mu"], item["sigma"]) in {("int8-fixed", "none"), ("int8", "none"), ("none", "none")}
+        # a compact base without σ (format 2.2), μ coded in the layer's stream (2.5), or (format 2.1) no latent at
+        # all where that was better
+        assert (item["mu"], item["sigma"]) in {("int8-fixed", "none"), ("int8", "none"), ("coded", "none"),
+                                               ("none", "none")}
         assert item["basis"]["count"] >= 45 and item["record_bytes"] <= 64 and "source_kind" not in item
 
 

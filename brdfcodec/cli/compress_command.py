@@ -98,7 +98,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
                         "error per material), packed (format 2.3: later vectors get fewer bits at one step, "
                         "more coefficients in the same bytes), coded (format 2.4: one step, the integers "
                         "arithmetic-coded under a Laplace prior whose spread falls with the vector's rank) or int8 "
-                        "(one byte each, readable by format 2.2 readers)")
+                        "(one byte each, readable by format 2.2 readers); under auto and coded, rate control also "
+                        "offers records whose mu rides in the coded layer on a coarser grid (format 2.5)")
     parser.set_defaults(handler=run)
 
 
