@@ -230,12 +230,9 @@ def test_encode_64b_with_layer_polish(benchmark, merl_file: Path) -> None:
 # --- issue 48: records whose μ rides in the coded layer (format 2.5), offered beside the fixed-grid ones
 
 
-def test_encode_64b_baseline_without_coded_mu(benchmark, merl_file: Path, monkeypatch) -> None:
-    """Read and encode at 64 B without the coded-μ candidates (``CODED_MU_STEP_LOG2`` 0)."""
-    from brdfcodec.codec import encoding
-
-    monkeypatch.setattr(encoding, "CODED_MU_STEP_LOG2", 0)
-    encoder = BrdfEncoder(bytes=64, latent_dtype="float16")
+def test_encode_64b_baseline_without_coded_mu(benchmark, merl_file: Path) -> None:
+    """Read and encode at 64 B without the coded-μ candidates (``coded_mu_step=0``)."""
+    encoder = BrdfEncoder(bytes=64, latent_dtype="float16", coded_mu_step=0)
     encoder.decoder  # noqa: B018
     benchmark.group = "encode-64B-coded-mu"
     benchmark.extra_info["role"] = "baseline"

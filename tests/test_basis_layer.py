@@ -451,8 +451,10 @@ def test_an_error_target_takes_the_smallest_candidate_that_meets_it(analytic_tab
     probe = BrdfEncoder(effort=0, bytes=40, latent_dtype="float16", latent="always")
     record = probe.encode(brdf, name="m")
     reached = measure(record, probe.decoder, brdf).meta["relae"]["mapped"]
-    # latent="always": the candidates with a latent (records without one: test_basis_only.py)
-    encoder = BrdfEncoder(effort=0, max_relae=reached * 1.05, latent_dtype="float16", latent="always")
+    # latent="always": the candidates with a latent (records without one: test_basis_only.py); the ladder's own
+    # candidates, without the coded-μ records searched below its choice (test_coded_mu.py)
+    encoder = BrdfEncoder(effort=0, max_relae=reached * 1.05, latent_dtype="float16", latent="always",
+                          coded_mu_step=0)
     chosen = encoder.encode(brdf, name="m")
     assert measure(chosen, encoder.decoder, brdf).meta["relae"]["mapped"] <= reached * 1.05
     assert isinstance(chosen, LayeredRecord) and chosen.basis is not None and chosen.detail is None
@@ -462,9 +464,15 @@ def test_an_error_target_takes_the_smallest_candidate_that_meets_it(analytic_tab
     # default --basis-coding auto's choice: more coefficients)
     assert chosen.meta["rate"]["payload_bytes"] == 8 + chosen.basis.nbytes <= 42
     assert chosen.basis.top or chosen.basis.prior is not None
-    loose = BrdfEncoder(effort=0, max_relae=1.0, latent_dtype="float16", latent="always").encode(brdf, name="m")
+    loose = BrdfEncoder(effort=0, max_relae=1.0, latent_dtype="float16", latent="always",
+                        coded_mu_step=0).encode(brdf, name="m")
     assert loose.compact_mu and loose.basis.count >= 4 and loose.meta["rate"]["payload_bytes"] == 8 + loose.basis.nbytes
     assert loose.basis.nbytes <= 2 + 4  # the smallest candidate: the bytes of 4 int8 coefficients
+    # with the default coded-μ candidates: a record no larger, that meets the target as well
+    default = BrdfEncoder(effort=0, max_relae=reached * 1.05, latent_dtype="float16", latent="always")
+    smaller = default.encode(brdf, name="m")
+    assert smaller.meta["rate"]["record_bytes"] <= chosen.meta["rate"]["record_bytes"]
+    assert measure(smaller, default.decoder, brdf).meta["relae"]["mapped"] <= reached * 1.05
 
 
 def test_an_error_target_tries_candidates_from_small_to_large() -> None:

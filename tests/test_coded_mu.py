@@ -17,6 +17,7 @@ from brdfcodec.layers.coded_basis import (
     coded_mu_codes,
     decode_integers,
     encode_integers,
+    mu_stream_lead,
     prior_codes,
 )
 from brdfcodec.layers.packed import packed_step
@@ -184,6 +185,49 @@ def test_rate_control_offers_coded_mu_and_keeps_the_least_error(red_plastic_file
     assert record.coded_mu == 0 and record.basis is not None and record.basis.prior is None
 
 
+def test_the_stream_lead_of_a_coded_mu_is_its_integers_under_16g() -> None:
+    q, codes = mu_stream_lead((3, np.array([1, -2, 0], dtype=np.int16)))
+    assert q.dtype == np.int64 and q.tolist() == [1, -2, 0] and codes.tolist() == [48, 48, 48]
+    record = _coded_mu_record(g=2)
+    assert [a.tolist() for a in record.basis.stream_codes()] == [a.tolist() for a in mu_stream_lead(
+        record.basis.coded_mu)]
+    with pytest.raises(ValueError, match="1 to 5"):
+        mu_stream_lead((6, [0]))
+
+
+@pytest.mark.parametrize("bad", [-1, 6, 2.5, True, "3"])
+def test_the_coded_mu_step_option_is_0_to_5(bad: object) -> None:
+    from brdfcodec.codec.encoding import EncodeOptions
+
+    with pytest.raises(ValueError, match="coded_mu_step"):
+        EncodeOptions(bytes_budget=32, coded_mu_step=bad)  # type: ignore[arg-type]
+
+
+def test_the_coded_mu_grid_is_offered_only_where_coded_layers_are() -> None:
+    from brdfcodec.codec.encoding import CODED_MU_STEP_LOG2, EncodeOptions
+
+    assert EncodeOptions(bytes_budget=32).coded_mu_grid == CODED_MU_STEP_LOG2
+    assert EncodeOptions(max_relae=0.05, coded_mu_step=4).coded_mu_grid == 4
+    assert EncodeOptions(bytes_budget=32, coded_mu_step=0).coded_mu_grid == 0
+    assert EncodeOptions(bytes_budget=32, basis_coding="packed").coded_mu_grid == 0
+    assert EncodeOptions().coded_mu_grid == 0  # no target: no rate control
+
+
+@pytest.mark.slow  # encodes with the shipped model
+@pytest.mark.parametrize("g", [2, 4])
+def test_the_grid_asked_for_is_the_grid_written(red_plastic_file, g: int) -> None:
+    """``BrdfEncoder(coded_mu_step=g)`` at 16 B (where the coded-μ record is the only layered one with a latent):
+    the record's μ is on the grid 2^−g and its stream leads with those integers."""
+    from brdfcodec.codec import BrdfEncoder
+    from brdfcodec.io.merl import read_merl
+
+    record = BrdfEncoder(bytes=16, latent_dtype="float16", coded_mu_step=g).encode(read_merl(red_plastic_file),
+                                                                                name="red")
+    assert record.coded_mu == g and record.basis is not None and record.basis.coded_mu is not None
+    assert record.basis.coded_mu[0] == g
+    np.testing.assert_array_equal(record.mu, record.basis.coded_mu[1] / 2.0 ** g)
+
+
 @pytest.mark.slow  # encodes with the shipped model
 def test_the_rate_points_include_coded_mu_records(red_plastic_file, monkeypatch) -> None:
     import brdfcodec as bc
@@ -219,3 +263,21 @@ def test_an_edit_off_the_grid_stores_mu_in_the_latent_dtype_and_keeps_the_coeffi
     for edited in (on_grid, off_grid):
         back = parse_bvae(encode_bvae([edited], DECODER)).record(edited.name)
         np.testing.assert_array_equal(back.mu, edited.mu)
+
+
+@pytest.mark.slow  # two encodes with the shipped model
+def test_an_error_target_takes_a_smaller_coded_mu_record_that_meets_it(red_plastic_file) -> None:
+    """``--max-relae``: where a record whose μ rides in its coded layer meets the target in fewer bytes than every
+    other candidate, it is the one written, and its decode meets the target; with the candidates off, the larger
+    record comes back."""
+    from brdfcodec.codec import BrdfDecoder, BrdfEncoder
+    from brdfcodec.io.merl import read_merl
+    from brdfcodec.representation.metrics import relae_mapped
+
+    source = read_merl(red_plastic_file)
+    records = {g: BrdfEncoder(max_relae=0.05, latent_dtype="float16", coded_mu_step=g).encode(source, name="red")
+               for g in (0, 3)}
+    assert records[3].coded_mu == 3 and records[0].coded_mu == 0
+    assert records[3].meta["rate"]["record_bytes"] < records[0].meta["rate"]["record_bytes"]
+    table = BrdfDecoder().decode(records[3])
+    assert relae_mapped(source.values, table, source.mask).overall <= 0.05

@@ -72,7 +72,7 @@ def test_the_polished_record_is_no_worse_and_fits_its_budget(red_plastic_file, m
     than the one chosen without it, and both fit the budget: with a latent (at 16 B, μ coded in the layer's stream,
     format 2.5), and (``latent="auto"`` at 16 B with the coded-μ records off, where this material's record then has
     none) without one."""
-    from brdfcodec.codec import BrdfDecoder, BrdfEncoder, encoding, refine
+    from brdfcodec.codec import BrdfDecoder, BrdfEncoder, refine
     from brdfcodec.io.merl import read_merl
     from brdfcodec.representation.network_io import network_input_from_table
 
@@ -84,10 +84,8 @@ def test_the_polished_record_is_no_worse_and_fits_its_budget(red_plastic_file, m
         if not polish:  # both polishes off: beside a latent, and of records without one
             monkeypatch.setitem(refine.LAYER_POLISH_PASSES, 1, 0)
             monkeypatch.setitem(refine.POLISH_PASSES, 1, 0)
-        if latent == "auto":
-            monkeypatch.setattr(encoding, "CODED_MU_STEP_LOG2", 0)
-        record = BrdfEncoder(bytes=budget, basis_coding=coding, latent=latent, latent_dtype="float16").encode(
-            source, name="red")
+        record = BrdfEncoder(bytes=budget, basis_coding=coding, latent=latent, latent_dtype="float16",
+                             coded_mu_step=0 if latent == "auto" else None).encode(source, name="red")
         assert record.basis is not None and record.has_latent == (latent == "always")
         if latent == "always" and budget == 16:
             assert record.coded_mu  # the only layered record with a latent in 16 B

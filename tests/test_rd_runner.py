@@ -40,7 +40,8 @@ def test_rows_compare_file_bytes_with_pca_of_the_same_training_materials(fold_mo
     dataset, model = fold_model
     config = tmp_path / "rd.json"
     config.write_text(json.dumps({"dataset": str(dataset), "budgets": [32, 64],
-                                  "experiments": [{"label": "fold0", "model": str(model), "group": "cv"}]}))
+                                  "experiments": [{"label": "fold0", "model": str(model), "group": "cv",
+                                                   "coded_mu_step": 2}]}))
     assert main(["bench", "rd", "--config", str(config), "-o", str(tmp_path / "rows.jsonl"), "--quiet"]) == 0
     rows = read_rows(tmp_path / "rows.jsonl")
     manifest = json.loads((model / "model.json").read_text())
@@ -51,6 +52,7 @@ def test_rows_compare_file_bytes_with_pca_of_the_same_training_materials(fold_mo
                                             row["decoder_sha256"] == manifest["decoder_sha256"] for row in rows)
     ours = [row for row in rows if row["point"] == "bvae"]
     assert {row["budget_bytes"] for row in ours} == {32, 64}
+    assert all(row["coded_mu_step"] == 2 for row in ours)  # the experiment's grid, named in its rows
     for row in ours:
         assert set(row["materials"]) <= held and len(row["per_material_mapped"]) == len(row["materials"])
         names = sum(len(n.encode()) for n in row["materials"])
@@ -92,6 +94,14 @@ def test_config_errors_name_the_file(tmp_path: Path) -> None:
         load_config(path)
     path.write_text(json.dumps({"dataset": "x.h5", "experiments": [], "header_in_budget": False}))
     assert load_config(path).header_in_budget is False and load_config(path).dataset == tmp_path / "x.h5"
+    for step in (6, -1, True, "3"):
+        path.write_text(json.dumps({"dataset": "x.h5", "experiments": [
+            {"label": "a", "model": "m", "coded_mu_step": step}]}))
+        with pytest.raises(ValueError, match="bad.json: an experiment's 'coded_mu_step' is an integer from 0 to 5"):
+            load_config(path)
+    path.write_text(json.dumps({"dataset": "x.h5", "experiments": [{"label": "a", "model": "m", "coded_mu_step": 4},
+                                                                   {"label": "b", "model": "m"}]}))
+    assert [e.coded_mu_step for e in load_config(path).experiments] == [4, None]
 
 
 def _row(group: str, point: str, budget: int, errors: list[float], size: float) -> dict:

@@ -37,9 +37,10 @@ from brdfcodec.layers.basis_layer import coded_coefficients
 from brdfcodec.layers.coded_basis import (
     CODED_HEADER_BYTES,
     MAX_MAGNITUDE,
+    MAX_MU_STEP_LOG2,
     choose_coding,
-    coded_mu_codes,
     encode_integers,
+    mu_stream_lead,
     prior_codes,
 )
 from brdfcodec.layers.packed import choose_packing, packed_step_code, packed_widths
@@ -116,11 +117,12 @@ CODED_PRIOR: dict[bool, tuple[int, int]] = {True: (156, 28), False: (190, 41)}
 #: (squared error of the layer's sum at those bytes, :func:`~brdfcodec.layers.coded_basis.choose_coding`) and
 #: fits the layer under the better one; each prior used in a file is a form of its own (spec §3.2, §4.8).
 CODED_PRIORS: dict[bool, tuple[tuple[int, int], ...]] = {True: ((156, 28), (188, 28)), False: ((190, 41), (190, 29))}
-#: The grid a size budget's records entropy-code μ on, beside the fixed grid's 8 bytes (format 2.5, spec §4.9):
-#: μ = q · 2^−3. Under the unit Laplace prior a held-out material's μ (D = 8) codes to about 5 bytes in the layer's
-#: stream; the layer refitted to the coarser μ makes up most of what the grid loses. 2^−3 lowered the error of
-#: held-out materials more than 2^−4 at 28 B in a probe of CV fold 1; rows of the budgets it was measured at:
-#: ``reports/results/rd-*-coded-mu-*.jsonl``. 0 turns the candidates off.
+#: The default grid exponent g of the records whose μ is entropy-coded in the coded basis layer (format 2.5, spec
+#: §4.9, μ = q · 2^−g), offered by rate control beside the fixed grid's 8 bytes (:attr:`EncodeOptions.coded_mu_step`,
+#: 0: none). Under the unit Laplace prior a held-out material's μ (D = 8) codes to about 5 bytes in the layer's
+#: stream at g = 3; the layer refitted to the coarser μ makes up most of what the grid loses. Rows at 16 and 32 B:
+#: ``reports/results/rd-*-coded-mu-*.jsonl``; the grids compared (``"coded_mu_step"`` of a ``bvae bench rd``
+#: experiment, CV fold 1 at 16 and 32 B): ``reports/results/rd-cv3-fold1-b200-always-mu-grid.jsonl``.
 CODED_MU_STEP_LOG2: int = 3
 _BASIS_CODINGS: tuple[str, ...] = get_args(BasisCoding)
 
@@ -199,6 +201,10 @@ class EncodeOptions:
         coefficients (:data:`BasisCoding`; default ``"auto"``: per record, packed, format 2.3, or coded, format
         2.4, in the same bytes, whichever has the lower kept-slice error; ``"packed"`` or ``"coded"`` alone;
         ``"int8"``).
+    coded_mu_step : int
+        0 to :data:`~brdfcodec.layers.coded_basis.MAX_MU_STEP_LOG2`: the grid exponent g of the candidate records
+        whose μ is entropy-coded in the coded basis layer (format 2.5, μ = q·2^−g; :attr:`coded_mu_grid` says
+        when they are offered); 0: none. Default :data:`CODED_MU_STEP_LOG2`.
     """
 
     effort: int = 1
@@ -212,8 +218,13 @@ class EncodeOptions:
     latent: LatentChoice = "always"
     store_sigma: bool = False
     basis_coding: BasisCoding = "auto"
+    coded_mu_step: int = CODED_MU_STEP_LOG2
 
     def __post_init__(self) -> None:
+        if isinstance(self.coded_mu_step, bool) or not isinstance(self.coded_mu_step, (int, np.integer)) or not (
+                0 <= self.coded_mu_step <= MAX_MU_STEP_LOG2):
+            raise ValueError(f"coded_mu_step must be an integer from 0 (none) to {MAX_MU_STEP_LOG2}, "
+                             f"got {self.coded_mu_step!r}")
         if self.basis_coding not in _BASIS_CODINGS:
             raise ValueError(f"basis_coding must be one of {list(_BASIS_CODINGS)}, got {self.basis_coding!r}")
         if self.latent not in _LATENT_CHOICES:
@@ -239,6 +250,12 @@ class EncodeOptions:
         """Whether records without a detail layer pack their basis layer (``"packed"`` under a size budget or an
         error target)."""
         return self.basis_coding != "int8" and (self.bytes_budget is not None or self.max_relae is not None)
+
+    @property
+    def coded_mu_grid(self) -> int:
+        """The grid exponent g of the coded-μ candidates rate control offers (format 2.5), 0 where it offers none:
+        :attr:`coded_mu_step` where records are packed or coded under a target and coded layers are allowed."""
+        return self.coded_mu_step if self.packed and self.basis_coding in ("auto", "coded") else 0
 
     @property
     def coded(self) -> bool:
@@ -300,7 +317,7 @@ def layer_records(
             basis_variants=() if basis is None else options.variants(
                 decoder.network.config.latent_dim if decoder.network.config.linear_basis else 0),
             compact_alone_fit=_compact_alone_fit(decoder, base),
-            coded_mu_step=CODED_MU_STEP_LOG2 if options.packed and options.basis_coding in ("auto", "coded") else 0,
+            coded_mu_step=options.coded_mu_grid,
         )
         chosen = result.record
         # record_bytes: what the budget caps (payload and index descriptor); payload_bytes: the payload alone
@@ -431,7 +448,7 @@ def _basis_fit(
         # a packed and a coded layer, of one fit where they keep as many coefficients (from about 64 B: all), else
         # of a fit each, and keeps the lower error (packed first: kept on a tie, readable by 2.3 readers).
         coded_mu = mu_storage == MU_CODED  # μ rides in the coded layer's stream (format 2.5): coded layers only
-        lead = None if not coded_mu else coded_mu_lead(base.mu)
+        lead = None if not coded_mu else coded_mu_on_grid(base.mu, options.coded_mu_grid)
         if packed:  # in the bytes of k int8 coefficients: as many as the least-squares coefficients pack to
             first = min(start, basis.count - 1)
             codings = ["packed", "coded"] if options.basis_coding == "auto" else [
@@ -473,7 +490,7 @@ def _basis_fit(
             if mu_storage is not None:
                 # μ as a compact record stores it (int8 on the fixed grid or with a step, or entropy-coded on the
                 # grid 2^−g), then the coefficients refitted to that code.
-                code = (coded_mu_values(codes[0]) if coded_mu else
+                code = (coded_mu_values(codes[0], options.coded_mu_grid) if coded_mu else
                         compact_mu_values(codes[0], mu_storage == MU_INT8_FIXED, f"{base.name}: mu"))
                 _, coefficients = fit_basis_coefficients(
                     decoder.network, code[None], inputs[None], masks[None], components, basis.entries,
@@ -486,7 +503,7 @@ def _basis_fit(
             for coding in (c for c in codings if count_of[c] == count):
                 if coding == "coded":
                     layer = coded_coefficients(basis.sha256, coefficients[0], max_bytes[coding], coded_prior,
-                                               first, p, coded_mu=None if not coded_mu else coded_mu_lead(code))
+                                               first, p, coded_mu=None if not coded_mu else coded_mu_on_grid(code, options.coded_mu_grid))
                 elif coding == "packed":
                     layer = packed_coefficients(basis.sha256, coefficients[0], max_bytes[coding], first, p)
                 else:
@@ -539,15 +556,15 @@ def _basis_fit(
     return fit
 
 
-def coded_mu_lead(mu: np.ndarray) -> tuple[int, np.ndarray]:
-    """A coded μ's ``(g, q)`` on brdfcodec's grid 2^−:data:`CODED_MU_STEP_LOG2` (format 2.5): q = round(μ · 2^g)."""
-    g = CODED_MU_STEP_LOG2
+def coded_mu_on_grid(mu: np.ndarray, step_log2: int) -> tuple[int, np.ndarray]:
+    """A coded μ's ``(g, q)`` on the grid 2^−g, g = ``step_log2`` (format 2.5): q = round(μ · 2^g)."""
+    g = int(step_log2)
     return g, np.rint(np.asarray(mu, dtype=np.float64) * float(1 << g)).astype(np.int64)
 
 
-def coded_mu_values(mu: np.ndarray) -> np.ndarray:
-    """The float32 values a coded μ decodes to (what an encoder fits the layer to)."""
-    g, q = coded_mu_lead(mu)
+def coded_mu_values(mu: np.ndarray, step_log2: int) -> np.ndarray:
+    """The float32 values a coded μ on the grid 2^−g decodes to (what an encoder fits the layer to)."""
+    g, q = coded_mu_on_grid(mu, step_log2)
     return (q / float(1 << g)).astype(np.float32)
 
 
@@ -610,7 +627,7 @@ def _coded_prior_and_count(coefficients: np.ndarray, first: int, max_bytes: int,
         No coded layer fits (not even one coefficient) under any of the priors.
     """
     best: tuple[float, tuple[int, int], int] | None = None
-    lead = None if coded_mu is None else (coded_mu[1], coded_mu_codes(coded_mu[0], len(coded_mu[1])))
+    lead = None if coded_mu is None else mu_stream_lead(coded_mu)
     for prior in priors:
         choice = choose_coding(coefficients, first, max_bytes, *prior, lead=lead)
         if choice is not None and (best is None or choice.error < best[0]):

@@ -123,6 +123,7 @@ def encode(
     metric: Literal["mapped", "linear"] = "mapped",
     provenance: bool = False,
     latent: LatentChoice = "always",
+    coded_mu_step: int | None = None,
 ) -> bytes:
     """Encode MERL tables into the bytes of one ``.bvae`` file (one material, or a library of many).
 
@@ -146,6 +147,8 @@ def encode(
         RelAE, encoder, effort, rate control). By default the file holds names and records only.
     latent : {"always", "auto"}, default "always"
         Whether rate control may write records without a latent, as for :class:`BrdfEncoder`.
+    coded_mu_step : int, optional
+        The grid exponent of rate control's coded-μ candidates (0: none), as for :class:`BrdfEncoder`.
 
     Returns
     -------
@@ -165,7 +168,7 @@ def encode(
     items = [sources] if isinstance(sources, MerlBRDF | MaterialInput | str | os.PathLike) else sources
     encoder = BrdfEncoder(
         model, effort=effort, bytes=bytes, max_relae=max_relae, metric=metric, latent_dtype=latent_dtype,
-        latent=latent,
+        latent=latent, coded_mu_step=coded_mu_step,
     )
     records = encode_records(items, names=names, encoder=encoder, measure_error=measure_error, batch_size=batch_size)
     if encoder.reference is None:  # loaded from a model folder, so it has one

@@ -355,9 +355,11 @@ def encode_layers(
         step) is a candidate of a size budget: the smallest record with a latent, so that every material fits
         a budget from D bytes beside its descriptor (10 for D = 8 and a one-byte name).
     coded_mu_step : int, default 0
-        g > 0: a size budget's candidates include records whose μ is entropy-coded on the grid 2^−g in their
-        coded basis layer (format 2.5, ``spec/bvae-format.md`` §4.9), in each of ``basis_variants``; ``basis_fit``
-        then receives ``"coded"`` as the μ storage and must make a coded layer that carries μ. 0: none.
+        g > 0: the candidates include records whose μ is entropy-coded on the grid 2^−g in their coded basis
+        layer (format 2.5, ``spec/bvae-format.md`` §4.9): a size budget's in each of ``basis_variants``; an error
+        target's below the size of the smallest other record that meets it, the layer's bytes bisected;
+        ``basis_fit`` then receives ``"coded"`` as the μ storage and must make a coded layer that carries μ.
+        0: none.
 
     Raises
     ------
@@ -374,12 +376,13 @@ def encode_layers(
     d = base.latent_dim
     compact = bytes_budget is not None and compact_base_pays(
         bytes_budget - record_overhead(base.name, basis_count=max(full, 1)), d, latent_itemsize, full, store_sigma)
-    candidates = functools.partial(_Candidates, store_sigma=store_sigma)
-    cands = candidates(base, base_mapped, target, weights, latent_itemsize, basis_fit, compact)
+    candidates_of = functools.partial(_Candidates, store_sigma=store_sigma)
+    cands = candidates_of(base, base_mapped, target, weights, latent_itemsize, basis_fit, compact)
     if cands.mu_storage == MU_INT8 and bytes_budget is not None and not _smallest_layered_fits(cands, bytes_budget):
         # μ past the fixed grid's ±3.97 with its own step does not fit beside its descriptor: the grid's end holds it
         # (spec §4.5; the coefficients are fitted to the clipped code), so every material fits the smallest budgets.
-        cands = candidates(base, base_mapped, target, weights, latent_itemsize, basis_fit, compact, fixed_grid=True)
+        cands = candidates_of(base, base_mapped, target, weights, latent_itemsize, basis_fit, compact,
+                              fixed_grid=True)
     base_bytes = cands.plain_bytes
     if full:
         base_bytes = min(base_bytes, cands.layered_bytes + STEP_BYTES + 1 + cands.overhead(1))
@@ -405,10 +408,10 @@ def encode_layers(
             what = "base record's" if smallest == base_bytes else "smallest record's"
             raise RateTargetError(f"{base.name}: {bytes_budget} bytes is below the {what} {smallest} bytes")
         points = _budget_points(cands, bytes_budget, full, compact, variants, tried,
-                                lambda: candidates(base, base_mapped, target, weights, latent_itemsize, basis_fit,
+                                lambda: candidates_of(base, base_mapped, target, weights, latent_itemsize, basis_fit,
                                                    compact=True),
                                 None if not (full and coded_mu_step) else
-                                lambda: candidates(base, base_mapped, target, weights, latent_itemsize, basis_fit,
+                                lambda: candidates_of(base, base_mapped, target, weights, latent_itemsize, basis_fit,
                                                    compact=True, coded_mu_step=coded_mu_step))
         if alone is not None and alone.storage_for(bytes_budget) is not None:
             # a candidate at every budget it fits, so that a byte more never loses what a smaller budget gave
@@ -424,7 +427,7 @@ def encode_layers(
     if not max_relae > 0:
         raise ValueError(f"max_relae must be > 0, got {max_relae}")
     # An error target's candidates: (compact base?, k coefficients, detail step or None).
-    pools = {False: cands, True: candidates(base, base_mapped, target, weights, latent_itemsize, basis_fit,
+    pools = {False: cands, True: candidates_of(base, base_mapped, target, weights, latent_itemsize, basis_fit,
                                              compact=True)}
     errors: dict[tuple[bool, int, float | None, str | None], float] = {}
     relae = RelaeAgainst(values, mask, metric)  # the source mapped and summed once for all candidates
@@ -468,10 +471,51 @@ def encode_layers(
     candidates = [c for c in errors if errors[c] <= max_relae]
     chosen = min(candidates, key=lambda c: (pools[c[0]].size(*c[1:]), errors[c]))
     size = pools[chosen[0]].size(*chosen[1:])
+    record = pools[chosen[0]].record(*chosen[1:])
+    if full and coded_mu_step:  # a smaller record whose μ rides in its coded layer (format 2.5) that meets X too
+        coded = candidates_of(base, base_mapped, target, weights, latent_itemsize, basis_fit, compact=True,
+                              coded_mu_step=coded_mu_step)
+        k = _smallest_coded_mu_meeting(coded, size, full, relae, max_relae, tried)
+        if k:
+            record, size = coded.record(k, None), coded.size(k, None)
     only = None if without is None else without.meeting(relae, max_relae, size, tried)
     if only is not None and without is not None:  # a smaller record without a latent meets the target too
         return RateResult(without.record(only), without.size(only), tried)
-    return RateResult(pools[chosen[0]].record(*chosen[1:]), size, tried)
+    return RateResult(record, size, tried)
+
+
+def _smallest_coded_mu_meeting(pool: _Candidates, smaller_than: int, full: int, relae: RelaeAgainst,
+                               max_relae: float, tried: list[tuple[float | None, int, float | None]]) -> int:
+    """The coefficients (the most that fit a bisected size) of the smallest record of ``pool`` — μ entropy-coded
+    in its coded layer, no detail layer — below ``smaller_than`` bytes whose decode meets ``max_relae``; 0 when
+    none does. Each size measured is appended to ``tried``."""
+    measured: dict[int, tuple[int, float]] = {}
+
+    def meets(budget: int) -> bool:
+        k = pool.most_coefficients(budget, full)
+        if not k:
+            return False
+        if k not in measured:
+            size = pool.size(k, None)
+            error = relae(table_from_network_output(pool.mapped(k, None))).overall
+            tried.append((None, size, error))
+            measured[k] = (size, error)
+        size, error = measured[k]
+        return size < smaller_than and error <= max_relae
+
+    low, high = pool.layered_bytes + STEP_BYTES + pool.overhead(1), smaller_than - 1
+    if high < low or not meets(high):
+        return 0
+    if meets(low):
+        high = low
+    while high - low > 1:  # meets(high); not meets(low)
+        middle = (low + high) // 2
+        if meets(middle):
+            high = middle
+        else:
+            low = middle
+    k = pool.most_coefficients(high, full)
+    return k if isinstance(pool.record(k, None), LayeredRecord) else 0
 
 
 def _budget_points(cands: _Candidates, bytes_budget: int, full: int, compact: bool,

@@ -23,6 +23,7 @@ from brdfcodec.layers.coded_basis import (
     coded_mu_codes,
     decode_integers,
     encode_integers,
+    mu_stream_lead,
     prior_codes,
 )
 from brdfcodec.layers.packed import (
@@ -161,8 +162,7 @@ class BasisLayer:
         come before the coefficients'."""
         if self.coded_mu is None:
             return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
-        g, q = self.coded_mu
-        return np.asarray(q, dtype=np.int64), coded_mu_codes(g, len(q))
+        return mu_stream_lead(self.coded_mu)
 
     @functools.cached_property
     def _coded(self) -> bytes:
@@ -263,11 +263,8 @@ def coded_coefficients(sha256: str, coefficients: npt.ArrayLike, max_bytes: int,
     ``first``, …; the leading ones that fit, or exactly ``count`` of them), under the form's ``prior``, after a
     coded μ's integers when given (format 2.5: they take their bytes first); None when not even one coefficient
     fits (:func:`~brdfcodec.layers.coded_basis.choose_coding`)."""
-    lead = None
-    if coded_mu is not None:
-        lead = (np.asarray(coded_mu[1], dtype=np.int64), coded_mu_codes(coded_mu[0], len(coded_mu[1])))
     choice = choose_coding(coefficients, int(first), int(max_bytes), int(prior[0]), int(prior[1]), count=count,
-                           lead=lead)
+                           lead=None if coded_mu is None else mu_stream_lead(coded_mu))
     if choice is None:
         return None
     return BasisLayer(sha256, packed_step(choice.step_code), choice.q, int(first), int(project),

@@ -56,6 +56,7 @@ __all__ = [
     "coded_prefix_sizes",
     "decode_integers",
     "encode_integers",
+    "mu_stream_lead",
     "prior_codes",
 ]
 
@@ -126,6 +127,20 @@ def coded_mu_codes(step_log2: int, latent_dim: int) -> npt.NDArray[np.int64]:
     if not 1 <= g <= MAX_MU_STEP_LOG2:
         raise ValueError(f"a coded mu's grid exponent must be 1 to {MAX_MU_STEP_LOG2}, got {step_log2!r}")
     return np.full(int(latent_dim), 16 * g, dtype=np.int64)
+
+
+def mu_stream_lead(coded_mu: tuple[int, npt.ArrayLike]) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]:
+    """A coded μ ``(g, q)`` as it leads a coded layer's stream (format 2.5, ``spec/bvae-format.md`` §4.9): its D
+    integers and their prior codes (:func:`coded_mu_codes`), what :func:`choose_coding`'s ``lead`` takes.
+
+    Raises
+    ------
+    ValueError
+        g outside 1 … :data:`MAX_MU_STEP_LOG2`.
+    """
+    g, q = coded_mu
+    integers = np.asarray(q, dtype=np.int64).reshape(-1)
+    return integers, coded_mu_codes(g, len(integers))
 
 
 def _binarise(q: npt.NDArray[np.int64], codes: npt.NDArray[np.int64]) -> tuple[list[int], list[int], list[int]]:

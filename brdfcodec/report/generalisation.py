@@ -87,6 +87,9 @@ class Experiment:
         model's ``model.json`` does not list as trained on.
     latent : {"auto", "always"}
         Whether rate control may write records without a latent (format 2.1; ``bvae compress --latent``).
+    coded_mu_step : int, optional
+        The grid exponent of rate control's coded-μ candidates, 0 (none) to 5 (``BrdfEncoder(coded_mu_step=)``);
+        the encoder's default when None.
     """
 
     label: str
@@ -94,6 +97,7 @@ class Experiment:
     group: str = ""
     held_out: tuple[str, ...] | None = None
     latent: str = "auto"
+    coded_mu_step: int | None = None
 
 
 @dataclass(frozen=True)
@@ -113,8 +117,9 @@ def load_config(path: str | os.PathLike[str]) -> RdConfig:
     """Read a runner configuration; relative paths are taken from the file's folder.
 
     The file is a JSON object: ``dataset`` (path), ``experiments`` (list of
-    objects with ``label``, ``model``, optional ``group``, ``held_out`` and
-    ``latent``: ``"auto"``, the default, or ``"always"``, as ``bvae compress --latent``),
+    objects with ``label``, ``model``, optional ``group``, ``held_out``,
+    ``latent``: ``"auto"``, the default, or ``"always"``, as ``bvae compress --latent``, and
+    ``coded_mu_step``: 0 to 5, the coded-μ candidates' grid exponent, a study of the encoder's default),
     optional ``budgets`` (list of int), ``effort`` (int), ``limit`` (int:
     only the first N held-out materials of each family, a quick look),
     ``header_in_budget`` (bool, default true: brdfcodec's file bytes less
@@ -138,15 +143,18 @@ def load_config(path: str | os.PathLike[str]) -> RdConfig:
     experiments = []
     for item in data["experiments"]:
         if not isinstance(item, dict) or not {"label", "model"} <= set(item) or set(item) - {
-                "label", "model", "group", "held_out", "latent"}:
+                "label", "model", "group", "held_out", "latent", "coded_mu_step"}:
             raise ValueError(f"{path}: each experiment is an object with 'label', 'model' (and optionally "
-                             f"'group', 'held_out', 'latent'), got {item!r}")
+                             f"'group', 'held_out', 'latent', 'coded_mu_step'), got {item!r}")
         if item.get("latent", "auto") not in ("auto", "always"):
             raise ValueError(f"{path}: an experiment's 'latent' is 'auto' or 'always', got {item['latent']!r}")
+        step = item.get("coded_mu_step")
+        if step is not None and (isinstance(step, bool) or not isinstance(step, int) or not 0 <= step <= 5):
+            raise ValueError(f"{path}: an experiment's 'coded_mu_step' is an integer from 0 to 5, got {step!r}")
         held = item.get("held_out")
         experiments.append(Experiment(str(item["label"]), base / item["model"], str(item.get("group", "")),
                                       None if held is None else tuple(str(n) for n in held),
-                                      str(item.get("latent", "auto"))))
+                                      str(item.get("latent", "auto")), step))
     budgets = tuple(int(n) for n in data.get("budgets", DEFAULT_BUDGETS))
     if not budgets or min(budgets) < 1:
         raise ValueError(f"{path}: budgets must be positive integers")
@@ -326,7 +334,7 @@ def search_bytes_flag(
 def _bvae_rows(model: Path, names: Sequence[str], families: Sequence[str], inputs: np.ndarray, masks: np.ndarray,
                references: Sequence[Any], budgets: Sequence[int], effort: int,
                error: Callable[[Any, np.ndarray], tuple[float, float]], latent: str = "auto",
-               header_in_budget: bool = True) -> dict[str, list[dict[str, Any]]]:
+               header_in_budget: bool = True, coded_mu_step: int | None = None) -> dict[str, list[dict[str, Any]]]:
     """brdfcodec's rows per family: every held-out material in one library at each budget, each family's bytes
     its records' (descriptor and payload, names aside) plus its materials' equal share of the header."""
     import brdfcodec as bc
@@ -344,7 +352,8 @@ def _bvae_rows(model: Path, names: Sequence[str], families: Sequence[str], input
             continue
         def encoded(value: int) -> tuple[tuple[bytes, Any], dict[str, int], float]:
             data = bc.encode(items, model=model, latent_dtype="float16", measure_error=False, effort=effort,
-                             bytes=max(value, 1), latent=latent)  # type: ignore[arg-type]
+                             bytes=max(value, 1), latent=latent,  # type: ignore[arg-type]
+                             coded_mu_step=coded_mu_step)
             library = bc.decode(data, decoder=decoder)
             return (data, library), *_record_bytes(library, data, names, name_bytes)
 
@@ -365,7 +374,8 @@ def _bvae_rows(model: Path, names: Sequence[str], families: Sequence[str], input
                 "point": "bvae", "budget_bytes": budget, "bytes_flag": max(flag, 1), "file_bytes": len(data),
                 "library_materials": len(names), "header_share_bytes": header_share,
                 "bytes_per_material": sum(record_bytes[names[i]] for i in chosen) / len(chosen) + header_share,
-                "latent": latent, "records_without_latent": without, **_error_summary(errors),
+                "latent": latent, "records_without_latent": without,
+                **({} if coded_mu_step is None else {"coded_mu_step": coded_mu_step}), **_error_summary(errors),
                 **_decode_time(seconds)})
     return rows
 
@@ -426,7 +436,7 @@ def run_experiment(config: RdConfig, experiment: Experiment,
         references = [dataset.table(i) for i in measured]
         ours = _bvae_rows(experiment.model, names, [dataset.families[i] for i in measured], inputs, masks,
                           references, config.budgets, config.effort, error, experiment.latent,
-                          config.header_in_budget)
+                          config.header_in_budget, experiment.coded_mu_step)
         for family in families:
             chosen = [k for k, i in enumerate(measured) if dataset.families[i] == family]
             family_rows = list(ours[family])
