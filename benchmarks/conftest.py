@@ -53,6 +53,9 @@ TARGETS = {
     "encode-64B-layer-polish": 1.5,
     # a 64 B encode with the coded-μ candidates (format 2.5, issue 48) vs without: one more pool of basis fits
     "encode-64B-coded-mu": 1.6,
+    # an error-target encode (--max-relae 0.05) with the coded-μ records searched below its choice vs without:
+    # a bisection of their size, a basis fit at each size it measures
+    "encode-max-relae-coded-mu": 2.0,
     "rgl-write": 40.0,  # one material as an RGL .bsdf (parameterisation + tensor file) vs as a MERL .binary (issue 38)
     # a 16 KB encode through the library with its default threads, beside one CPU-bound process per core, vs the
     # best explicit bc.set_num_threads(n) in the same rounds (issue 39)

@@ -248,3 +248,23 @@ def test_encode_64b_with_coded_mu(benchmark, merl_file: Path) -> None:
     benchmark.extra_info["role"] = "candidate"
     record = benchmark.pedantic(lambda: encoder.encode(read_merl(merl_file)), rounds=3, iterations=1)
     assert record.has_latent and record.meta["rate"]["record_bytes"] <= 64
+
+
+def test_encode_max_relae_baseline_without_coded_mu(benchmark, merl_file: Path) -> None:
+    """Read and encode to an error target (mapped RelAE 0.05) without the coded-μ records (``coded_mu_step=0``)."""
+    encoder = BrdfEncoder(max_relae=0.05, latent_dtype="float16", coded_mu_step=0)
+    encoder.decoder  # noqa: B018
+    benchmark.group = "encode-max-relae-coded-mu"
+    benchmark.extra_info["role"] = "baseline"
+    record = benchmark.pedantic(lambda: encoder.encode(read_merl(merl_file)), rounds=3, iterations=1)
+    assert not record.coded_mu
+
+
+def test_encode_max_relae_with_coded_mu(benchmark, merl_file: Path) -> None:
+    """The same encode with the default candidates: the coded-μ records' size bisected below the ladder's choice."""
+    encoder = BrdfEncoder(max_relae=0.05, latent_dtype="float16")
+    encoder.decoder  # noqa: B018
+    benchmark.group = "encode-max-relae-coded-mu"
+    benchmark.extra_info["role"] = "candidate"
+    record = benchmark.pedantic(lambda: encoder.encode(read_merl(merl_file)), rounds=3, iterations=1)
+    assert record.has_latent

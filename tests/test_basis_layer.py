@@ -468,7 +468,8 @@ def test_an_error_target_takes_the_smallest_candidate_that_meets_it(analytic_tab
                         coded_mu_step=0).encode(brdf, name="m")
     assert loose.compact_mu and loose.basis.count >= 4 and loose.meta["rate"]["payload_bytes"] == 8 + loose.basis.nbytes
     assert loose.basis.nbytes <= 2 + 4  # the smallest candidate: the bytes of 4 int8 coefficients
-    # with the default coded-μ candidates: a record no larger, that meets the target as well
+    # with the default coded-μ candidates: a record no larger, that meets the target as well (strictly smaller
+    # where a coded-μ record meets it: test_coded_mu.py's error-target test)
     default = BrdfEncoder(effort=0, max_relae=reached * 1.05, latent_dtype="float16", latent="always")
     smaller = default.encode(brdf, name="m")
     assert smaller.meta["rate"]["record_bytes"] <= chosen.meta["rate"]["record_bytes"]

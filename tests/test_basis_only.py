@@ -301,6 +301,7 @@ def test_an_error_target_takes_a_smaller_record_without_a_latent_where_it_meets_
     coded, _ = _encode(encoder, brdf, max_relae=0.045, latent="auto")  # with them: a latent, and no more bytes
     assert coded.has_latent and coded.coded_mu
     assert coded.meta["rate"]["record_bytes"] <= auto.meta["rate"]["record_bytes"]
+    assert measure(coded, encoder.decoder, brdf).meta["relae"]["mapped"] <= 0.045
 
 
 # --------------------------------------------------------------------------- edits, info, CLI, studio

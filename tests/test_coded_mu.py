@@ -195,12 +195,14 @@ def test_the_stream_lead_of_a_coded_mu_is_its_integers_under_16g() -> None:
         mu_stream_lead((6, [0]))
 
 
-@pytest.mark.parametrize("bad", [-1, 6, 2.5, True, "3"])
+@pytest.mark.parametrize("bad", [-1, 6, 2.5, True, "3", np.float64(3)])
 def test_the_coded_mu_step_option_is_0_to_5(bad: object) -> None:
     from brdfcodec.codec.encoding import EncodeOptions
 
     with pytest.raises(ValueError, match="coded_mu_step"):
         EncodeOptions(bytes_budget=32, coded_mu_step=bad)  # type: ignore[arg-type]
+    step = EncodeOptions(bytes_budget=32, coded_mu_step=np.int64(4)).coded_mu_step
+    assert step == 4 and type(step) is int
 
 
 def test_the_coded_mu_grid_is_offered_only_where_coded_layers_are() -> None:

@@ -33,11 +33,21 @@ def fold_model(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
 
 @pytest.mark.slow  # trains, exports and encodes: > 10 s on 2 cores
 def test_rows_compare_file_bytes_with_pca_of_the_same_training_materials(fold_model: tuple[Path, Path],
-                                                                         tmp_path: Path) -> None:
+                                                                         tmp_path: Path, monkeypatch) -> None:
     from brdfcodec.cli.main import main
     from brdfcodec.report.rows import SCHEMA, read_rows
 
+    import brdfcodec
+
     dataset, model = fold_model
+    asked: list[object] = []  # what the runner's encodes were asked for: the experiment's coded-μ grid
+    real_encode = brdfcodec.encode
+
+    def encode(*args: object, **options: object) -> bytes:
+        asked.append(options.get("coded_mu_step"))
+        return real_encode(*args, **options)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(brdfcodec, "encode", encode)
     config = tmp_path / "rd.json"
     config.write_text(json.dumps({"dataset": str(dataset), "budgets": [32, 64],
                                   "experiments": [{"label": "fold0", "model": str(model), "group": "cv",
@@ -53,6 +63,7 @@ def test_rows_compare_file_bytes_with_pca_of_the_same_training_materials(fold_mo
     ours = [row for row in rows if row["point"] == "bvae"]
     assert {row["budget_bytes"] for row in ours} == {32, 64}
     assert all(row["coded_mu_step"] == 2 for row in ours)  # the experiment's grid, named in its rows
+    assert asked and set(asked) == {2}
     for row in ours:
         assert set(row["materials"]) <= held and len(row["per_material_mapped"]) == len(row["materials"])
         names = sum(len(n.encode()) for n in row["materials"])

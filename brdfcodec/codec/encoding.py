@@ -225,6 +225,7 @@ class EncodeOptions:
                 0 <= self.coded_mu_step <= MAX_MU_STEP_LOG2):
             raise ValueError(f"coded_mu_step must be an integer from 0 (none) to {MAX_MU_STEP_LOG2}, "
                              f"got {self.coded_mu_step!r}")
+        object.__setattr__(self, "coded_mu_step", int(self.coded_mu_step))
         if self.basis_coding not in _BASIS_CODINGS:
             raise ValueError(f"basis_coding must be one of {list(_BASIS_CODINGS)}, got {self.basis_coding!r}")
         if self.latent not in _LATENT_CHOICES:
@@ -502,8 +503,9 @@ def _basis_fit(
             base_mapped: np.ndarray | None = None
             for coding in (c for c in codings if count_of[c] == count):
                 if coding == "coded":
-                    layer = coded_coefficients(basis.sha256, coefficients[0], max_bytes[coding], coded_prior,
-                                               first, p, coded_mu=None if not coded_mu else coded_mu_on_grid(code, options.coded_mu_grid))
+                    layer = coded_coefficients(
+                        basis.sha256, coefficients[0], max_bytes[coding], coded_prior, first, p,
+                        coded_mu=None if not coded_mu else coded_mu_on_grid(code, options.coded_mu_grid))
                 elif coding == "packed":
                     layer = packed_coefficients(basis.sha256, coefficients[0], max_bytes[coding], first, p)
                 else:

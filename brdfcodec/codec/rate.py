@@ -46,7 +46,9 @@ target):
   min(K, :data:`DETAIL_BASIS_COUNT`) coefficients plus each rung from coarse
   to fine (:func:`error_target_sequence`), bisected (size falls and error
   rises along the sequence), the step then bisected in log space between the
-  two rungs that bracket X (2 rounds).
+  two rungs that bracket X (2 rounds); then, with ``coded_mu_step``, the size
+  of a record whose μ is entropy-coded in its layer (format 2.5) is bisected
+  below that choice, and the smallest such record that meets X replaces it.
 
 The achieved RelAE is measured on the returned record. A layered record
 stores σ compactly (one byte per dimension, ``spec/bvae-format.md`` §4.5) or
@@ -486,36 +488,45 @@ def encode_layers(
 
 def _smallest_coded_mu_meeting(pool: _Candidates, smaller_than: int, full: int, relae: RelaeAgainst,
                                max_relae: float, tried: list[tuple[float | None, int, float | None]]) -> int:
-    """The coefficients (the most that fit a bisected size) of the smallest record of ``pool`` — μ entropy-coded
-    in its coded layer, no detail layer — below ``smaller_than`` bytes whose decode meets ``max_relae``; 0 when
-    none does. Each size measured is appended to ``tried``."""
-    measured: dict[int, tuple[int, float]] = {}
+    """The coefficients k of the smallest record of ``pool`` — μ entropy-coded in its coded layer, no detail
+    layer, the basis variant after the decoder's linear path — below ``smaller_than`` bytes whose decode meets
+    ``max_relae``; 0 when none does.
+
+    The record's size is bisected (k: the most coefficients that fit it); the smallest of the records measured
+    that meets the target is returned (a coded layer may take fewer bytes than its allowance, so sizes need not
+    rise with k). A size at which no coded layer fits beside μ (the fit gives the base alone) does not meet it.
+    Each record measured is appended to ``tried``.
+    """
+    measured: dict[int, tuple[int, float] | None] = {}  # k → (bytes, RelAE); None: no coded layer at k
+
+    def meeting(k: int) -> bool:
+        found = measured.get(k)
+        return found is not None and found[0] < smaller_than and found[1] <= max_relae
 
     def meets(budget: int) -> bool:
         k = pool.most_coefficients(budget, full)
         if not k:
             return False
         if k not in measured:
-            size = pool.size(k, None)
-            error = relae(table_from_network_output(pool.mapped(k, None))).overall
-            tried.append((None, size, error))
-            measured[k] = (size, error)
-        size, error = measured[k]
-        return size < smaller_than and error <= max_relae
+            measured[k] = None
+            if isinstance(pool.record(k, None), LayeredRecord):  # else the base alone: μ not coded
+                size = pool.size(k, None)
+                error = relae(table_from_network_output(pool.mapped(k, None))).overall
+                tried.append((None, size, error))
+                measured[k] = (size, error)
+        return meeting(k)
 
-    low, high = pool.layered_bytes + STEP_BYTES + pool.overhead(1), smaller_than - 1
-    if high < low or not meets(high):
+    low = pool.layered_bytes + STEP_BYTES + pool.overhead(1)  # no coefficient fits: never meets
+    high = smaller_than - 1
+    if high <= low or not meets(high):
         return 0
-    if meets(low):
-        high = low
     while high - low > 1:  # meets(high); not meets(low)
         middle = (low + high) // 2
         if meets(middle):
             high = middle
         else:
             low = middle
-    k = pool.most_coefficients(high, full)
-    return k if isinstance(pool.record(k, None), LayeredRecord) else 0
+    return min((found[0], k) for k, found in measured.items() if found is not None and meeting(k))[1]
 
 
 def _budget_points(cands: _Candidates, bytes_budget: int, full: int, compact: bool,

@@ -57,6 +57,8 @@ from typing import Any
 
 import numpy as np
 
+from brdfcodec.layers.coded_basis import MAX_MU_STEP_LOG2
+
 __all__ = ["DEFAULT_BUDGETS", "Experiment", "RdConfig", "decode_machine", "load_config", "run_config",
            "run_experiment"]
 
@@ -88,7 +90,8 @@ class Experiment:
     latent : {"auto", "always"}
         Whether rate control may write records without a latent (format 2.1; ``bvae compress --latent``).
     coded_mu_step : int, optional
-        The grid exponent of rate control's coded-μ candidates, 0 (none) to 5 (``BrdfEncoder(coded_mu_step=)``);
+        The grid exponent of rate control's coded-μ candidates, 0 (none) to
+        :data:`~brdfcodec.layers.coded_basis.MAX_MU_STEP_LOG2` (``BrdfEncoder(coded_mu_step=)``);
         the encoder's default when None.
     """
 
@@ -149,8 +152,10 @@ def load_config(path: str | os.PathLike[str]) -> RdConfig:
         if item.get("latent", "auto") not in ("auto", "always"):
             raise ValueError(f"{path}: an experiment's 'latent' is 'auto' or 'always', got {item['latent']!r}")
         step = item.get("coded_mu_step")
-        if step is not None and (isinstance(step, bool) or not isinstance(step, int) or not 0 <= step <= 5):
-            raise ValueError(f"{path}: an experiment's 'coded_mu_step' is an integer from 0 to 5, got {step!r}")
+        if step is not None and (isinstance(step, bool) or not isinstance(step, int) or
+                                 not 0 <= step <= MAX_MU_STEP_LOG2):
+            raise ValueError(f"{path}: an experiment's 'coded_mu_step' is an integer from 0 to {MAX_MU_STEP_LOG2}, "
+                             f"got {step!r}")
         held = item.get("held_out")
         experiments.append(Experiment(str(item["label"]), base / item["model"], str(item.get("group", "")),
                                       None if held is None else tuple(str(n) for n in held),
