@@ -222,6 +222,29 @@ def test_the_bytes_flag_search_stops_when_records_stop_growing_and_keeps_the_lar
     assert flags == [8]
 
 
+def test_a_flag_below_the_smallest_record_ends_the_search() -> None:
+    """An encode that refuses a flag (below the smallest record a material can take, ``RateTargetError``) ends the
+    search with the last library encoded; refused at the first flag, the error reaches the caller, which leaves the
+    budget without a point."""
+    from brdfcodec.errors import RateTargetError
+    from brdfcodec.report.generalisation import search_bytes_flag
+
+    families = ["merl", "rgl"]
+    flags: list[int] = []
+    sizes = _sizes({"merl": lambda flag: flag + 4, "rgl": lambda flag: flag + 4}, families, 0.0, flags)
+
+    def encoded(flag: int) -> tuple[int, dict[str, int], float]:
+        if flag < 10:
+            flags.append(flag)
+            raise RateTargetError(f"m0: {flag} bytes is below the base record's 10 bytes")
+        return sizes(flag)
+
+    flag, result, records, _ = search_bytes_flag(encoded, 12, 12, families)  # over by 4 at 12: down to 8, refused
+    assert flags == [12, 8] and (flag, result) == (12, 12) and records["m0"] == 16
+    with pytest.raises(RateTargetError):
+        search_bytes_flag(encoded, 9, 12, families)
+
+
 def test_rd_rows_name_the_commit_the_run_started_at(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
                                                      capsys: pytest.CaptureFixture[str]) -> None:
     """A run takes an hour: a commit made meanwhile is not the code it measured."""

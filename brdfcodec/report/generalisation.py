@@ -57,6 +57,7 @@ from typing import Any
 
 import numpy as np
 
+from brdfcodec.errors import RateTargetError
 from brdfcodec.layers.coded_basis import MAX_MU_STEP_LOG2
 
 __all__ = ["DEFAULT_BUDGETS", "Experiment", "RdConfig", "decode_machine", "load_config", "run_config",
@@ -306,14 +307,24 @@ def search_bytes_flag(
     Returns
     -------
     flag, result, record_bytes, header_share
-        Of the largest flag tried that fits, else of the last one tried.
+        Of the largest flag tried that fits, else of the last one encoded.
+
+    Raises
+    ------
+    RateTargetError
+        ``encoded(flag)`` raised it for the first flag (a later flag that raises it ends the search).
     """
     fitting: tuple[int, Any, dict[str, int], float] | None = None  # the largest --bytes within N
     last: tuple[int, Any, dict[str, int], float] | None = None
     tried: set[int] = set()
     grown = True  # whether the last larger --bytes made larger records (else the records are full)
     for _ in range(max(1, tries)):
-        result, record_bytes, header_share = encoded(flag)
+        try:
+            result, record_bytes, header_share = encoded(flag)
+        except RateTargetError:  # below the smallest record a material can take: no smaller flag fits either
+            if last is None:
+                raise
+            break
         last = (flag, result, record_bytes, header_share)
         over = bytes_over_budget(record_bytes, header_share, families, budget)
         tried.add(flag)
@@ -362,8 +373,11 @@ def _bvae_rows(model: Path, names: Sequence[str], families: Sequence[str], input
             library = bc.decode(data, decoder=decoder)
             return (data, library), *_record_bytes(library, data, names, name_bytes)
 
-        flag, (data, library), record_bytes, header_share = search_bytes_flag(
-            encoded, flag, budget, families, tries=8 if header_in_budget else 1)
+        try:
+            flag, (data, library), record_bytes, header_share = search_bytes_flag(
+                encoded, flag, budget, families, tries=8 if header_in_budget else 1)
+        except RateTargetError:  # the header's share leaves less than the smallest record: no point
+            continue
         library[names[0]].table(masked="unmeasured")  # warm-up (lazy imports, thread pools), not timed
         library.forget()
         for family in rows:
