@@ -205,25 +205,28 @@ def test_encode_default_effort(benchmark, merl_file: Path) -> None:
 # --- issue 48: the integer polish of a latent record's basis layer, at the budget the issue times (64 B)
 
 
+def _timed_encode(benchmark, merl_file: Path, group: str, role: str,  # noqa: ANN001 - pytest-benchmark's fixture
+                  **options: object) -> LatentRecord:
+    """Read and encode ``merl_file`` with ``BrdfEncoder(latent_dtype="float16", **options)`` (its model loaded once,
+    as by the CLI before its first file), timed as ``role`` of ``group``; the last record."""
+    encoder = BrdfEncoder(latent_dtype="float16", **options)  # type: ignore[arg-type]
+    encoder.decoder  # noqa: B018
+    benchmark.group = group
+    benchmark.extra_info["role"] = role
+    return benchmark.pedantic(lambda: encoder.encode(read_merl(merl_file)), rounds=3, iterations=1)
+
+
 def test_encode_64b_baseline_without_layer_polish(benchmark, merl_file: Path, monkeypatch) -> None:
     """Read and encode at 64 B with the layer polish off (``LAYER_POLISH_PASSES`` 0 at effort 1)."""
     from brdfcodec.codec import refine
 
     monkeypatch.setitem(refine.LAYER_POLISH_PASSES, 1, 0)
-    encoder = BrdfEncoder(bytes=64, latent_dtype="float16")
-    encoder.decoder  # noqa: B018
-    benchmark.group = "encode-64B-layer-polish"
-    benchmark.extra_info["role"] = "baseline"
-    benchmark.pedantic(lambda: encoder.encode(read_merl(merl_file)), rounds=3, iterations=1)
+    _timed_encode(benchmark, merl_file, "encode-64B-layer-polish", "baseline", bytes=64)
 
 
 def test_encode_64b_with_layer_polish(benchmark, merl_file: Path) -> None:
     """The same encode with the default polish of every packed or coded candidate layer."""
-    encoder = BrdfEncoder(bytes=64, latent_dtype="float16")
-    encoder.decoder  # noqa: B018
-    benchmark.group = "encode-64B-layer-polish"
-    benchmark.extra_info["role"] = "candidate"
-    record = benchmark.pedantic(lambda: encoder.encode(read_merl(merl_file)), rounds=3, iterations=1)
+    record = _timed_encode(benchmark, merl_file, "encode-64B-layer-polish", "candidate", bytes=64)
     assert record.has_latent and record.meta["rate"]["record_bytes"] <= 64
 
 
@@ -232,39 +235,24 @@ def test_encode_64b_with_layer_polish(benchmark, merl_file: Path) -> None:
 
 def test_encode_64b_baseline_without_coded_mu(benchmark, merl_file: Path) -> None:
     """Read and encode at 64 B without the coded-μ candidates (``coded_mu_step=0``)."""
-    encoder = BrdfEncoder(bytes=64, latent_dtype="float16", coded_mu_step=0)
-    encoder.decoder  # noqa: B018
-    benchmark.group = "encode-64B-coded-mu"
-    benchmark.extra_info["role"] = "baseline"
-    record = benchmark.pedantic(lambda: encoder.encode(read_merl(merl_file)), rounds=3, iterations=1)
+    record = _timed_encode(benchmark, merl_file, "encode-64B-coded-mu", "baseline", bytes=64, coded_mu_step=0)
     assert not record.coded_mu
 
 
 def test_encode_64b_with_coded_mu(benchmark, merl_file: Path) -> None:
     """The same encode with the default candidates, coded μ among them."""
-    encoder = BrdfEncoder(bytes=64, latent_dtype="float16")
-    encoder.decoder  # noqa: B018
-    benchmark.group = "encode-64B-coded-mu"
-    benchmark.extra_info["role"] = "candidate"
-    record = benchmark.pedantic(lambda: encoder.encode(read_merl(merl_file)), rounds=3, iterations=1)
+    record = _timed_encode(benchmark, merl_file, "encode-64B-coded-mu", "candidate", bytes=64)
     assert record.has_latent and record.meta["rate"]["record_bytes"] <= 64
 
 
 def test_encode_max_relae_baseline_without_coded_mu(benchmark, merl_file: Path) -> None:
     """Read and encode to an error target (mapped RelAE 0.05) without the coded-μ records (``coded_mu_step=0``)."""
-    encoder = BrdfEncoder(max_relae=0.05, latent_dtype="float16", coded_mu_step=0)
-    encoder.decoder  # noqa: B018
-    benchmark.group = "encode-max-relae-coded-mu"
-    benchmark.extra_info["role"] = "baseline"
-    record = benchmark.pedantic(lambda: encoder.encode(read_merl(merl_file)), rounds=3, iterations=1)
+    record = _timed_encode(benchmark, merl_file, "encode-max-relae-coded-mu", "baseline", max_relae=0.05,
+                           coded_mu_step=0)
     assert not record.coded_mu
 
 
 def test_encode_max_relae_with_coded_mu(benchmark, merl_file: Path) -> None:
     """The same encode with the default candidates: the coded-μ records' size bisected below the ladder's choice."""
-    encoder = BrdfEncoder(max_relae=0.05, latent_dtype="float16")
-    encoder.decoder  # noqa: B018
-    benchmark.group = "encode-max-relae-coded-mu"
-    benchmark.extra_info["role"] = "candidate"
-    record = benchmark.pedantic(lambda: encoder.encode(read_merl(merl_file)), rounds=3, iterations=1)
+    record = _timed_encode(benchmark, merl_file, "encode-max-relae-coded-mu", "candidate", max_relae=0.05)
     assert record.has_latent
