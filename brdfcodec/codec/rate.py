@@ -411,10 +411,10 @@ def encode_layers(
             raise RateTargetError(f"{base.name}: {bytes_budget} bytes is below the {what} {smallest} bytes")
         points = _budget_points(cands, bytes_budget, full, compact, variants, tried,
                                 lambda: candidates_of(base, base_mapped, target, weights, latent_itemsize, basis_fit,
-                                                   compact=True),
+                                                      compact=True),
                                 None if not (full and coded_mu_step) else
                                 lambda: candidates_of(base, base_mapped, target, weights, latent_itemsize, basis_fit,
-                                                   compact=True, coded_mu_step=coded_mu_step))
+                                                      compact=True, coded_mu_step=coded_mu_step))
         if alone is not None and alone.storage_for(bytes_budget) is not None:
             # a candidate at every budget it fits, so that a byte more never loses what a smaller budget gave
             points.append(alone.point(bytes_budget))
@@ -430,7 +430,7 @@ def encode_layers(
         raise ValueError(f"max_relae must be > 0, got {max_relae}")
     # An error target's candidates: (compact base?, k coefficients, detail step or None).
     pools = {False: cands, True: candidates_of(base, base_mapped, target, weights, latent_itemsize, basis_fit,
-                                             compact=True)}
+                                                compact=True)}
     errors: dict[tuple[bool, int, float | None, str | None], float] = {}
     relae = RelaeAgainst(values, mask, metric)  # the source mapped and summed once for all candidates
 
