@@ -207,7 +207,7 @@ def test_unknown_versions_flags_and_kinds_are_refused() -> None:
     with pytest.raises(UnsupportedVersionError, match="development format 1.x"):
         parse_bvae(_rewrap(data, major=1))
     with pytest.raises(UnsupportedVersionError, match="flag bits"):
-        parse_bvae(_rewrap(data, flags=4))
+        parse_bvae(_rewrap(data, flags=8))  # bit 3: bit 2 is known since 2.6 (short references)
     # 32 bytes of decoder hash, latent_dim, latent_dtype, the form count: then the first form's kind.
     with pytest.raises(UnsupportedVersionError, match="record kind 7"):
         parse_bvae(_rewrap(data, header_edit=lambda h: h[:36] + b"\x07" + h[37:]))

@@ -46,8 +46,8 @@ def test_compress_decompress_round_trip(capsys, merl_folder: Path, tmp_path: Pat
 
     code, out, err = run(capsys, "info", str(lib))
     assert code == 0, err
-    # the lowest version that holds it: a latent without σ (2.2), no packed basis layer (2.3)
-    assert "tiny-test-model" in out and f"format {FORMAT_MAJOR}.2" in out and "gold" in out
+    # the lowest version that holds it: short references (2.6; without them, a latent without σ: 2.2)
+    assert "tiny-test-model" in out and f"format {FORMAT_MAJOR}.6" in out and "gold" in out
 
     kept = tmp_path / "kept.bvae"
     code, out, err = run(capsys, "compress", str(merl_folder), "-o", str(kept), "--model", str(tiny_model_folder),

@@ -179,8 +179,13 @@ def test_the_cli_writes_coded_layers_within_the_budget_and_they_decode_as_writte
     parsed = parse_bvae(data)
     (entry,) = parsed.header.entries
     (record,) = read_bvae(out).records
-    # 2.4, or 2.5 where rate control kept a record whose μ rides in the coded layer (spec §4.9)
-    assert data[8:12] == bytes([2, 0, 5 if record.coded_mu else 4, 0])
+    # 2.6: bvae compress names the decoder and basis by short references (spec §3.1); with --full-references, 2.4,
+    # or 2.5 where rate control kept a record whose μ rides in the coded layer (spec §4.9)
+    assert data[8:12] == bytes([2, 0, 6, 0])
+    full = tmp_path / "full.bvae"
+    assert main(["compress", str(red_plastic_file), "-o", str(full), "--bytes", "32", "--basis-coding", "coded",
+                 "--no-measure", "--full-references"]) == 0
+    assert full.read_bytes()[8:12] == bytes([2, 0, 5 if record.coded_mu else 4, 0])
     assert record.has_latent and record.basis is not None and record.basis.prior is not None
     assert entry.length + entry.descriptor_bytes <= 32 and entry.layers["basis"]["length"] == record.basis.nbytes
     table = BrdfDecoder().decode(record)

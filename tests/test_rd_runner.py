@@ -42,9 +42,11 @@ def test_rows_compare_file_bytes_with_pca_of_the_same_training_materials(fold_mo
     dataset, model = fold_model
     asked: list[object] = []  # what the runner's encodes were asked for: the experiment's coded-μ grid
     real_encode = brdfcodec.encode
+    references: list[object] = []
 
     def encode(*args: object, **options: object) -> bytes:
         asked.append(options.get("coded_mu_step"))
+        references.append(options.get("short_references"))
         return real_encode(*args, **options)  # type: ignore[arg-type]
 
     monkeypatch.setattr(brdfcodec, "encode", encode)
@@ -64,13 +66,16 @@ def test_rows_compare_file_bytes_with_pca_of_the_same_training_materials(fold_mo
     assert {row["budget_bytes"] for row in ours} == {32, 64}
     assert all(row["coded_mu_step"] == 2 for row in ours)  # the experiment's grid, named in its rows
     assert asked and set(asked) == {2}
+    assert set(references) == {True} and all(row["short_references"] is True for row in ours)  # the default
     for row in ours:
         assert set(row["materials"]) <= held and len(row["per_material_mapped"]) == len(row["materials"])
         names = sum(len(n.encode()) for n in row["materials"])
         # a sum of record bytes over n plus the header's share: equal to the file's bytes over n up to rounding
         assert row["bytes_per_material"] == pytest.approx((row["file_bytes"] - names) / len(row["materials"]),
                                                           rel=1e-12)
-        assert row["bytes_per_material"] <= row["budget_bytes"] and row["bytes_flag"] < row["budget_bytes"]
+        assert row["bytes_per_material"] <= row["budget_bytes"] and row["bytes_flag"] <= row["budget_bytes"]
+        # the header's share is charged: below the records' saturation (8 basis vectors here), --bytes is below N
+        assert row["bytes_flag"] < row["budget_bytes"] or row["bytes_per_material"] < row["budget_bytes"] - 8
     pca = {row["point"] for row in rows} - {"bvae"}
     assert pca == {f"{base}-{kind}" for base in ("pca", "pca-perm")
                    for kind in ("int8", "float16", "tc", "ec-laplace", "ec-gaussian")}
@@ -113,6 +118,14 @@ def test_config_errors_name_the_file(tmp_path: Path) -> None:
     path.write_text(json.dumps({"dataset": "x.h5", "experiments": [{"label": "a", "model": "m", "coded_mu_step": 4},
                                                                    {"label": "b", "model": "m"}]}))
     assert [e.coded_mu_step for e in load_config(path).experiments] == [4, None]
+    path.write_text(json.dumps({"dataset": "x.h5", "experiments": [{"label": "a", "model": "m",
+                                                                    "short_references": False},
+                                                                   {"label": "b", "model": "m"}]}))
+    assert [e.short_references for e in load_config(path).experiments] == [False, True]
+    path.write_text(json.dumps({"dataset": "x.h5", "experiments": [{"label": "a", "model": "m",
+                                                                    "short_references": "no"}]}))
+    with pytest.raises(ValueError, match="'short_references' is true or false"):
+        load_config(path)
 
 
 def _row(group: str, point: str, budget: int, errors: list[float], size: float) -> dict:

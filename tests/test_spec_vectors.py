@@ -52,6 +52,9 @@ def test_manifest_covers_what_the_spec_asks_for() -> None:
     assert {"coded-trailing-zero", "coded-escape-prefix", "coded-and-packed", "coded-without-basis",
             "coded-length-zero"} <= invalid
     assert {"basis-only", "version-2.0", "packed-basis", "coded-basis"} <= valid
+    # Short references (2.6): a file that names the shipped decoder and basis by 8 bytes decodes; misread fields fail.
+    assert "reference-decode-short" in valid
+    assert {"short-references-over-full-hashes", "short-references-truncated", "unknown-flag"} <= invalid
     without = [r for v in MANIFEST["valid"] for r in v["records"] if r.get("layers", {}).get("mu") == "none"]
     assert len(without) == 6 and all(r["mu"] is None and r["layers"]["sigma"] == "none" for r in without)
     assert {"reference.basis-only", "reference.basis-only-detail"} <= set(MANIFEST["decode_layers"]["values"])
@@ -70,7 +73,7 @@ def test_manifest_covers_what_the_spec_asks_for() -> None:
 def test_valid_vector_reads_as_listed(vector: dict[str, Any]) -> None:
     parsed = parse_bvae((VECTORS / vector["file"]).read_bytes(), vector["file"])
     header = parsed.header
-    assert (FORMAT_MAJOR, FORMAT_MINOR) == (2, 5) and MANIFEST["format_version"] == "2.5"
+    assert (FORMAT_MAJOR, FORMAT_MINOR) == (2, 6) and MANIFEST["format_version"] == "2.6"
     assert f"{header.major}.{header.minor}" == vector["format_version"]  # the lowest version that holds the file
     assert header.decoder.sha256 == vector["decoder_sha256"]
     assert header.basis_sha256 == vector["basis_sha256"]
@@ -119,7 +122,7 @@ def test_latent_size_mismatch_is_refused_when_opened_for_decoding() -> None:
     assert str(path) in str(caught.value)
 
 
-@pytest.mark.parametrize("section", ["decode", "decode_layers", "decode_edits"])
+@pytest.mark.parametrize("section", ["decode", "decode_layers", "decode_edits", "decode_short"])
 def test_reference_latents_decode_to_the_pinned_values(section: str) -> None:
     from brdfcodec.codec import MaterialLibrary
 
@@ -138,6 +141,7 @@ def test_generator_reproduces_the_committed_vectors(tmp_path: Path) -> None:
     committed = dict(MANIFEST, decode={})
     committed.pop("decode_layers")
     committed.pop("decode_edits")  # decoded with the shipped model, as decode is
+    committed.pop("decode_short")
     assert generated == committed
     for vector in [*MANIFEST["valid"], *MANIFEST["invalid"]]:
         new, old = (tmp_path / vector["file"]).read_bytes(), (VECTORS / vector["file"]).read_bytes()

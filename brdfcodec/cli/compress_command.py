@@ -56,6 +56,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     parser.add_argument("--provenance", action="store_true",
                         help="store each material's provenance in the file: source SHA-256 and kind, measured RelAE, "
                         "encoder, effort and rate control (by default the file holds names and records only)")
+    parser.add_argument("--full-references", action="store_true",
+                        help="name the decoder and the shared basis by their full SHA-256, for readers older than "
+                        "format 2.6 (by default the first 8 bytes of each: 48 bytes less a file with basis layers)")
     parser.add_argument("--batch-size", type=int, default=8, help="materials encoded at once (default 8)")
     parser.add_argument("--force", action="store_true", help="replace an existing output file")
     # --- issue 14: refinement and rate control (brdfcodec.layers)
@@ -264,7 +267,8 @@ def run(args: argparse.Namespace) -> int:
     if encoder.reference is None:  # loaded from a model folder, so it has one
         raise RuntimeError("the encoder has no decoder reference")
     stored = records if args.provenance else without_provenance(records)
-    size = write_bvae(args.output, stored, encoder.reference, latent_dtype=dtype, overwrite=args.force)
+    size = write_bvae(args.output, stored, encoder.reference, latent_dtype=dtype, overwrite=args.force,
+                      short_references=not args.full_references)
     print("\n".join(lines))
     measured = [r.meta["relae"]["mapped"] for r in records if "relae" in r.meta]
     if measured:

@@ -98,7 +98,8 @@ def _operand(library: ParsedBvae, path: Path, spec: str) -> tuple[Record, Parsed
     if ":" in spec and spec.split(":", 1)[0].endswith(".bvae"):
         other_path, name = spec.split(":", 1)
         other = read_bvae(other_path)
-        if other.header.decoder.sha256 != library.header.decoder.sha256:
+        ours, theirs = sorted((library.header.decoder.sha256, other.header.decoder.sha256), key=len)
+        if not theirs.startswith(ours):  # a short reference (format 2.6) names a decoder by its hash's first bytes
             raise ValueError(f"{other_path}: made for another decoder than {path}; both must use the same model")
         return _editable(other.record(name), other_path), other
     return _editable(library.record(spec), path), library

@@ -245,13 +245,14 @@ def _format_text(summary: dict[str, Any]) -> str:
         rest = summary["header_bytes"] - summary["names_bytes"] - summary["index_bytes"]
         floats = sum(summary["latent_dtype"] in (item["mu"], item["sigma"]) for item in summary["materials"])
         metadata = "per-record metadata" if summary["metadata"] else "no metadata (names and records only)"
+        basis = _reference(summary["basis_sha256"]) if summary["basis_sha256"] else "- (no basis layer)"
         lines += [
             f"  kind            .bvae latent file, format {summary['format_version']}{created}",
-            f"  decoder         {decoder['name'] or '(name not stored)'}  sha256 {decoder['sha256']}",
+            f"  decoder         {decoder['name'] or '(name not stored)'}  sha256 {_reference(decoder['sha256'])}",
             f"                  {where}",
             f"  latents         {summary['latent_dim']} dimensions; {summary['latent_dtype']} where a record "
             f"stores μ or σ as floats ({floats} of {len(summary['materials'])}; per record below)",
-            f"  shared basis    {summary['basis_sha256'] or '- (no basis layer)'}",
+            f"  shared basis    {basis}",
             f"  size            {summary['bytes']:,} bytes ({summary['bytes_per_material']:.1f} per material): "
             f"payloads {summary['payload_bytes']:,}, names {summary['names_bytes']:,}, index "
             f"{summary['index_bytes']:,}, rest of the header {rest:,}",
@@ -325,3 +326,8 @@ def run(args: argparse.Namespace) -> int:
                 print()
             print(_format_text(summary))
     return 0
+
+
+def _reference(sha256: str) -> str:
+    """A file's reference to a decoder or basis as ``bvae info`` prints it: a short one (format 2.6) says so."""
+    return sha256 if len(sha256) == 64 else f"{sha256}… (short reference: the hash's first 8 bytes)"

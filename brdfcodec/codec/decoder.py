@@ -27,6 +27,7 @@ from brdfcodec.format.bvae import (
     LatentRecord,
     Record,
 )
+from brdfcodec.io.hashing import refers_to
 from brdfcodec.models.registry import find_model
 from brdfcodec.models.store import ModelManifest, load_model
 from brdfcodec.representation import (
@@ -194,7 +195,7 @@ class BrdfDecoder:
             (``spec/bvae-format.md`` §4.5): refused on opening, before any record is decoded.
         """
         mine = self.reference
-        if mine is None or header.decoder.sha256 != mine.sha256:
+        if mine is None or not header.decoder.matches(mine.sha256):
             where = f"{os.fspath(path)}: " if path else ""
             own = "a decoder held in memory" if mine is None else f"{mine.sha256} ({mine.name})"
             raise DecoderMismatchError(
@@ -305,14 +306,17 @@ class BrdfDecoder:
         """The model's shared basis (:attr:`shared_basis`) if it has this SHA-256, its leading vectors where
         ``model.json`` names an earlier basis of that SHA-256 they are (``basis_prefixes``, ``spec/model.md``
         §5), else None: a file's basis layers decode with the model whose basis they name
-        (``spec/bvae-format.md`` §4.5)."""
+        (``spec/bvae-format.md`` §4.5). ``sha256`` may be a short reference (its first 16 hex digits, format 2.6);
+        the basis returned is named by its full SHA-256."""
         basis = self.shared_basis
         if basis is None:
             return None
-        if basis.sha256 == sha256:
-            return basis
-        count = self.manifest.basis_prefixes.get(sha256) if self.manifest is not None else None
-        return None if count is None else basis.leading(count, sha256)
+        # a short reference (format 2.6) names a basis by its hash's first 8 bytes: one that names two is refused
+        earlier = self.manifest.basis_prefixes if self.manifest is not None else {}
+        named = [full for full in (basis.sha256, *earlier) if refers_to(sha256, full)]
+        if len(named) != 1:
+            return None
+        return basis if named[0] == basis.sha256 else basis.leading(earlier[named[0]], named[0])
 
     @property
     def projection_centre(self) -> npt.NDArray[np.float32]:

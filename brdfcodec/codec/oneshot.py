@@ -124,6 +124,7 @@ def encode(
     provenance: bool = False,
     latent: LatentChoice = "always",
     coded_mu_step: int | None = None,
+    short_references: bool = True,
 ) -> bytes:
     """Encode MERL tables into the bytes of one ``.bvae`` file (one material, or a library of many).
 
@@ -149,6 +150,10 @@ def encode(
         Whether rate control may write records without a latent, as for :class:`BrdfEncoder`.
     coded_mu_step : int, optional
         The grid exponent of rate control's coded-μ candidates (0: none), as for :class:`BrdfEncoder`.
+    short_references : bool, default True
+        Name the decoder and the shared basis by the first 8 bytes of their SHA-256 (format 2.6,
+        ``spec/bvae-format.md`` §3.1): 24 bytes less a file, 48 with basis layers. ``False`` writes their full
+        hashes, for readers older than 2.6.
 
     Returns
     -------
@@ -161,7 +166,7 @@ def encode(
     >>> from brdfcodec.datasets.analytic import ANALYTIC_PRESETS
     >>> data = bc.encode([ANALYTIC_PRESETS["gold"].to_merl()], measure_error=False)
     >>> data[1:5], len(data)   # one material: a header naming the decoder, then the 32 bytes of μ
-    (b'BVAE', 107)
+    (b'BVAE', 83)
     >>> bc.decode(data)["gold"].table(phi_d_bins=[0]).shape
     (3, 90, 90, 1)
     """
@@ -175,7 +180,7 @@ def encode(
         raise RuntimeError("the encoder has no decoder reference")
     if not provenance:
         records = without_provenance(records)
-    return encode_bvae(records, encoder.reference, latent_dtype=latent_dtype)
+    return encode_bvae(records, encoder.reference, latent_dtype=latent_dtype, short_references=short_references)
 
 
 def decode(data: bytes, *, decoder: BrdfDecoder | None = None) -> MaterialLibrary:
@@ -215,6 +220,8 @@ def compress(
     metric: Literal["mapped", "linear"] = "mapped",
     provenance: bool = False,
     latent: LatentChoice = "always",
+    coded_mu_step: int | None = None,
+    short_references: bool = True,
 ) -> int:
     """Write :func:`encode` of the sources to a ``.bvae`` file, atomically (options as for :func:`encode`).
 
@@ -227,6 +234,7 @@ def compress(
     data = encode(
         sources, names=names, model=model, latent_dtype=latent_dtype, measure_error=measure_error,
         effort=effort, bytes=bytes, max_relae=max_relae, metric=metric, provenance=provenance, latent=latent,
+        coded_mu_step=coded_mu_step, short_references=short_references,
     )
     with atomic_output(output, overwrite=overwrite) as tmp:
         Path(tmp).write_bytes(data)

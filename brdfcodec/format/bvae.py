@@ -42,6 +42,7 @@ from brdfcodec.format.container import (
     _ZSTD_LEVEL,
     FLAG_BASIS,
     FLAG_METADATA_ZSTD,
+    FLAG_SHORT_REFERENCES,
     FORMAT_MAJOR,
     FORMAT_MINOR,
     KNOWN_FLAGS,

@@ -19,6 +19,7 @@ import numpy as np
 from brdfcodec.format.material_names import MAX_NAME_LENGTH as MAX_NAME_LENGTH  # re-exported
 from brdfcodec.format.records import MAX_LATENT_DIM as MAX_LATENT_DIM  # re-exported
 from brdfcodec.format.records import GraftRecord, LatentRecord
+from brdfcodec.io.hashing import SHORT_REFERENCE_BYTES, is_reference_hex, refers_to
 
 __all__ = [
     "FORMAT_MAJOR",
@@ -44,8 +45,10 @@ FORMAT_MAJOR = 2
 #: 2.2: a latent without σ (``layers.sigma`` ``"none"`` beside a stored μ), which may hold no layer (spec §4.4).
 #: 2.3: packed basis layers (form layer bit 2 and a top width: spec §4.7).
 #: 2.4: entropy-coded basis layers (form layer bit 3, a prior of two bytes, a length per record: spec §4.8).
+#: 2.5: μ entropy-coded in the basis layer (form ``mu`` 4 and a grid exponent: spec §4.9).
+#: 2.6: short references (flag bit 2: the decoder and the shared basis named by 8 bytes of their SHA-256, §3.1).
 #: A writer states the lowest minor version a file needs (2.1 unless a record leaves σ out, packs or codes its basis).
-FORMAT_MINOR = 5
+FORMAT_MINOR = 6
 #: Largest stored header (binary index and stored metadata block), in bytes.
 MAX_HEADER_BYTES = 1 << 24
 #: Largest metadata block, decompressed, in bytes.
@@ -63,7 +66,10 @@ MAX_JSON_INTEGER = (1 << 53) - 1
 FLAG_METADATA_ZSTD = 1 << 0
 #: Flag bit 1: the header names the shared basis of the file's basis layers.
 FLAG_BASIS = 1 << 1
-KNOWN_FLAGS = FLAG_METADATA_ZSTD | FLAG_BASIS
+#: Flag bit 2 (format 2.6): the header names its decoder and shared basis by short references, the first 8 bytes of
+#: their SHA-256 (spec §3.1).
+FLAG_SHORT_REFERENCES = 1 << 2
+KNOWN_FLAGS = FLAG_METADATA_ZSTD | FLAG_BASIS | FLAG_SHORT_REFERENCES
 #: Longest varint (LEB128) in a header, in bytes: values below 2^28.
 _VARINT_MAX_BYTES = 4
 
@@ -94,7 +100,8 @@ class DecoderReference:
     Attributes
     ----------
     sha256 : str
-        Lower-case hex SHA-256 of the decoder weight file (``decoder.safetensors``).
+        Lower-case hex SHA-256 of the decoder weight file (``decoder.safetensors``): 64 hex digits, or the first
+        16 of them where a file names its decoder by a short reference (format 2.6, spec §3.1).
     name : str
         Readable model name (informative; the hash decides).
     """
@@ -103,10 +110,24 @@ class DecoderReference:
     name: str
 
     def __post_init__(self) -> None:
-        if not isinstance(self.sha256, str) or not _SHA256.match(self.sha256):
-            raise ValueError(f"decoder SHA-256 must be 64 lower-case hex digits, got {self.sha256!r}")
+        if not is_reference_hex(self.sha256):
+            raise ValueError(f"decoder SHA-256 must be 64 lower-case hex digits (or a short reference's first 16), "
+                             f"got {self.sha256!r}")
         if not isinstance(self.name, str):
             raise ValueError(f"decoder name must be a string, got {self.name!r}")
+
+    @property
+    def short(self) -> bool:
+        """Whether only the first 8 bytes of the hash are known (a file with short references, spec §3.1)."""
+        return len(self.sha256) == 2 * SHORT_REFERENCE_BYTES
+
+    def matches(self, sha256: str) -> bool:
+        """Whether this reference names the decoder whose weight file has this full SHA-256 (64 hex digits)."""
+        return refers_to(self.sha256, sha256)
+
+    def shortened(self) -> DecoderReference:
+        """The same decoder named by a short reference (its hash's first 16 hex digits)."""
+        return DecoderReference(self.sha256[: 2 * SHORT_REFERENCE_BYTES], self.name)
 
 
 Record = LatentRecord | GraftRecord

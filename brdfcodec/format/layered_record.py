@@ -25,7 +25,7 @@ import numpy as np
 import numpy.typing as npt
 
 from brdfcodec.format.records import LatentRecord
-from brdfcodec.io.hashing import is_sha256_hex
+from brdfcodec.io.hashing import is_reference_hex
 from brdfcodec.layers.basis import (
     FIXED_MU_STEP,
     MAX_BASIS_COUNT,
@@ -458,8 +458,8 @@ def _basis_length(basis: object, where: str) -> int:
         )
     sha, count, first = basis.get("sha256"), basis.get("count"), basis.get("first", 0)
     project = basis.get("project", 1)  # absent: no projection
-    if not is_sha256_hex(sha):
-        raise ValueError(f"{where} basis sha256 {sha!r} is not 64 lower-case hex digits")
+    if not is_reference_hex(sha):
+        raise ValueError(f"{where} basis sha256 {sha!r} is not 64 lower-case hex digits (or a short reference's 16)")
     if not isinstance(count, int) or isinstance(count, bool) or not 1 <= count <= MAX_BASIS_COUNT:
         raise ValueError(f"{where} basis count {count!r} is not an integer in [1, {MAX_BASIS_COUNT}]")
     if not isinstance(first, int) or isinstance(first, bool) or not 0 <= first <= MAX_BASIS_COUNT - count:

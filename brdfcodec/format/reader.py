@@ -31,6 +31,7 @@ from brdfcodec.format.container import (
     _VARINT_MAX_BYTES,
     FLAG_BASIS,
     FLAG_METADATA_ZSTD,
+    FLAG_SHORT_REFERENCES,
     FORMAT_MAJOR,
     KNOWN_FLAGS,
     MAGIC,
@@ -57,6 +58,7 @@ from brdfcodec.format.records import MAX_LATENT_DIM as MAX_LATENT_DIM  # re-expo
 from brdfcodec.format.records import GraftRecord, LatentRecord, meta_problem
 from brdfcodec.format.strict_json import _check_json_text
 from brdfcodec.format.writer import _DETAIL_CODES, _KIND_CODES, _MU_CODES, _SIGMA_CODES
+from brdfcodec.io.hashing import SHORT_REFERENCE_BYTES
 from brdfcodec.layers.basis import MAX_BASIS_COUNT
 from brdfcodec.layers.coded_basis import MAX_MU_STEP_LOG2
 from brdfcodec.layers.packed import MAX_TOP_WIDTH
@@ -235,7 +237,9 @@ def _parse_header(path: str, stored: bytes, preamble_fields: tuple[int, ...], fi
     """The binary header (§3): file-level fields, the form table, the record index, the payload CRC, metadata."""
     major, minor, flags, header_length, _ = preamble_fields
     cursor = _Cursor(path, stored)
-    sha = cursor.take(32, "the decoder's SHA-256").hex()
+    # 2.6 (flag bit 2): the decoder and the shared basis named by the first 8 bytes of their SHA-256
+    reference = SHORT_REFERENCE_BYTES if flags & FLAG_SHORT_REFERENCES else 32
+    sha = cursor.take(reference, "the decoder's SHA-256").hex()
     latent_dim = int.from_bytes(cursor.take(2, "latent_dim"), "little")
     if not 1 <= latent_dim <= MAX_LATENT_DIM:
         raise _fail(path, f"latent_dim {latent_dim} is outside [1, {MAX_LATENT_DIM}]")
@@ -244,7 +248,7 @@ def _parse_header(path: str, stored: bytes, preamble_fields: tuple[int, ...], fi
     if dtype_code not in dtypes:
         raise UnsupportedVersionError(path, f"latent dtype code {dtype_code} is not supported (0: float32, 1: float16)")
     latent_dtype = dtypes[dtype_code]
-    basis_sha = cursor.take(32, "the shared basis' SHA-256").hex() if flags & FLAG_BASIS else None
+    basis_sha = cursor.take(reference, "the shared basis' SHA-256").hex() if flags & FLAG_BASIS else None
     form_count = cursor.u8("the form count")
     if not form_count:
         raise _fail(path, "the form table is empty")

@@ -30,6 +30,7 @@ from brdfcodec.format.container import (
     _ZSTD_LEVEL,
     FLAG_BASIS,
     FLAG_METADATA_ZSTD,
+    FLAG_SHORT_REFERENCES,
     FORMAT_MAJOR,
     FORMAT_MINOR,
     MAGIC,
@@ -49,6 +50,7 @@ from brdfcodec.format.records import MAX_LATENT_DIM as MAX_LATENT_DIM  # re-expo
 from brdfcodec.format.records import GraftRecord
 from brdfcodec.format.strict_json import canonical_json
 from brdfcodec.io.atomic import atomic_output
+from brdfcodec.io.hashing import SHORT_REFERENCE_BYTES
 from brdfcodec.version import __version__
 
 __all__ = ["encode_bvae", "descriptor_size", "record_overhead", "record_size", "write_bvae"]
@@ -176,11 +178,14 @@ def _form_bytes(form: tuple[Any, ...]) -> bytes:
     return out
 
 
-def _minor_needed(records: Sequence[Record]) -> int:
-    """The lowest minor version that holds these records (§2): 5 once a record entropy-codes μ, 4 once a basis
-    layer is entropy-coded, 3 once one is packed, 2 once a record stores a latent without σ, else 1."""
-    if any(getattr(r, "coded_mu", 0) for r in records):
+def _minor_needed(records: Sequence[Record], short_references: bool) -> int:
+    """The lowest minor version that holds these records (§2): 6 with short references, 5 once a record
+    entropy-codes μ, 4 once a basis layer is entropy-coded, 3 once one is packed, 2 once a record stores a latent
+    without σ, else 1."""
+    if short_references:
         return FORMAT_MINOR
+    if any(getattr(r, "coded_mu", 0) for r in records):
+        return 5
     if any(getattr(getattr(r, "basis", None), "prior", None) is not None for r in records):
         return 4
     if any(getattr(getattr(r, "basis", None), "top", 0) for r in records):
@@ -195,9 +200,10 @@ def encode_bvae(
     *,
     latent_dtype: LatentDtype = "float32",
     compress_header: bool | None = None,
+    short_references: bool | None = None,
 ) -> bytes:
-    """Serialise records to the bytes of a ``.bvae`` file (format 2.2; the preamble states the lowest minor version
-    the file needs: 2 with a record that stores a latent without σ, else 1).
+    """Serialise records to the bytes of a ``.bvae`` file (format 2; the preamble states the lowest minor version
+    the file needs, §2).
 
     Parameters
     ----------
@@ -215,6 +221,11 @@ def encode_bvae(
     compress_header : bool, optional
         Compress the metadata block with zstandard. By default it is
         compressed when that makes it smaller.
+    short_references : bool, optional
+        Name the decoder and the shared basis by the first 8 bytes of their SHA-256 (format 2.6, §3.1): 48 bytes
+        less for a file with basis layers, 24 without, and a file that readers before 2.6 refuse. By default,
+        only where ``decoder`` or a record's basis layer is itself a short reference (read from such a file):
+        full hashes cannot be written then, and ``False`` is refused.
 
     Returns
     -------
@@ -240,7 +251,15 @@ def encode_bvae(
     if any(r.latent_dim != latent_dim for r in records):
         raise ValueError("all records of a file must have the same latent dimension")
     layers = [getattr(r, "basis", None) for r in records]
-    bases = sorted({layer.sha256 for layer in layers if layer is not None})
+    references = [decoder.sha256, *(layer.sha256 for layer in layers if layer is not None)]
+    short_only = [ref for ref in references if len(ref) == 2 * SHORT_REFERENCE_BYTES]
+    if short_references is None:
+        short_references = bool(short_only)
+    elif short_only and not short_references:
+        raise ValueError(f"full references cannot be written: {short_only[0]} is a short reference (the first 8 bytes "
+                         f"of a SHA-256, read from a format 2.6 file); write short references")
+    width = 2 * SHORT_REFERENCE_BYTES if short_references else 64
+    bases = sorted({layer.sha256[:width] for layer in layers if layer is not None})
     if len(bases) > 1:
         raise ValueError(f"a file holds the basis layers of one shared basis; these records use {len(bases)}")
     dtype = _DTYPES[latent_dtype]
@@ -272,8 +291,9 @@ def encode_bvae(
         if record.meta:
             metadata[record.name] = dict(record.meta)
     data = b"".join(payloads)
-    flags = FLAG_BASIS if bases else 0
-    header = bytearray(bytes.fromhex(decoder.sha256) + struct.pack("<HB", latent_dim, _DTYPE_CODES[latent_dtype]))
+    flags = (FLAG_BASIS if bases else 0) | (FLAG_SHORT_REFERENCES if short_references else 0)
+    header = bytearray(bytes.fromhex(decoder.sha256[:width]) + struct.pack("<HB", latent_dim,
+                                                                           _DTYPE_CODES[latent_dtype]))
     if bases:
         header += bytes.fromhex(bases[0])
     header += bytes([len(forms)]) + b"".join(_form_bytes(f) for f in forms)
@@ -293,7 +313,8 @@ def encode_bvae(
         header += stored
     if len(header) > MAX_HEADER_BYTES:
         raise ValueError(f"stored header of {len(header)} bytes exceeds {MAX_HEADER_BYTES}; split the library")
-    head = _PREAMBLE.pack(MAGIC, FORMAT_MAJOR, _minor_needed(records), flags, len(header), 0)[:_CRC_COVERED_PREAMBLE]
+    minor = _minor_needed(records, short_references)
+    head = _PREAMBLE.pack(MAGIC, FORMAT_MAJOR, minor, flags, len(header), 0)[:_CRC_COVERED_PREAMBLE]
     crc = zlib.crc32(header, zlib.crc32(head))
     return head + struct.pack("<I", crc) + bytes(header) + data
 
@@ -305,8 +326,9 @@ def write_bvae(
     *,
     latent_dtype: LatentDtype = "float32",
     overwrite: bool = False,
+    short_references: bool | None = None,
 ) -> int:
-    """Write a ``.bvae`` file atomically (see :func:`encode_bvae`).
+    """Write a ``.bvae`` file atomically (see :func:`encode_bvae`, whose ``short_references`` it passes on).
 
     Returns
     -------
@@ -318,7 +340,7 @@ def write_bvae(
     FileExistsError
         ``path`` exists and ``overwrite`` is false.
     """
-    data = encode_bvae(records, decoder, latent_dtype=latent_dtype)
+    data = encode_bvae(records, decoder, latent_dtype=latent_dtype, short_references=short_references)
     with atomic_output(path, overwrite=overwrite) as tmp:
         tmp.write_bytes(data)
     return len(data)

@@ -14,7 +14,7 @@ import numpy as np
 import numpy.typing as npt
 
 from brdfcodec.errors import BasisError, BasisMismatchError
-from brdfcodec.io.hashing import is_sha256_hex
+from brdfcodec.io.hashing import is_reference_hex
 from brdfcodec.layers.coded_basis import (
     CODED_HEADER_BYTES,
     MAX_CODED_BYTES,
@@ -65,7 +65,8 @@ class BasisLayer:
     Attributes
     ----------
     sha256 : str
-        The shared basis' SHA-256 (64 lower-case hex digits).
+        The shared basis' SHA-256 (64 lower-case hex digits), or its first 16 in a record read from a file with
+        short references (format 2.6, ``spec/bvae-format.md`` §3.1).
     step : float
         Quantisation step s, mapped units: a positive, finite float16 value, or in a packed layer one of the
         steps 2^(e/16 − 8) (:func:`~brdfcodec.layers.packed.packed_step`).
@@ -104,8 +105,9 @@ class BasisLayer:
     coded_mu: tuple[int, npt.NDArray[np.int64]] | None = None
 
     def __post_init__(self) -> None:
-        if not is_sha256_hex(self.sha256):
-            raise ValueError(f"basis sha256 must be 64 lower-case hex digits, got {self.sha256!r}")
+        if not is_reference_hex(self.sha256):
+            raise ValueError(f"basis sha256 must be 64 lower-case hex digits (or a short reference's first 16), "
+                             f"got {self.sha256!r}")
         q = np.asarray(self.q)
         if self.coded_mu is not None:
             self._check_coded_mu()

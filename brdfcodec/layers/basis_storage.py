@@ -14,6 +14,7 @@ import numpy as np
 import numpy.typing as npt
 
 from brdfcodec.errors import BasisError
+from brdfcodec.io.hashing import refers_to
 from brdfcodec.layers.quantise import _N_ENTRIES, BASIS_FILE, MAX_BASIS_COUNT
 from brdfcodec.layers.shared_basis import FactorisedBasis, SharedBasis, _factorised
 
@@ -55,10 +56,10 @@ def load_shared_basis(path: str | os.PathLike[str], expected_sha256: str) -> Sha
     BasisError
         The file's hash is not ``expected_sha256``, or its tensors are malformed.
     """
+    import hashlib
+
     from safetensors import SafetensorError
     from safetensors.numpy import load
-
-    import hashlib
 
     from brdfcodec.io.folder_files import read_folder_file
 
@@ -127,10 +128,13 @@ def model_basis_lookup(folder: str | os.PathLike[str], current: str | None,
     (``basis.safetensors``, hash ``current``, read and checked against its hash once), or its leading vectors
     where they are an earlier basis (``prefixes``: that basis' hash → its count; ``spec/model.md`` §5)."""
     def basis_named(sha256: str) -> SharedBasis | None:
-        if current is None or (sha256 != current and sha256 not in prefixes):
+        # a short reference (format 2.6) names a basis by its hash's first 16 hex digits
+        # (one that names two bases is refused)
+        named = [] if current is None else [full for full in (current, *prefixes) if refers_to(sha256, full)]
+        if len(named) != 1:
             return None
-        basis = _load_checked(Path(folder) / BASIS_FILE, current)
-        return basis if sha256 == current else basis.leading(prefixes[sha256], sha256)
+        basis = _load_checked(Path(folder) / BASIS_FILE, current)  # type: ignore[arg-type]
+        return basis if named[0] == current else basis.leading(prefixes[named[0]], named[0])
 
     return basis_named
 

@@ -24,6 +24,7 @@ from pathlib import Path
 
 from brdfcodec.errors import BrdfcodecError, ModelNotFoundError
 from brdfcodec.io.folder_files import read_folder_file
+from brdfcodec.io.hashing import refers_to
 from brdfcodec.models.manifest import MANIFEST, MAX_MANIFEST_BYTES, ModelManifest, load_manifest
 
 __all__ = [
@@ -258,11 +259,12 @@ def _names_hash(folder: Path, wanted: str) -> bool:
         text = read_folder_file(folder, MANIFEST, limit=MAX_MANIFEST_BYTES)
     except BrdfcodecError:
         return False
-    return f'"{wanted}"'.encode() in text
+    return f'"{wanted}'.encode() in text if len(wanted) < 64 else f'"{wanted}"'.encode() in text
 
 
 def find_model(decoder_sha256: str) -> ModelManifest:
-    """The model whose decoder weights have this SHA-256.
+    """The model whose decoder weights have this SHA-256 (64 hex digits), or whose SHA-256 starts with these 16
+    (a short reference, format 2.6: ``spec/bvae-format.md`` §3.1).
 
     Folders are searched in order and the first valid match wins; a folder whose ``model.json`` is invalid is
     skipped with a warning, and its error is raised only when no valid folder has the hash and it names it.
@@ -270,27 +272,40 @@ def find_model(decoder_sha256: str) -> ModelManifest:
     Raises
     ------
     ModelNotFoundError
-        None has it; the message lists the hashes that are available.
+        None has it (the message lists the hashes that are available), or a short reference names two decoders.
     ModelFolderError
         No valid folder has the hash, and an invalid one names it.
     """
     wanted = decoder_sha256.lower()
     models: list[ModelManifest] = []
+    matches: list[ModelManifest] = []
     claimed: BrdfcodecError | None = None
     for found in _usable_models():
         if isinstance(found, ModelManifest):
-            if found.decoder_sha256 == wanted:
-                return found
+            if refers_to(wanted, found.decoder_sha256):
+                if len(wanted) == 64:
+                    return found
+                matches.append(found)  # a short reference: every folder is looked at, so that two are refused
             models.append(found)
             continue
         _skip(*found)
         if claimed is None and _names_hash(found[0], wanted):
             claimed = found[1]
+    named = {m.decoder_sha256 for m in matches}
+    if len(named) > 1:
+        raise ModelNotFoundError(
+            f"the short decoder reference {wanted} (the first 8 bytes of a SHA-256) names {len(named)} installed "
+            f"decoders: {', '.join(f'{m.decoder_sha256} ({m.name})' for m in matches)}; keep only the model that "
+            "made the file registered"
+        )
+    if matches:
+        return matches[0]
     if claimed is not None:
         raise claimed
-    if wanted in RETIRED_MODELS:
+    retired = [sha for sha in RETIRED_MODELS if refers_to(wanted, sha)]
+    if retired:
         raise ModelNotFoundError(
-            f"decoder {wanted} is that of {RETIRED_MODELS[wanted]}, an earlier default no longer in the brdfcodec "
+            f"decoder {wanted} is that of {RETIRED_MODELS[retired[0]]}, an earlier default no longer in the brdfcodec "
             f"wheel: {_legacy_remedy()}"
         )
     known = ", ".join(f"{m.decoder_sha256} ({m.name})" for m in models) or "none"

@@ -63,9 +63,10 @@ from brdfcodec.layers.coded_basis import MAX_MU_STEP_LOG2
 __all__ = ["DEFAULT_BUDGETS", "Experiment", "RdConfig", "decode_machine", "load_config", "run_config",
            "run_experiment"]
 
-#: Bytes of a file's header besides the records' descriptors (preamble, decoder and basis hashes, a few forms,
-#: the payload CRC): a first guess of what the materials share, corrected by measuring the file.
-_HEADER_ESTIMATE = 120
+#: Bytes of a file's header besides the records' descriptors (preamble, the decoder's and basis' short references,
+#: format 2.6, a few forms, the payload CRC): a first guess of what the materials share, corrected by measuring the
+#: file.
+_HEADER_ESTIMATE = 90
 #: The smallest record brdfcodec writes, its descriptor included (a record without a latent, one coefficient).
 _SMALLEST_RECORD = 6
 #: Size budgets of the comparison, bytes per material.
@@ -94,6 +95,10 @@ class Experiment:
         The grid exponent of rate control's coded-μ candidates, 0 (none) to
         :data:`~brdfcodec.layers.coded_basis.MAX_MU_STEP_LOG2` (``BrdfEncoder(coded_mu_step=)``);
         the encoder's default when None.
+    short_references : bool, default True
+        Whether the library names its decoder and basis by short references (format 2.6,
+        ``brdfcodec.encode(short_references=)``), the encoder's default; False writes full hashes, 48 bytes more a
+        file, as files before 2.6 did.
     """
 
     label: str
@@ -102,6 +107,7 @@ class Experiment:
     held_out: tuple[str, ...] | None = None
     latent: str = "auto"
     coded_mu_step: int | None = None
+    short_references: bool = True
 
 
 @dataclass(frozen=True)
@@ -123,7 +129,8 @@ def load_config(path: str | os.PathLike[str]) -> RdConfig:
     The file is a JSON object: ``dataset`` (path), ``experiments`` (list of
     objects with ``label``, ``model``, optional ``group``, ``held_out``,
     ``latent``: ``"auto"``, the default, or ``"always"``, as ``bvae compress --latent``, and
-    ``coded_mu_step``: 0 to 5, the coded-μ candidates' grid exponent, a study of the encoder's default),
+    ``coded_mu_step``: 0 to 5, the coded-μ candidates' grid exponent, a study of the encoder's default, and
+    ``short_references``: true, the default, or false, full hashes in the header as before format 2.6),
     optional ``budgets`` (list of int), ``effort`` (int), ``limit`` (int:
     only the first N held-out materials of each family, a quick look),
     ``header_in_budget`` (bool, default true: brdfcodec's file bytes less
@@ -147,9 +154,12 @@ def load_config(path: str | os.PathLike[str]) -> RdConfig:
     experiments = []
     for item in data["experiments"]:
         if not isinstance(item, dict) or not {"label", "model"} <= set(item) or set(item) - {
-                "label", "model", "group", "held_out", "latent", "coded_mu_step"}:
+                "label", "model", "group", "held_out", "latent", "coded_mu_step", "short_references"}:
             raise ValueError(f"{path}: each experiment is an object with 'label', 'model' (and optionally "
-                             f"'group', 'held_out', 'latent', 'coded_mu_step'), got {item!r}")
+                             f"'group', 'held_out', 'latent', 'coded_mu_step', 'short_references'), got {item!r}")
+        if not isinstance(item.get("short_references", True), bool):
+            raise ValueError(f"{path}: an experiment's 'short_references' is true or false, "
+                             f"got {item['short_references']!r}")
         if item.get("latent", "auto") not in ("auto", "always"):
             raise ValueError(f"{path}: an experiment's 'latent' is 'auto' or 'always', got {item['latent']!r}")
         step = item.get("coded_mu_step")
@@ -160,7 +170,7 @@ def load_config(path: str | os.PathLike[str]) -> RdConfig:
         held = item.get("held_out")
         experiments.append(Experiment(str(item["label"]), base / item["model"], str(item.get("group", "")),
                                       None if held is None else tuple(str(n) for n in held),
-                                      str(item.get("latent", "auto")), step))
+                                      str(item.get("latent", "auto")), step, item.get("short_references", True)))
     budgets = tuple(int(n) for n in data.get("budgets", DEFAULT_BUDGETS))
     if not budgets or min(budgets) < 1:
         raise ValueError(f"{path}: budgets must be positive integers")
@@ -350,7 +360,8 @@ def search_bytes_flag(
 def _bvae_rows(model: Path, names: Sequence[str], families: Sequence[str], inputs: np.ndarray, masks: np.ndarray,
                references: Sequence[Any], budgets: Sequence[int], effort: int,
                error: Callable[[Any, np.ndarray], tuple[float, float]], latent: str = "auto",
-               header_in_budget: bool = True, coded_mu_step: int | None = None) -> dict[str, list[dict[str, Any]]]:
+               header_in_budget: bool = True, coded_mu_step: int | None = None,
+               short_references: bool = True) -> dict[str, list[dict[str, Any]]]:
     """brdfcodec's rows per family: every held-out material in one library at each budget, each family's bytes
     its records' (descriptor and payload, names aside) plus its materials' equal share of the header."""
     import brdfcodec as bc
@@ -369,7 +380,7 @@ def _bvae_rows(model: Path, names: Sequence[str], families: Sequence[str], input
         def encoded(value: int) -> tuple[tuple[bytes, Any], dict[str, int], float]:
             data = bc.encode(items, model=model, latent_dtype="float16", measure_error=False, effort=effort,
                              bytes=max(value, 1), latent=latent,  # type: ignore[arg-type]
-                             coded_mu_step=coded_mu_step)
+                             coded_mu_step=coded_mu_step, short_references=short_references)
             library = bc.decode(data, decoder=decoder)
             return (data, library), *_record_bytes(library, data, names, name_bytes)
 
@@ -393,7 +404,7 @@ def _bvae_rows(model: Path, names: Sequence[str], families: Sequence[str], input
                 "point": "bvae", "budget_bytes": budget, "bytes_flag": max(flag, 1), "file_bytes": len(data),
                 "library_materials": len(names), "header_share_bytes": header_share,
                 "bytes_per_material": sum(record_bytes[names[i]] for i in chosen) / len(chosen) + header_share,
-                "latent": latent, "records_without_latent": without,
+                "latent": latent, "records_without_latent": without, "short_references": short_references,
                 **({} if coded_mu_step is None else {"coded_mu_step": coded_mu_step}), **_error_summary(errors),
                 **_decode_time(seconds)})
     return rows
@@ -455,7 +466,7 @@ def run_experiment(config: RdConfig, experiment: Experiment,
         references = [dataset.table(i) for i in measured]
         ours = _bvae_rows(experiment.model, names, [dataset.families[i] for i in measured], inputs, masks,
                           references, config.budgets, config.effort, error, experiment.latent,
-                          config.header_in_budget, experiment.coded_mu_step)
+                          config.header_in_budget, experiment.coded_mu_step, experiment.short_references)
         for family in families:
             chosen = [k for k, i in enumerate(measured) if dataset.families[i] == family]
             family_rows = list(ours[family])

@@ -166,9 +166,15 @@ def invalid_vectors() -> dict[str, tuple[bytes, str, str]]:
     flipped[-1] ^= 0x80
     add("record-crc", bytes(flipped), "checksum", "one payload bit flipped (payload CRC-32)")
     stored = header([latent_form()], [descriptor("a", 0)], good)
-    add("flag-bit-flipped", assemble(stored, good, flags=4, crc_flags=0), "checksum",
-        "flag bit 2 set by corruption (CRC over the original flags): checksum wins over unsupported (§7)")
-    add("unknown-flag", assemble(stored, good, flags=4), "unsupported", "flag bit 2 set, CRC valid")
+    add("flag-bit-flipped", assemble(stored, good, flags=8, crc_flags=0), "checksum",
+        "flag bit 3 set by corruption (CRC over the original flags): checksum wins over unsupported (§7)")
+    add("unknown-flag", assemble(stored, good, flags=8), "unsupported", "flag bit 3 set, CRC valid")
+    add("short-references-over-full-hashes", assemble(stored, good, flags=4, minor=6), "malformed",
+        "flag bit 2 (short references, since 2.6) over a header that holds the full 32-byte hash: read as 8 bytes, "
+        "latent_dim is then the hash's bytes 8-9 (43947)")
+    short = header([latent_form()], [descriptor("a", 0)], good, decoder=TEST_DECODER.sha256[:16])
+    add("short-references-truncated", assemble(short, good, flags=4, minor=6)[:-1], "malformed",
+        "a valid file with short references (2.6), one byte short")
     add("major-version-3", assemble(stored, good, major=3), "unsupported", "major version 3")
     add("major-version-1", assemble(stored, good, major=1, minor=6), "unsupported",
         "major version 1 (the development format): refused, whatever follows")
@@ -563,6 +569,17 @@ def packed_records() -> tuple[list, DecoderReference, str, bool | None]:
             TEST_DECODER, "float32", False)
 
 
+def short_reference_records() -> tuple[list, DecoderReference, str, bool | None]:
+    """Records of a file with short references (since 2.6): the shipped decoder and its basis named by the first
+    8 bytes of their SHA-256, a plain latent record beside one with a basis layer."""
+    rng = np.random.default_rng(2032)  # its own draws: the other vectors keep their values
+    mu = lambda: (np.round(rng.normal(size=8) * 8) / 8).astype(np.float32)  # noqa: E731 - exact in float16
+    sigma = lambda: (2.0 ** -rng.integers(1, 6, size=8)).astype(np.float32)  # noqa: E731
+    return ([LatentRecord("reference.short", mu(), sigma()),
+             basis_record("reference.short-basis", mu(), sigma(), SHIPPED_BASIS[:16], first=8)],
+            SHIPPED_DECODER.shortened(), "float16", False)
+
+
 def valid_records() -> dict[str, tuple[list, DecoderReference, str, bool | None]]:
     """name -> (records, decoder, latent dtype, compress header)."""
     rng = np.random.default_rng(2026)
@@ -633,6 +650,7 @@ def valid_records() -> dict[str, tuple[list, DecoderReference, str, bool | None]
         "packed-basis": packed_records(),
         "coded-basis": coded_records(),
         "coded-mu": coded_mu_records(),
+        "reference-decode-short": short_reference_records(),
     }
 
 
@@ -698,7 +716,7 @@ def generate(folder: Path, *, with_reference: bool = True) -> dict[str, Any]:
     (folder / "valid").mkdir(parents=True, exist_ok=True)
     (folder / "invalid").mkdir(parents=True, exist_ok=True)
     manifest: dict[str, Any] = {
-        "format_version": "2.5",
+        "format_version": "2.6",
         "error_classes": {
             "malformed": "BvaeFormatError",
             "checksum": "BvaeChecksumError",
@@ -732,6 +750,12 @@ def generate(folder: Path, *, with_reference: bool = True) -> dict[str, Any]:
                 "file": f"valid/{name}.bvae", "entries": entries, "rtol": DECODE_RTOL, "atol": DECODE_ATOL,
                 "masked": "unmeasured", "units": "stored MERL units (float32)",
                 "values": reference_values_at(records, entries),
+            }
+        if name == "reference-decode-short" and with_reference:
+            manifest["decode_short"] = {
+                "file": f"valid/{name}.bvae", "entries": REFERENCE_ENTRIES, "rtol": DECODE_RTOL, "atol": DECODE_ATOL,
+                "masked": "unmeasured", "units": "stored MERL units (float32)", "basis_sha256": SHIPPED_BASIS[:16],
+                "values": reference_values(records),
             }
         if name == "reference-decode-layers" and with_reference:
             manifest["decode_layers"] = {
