@@ -55,6 +55,28 @@ def test_fields_cover_a_layered_file_and_crcs_are_recomputed(seed_folder: Path) 
         assert "CRC" not in str(error)
 
 
+def test_fields_of_a_file_with_short_references_and_a_coded_mu() -> None:
+    """bvae compress writes short references (format 2.6) and coded-μ forms (2.5): the fields the mutators aim at
+    are where the reader reads them, up to the payload CRC-32 that fix_bvae mends."""
+    from brdfcodec.errors import BvaeChecksumError
+    from brdfcodec.format.bvae import parse_bvae
+
+    vectors = Path(__file__).resolve().parents[1] / "spec" / "vectors" / "valid"
+    for name, wanted in (("reference-decode-short", "basis"), ("coded-mu", "form0.mu_step")):
+        data = (vectors / f"{name}.bvae").read_bytes()
+        fields = {field.name: field for field in bvae_fields(data)}
+        assert {wanted, "payload_crc32", "payload"} <= set(fields), name
+        assert fields["latent_dim"].start == 24 + (8 if name.endswith("short") else 32)
+        assert data[fields["payload_crc32"].start : fields["payload_crc32"].end] == struct.pack(
+            "<I", zlib.crc32(data[fields["payload"].start :]))
+        changed = bytearray(data)
+        changed[-1] ^= 0x01
+        try:
+            parse_bvae(fix_bvae(bytes(changed)))
+        except Exception as error:  # noqa: BLE001 - a payload byte flipped may be refused, but not by a CRC-32
+            assert not isinstance(error, BvaeChecksumError), (name, error)
+
+
 def test_mutants_are_deterministic(seed_folder: Path) -> None:
     seed = (seed_folder / "w-graft-latent.bvae").read_bytes()
     first = [mutate_bvae(seed, random.Random(f"s{i}"), seed) for i in range(50)]

@@ -24,6 +24,7 @@ from brdfcodec.format.layered_record import LayeredRecord
 from brdfcodec.io.hashing import refers_to
 from brdfcodec.io.merl import MerlBRDF, write_merl
 from brdfcodec.layers.basis_layer import BasisLayer
+from brdfcodec.layers.basis_storage import model_basis_lookup
 from brdfcodec.models import registry
 
 DECODER = DecoderReference("ab" * 32, "test")
@@ -103,6 +104,7 @@ def test_a_decoder_the_short_reference_does_not_name_is_refused(gold: MerlBRDF) 
 
 def test_a_short_reference_that_names_two_installed_decoders_is_refused(monkeypatch: pytest.MonkeyPatch) -> None:
     shipped = registry.find_model(bc.BrdfDecoder().reference.sha256)
+    assert bc.BrdfDecoder(shipped.decoder_sha256[:16]).reference.sha256 == shipped.decoder_sha256  # as info prints
     twins = [dataclasses.replace(shipped, decoder_sha256="0123456789abcdef" + tail * 48) for tail in "01"]
     monkeypatch.setattr(registry, "_usable_models", lambda: iter(twins))
     assert registry.find_model(twins[1].decoder_sha256) is twins[1]  # a full hash is never ambiguous
@@ -119,11 +121,21 @@ def test_the_basis_is_found_by_its_short_reference_and_an_ambiguous_one_is_not()
     found = decoder.basis_named(basis.sha256[:16])
     assert found is basis and found.sha256 == basis.sha256  # named by its full hash in memory
     assert decoder.basis_named("f" * 16) is None
+    earlier = "e" * 64  # an earlier basis this one extends (spec/model.md §5): its first 10 vectors
     twin = basis.sha256[:16] + ("0" * 48 if basis.sha256[16] != "0" else "1" * 48)
-    manifest = dataclasses.replace(decoder.manifest, basis_prefixes={twin: 10})
+    manifest = dataclasses.replace(decoder.manifest, basis_prefixes={earlier: 10, twin: 12})
     object.__setattr__(decoder, "manifest", manifest)
+    leading = decoder.basis_named("e" * 16)
+    assert leading is not None and leading.count == 10 and leading.sha256 == earlier
     assert decoder.basis_named(basis.sha256[:16]) is None  # names both the basis and an earlier one: refused
     assert decoder.basis_named(basis.sha256) is basis
+    lookup = model_basis_lookup(manifest.folder, basis.sha256, manifest.basis_prefixes)  # bvae info's, no torch
+    assert lookup(basis.sha256[:16]) is None and lookup(basis.sha256).sha256 == basis.sha256
+    assert lookup("e" * 16).count == 10 and lookup("e" * 16).sha256 == earlier
+    record = LayeredRecord("gold", np.zeros(8, np.float32), np.ones(8, np.float32),
+                           basis=BasisLayer(basis.sha256[:16], 0.5, np.array([3, -1], dtype=np.int8)))
+    with pytest.raises(errors.BasisMismatchError, match="a short reference: none of the model's bases, or two"):
+        decoder.decode(record)
 
 
 def test_cli_writes_short_references_unless_asked_and_edits_keep_them(

@@ -451,8 +451,9 @@ class BrdfDecoder:
         basis = self.basis_named(sha256)
         if basis is None:
             own = self.manifest.basis_sha256 if self.manifest is not None else None
+            short = " (a short reference: none of the model's bases, or two, start with it)" if len(sha256) < 64 else ""
             raise BasisMismatchError(
-                f"{record.name}: the record's basis layer needs shared basis {sha256}, but this "
+                f"{record.name}: the record's basis layer needs shared basis {sha256}{short}, but this "
                 f"decoder's model has {own or 'none'}; decode it with the model that wrote it"
             )
         return basis

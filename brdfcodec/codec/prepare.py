@@ -39,7 +39,8 @@ ModelSpec = str | os.PathLike[str] | ModelManifest | None
 
 
 def resolve_model(model: ModelSpec) -> ModelManifest:
-    """A model's manifest from a folder, a decoder SHA-256, or ``None`` for the shipped default.
+    """A model's manifest from a folder, a decoder SHA-256 (64 hex digits, or the first 16 that a file with short
+    references names, format 2.6), or ``None`` for the shipped default.
 
     Raises
     ------
@@ -51,7 +52,7 @@ def resolve_model(model: ModelSpec) -> ModelManifest:
     if model is None:
         return load_manifest(default_model_folder())
     text = os.fspath(model)
-    if len(text) == 64 and all(c in "0123456789abcdef" for c in text.lower()) and not Path(text).exists():
+    if len(text) in (16, 64) and all(c in "0123456789abcdef" for c in text.lower()) and not Path(text).exists():
         return find_model(text)
     return load_manifest(text)
 

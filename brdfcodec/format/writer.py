@@ -32,7 +32,6 @@ from brdfcodec.format.container import (
     FLAG_METADATA_ZSTD,
     FLAG_SHORT_REFERENCES,
     FORMAT_MAJOR,
-    FORMAT_MINOR,
     MAGIC,
     MAX_HEADER_BYTES,
     MAX_HEADER_JSON_BYTES,
@@ -183,7 +182,7 @@ def _minor_needed(records: Sequence[Record], short_references: bool) -> int:
     entropy-codes μ, 4 once a basis layer is entropy-coded, 3 once one is packed, 2 once a record stores a latent
     without σ, else 1."""
     if short_references:
-        return FORMAT_MINOR
+        return 6
     if any(getattr(r, "coded_mu", 0) for r in records):
         return 5
     if any(getattr(getattr(r, "basis", None), "prior", None) is not None for r in records):

@@ -272,6 +272,10 @@ def coded_coefficients(sha256: str, coefficients: npt.ArrayLike, max_bytes: int,
     return BasisLayer(sha256, packed_step(choice.step_code), choice.q, int(first), int(project),
                       prior=(int(prior[0]), int(prior[1])), coded_mu=coded_mu)
 
+#: Said of a short reference (format 2.6) that names no basis of the model, or more than one.
+_SHORT_NOTE = " (a short reference: the first 8 bytes of a SHA-256, which name none of the model's bases, or two)"
+
+
 def check_basis_layers(
     entries: Sequence[Any], basis_named: Callable[[str], SharedBasis | None], where: str, own: str | None
 ) -> None:
@@ -303,7 +307,8 @@ def check_basis_layers(
         basis = basis_named(sha)
         if basis is None:
             raise BasisMismatchError(
-                f"{where}: record {entry.name!r}: its basis layer needs shared basis {sha}, but the decoder's model "
+                f"{where}: record {entry.name!r}: its basis layer needs shared basis {sha}"
+                f"{_SHORT_NOTE if len(sha) < 64 else ''}, but the decoder's model "
                 f"has {own or 'none'}; decode it with the model that wrote it"
             )
         count, first, project = int(layer["count"]), int(layer.get("first", 0)), int(layer.get("project", 0))

@@ -267,7 +267,9 @@ def find_model(decoder_sha256: str) -> ModelManifest:
     (a short reference, format 2.6: ``spec/bvae-format.md`` §3.1).
 
     Folders are searched in order and the first valid match wins; a folder whose ``model.json`` is invalid is
-    skipped with a warning, and its error is raised only when no valid folder has the hash and it names it.
+    skipped with a warning, and its error is raised only when no valid folder has the hash and it names it. A
+    short reference is looked for in every folder (two decoders it names are refused, not chosen between), so
+    every invalid folder's warning is given then.
 
     Raises
     ------

@@ -19,6 +19,7 @@ __all__ = ["Field", "bvae_fields", "fix_bvae", "mutate_bvae"]
 PREAMBLE = 24
 _FLAG_ZSTD = 1
 _FLAG_BASIS = 2
+_FLAG_SHORT_REFERENCES = 4
 
 #: Values worth trying in an unsigned field of each width (limits, off-by-one, bit patterns).
 _INTERESTING = {
@@ -84,11 +85,12 @@ def bvae_fields(data: bytes) -> list[Field]:
             cur.take(name, size, kind)
         flags, length = struct.unpack_from("<II", data, 12)
         cur.end = min(len(data), PREAMBLE + length)
-        cur.take("decoder", 32, "bytes")
+        reference = 8 if flags & _FLAG_SHORT_REFERENCES else 32  # format 2.6: short references (spec §3.1)
+        cur.take("decoder", reference, "bytes")
         cur.take("latent_dim", 2, "u16")
         cur.take("latent_dtype", 1, "u8")
         if flags & _FLAG_BASIS:
-            cur.take("basis", 32, "bytes")
+            cur.take("basis", reference, "bytes")
         forms = []
         for f in range(cur.take("form_count", 1, "u8")[0]):
             kind = cur.take(f"form{f}.kind", 1, "u8")[0]
@@ -97,7 +99,7 @@ def bvae_fields(data: bytes) -> list[Field]:
                 for d in range(cur.varint(f"form{f}.graft_k")):
                     cur.varint(f"form{f}.graft_dim{d}")
             elif kind == 2:
-                cur.take(f"form{f}.mu", 1, "u8")
+                mu = cur.take(f"form{f}.mu", 1, "u8")[0]
                 cur.take(f"form{f}.sigma", 1, "u8")
                 layers = cur.take(f"form{f}.layers", 1, "u8")[0]
                 if layers & 1:
@@ -107,6 +109,8 @@ def bvae_fields(data: bytes) -> list[Field]:
                         cur.take(f"form{f}.top", 1, "u8")
                     if layers & 8:
                         cur.take(f"form{f}.prior", 2, "bytes")
+                if mu == 4:  # a coded μ's grid exponent (format 2.5, spec §4.9)
+                    cur.take(f"form{f}.mu_step", 1, "u8")
                 if layers & 2:
                     cur.take(f"form{f}.detail_form", 1, "u8")
             forms.append(layers)

@@ -67,6 +67,8 @@ __all__ = ["DEFAULT_BUDGETS", "Experiment", "RdConfig", "decode_machine", "load_
 #: format 2.6, a few forms, the payload CRC): a first guess of what the materials share, corrected by measuring the
 #: file.
 _HEADER_ESTIMATE = 90
+#: Bytes more with full references (the decoder's and the basis' whole SHA-256, ``short_references`` false).
+_FULL_REFERENCES_EXTRA = 48
 #: The smallest record brdfcodec writes, its descriptor included (a record without a latent, one coefficient).
 _SMALLEST_RECORD = 6
 #: Size budgets of the comparison, bytes per material.
@@ -374,7 +376,8 @@ def _bvae_rows(model: Path, names: Sequence[str], families: Sequence[str], input
         # The file's fixed header is shared by the materials: --bytes starts below N by an estimate of its
         # share, then moves to the largest value for which the file's bytes less the names, and each family's,
         # stay within N per material.
-        flag = budget - math.ceil(_HEADER_ESTIMATE / len(names)) if header_in_budget else budget
+        header = _HEADER_ESTIMATE + (0 if short_references else _FULL_REFERENCES_EXTRA)
+        flag = budget - math.ceil(header / len(names)) if header_in_budget else budget
         if flag < _SMALLEST_RECORD:  # too few materials to share the header within this budget: no point
             continue
         def encoded(value: int) -> tuple[tuple[bytes, Any], dict[str, int], float]:
