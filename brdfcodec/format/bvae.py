@@ -5,11 +5,12 @@ materials, and the SHA-256 of the decoder that turns them back into BRDF
 tables. This module does not import torch: inspecting a file (``bvae info``)
 is instant, and a file can be checked on a machine without a model.
 
-Layout (format 2.1, little-endian)::
+Layout (format 2, little-endian)::
 
     preamble  24 bytes   magic, version, flags, header length, header CRC-32
-    header    N bytes    binary: decoder SHA-256, latent size and dtype, the shared
-                         basis' SHA-256 (once), the form table (how records store
+    header    N bytes    binary: decoder SHA-256 (since 2.6 by default its first 8
+                         bytes), latent size and dtype, the shared basis' SHA-256
+                         (once, as short), the form table (how records store
                          μ, σ and their layers, once per form), the record index
                          (name, form, per-record numbers), the payloads' CRC-32;
                          then an optional JSON metadata block (provenance, edits)
