@@ -27,7 +27,6 @@ from brdfcodec.format.bvae import (
     LatentRecord,
     Record,
 )
-from brdfcodec.io.hashing import refers_to
 from brdfcodec.models.registry import find_model
 from brdfcodec.models.store import ModelManifest, load_model
 from brdfcodec.representation import (
@@ -311,12 +310,13 @@ class BrdfDecoder:
         basis = self.shared_basis
         if basis is None:
             return None
-        # a short reference (format 2.6) names a basis by its hash's first 8 bytes: one that names two is refused
+        from brdfcodec.layers.basis_storage import basis_reference_target
+
         earlier = self.manifest.basis_prefixes if self.manifest is not None else {}
-        named = [full for full in (basis.sha256, *earlier) if refers_to(sha256, full)]
-        if len(named) != 1:
+        named = basis_reference_target(sha256, basis.sha256, earlier)
+        if named is None:
             return None
-        return basis if named[0] == basis.sha256 else basis.leading(earlier[named[0]], named[0])
+        return basis if named == basis.sha256 else basis.leading(earlier[named], named)
 
     @property
     def projection_centre(self) -> npt.NDArray[np.float32]:

@@ -122,19 +122,25 @@ def _validate(components: np.ndarray, entries: np.ndarray, where: str) -> None:
     if not np.isfinite(components).all():
         raise BasisError(f"{where}: 'components' holds non-finite values")
 
+def basis_reference_target(reference: str, current: str, prefixes: Mapping[str, int]) -> str | None:
+    """The full SHA-256 of the one basis a file's ``reference`` names among a model's: its basis ``current`` and
+    the earlier ones it extends (``prefixes``, ``spec/model.md`` §5); None when it names none, or two (a short
+    reference, format 2.6, is refused rather than resolved by picking one)."""
+    named = [full for full in (current, *prefixes) if refers_to(reference, full)]
+    return named[0] if len(named) == 1 else None
+
+
 def model_basis_lookup(folder: str | os.PathLike[str], current: str | None,
                        prefixes: Mapping[str, int]) -> Callable[[str], SharedBasis | None]:
     """``basis_named`` for :func:`check_basis_layers` from a model folder (no torch): its basis
     (``basis.safetensors``, hash ``current``, read and checked against its hash once), or its leading vectors
     where they are an earlier basis (``prefixes``: that basis' hash → its count; ``spec/model.md`` §5)."""
     def basis_named(sha256: str) -> SharedBasis | None:
-        # a short reference (format 2.6) names a basis by its hash's first 16 hex digits
-        # (one that names two bases is refused)
-        named = [] if current is None else [full for full in (current, *prefixes) if refers_to(sha256, full)]
-        if len(named) != 1:
+        named = None if current is None else basis_reference_target(sha256, current, prefixes)
+        if named is None:
             return None
         basis = _load_checked(Path(folder) / BASIS_FILE, current)  # type: ignore[arg-type]
-        return basis if named[0] == current else basis.leading(prefixes[named[0]], named[0])
+        return basis if named == current else basis.leading(prefixes[named], named)
 
     return basis_named
 
