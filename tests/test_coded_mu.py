@@ -10,6 +10,7 @@ import pytest
 
 from brdfcodec.format.bvae import DecoderReference, encode_bvae, parse_bvae, record_size
 from brdfcodec.format.layered_record import LayeredRecord
+from brdfcodec.layers.basis import quantise_coefficients
 from brdfcodec.layers.basis_layer import BasisLayer, coded_coefficients
 from brdfcodec.layers.coded_basis import (
     MAX_MAGNITUDE,
@@ -195,24 +196,57 @@ def test_the_stream_lead_of_a_coded_mu_is_its_integers_under_16g() -> None:
         mu_stream_lead((6, [0]))
 
 
-@pytest.mark.parametrize("bad", [-1, 6, 2.5, True, "3", np.float64(3)])
-def test_the_coded_mu_step_option_is_0_to_5(bad: object) -> None:
+@pytest.mark.parametrize("bad", [-1, 6, 2.5, True, "3", np.float64(3), (3, 3), (3, 0), [2, 6], (None,)])
+def test_the_coded_mu_step_option_is_0_to_5_or_distinct_grids(bad: object) -> None:
     from brdfcodec.codec.encoding import EncodeOptions
 
     with pytest.raises(ValueError, match="coded_mu_step"):
         EncodeOptions(bytes_budget=32, coded_mu_step=bad)  # type: ignore[arg-type]
     step = EncodeOptions(bytes_budget=32, coded_mu_step=np.int64(4)).coded_mu_step
-    assert step == 4 and type(step) is int
+    assert step == (4,) and type(step[0]) is int
+    assert EncodeOptions(bytes_budget=32, coded_mu_step=[2, np.int64(3)]).coded_mu_step == (2, 3)
+    assert EncodeOptions(bytes_budget=32, coded_mu_step=0).coded_mu_step == ()
 
 
-def test_the_coded_mu_grid_is_offered_only_where_coded_layers_are() -> None:
-    from brdfcodec.codec.encoding import CODED_MU_STEP_LOG2, EncodeOptions
+def test_the_coded_mu_grids_are_offered_only_where_coded_layers_are() -> None:
+    from brdfcodec.codec.encoding import CODED_MU_STEP_LOG2, CODED_MU_STEPS_LOG2, EncodeOptions
 
-    assert EncodeOptions(bytes_budget=32).coded_mu_grid == CODED_MU_STEP_LOG2
-    assert EncodeOptions(max_relae=0.05, coded_mu_step=4).coded_mu_grid == 4
-    assert EncodeOptions(bytes_budget=32, coded_mu_step=0).coded_mu_grid == 0
-    assert EncodeOptions(bytes_budget=32, basis_coding="packed").coded_mu_grid == 0
-    assert EncodeOptions().coded_mu_grid == 0  # no target: no rate control
+    assert EncodeOptions(bytes_budget=32).coded_mu_grids == CODED_MU_STEPS_LOG2 == (CODED_MU_STEP_LOG2, 2)
+    assert EncodeOptions(max_relae=0.05, coded_mu_step=4).coded_mu_grids == (4,)
+    assert EncodeOptions(bytes_budget=32, coded_mu_step=0).coded_mu_grids == ()
+    assert EncodeOptions(bytes_budget=32, basis_coding="packed").coded_mu_grids == ()
+    assert EncodeOptions().coded_mu_grids == ()  # no target: no rate control
+
+
+@pytest.mark.parametrize("better", [3, 2])
+def test_a_budget_keeps_the_coded_mu_grid_of_lower_error(better: int) -> None:
+    """Rate control's coded-μ candidates on each grid asked for (the default: 2^−3 and 2^−2) are pools of their
+    own, their fits told the grid; the record of least kept-slice error is written, on its grid."""
+    from brdfcodec.codec.rate import encode_layers
+    from brdfcodec.conventions import NETWORK_INPUT_SHAPE
+    from brdfcodec.format.bvae import LatentRecord
+
+    target = np.full(NETWORK_INPUT_SHAPE, 0.5, dtype=np.float32)
+    masks = np.ones(NETWORK_INPUT_SHAPE, dtype=np.float32)
+    base = LatentRecord("m", _mu(), np.ones(8))
+    grids: list[int] = []
+
+    def fit(k: int, mu_storage: str | None, under_detail: bool, variant: str | None = None, *,  # noqa: ARG001
+            grid: int = 0) -> tuple:
+        if mu_storage != "coded":  # the other candidates: worse than either coded one
+            return base, quantise_coefficients(SHA, np.ones(k)), target * 0.5
+        grids.append(grid)
+        q = np.rint(base.mu.astype(np.float64) * 2 ** grid).astype(np.int64)
+        layer = coded_coefficients(SHA, _coefficients(k=k), k - 1, (128, 40), first=8, coded_mu=(grid, q))
+        code = LatentRecord("m", (q / 2.0 ** grid).astype(np.float32), base.sigma)
+        return code, layer, target * (0.99 if grid == better else 0.9)
+
+    result = encode_layers(base, target * 0.5, target, masks, bytes_budget=24, basis_fit=fit, basis_count=75,
+                           basis_variants=("8",), coded_mu_steps=(3, 2))
+    assert set(grids) == {3, 2}
+    assert {p.label.split(" k=")[0] for p in result.points} >= {"coded-mu g=3", "coded-mu g=2"}
+    assert result.record.coded_mu == better and result.record.basis.coded_mu[0] == better
+    assert result.payload_bytes <= 24
 
 
 @pytest.mark.slow  # encodes with the shipped model
@@ -246,7 +280,8 @@ def test_the_rate_points_include_coded_mu_records(red_plastic_file, monkeypatch)
     data = bc.encode([str(red_plastic_file)], bytes=32, measure_error=False)
     monkeypatch.undo()
     labels = [p.label for p in seen["points"]]
-    assert any(label.startswith("coded-mu") for label in labels), labels
+    assert any(label.startswith("coded-mu g=3") for label in labels), labels  # the default grids, each a pool
+    assert any(label.startswith("coded-mu g=2") for label in labels), labels
     chosen = seen["points"][lowest_distortion(seen["points"], 32)]
     assert all(p.distortion >= chosen.distortion for p in seen["points"] if p.rate <= 32)
     record = bc.decode(data).record(bc.decode(data).names[0])

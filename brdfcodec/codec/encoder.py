@@ -127,11 +127,12 @@ class BrdfEncoder:
         step, so a budget holds more coefficients; ``"coded"`` (format 2.4) arithmetic-codes them at one step under a
         Laplace prior whose spread falls with the vector's rank; ``"int8"`` stores one byte each (readable by
         2.2 readers).
-    coded_mu_step : int, optional
-        With ``bytes`` or ``max_relae`` and ``basis_coding`` ``"auto"`` or ``"coded"``: the grid exponent g, 1 to
-        5, of the candidate records whose μ is entropy-coded in the coded basis layer (format 2.5, μ = q·2^−g),
-        offered beside the compact forms; 0 offers none. Default
-        :data:`~brdfcodec.codec.encoding.CODED_MU_STEP_LOG2`.
+    coded_mu_step : int or tuple of int, optional
+        With ``bytes`` or ``max_relae`` and ``basis_coding`` ``"auto"`` or ``"coded"``: the grid exponents g, each
+        1 to 5, of the candidate records whose μ is entropy-coded in the coded basis layer (format 2.5,
+        μ = q·2^−g), offered beside the compact forms, each grid a pool of candidates of its own (the record
+        of least kept-slice error kept); one integer: that grid alone; 0 offers none. Default
+        :data:`~brdfcodec.codec.encoding.CODED_MU_STEPS_LOG2`: 2^−3 and 2^−2.
     """
 
     manifest: ModelManifest | None
@@ -152,15 +153,15 @@ class BrdfEncoder:
         latent: LatentChoice = "always",
         store_sigma: bool = False,
         basis_coding: BasisCoding = "auto",
-        coded_mu_step: int | None = None,
+        coded_mu_step: int | tuple[int, ...] | None = None,
     ) -> None:
-        from brdfcodec.codec.encoding import CODED_MU_STEP_LOG2, EncodeOptions
+        from brdfcodec.codec.encoding import CODED_MU_STEPS_LOG2, EncodeOptions
 
         self.options = EncodeOptions(
             effort=effort, bytes_budget=bytes, max_relae=max_relae, metric=metric, detail_step=detail_step,
             latent_itemsize=2 if latent_dtype == "float16" else 4, basis=basis, project_base=project_base,
             latent=latent, store_sigma=store_sigma, basis_coding=basis_coding,
-            coded_mu_step=CODED_MU_STEP_LOG2 if coded_mu_step is None else coded_mu_step,
+            coded_mu_step=CODED_MU_STEPS_LOG2 if coded_mu_step is None else coded_mu_step,
         )
         manifest = resolve_model(model)
         network, _, loaded = load_model(manifest.folder, parts=("encoder",), device=str(device))

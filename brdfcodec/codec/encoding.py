@@ -124,6 +124,12 @@ CODED_PRIORS: dict[bool, tuple[tuple[int, int], ...]] = {True: ((156, 28), (188,
 #: ``reports/results/rd-*-coded-mu-*.jsonl``; the grids compared (``"coded_mu_step"`` of a ``bvae bench rd``
 #: experiment, CV fold 1 at 16 and 32 B): ``reports/results/rd-cv3-fold1-b200-always-mu-grid.jsonl``.
 CODED_MU_STEP_LOG2: int = 3
+#: The grids of the coded-μ candidates rate control offers by default (:attr:`EncodeOptions.coded_mu_step`): 2^−3
+#: and the next coarser, 2^−2, each a pool of candidates of its own, the one of least kept-slice error kept per
+#: material (the grid is the form's ``mu step``, spec §3.2: nothing else changes in the file). At 16 B on CV fold 1
+#: the coarser grid alone lowered the error on the RGL-family materials and raised it on the MERL-family ones
+#: (``reports/results/rd-cv3-fold1-b200-always-mu-grids.jsonl``, where both are also measured together).
+CODED_MU_STEPS_LOG2: tuple[int, ...] = (CODED_MU_STEP_LOG2, CODED_MU_STEP_LOG2 - 1)
 _BASIS_CODINGS: tuple[str, ...] = get_args(BasisCoding)
 
 #: Most coefficients whose count takes one varint byte in a record's descriptor.
@@ -201,10 +207,11 @@ class EncodeOptions:
         coefficients (:data:`BasisCoding`; default ``"auto"``: per record, packed, format 2.3, or coded, format
         2.4, in the same bytes, whichever has the lower kept-slice error; ``"packed"`` or ``"coded"`` alone;
         ``"int8"``).
-    coded_mu_step : int
-        0 to :data:`~brdfcodec.layers.coded_basis.MAX_MU_STEP_LOG2`: the grid exponent g of the candidate records
-        whose μ is entropy-coded in the coded basis layer (format 2.5, μ = q·2^−g; :attr:`coded_mu_grid` says
-        when they are offered); 0: none. Default :data:`CODED_MU_STEP_LOG2`.
+    coded_mu_step : int or tuple of int
+        The grid exponents g, each 1 to :data:`~brdfcodec.layers.coded_basis.MAX_MU_STEP_LOG2`, of the candidate
+        records whose μ is entropy-coded in the coded basis layer (format 2.5, μ = q·2^−g; :attr:`coded_mu_grids`
+        says when they are offered), each grid a pool of candidates of its own; one integer g: that grid alone;
+        0 or (): none. Default :data:`CODED_MU_STEPS_LOG2`. Stored as a tuple.
     """
 
     effort: int = 1
@@ -218,14 +225,10 @@ class EncodeOptions:
     latent: LatentChoice = "always"
     store_sigma: bool = False
     basis_coding: BasisCoding = "auto"
-    coded_mu_step: int = CODED_MU_STEP_LOG2
+    coded_mu_step: int | tuple[int, ...] = CODED_MU_STEPS_LOG2
 
     def __post_init__(self) -> None:
-        if isinstance(self.coded_mu_step, bool) or not isinstance(self.coded_mu_step, (int, np.integer)) or not (
-                0 <= self.coded_mu_step <= MAX_MU_STEP_LOG2):
-            raise ValueError(f"coded_mu_step must be an integer from 0 (none) to {MAX_MU_STEP_LOG2}, "
-                             f"got {self.coded_mu_step!r}")
-        object.__setattr__(self, "coded_mu_step", int(self.coded_mu_step))
+        object.__setattr__(self, "coded_mu_step", coded_mu_grids(self.coded_mu_step))
         if self.basis_coding not in _BASIS_CODINGS:
             raise ValueError(f"basis_coding must be one of {list(_BASIS_CODINGS)}, got {self.basis_coding!r}")
         if self.latent not in _LATENT_CHOICES:
@@ -253,10 +256,13 @@ class EncodeOptions:
         return self.basis_coding != "int8" and (self.bytes_budget is not None or self.max_relae is not None)
 
     @property
-    def coded_mu_grid(self) -> int:
-        """The grid exponent g of the coded-μ candidates rate control offers (format 2.5), 0 where it offers none:
-        :attr:`coded_mu_step` where records are packed or coded under a target and coded layers are allowed."""
-        return self.coded_mu_step if self.packed and self.basis_coding in ("auto", "coded") else 0
+    def coded_mu_grids(self) -> tuple[int, ...]:
+        """The grid exponents g of the coded-μ candidates rate control offers (format 2.5), () where it offers
+        none: :attr:`coded_mu_step` where records are packed or coded under a target and coded layers are
+        allowed."""
+        steps = self.coded_mu_step
+        assert isinstance(steps, tuple)  # __post_init__
+        return steps if self.packed and self.basis_coding in ("auto", "coded") else ()
 
     @property
     def coded(self) -> bool:
@@ -275,6 +281,33 @@ class EncodeOptions:
     def layered(self) -> bool:
         """Whether records get a detail layer (a target or a step is set)."""
         return any(x is not None for x in (self.bytes_budget, self.max_relae, self.detail_step))
+
+
+def coded_mu_grids(steps: object) -> tuple[int, ...]:
+    """The grid exponents of the coded-μ candidates (:attr:`EncodeOptions.coded_mu_step`) as a tuple: an integer g
+    is that grid alone, 0 none; a sequence lists them (distinct, each 1 to
+    :data:`~brdfcodec.layers.coded_basis.MAX_MU_STEP_LOG2`).
+
+    Raises
+    ------
+    ValueError
+        Anything else, naming ``coded_mu_step``.
+    """
+    def one(value: object) -> int:
+        if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or not (
+                1 <= value <= MAX_MU_STEP_LOG2):
+            raise ValueError(f"coded_mu_step must be an integer from 0 (none) to {MAX_MU_STEP_LOG2}, or a sequence "
+                             f"of distinct integers from 1 to {MAX_MU_STEP_LOG2}, got {steps!r}")
+        return int(value)
+
+    if isinstance(steps, (int, np.integer)) and not isinstance(steps, bool) and steps == 0:
+        return ()
+    if isinstance(steps, (tuple, list)):
+        grids = tuple(one(value) for value in steps)
+        if len(set(grids)) != len(grids):
+            one(None)  # a grid twice: refused with the same message
+        return grids
+    return (one(steps),)
 
 
 def layer_records(
@@ -318,7 +351,7 @@ def layer_records(
             basis_variants=() if basis is None else options.variants(
                 decoder.network.config.latent_dim if decoder.network.config.linear_basis else 0),
             compact_alone_fit=_compact_alone_fit(decoder, base),
-            coded_mu_step=options.coded_mu_grid,
+            coded_mu_steps=options.coded_mu_grids,
         )
         chosen = result.record
         # record_bytes: what the budget caps (payload and index descriptor); payload_bytes: the payload alone
@@ -430,9 +463,11 @@ def _basis_fit(
     target, weights = np.asarray(inputs, dtype=np.float32), np.asarray(masks, dtype=np.float32)
     # what the polish of every packed or coded candidate measures against, taken once per material
     target_on_basis, weights_on_basis = target.reshape(-1)[basis.entries], weights.reshape(-1)[basis.entries]
-    made: dict[tuple[int, MuStorage, int, bool, int], tuple[LatentRecord, BasisLayer | None, np.ndarray]] = {}
+    made: dict[tuple[int, tuple[MuStorage, int], int, bool, int],
+               tuple[LatentRecord, BasisLayer | None, np.ndarray]] = {}
     least_squares_of: dict[tuple[int, int, int], np.ndarray] = {}
-    projected_as: dict[tuple[int, MuStorage], int] = {}  # the projection the first variant kept, per size and μ
+    projected_as: dict[tuple[int, tuple[MuStorage, int]], int] = {}  # the projection the first variant kept,
+    # per size and μ storage (with a coded μ's grid)
 
     def least_squares(first: int, available: int, p: int) -> np.ndarray:
         if (first, available, p) not in least_squares_of:
@@ -442,14 +477,14 @@ def _basis_fit(
                 basis.entries, 0, projection=projection)[1][0]
         return least_squares_of[first, available, p]
 
-    def fit_one(k: int, mu_storage: MuStorage, p: int, packed: bool,
-                start: int) -> tuple[LatentRecord, BasisLayer | None, np.ndarray]:
+    def fit_one(k: int, mu_storage: MuStorage, p: int, packed: bool, start: int,
+                grid: int) -> tuple[LatentRecord, BasisLayer | None, np.ndarray]:
         projection = None if not p else (BasisOperator.of(basis, 0, p), decoder.projection_centre)
         # Each coding asked for: the bytes of its layer and how many coefficients it keeps. --basis-coding auto makes
         # a packed and a coded layer, of one fit where they keep as many coefficients (from about 64 B: all), else
         # of a fit each, and keeps the lower error (packed first: kept on a tie, readable by 2.3 readers).
         coded_mu = mu_storage == MU_CODED  # μ rides in the coded layer's stream (format 2.5): coded layers only
-        lead = None if not coded_mu else coded_mu_on_grid(base.mu, options.coded_mu_grid)
+        lead = None if not coded_mu else coded_mu_on_grid(base.mu, grid)
         if packed:  # in the bytes of k int8 coefficients: as many as the least-squares coefficients pack to
             first = min(start, basis.count - 1)
             codings = ["packed", "coded"] if options.basis_coding == "auto" else [
@@ -491,7 +526,7 @@ def _basis_fit(
             if mu_storage is not None:
                 # μ as a compact record stores it (int8 on the fixed grid or with a step, or entropy-coded on the
                 # grid 2^−g), then the coefficients refitted to that code.
-                code = (coded_mu_values(codes[0], options.coded_mu_grid) if coded_mu else
+                code = (coded_mu_values(codes[0], grid) if coded_mu else
                         compact_mu_values(codes[0], mu_storage == MU_INT8_FIXED, f"{base.name}: mu"))
                 _, coefficients = fit_basis_coefficients(
                     decoder.network, code[None], inputs[None], masks[None], components, basis.entries,
@@ -505,7 +540,7 @@ def _basis_fit(
                 if coding == "coded":
                     layer = coded_coefficients(
                         basis.sha256, coefficients[0], max_bytes[coding], coded_prior, first, p,
-                        coded_mu=None if not coded_mu else coded_mu_on_grid(code, options.coded_mu_grid))
+                        coded_mu=None if not coded_mu else coded_mu_on_grid(code, grid))
                 elif coding == "packed":
                     layer = packed_coefficients(basis.sha256, coefficients[0], max_bytes[coding], first, p)
                 else:
@@ -531,28 +566,32 @@ def _basis_fit(
         """What rate control ranks candidates by: the clamped decode's L1 error over valid kept-slice entries."""
         return float((np.abs(np.clip(mapped, 0.0, MAPPED_MAX) - target) * weights).sum())
 
-    def fit(k: int, mu_storage: MuStorage, under_detail: bool,
-            variant: str | None = None) -> tuple[LatentRecord, BasisLayer | None, np.ndarray]:
+    def fit(k: int, mu_storage: MuStorage, under_detail: bool, variant: str | None = None, *,
+            grid: int = 0) -> tuple[LatentRecord, BasisLayer | None, np.ndarray]:
         # variant: the first vector of a packed or coded layer (one of options.variants(...), rate control
-        # comparing them); None: after the decoder's linear path.
+        # comparing them); None: after the decoder's linear path. grid: a coded μ's grid exponent g (μ = q·2^−g),
+        # with mu_storage MU_CODED.
         # "auto" projects only records without a detail layer: with one, the projection's pass over the vectors
         # and the detail layer's inverse DCT both follow the network, and together they take the decode past the
         # 1.5x a base-only one that a layered decode may take (benchmark decode-layered).
         chosen = [0] if under_detail and options.project_base == "auto" else ways
         packed = options.packed and not under_detail
         start = linear_rank if variant is None else int(variant)
+        if mu_storage == MU_CODED and not grid:
+            raise ValueError("a coded μ needs its grid exponent")
+        storage = (mu_storage, grid if mu_storage == MU_CODED else 0)
         if packed and start != linear_rank:
-            if (k, mu_storage) not in projected_as:
-                fit(k, mu_storage, under_detail)  # the first variant chooses the projection
-            chosen = [projected_as[k, mu_storage]]  # a later variant: the projection the first one kept
+            if (k, storage) not in projected_as:
+                fit(k, mu_storage, under_detail, grid=grid)  # the first variant chooses the projection
+            chosen = [projected_as[k, storage]]  # a later variant: the projection the first one kept
         fits = []
         for p in chosen:
-            if (k, mu_storage, p, packed, start) not in made:
-                made[k, mu_storage, p, packed, start] = fit_one(k, mu_storage, p, packed, start)
-            fits.append((made[k, mu_storage, p, packed, start], p))
+            if (k, storage, p, packed, start) not in made:
+                made[k, storage, p, packed, start] = fit_one(k, mu_storage, p, packed, start, storage[1])
+            fits.append((made[k, storage, p, packed, start], p))
         best, p = min(fits, key=lambda candidate: kept_slice_error(candidate[0][2]))
         if packed and start == linear_rank:
-            projected_as[k, mu_storage] = p
+            projected_as[k, storage] = p
         return best
 
     return fit

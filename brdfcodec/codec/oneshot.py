@@ -123,7 +123,7 @@ def encode(
     metric: Literal["mapped", "linear"] = "mapped",
     provenance: bool = False,
     latent: LatentChoice = "always",
-    coded_mu_step: int | None = None,
+    coded_mu_step: int | tuple[int, ...] | None = None,
     short_references: bool = True,
 ) -> bytes:
     """Encode MERL tables into the bytes of one ``.bvae`` file (one material, or a library of many).
@@ -148,8 +148,9 @@ def encode(
         RelAE, encoder, effort, rate control). By default the file holds names and records only.
     latent : {"always", "auto"}, default "always"
         Whether rate control may write records without a latent, as for :class:`BrdfEncoder`.
-    coded_mu_step : int, optional
-        The grid exponent of rate control's coded-μ candidates (0: none), as for :class:`BrdfEncoder`.
+    coded_mu_step : int or tuple of int, optional
+        The grid exponents of rate control's coded-μ candidates (one integer: that grid alone; 0: none), as for
+        :class:`BrdfEncoder` (by default 2^−3 and 2^−2).
     short_references : bool, default True
         Name the decoder and the shared basis by the first 8 bytes of their SHA-256 (format 2.6,
         ``spec/bvae-format.md`` §3.1): 24 bytes less a file, 48 with basis layers. ``False`` writes their full
@@ -220,7 +221,7 @@ def compress(
     metric: Literal["mapped", "linear"] = "mapped",
     provenance: bool = False,
     latent: LatentChoice = "always",
-    coded_mu_step: int | None = None,
+    coded_mu_step: int | tuple[int, ...] | None = None,
     short_references: bool = True,
 ) -> int:
     """Write :func:`encode` of the sources to a ``.bvae`` file, atomically (options as for :func:`encode`).

@@ -46,9 +46,9 @@ target):
   min(K, :data:`DETAIL_BASIS_COUNT`) coefficients plus each rung from coarse
   to fine (:func:`error_target_sequence`), bisected (size falls and error
   rises along the sequence), the step then bisected in log space between the
-  two rungs that bracket X (2 rounds); then, with ``coded_mu_step``, the size
-  of a record whose μ is entropy-coded in its layer (format 2.5) is bisected
-  below that choice, and the smallest such record that meets X replaces it.
+  two rungs that bracket X (2 rounds); then, for each grid of ``coded_mu_steps``,
+  the size of a record whose μ is entropy-coded in its layer (format 2.5) is
+  bisected below that choice, and the smallest such record that meets X replaces it.
 
 The achieved RelAE is measured on the returned record. A layered record
 stores σ compactly (one byte per dimension, ``spec/bvae-format.md`` §4.5) or
@@ -68,7 +68,7 @@ with a latent (from 6 bytes with a one-byte name) then hold one without.
 from __future__ import annotations
 
 import functools
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Final, Literal
 
@@ -150,12 +150,14 @@ class RatePoint:
 
     @property
     def label(self) -> str:
-        """A short name: ``compact-mu k=48 variant=0``, ``mu k=32 detail=0.5``, ``mu alone``."""
+        """A short name: ``compact-mu k=48 variant=0``, ``coded-mu g=3 k=12 variant=8``, ``mu k=32 detail=0.5``,
+        ``mu alone``."""
         k, step, variant = self.option
         if not k and step is None:  # the base record: μ in the latent dtype, or compact (no layer, no σ)
             return "compact-mu alone" if self.compact else "mu alone"
         coded = getattr(self.pool, "mu_storage", None) == MU_CODED
-        parts = ["coded-mu" if coded else "compact-mu" if self.compact else "mu", f"k={k}"]
+        parts = [f"coded-mu g={self.pool.coded_mu_step}" if coded else "compact-mu" if self.compact else "mu",
+                 f"k={k}"]
         if variant is not None:
             parts.append(f"variant={variant}")
         if step is not None:
@@ -235,8 +237,9 @@ class _Candidates:
             return self.base, None, self.base_mapped
         if (k, under_detail, variant) not in self.stages:
             assert self.basis_fit is not None
-            fitted = (self.basis_fit(k, self.mu_storage, under_detail) if variant is None
-                      else self.basis_fit(k, self.mu_storage, under_detail, variant))  # type: ignore[call-arg]
+            grid: dict[str, int] = {"grid": self.coded_mu_step} if self.mu_storage == MU_CODED else {}
+            fitted = (self.basis_fit(k, self.mu_storage, under_detail, **grid) if variant is None  # type: ignore[call-arg]
+                      else self.basis_fit(k, self.mu_storage, under_detail, variant, **grid))  # type: ignore[call-arg]
             if fitted[1] is None:  # no coefficient survived in these bytes: the base alone, as k = 0
                 fitted = (self.base, None, self.base_mapped)
             self.stages[k, under_detail, variant] = fitted
@@ -311,7 +314,7 @@ def encode_layers(
     store_sigma: bool = True,
     basis_variants: Sequence[str] = (),
     compact_alone_fit: CompactAloneFit | None = None,
-    coded_mu_step: int = 0,
+    coded_mu_steps: Sequence[int] = (),
 ) -> RateResult:
     """A base record, layered to a size budget, an error target or a fixed step.
 
@@ -356,12 +359,13 @@ def encode_layers(
         μ compact and no layer (format 2.2, ``spec/bvae-format.md`` §3.2: D bytes on the fixed grid, 2 + D with a
         step) is a candidate of a size budget: the smallest record with a latent, so that every material fits
         a budget from D bytes beside its descriptor (10 for D = 8 and a one-byte name).
-    coded_mu_step : int, default 0
-        g > 0: the candidates include records whose μ is entropy-coded on the grid 2^−g in their coded basis
-        layer (format 2.5, ``spec/bvae-format.md`` §4.9): a size budget's in each of ``basis_variants``; an error
-        target's below the size of the smallest other record that meets it, the layer's bytes bisected;
-        ``basis_fit`` then receives ``"coded"`` as the μ storage and must make a coded layer that carries μ.
-        0: none.
+    coded_mu_steps : sequence of int, default ()
+        For each g > 0 listed, the candidates include records whose μ is entropy-coded on the grid 2^−g in their
+        coded basis layer (format 2.5, ``spec/bvae-format.md`` §4.9): a size budget's in each of
+        ``basis_variants``; an error target's below the size of the smallest other record that meets it, the
+        layer's bytes bisected (the smallest over the grids kept, the grid listed first on a tie); ``basis_fit``
+        then receives ``"coded"`` as the μ storage and the grid as the keyword ``grid``, and must make a coded
+        layer that carries μ on that grid. Empty: none.
 
     Raises
     ------
@@ -412,9 +416,10 @@ def encode_layers(
         points = _budget_points(cands, bytes_budget, full, compact, variants, tried,
                                 lambda: candidates_of(base, base_mapped, target, weights, latent_itemsize, basis_fit,
                                                       compact=True),
-                                None if not (full and coded_mu_step) else
-                                lambda: candidates_of(base, base_mapped, target, weights, latent_itemsize, basis_fit,
-                                                      compact=True, coded_mu_step=coded_mu_step))
+                                {} if not full else
+                                {g: functools.partial(candidates_of, base, base_mapped, target, weights,
+                                                      latent_itemsize, basis_fit, compact=True, coded_mu_step=g)
+                                 for g in coded_mu_steps})
         if alone is not None and alone.storage_for(bytes_budget) is not None:
             # a candidate at every budget it fits, so that a byte more never loses what a smaller budget gave
             points.append(alone.point(bytes_budget))
@@ -474,9 +479,9 @@ def encode_layers(
     chosen = min(candidates, key=lambda c: (pools[c[0]].size(*c[1:]), errors[c]))
     size = pools[chosen[0]].size(*chosen[1:])
     record = pools[chosen[0]].record(*chosen[1:])
-    if full and coded_mu_step:  # a smaller record whose μ rides in its coded layer (format 2.5) that meets X too
+    for g in coded_mu_steps if full else ():  # a smaller record whose μ rides in its coded layer (format 2.5)
         coded = candidates_of(base, base_mapped, target, weights, latent_itemsize, basis_fit, compact=True,
-                              coded_mu_step=coded_mu_step)
+                              coded_mu_step=g)  # that meets X too (the grid listed first on a tie)
         k = _smallest_coded_mu_meeting(coded, size, full, relae, max_relae, tried)
         if k:
             record, size = coded.record(k, None), coded.size(k, None)
@@ -532,7 +537,7 @@ def _smallest_coded_mu_meeting(pool: _Candidates, smaller_than: int, full: int, 
 def _budget_points(cands: _Candidates, bytes_budget: int, full: int, compact: bool,
                    variants: tuple[str | None, ...], tried: list[tuple[float | None, int, float | None]],
                    compact_pool: Callable[[], _Candidates],
-                   coded_pool: Callable[[], _Candidates] | None = None) -> list[RatePoint]:
+                   coded_pools: Mapping[int, Callable[[], _Candidates]] | None = None) -> list[RatePoint]:
     """Every candidate record of a size budget that fits it, with its rate and kept-slice distortion.
 
     The candidates, each the largest of its kind that fits (within a kind, more bytes lower the error): the base
@@ -540,8 +545,8 @@ def _budget_points(cands: _Candidates, bytes_budget: int, full: int, compact: bo
     not, :func:`compact_base_pays`) and, where that base is the full one, on a compact base too (so that a byte
     more never loses what the compact base gave, issue 39); and min(k, n) int8 coefficients, for each n of
     :data:`DETAIL_BASIS_COUNTS`, under a detail layer at each step of the ladder search that fits (where a detail
-    layer has room); and, with ``coded_pool``, the most coefficients that fit beside a μ entropy-coded in their
-    layer (format 2.5), in each of ``variants``.
+    layer has room); and, for each grid g of ``coded_pools`` (its pool's factory), the most coefficients that fit
+    beside a μ entropy-coded on the grid 2^−g in their layer (format 2.5), in each of ``variants``.
     """
     pools: dict[bool | str, _Candidates] = {compact: cands}
     options: list[tuple[bool | str, int, float | None, str | None]] = [(compact, 0, None, None)]
@@ -553,11 +558,12 @@ def _budget_points(cands: _Candidates, bytes_budget: int, full: int, compact: bo
         most = pools[True].most_coefficients(bytes_budget, full)
         if most:
             options += [(True, most, None, variant) for variant in variants]
-    if coded_pool is not None:
-        pools[MU_CODED] = coded_pool()
-        most = pools[MU_CODED].most_coefficients(bytes_budget, full)
+    for g, coded_pool in (coded_pools or {}).items():
+        key = f"{MU_CODED}-{g}"
+        pools[key] = coded_pool()
+        most = pools[key].most_coefficients(bytes_budget, full)
         if most:
-            options += [(MU_CODED, most, None, variant) for variant in variants]
+            options += [(key, most, None, variant) for variant in variants]
     # A detail layer only where it fits beside its coefficients (no room at 64 B: 48 coefficients, no detail).
     empty = _empty_detail_bytes()
     for under_detail in sorted({min(k, count) for count in DETAIL_BASIS_COUNTS}):
