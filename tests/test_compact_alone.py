@@ -92,11 +92,14 @@ def test_the_floor_checked_up_front_is_the_base_alone_without_sigma() -> None:
 
 def test_the_shipped_model_writes_an_editable_ten_byte_record(tmp_path: Path, red_plastic_file: Path,
                                                               capsys: pytest.CaptureFixture[str]) -> None:
-    """Through the CLI with its defaults (a latent in every record, no σ): 10 bytes per record beside the name,
-    a file that reads back, decodes as the decoder's output for the stored code, and can be edited."""
+    """Through the CLI with its defaults (a latent in every record, no σ): at most 10 bytes per record beside the
+    name, a file that reads back and can be edited. The base alone, μ compact (10 bytes, decoding as the decoder's
+    output for the stored code), is the record without the coded-μ candidates; with them (the default) a coded μ
+    on the coarser grid with a few coefficients may fit the same bytes and err less."""
     from brdfcodec.cli import main
-    from brdfcodec.codec import BrdfDecoder
+    from brdfcodec.codec import BrdfDecoder, BrdfEncoder
     from brdfcodec.format.bvae import read_bvae
+    from brdfcodec.io.merl import read_merl
 
     output = tmp_path / "ten.bvae"
     assert main(["compress", str(red_plastic_file), "-o", str(output), "--bytes", "10"]) == 0
@@ -104,11 +107,15 @@ def test_the_shipped_model_writes_an_editable_ten_byte_record(tmp_path: Path, re
     assert not (tmp_path / "nine.bvae").exists()
     capsys.readouterr()
     parsed = read_bvae(output)
-    (record,) = parsed.records
+    (written,) = parsed.records
+    assert isinstance(written, LayeredRecord) and written.has_latent and written.detail is None
+    assert record_size(written) <= 10
+    record = BrdfEncoder(bytes=10, coded_mu_step=0).encode(read_merl(red_plastic_file), name="red-plastic")
     assert isinstance(record, LayeredRecord) and record.has_latent and record.basis is None and record.detail is None
     assert record_size(record) == 10  # the payload (8) and the descriptor beside the name
     decoder = BrdfDecoder()
     np.testing.assert_array_equal(decoder.mapped_record(record), decoder.decode_mapped(record.mu))
+    record = written
     edited = tmp_path / "edited.bvae"
     assert main(["edit", "traverse", str(output), "-o", str(edited), "--dim", "1", "--values", "1"]) == 0, \
         capsys.readouterr().err
