@@ -209,9 +209,13 @@ def test_the_coded_mu_step_option_is_0_to_5_or_distinct_grids(bad: object) -> No
 
 
 def test_the_coded_mu_grids_are_offered_only_where_coded_layers_are() -> None:
-    from brdfcodec.codec.encoding import CODED_MU_STEP_LOG2, CODED_MU_STEPS_LOG2, EncodeOptions
+    from brdfcodec.codec.encoding import CODED_MU_COARSER_BUDGET, CODED_MU_STEP_LOG2, CODED_MU_STEPS_LOG2, EncodeOptions
 
     assert EncodeOptions(bytes_budget=32).coded_mu_grids == CODED_MU_STEPS_LOG2 == (CODED_MU_STEP_LOG2, 2)
+    assert CODED_MU_COARSER_BUDGET == 32  # the default's second grid: up to 32 B, where it was measured
+    assert EncodeOptions(bytes_budget=33).coded_mu_grids == (CODED_MU_STEP_LOG2,)
+    assert EncodeOptions(max_relae=0.05).coded_mu_grids == (CODED_MU_STEP_LOG2,)
+    assert EncodeOptions(bytes_budget=64, coded_mu_step=(3, 2)).coded_mu_grids == (3, 2)  # asked: offered
     assert EncodeOptions(max_relae=0.05, coded_mu_step=4).coded_mu_grids == (4,)
     assert EncodeOptions(bytes_budget=32, coded_mu_step=0).coded_mu_grids == ()
     assert EncodeOptions(bytes_budget=32, basis_coding="packed").coded_mu_grids == ()

@@ -131,8 +131,9 @@ class BrdfEncoder:
         With ``bytes`` or ``max_relae`` and ``basis_coding`` ``"auto"`` or ``"coded"``: the grid exponents g, each
         1 to 5, of the candidate records whose μ is entropy-coded in the coded basis layer (format 2.5,
         μ = q·2^−g), offered beside the compact forms, each grid a pool of candidates of its own (the record
-        of least kept-slice error kept); one integer: that grid alone; 0 offers none. Default
-        :data:`~brdfcodec.codec.encoding.CODED_MU_STEPS_LOG2`: 2^−3 and 2^−2.
+        of least kept-slice error kept); one integer: that grid alone; 0 offers none. By default 2^−3 and 2^−2
+        (:data:`~brdfcodec.codec.encoding.CODED_MU_STEPS_LOG2`) under ``bytes`` of at most
+        :data:`~brdfcodec.codec.encoding.CODED_MU_COARSER_BUDGET`, else 2^−3 alone.
     """
 
     manifest: ModelManifest | None
@@ -155,13 +156,13 @@ class BrdfEncoder:
         basis_coding: BasisCoding = "auto",
         coded_mu_step: int | tuple[int, ...] | None = None,
     ) -> None:
-        from brdfcodec.codec.encoding import CODED_MU_STEPS_LOG2, EncodeOptions
+        from brdfcodec.codec.encoding import EncodeOptions
 
         self.options = EncodeOptions(
             effort=effort, bytes_budget=bytes, max_relae=max_relae, metric=metric, detail_step=detail_step,
             latent_itemsize=2 if latent_dtype == "float16" else 4, basis=basis, project_base=project_base,
             latent=latent, store_sigma=store_sigma, basis_coding=basis_coding,
-            coded_mu_step=CODED_MU_STEPS_LOG2 if coded_mu_step is None else coded_mu_step,
+            coded_mu_step=coded_mu_step,
         )
         manifest = resolve_model(model)
         network, _, loaded = load_model(manifest.folder, parts=("encoder",), device=str(device))

@@ -124,12 +124,18 @@ CODED_PRIORS: dict[bool, tuple[tuple[int, int], ...]] = {True: ((156, 28), (188,
 #: ``reports/results/rd-*-coded-mu-*.jsonl``; the grids compared (``"coded_mu_step"`` of a ``bvae bench rd``
 #: experiment, CV fold 1 at 16 and 32 B): ``reports/results/rd-cv3-fold1-b200-always-mu-grid.jsonl``.
 CODED_MU_STEP_LOG2: int = 3
-#: The grids of the coded-μ candidates rate control offers by default (:attr:`EncodeOptions.coded_mu_step`): 2^−3
-#: and the next coarser, 2^−2, each a pool of candidates of its own, the one of least kept-slice error kept per
-#: material (the grid is the form's ``mu step``, spec §3.2: nothing else changes in the file). At 16 B on CV fold 1
-#: the coarser grid alone lowered the error on the RGL-family materials and raised it on the MERL-family ones
-#: (``reports/results/rd-cv3-fold1-b200-always-mu-grids.jsonl``, where both are also measured together).
+#: The grids of the coded-μ candidates rate control offers by default under a size budget of at most
+#: :data:`CODED_MU_COARSER_BUDGET` bytes (:attr:`EncodeOptions.coded_mu_grids`): 2^−3 and the next coarser, 2^−2,
+#: each a pool of candidates of its own, the one of least kept-slice error kept per material (the grid is the
+#: form's ``mu step``, spec §3.2: nothing else changes in the file). On CV fold 1 both together were best on both
+#: families at 32 B; at 16 B the coarser grid alone lowered the error on the RGL-family materials and raised it on
+#: the MERL-family ones (``reports/results/rd-cv3-fold1-b200-always-mu-grids.jsonl``).
 CODED_MU_STEPS_LOG2: tuple[int, ...] = (CODED_MU_STEP_LOG2, CODED_MU_STEP_LOG2 - 1)
+#: The largest size budget (bytes) under which the default offers the coarser grid too: where μ's bytes are a large
+#: share of the record (about 5 of a 16 B record's, under the unit prior at 2^−3), and where it was measured. Above
+#: it, and under an error target, 2^−3 alone: a second pool of candidates costs encode time (benchmark
+#: ``encode-64B-coded-mu``: 1.86 times the encode without coded μ at 64 B with both grids, against a target of 1.6).
+CODED_MU_COARSER_BUDGET: int = 32
 _BASIS_CODINGS: tuple[str, ...] = get_args(BasisCoding)
 
 #: Most coefficients whose count takes one varint byte in a record's descriptor.
@@ -207,11 +213,13 @@ class EncodeOptions:
         coefficients (:data:`BasisCoding`; default ``"auto"``: per record, packed, format 2.3, or coded, format
         2.4, in the same bytes, whichever has the lower kept-slice error; ``"packed"`` or ``"coded"`` alone;
         ``"int8"``).
-    coded_mu_step : int or tuple of int
+    coded_mu_step : int, tuple of int or None
         The grid exponents g, each 1 to :data:`~brdfcodec.layers.coded_basis.MAX_MU_STEP_LOG2`, of the candidate
         records whose μ is entropy-coded in the coded basis layer (format 2.5, μ = q·2^−g; :attr:`coded_mu_grids`
         says when they are offered), each grid a pool of candidates of its own; one integer g: that grid alone;
-        0 or (): none. Default :data:`CODED_MU_STEPS_LOG2`. Stored as a tuple.
+        0 or (): none; None (the default): :data:`CODED_MU_STEPS_LOG2` under a size budget of at most
+        :data:`CODED_MU_COARSER_BUDGET` bytes, else :data:`CODED_MU_STEP_LOG2` alone. Stored as a tuple (None as
+        None).
     """
 
     effort: int = 1
@@ -225,10 +233,11 @@ class EncodeOptions:
     latent: LatentChoice = "always"
     store_sigma: bool = False
     basis_coding: BasisCoding = "auto"
-    coded_mu_step: int | tuple[int, ...] = CODED_MU_STEPS_LOG2
+    coded_mu_step: int | tuple[int, ...] | None = None
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "coded_mu_step", coded_mu_grids(self.coded_mu_step))
+        if self.coded_mu_step is not None:
+            object.__setattr__(self, "coded_mu_step", coded_mu_grids(self.coded_mu_step))
         if self.basis_coding not in _BASIS_CODINGS:
             raise ValueError(f"basis_coding must be one of {list(_BASIS_CODINGS)}, got {self.basis_coding!r}")
         if self.latent not in _LATENT_CHOICES:
@@ -260,9 +269,13 @@ class EncodeOptions:
         """The grid exponents g of the coded-μ candidates rate control offers (format 2.5), () where it offers
         none: :attr:`coded_mu_step` where records are packed or coded under a target and coded layers are
         allowed."""
-        steps = self.coded_mu_step
-        assert isinstance(steps, tuple)  # __post_init__
-        return steps if self.packed and self.basis_coding in ("auto", "coded") else ()
+        if not (self.packed and self.basis_coding in ("auto", "coded")):
+            return ()
+        if self.coded_mu_step is None:
+            small = self.bytes_budget is not None and self.bytes_budget <= CODED_MU_COARSER_BUDGET
+            return CODED_MU_STEPS_LOG2 if small else (CODED_MU_STEP_LOG2,)
+        assert isinstance(self.coded_mu_step, tuple)  # __post_init__
+        return self.coded_mu_step
 
     @property
     def coded(self) -> bool:
