@@ -56,6 +56,9 @@ TARGETS = {
     # an error-target encode (--max-relae 0.05) with the coded-μ records searched below its choice vs without:
     # a bisection of their size, a basis fit at each size it measures
     "encode-max-relae-coded-mu": 2.0,
+    # the default's second grid of coded-μ candidates (2^−2 beside 2^−3, budgets up to 32 B): read + encode at 32 B
+    # with both pools vs with 2^−3 alone (issue 48)
+    "encode-32B-coded-mu-grids": 1.5,
     "rgl-write": 40.0,  # one material as an RGL .bsdf (parameterisation + tensor file) vs as a MERL .binary (issue 38)
     # a 16 KB encode through the library with its default threads, beside one CPU-bound process per core, vs the
     # best explicit bc.set_num_threads(n) in the same rounds (issue 39)

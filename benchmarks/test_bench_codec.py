@@ -256,3 +256,15 @@ def test_encode_max_relae_with_coded_mu(benchmark, merl_file: Path) -> None:
     """The same encode with the default candidates: the coded-μ records' size bisected below the ladder's choice."""
     record = _timed_encode(benchmark, merl_file, "encode-max-relae-coded-mu", "candidate", max_relae=0.05)
     assert record.has_latent
+
+
+def test_encode_32b_baseline_with_one_coded_mu_grid(benchmark, merl_file: Path) -> None:
+    """Read and encode at 32 B with the coded-μ candidates on 2^−3 alone (``coded_mu_step=3``)."""
+    record = _timed_encode(benchmark, merl_file, "encode-32B-coded-mu-grids", "baseline", bytes=32, coded_mu_step=3)
+    assert record.coded_mu in (0, 3)
+
+
+def test_encode_32b_with_two_coded_mu_grids(benchmark, merl_file: Path) -> None:
+    """The same encode with the default candidates: at 32 B, coded-μ records on 2^−3 and 2^−2, a pool each."""
+    record = _timed_encode(benchmark, merl_file, "encode-32B-coded-mu-grids", "candidate", bytes=32)
+    assert record.has_latent and record.meta["rate"]["record_bytes"] <= 32

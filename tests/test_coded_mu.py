@@ -250,7 +250,55 @@ def test_a_budget_keeps_the_coded_mu_grid_of_lower_error(better: int) -> None:
     assert set(grids) == {3, 2}
     assert {p.label.split(" k=")[0] for p in result.points} >= {"coded-mu g=3", "coded-mu g=2"}
     assert result.record.coded_mu == better and result.record.basis.coded_mu[0] == better
-    assert result.payload_bytes <= 24
+    assert record_size(result.record) == result.payload_bytes <= 24
+
+
+def test_an_error_target_keeps_the_smallest_coded_mu_record_over_the_grids() -> None:
+    """Under an error target each grid's coded-μ records are bisected below the ladder's choice and the smallest
+    that meets the target is written: the coarser grid's where it meets the target with fewer coefficients (here
+    10 on 2^−2 against 20 on 2^−3), whichever grid is listed first."""
+    from brdfcodec.codec import rate
+    from brdfcodec.conventions import N_CHANNELS, N_PHI_D, N_THETA_D, N_THETA_H, NETWORK_INPUT_SHAPE
+    from brdfcodec.format.bvae import LatentRecord
+
+    target = np.full(NETWORK_INPUT_SHAPE, 0.5, dtype=np.float32)
+    masks = np.ones(NETWORK_INPUT_SHAPE, dtype=np.float32)
+    base = LatentRecord("m", _mu(), np.ones(8))
+    values = np.ones((N_CHANNELS, N_THETA_H, N_THETA_D, N_PHI_D))
+    mask = np.ones(values.shape, dtype=bool)
+
+    def fit(k: int, mu_storage: str | None, under_detail: bool, variant: str | None = None, *,  # noqa: ARG001
+            grid: int = 0) -> tuple:
+        if mu_storage != "coded":  # every other candidate decodes to the target only with all K coefficients
+            return base, quantise_coefficients(SHA, np.ones(k)), target * (1.0 if k >= 75 else 0.5)
+        q = np.rint(base.mu.astype(np.float64) * 2 ** grid).astype(np.int64)
+        layer = coded_coefficients(SHA, _coefficients(k=k), k - 1, (128, 40), first=8, coded_mu=(grid, q))
+        code = LatentRecord("m", (q / 2.0 ** grid).astype(np.float32), base.sigma)
+        return code, layer, target * (1.0 if k >= (10 if grid == 2 else 20) else 0.5)
+
+    def relae(table: np.ndarray) -> float:  # the error of a decode: 0 where it is the target, else 1
+        return 0.0 if np.allclose(table, reference) else 1.0
+
+    reference = rate.table_from_network_output(target)
+    original = rate.RelaeAgainst
+
+    class Exact:
+        def __init__(self, *args: object) -> None:
+            pass
+
+        def __call__(self, table: np.ndarray) -> object:
+            return type("R", (), {"overall": relae(table)})()
+
+    try:
+        rate.RelaeAgainst = Exact  # type: ignore[misc, assignment]
+        results = [rate.encode_layers(base, target * 0.5, target, masks, values=values, mask=mask, max_relae=0.5,
+                                      basis_fit=fit, basis_count=75, coded_mu_steps=grids)
+                   for grids in ((3, 2), (2, 3), (3,))]
+    finally:
+        rate.RelaeAgainst = original  # type: ignore[misc]
+    assert [result.record.coded_mu for result in results] == [2, 2, 3]
+    assert results[0].payload_bytes == results[1].payload_bytes < results[2].payload_bytes
+    assert all(record_size(result.record) == result.payload_bytes for result in results)
 
 
 @pytest.mark.slow  # encodes with the shipped model
@@ -289,7 +337,13 @@ def test_the_rate_points_include_coded_mu_records(red_plastic_file, monkeypatch)
     chosen = seen["points"][lowest_distortion(seen["points"], 32)]
     assert all(p.distortion >= chosen.distortion for p in seen["points"] if p.rate <= 32)
     record = bc.decode(data).record(bc.decode(data).names[0])
+    assert record.coded_mu == getattr(chosen.pool, "coded_mu_step", 0)  # the chosen pool's grid, or none
     assert (record.coded_mu != 0) == chosen.label.startswith("coded-mu")
+    for point in seen["points"]:  # every candidate is the record of its rate, on its pool's grid
+        made = point.pool.record(*point.option)
+        if getattr(made, "coded_mu", 0):
+            assert made.coded_mu == made.basis.coded_mu[0] == point.pool.coded_mu_step, point.label
+        assert record_size(made) == point.rate, point.label
 
 
 def test_an_edit_off_the_grid_stores_mu_in_the_latent_dtype_and_keeps_the_coefficients() -> None:

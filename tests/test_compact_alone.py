@@ -100,6 +100,7 @@ def test_the_shipped_model_writes_an_editable_ten_byte_record(tmp_path: Path, re
     from brdfcodec.codec import BrdfDecoder, BrdfEncoder
     from brdfcodec.format.bvae import read_bvae
     from brdfcodec.io.merl import read_merl
+    from brdfcodec.representation import network_input_from_table
 
     output = tmp_path / "ten.bvae"
     assert main(["compress", str(red_plastic_file), "-o", str(output), "--bytes", "10"]) == 0
@@ -110,11 +111,19 @@ def test_the_shipped_model_writes_an_editable_ten_byte_record(tmp_path: Path, re
     (written,) = parsed.records
     assert isinstance(written, LayeredRecord) and written.has_latent and written.detail is None
     assert record_size(written) <= 10
-    record = BrdfEncoder(bytes=10, coded_mu_step=0).encode(read_merl(red_plastic_file), name="red-plastic")
+    source = read_merl(red_plastic_file)
+    record = BrdfEncoder(bytes=10, coded_mu_step=0).encode(source, name="red-plastic")
     assert isinstance(record, LayeredRecord) and record.has_latent and record.basis is None and record.detail is None
     assert record_size(record) == 10  # the payload (8) and the descriptor beside the name
     decoder = BrdfDecoder()
     np.testing.assert_array_equal(decoder.mapped_record(record), decoder.decode_mapped(record.mu))
+    # what the default wrote instead errs no more on what rate control ranks by (the clamped kept slices' L1)
+    inputs, mask = network_input_from_table(source.values, source.mask)
+
+    def kept_error(chosen: LayeredRecord) -> float:
+        return float((np.abs(decoder.mapped_record(chosen) - inputs) * mask).sum())
+
+    assert kept_error(written) <= kept_error(record)
     record = written
     edited = tmp_path / "edited.bvae"
     assert main(["edit", "traverse", str(output), "-o", str(edited), "--dim", "1", "--values", "1"]) == 0, \

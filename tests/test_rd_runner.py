@@ -115,9 +115,16 @@ def test_config_errors_name_the_file(tmp_path: Path) -> None:
             {"label": "a", "model": "m", "coded_mu_step": step}]}))
         with pytest.raises(ValueError, match="bad.json: an experiment's 'coded_mu_step' is an integer from 0 to 5"):
             load_config(path)
+    for grids in ([], [3, 3], [3, 0], [2, 6], [True]):
+        path.write_text(json.dumps({"dataset": "x.h5", "experiments": [
+            {"label": "a", "model": "m", "coded_mu_step": grids}]}))
+        with pytest.raises(ValueError, match="bad.json: an experiment's 'coded_mu_step' list holds distinct"):
+            load_config(path)
     path.write_text(json.dumps({"dataset": "x.h5", "experiments": [{"label": "a", "model": "m", "coded_mu_step": 4},
-                                                                   {"label": "b", "model": "m"}]}))
-    assert [e.coded_mu_step for e in load_config(path).experiments] == [4, None]
+                                                                   {"label": "b", "model": "m"},
+                                                                   {"label": "c", "model": "m",
+                                                                    "coded_mu_step": [3, 2]}]}))
+    assert [e.coded_mu_step for e in load_config(path).experiments] == [4, None, (3, 2)]
     path.write_text(json.dumps({"dataset": "x.h5", "experiments": [{"label": "a", "model": "m",
                                                                     "short_references": False},
                                                                    {"label": "b", "model": "m"}]}))

@@ -117,8 +117,9 @@ CODED_PRIOR: dict[bool, tuple[int, int]] = {True: (156, 28), False: (190, 41)}
 #: (squared error of the layer's sum at those bytes, :func:`~brdfcodec.layers.coded_basis.choose_coding`) and
 #: fits the layer under the better one; each prior used in a file is a form of its own (spec §3.2, §4.8).
 CODED_PRIORS: dict[bool, tuple[tuple[int, int], ...]] = {True: ((156, 28), (188, 28)), False: ((190, 41), (190, 29))}
-#: The default grid exponent g of the records whose μ is entropy-coded in the coded basis layer (format 2.5, spec
-#: §4.9, μ = q · 2^−g), offered by rate control beside the fixed grid's 8 bytes (:attr:`EncodeOptions.coded_mu_step`,
+#: The first default grid exponent g (the only one above :data:`CODED_MU_COARSER_BUDGET` and under error targets) of
+#: the records whose μ is entropy-coded in the coded basis layer (format 2.5, spec §4.9, μ = q · 2^−g), offered by
+#: rate control beside the fixed grid's 8 bytes (:attr:`EncodeOptions.coded_mu_step`,
 #: 0: none). Under the unit Laplace prior a held-out material's μ (D = 8) codes to about 5 bytes in the layer's
 #: stream at g = 3; the layer refitted to the coarser μ makes up most of what the grid loses. Rows at 16 and 32 B:
 #: ``reports/results/rd-*-coded-mu-*.jsonl``; the grids compared (``"coded_mu_step"`` of a ``bvae bench rd``
@@ -127,9 +128,12 @@ CODED_MU_STEP_LOG2: int = 3
 #: The grids of the coded-μ candidates rate control offers by default under a size budget of at most
 #: :data:`CODED_MU_COARSER_BUDGET` bytes (:attr:`EncodeOptions.coded_mu_grids`): 2^−3 and the next coarser, 2^−2,
 #: each a pool of candidates of its own, the one of least kept-slice error kept per material (the grid is the
-#: form's ``mu step``, spec §3.2: nothing else changes in the file). On CV fold 1 both together were best on both
-#: families at 32 B; at 16 B the coarser grid alone lowered the error on the RGL-family materials and raised it on
-#: the MERL-family ones (``reports/results/rd-cv3-fold1-b200-always-mu-grids.jsonl``).
+#: form's ``mu step``, spec §3.2: nothing else changes in the file). On CV fold 1 (every held-out material in one
+#: library) both together were best on both families at 32 B. At 16 B they were worse than 2^−3 alone on the
+#: MERL-family materials (0.0496 against 0.0484) and equal on the RGL-family ones: the second grid's records add
+#: forms to the file's form table, and the header's larger share took a byte from every record; the coarser grid
+#: alone was best on the RGL family there (``reports/results/rd-cv3-fold1-b200-always-mu-grids.jsonl``). A file of
+#: one material has one form whatever its grid.
 CODED_MU_STEPS_LOG2: tuple[int, ...] = (CODED_MU_STEP_LOG2, CODED_MU_STEP_LOG2 - 1)
 #: The largest size budget (bytes) under which the default offers the coarser grid too: where μ's bytes are a large
 #: share of the record (about 5 of a 16 B record's, under the unit prior at 2^−3), and where it was measured. Above

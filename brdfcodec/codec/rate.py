@@ -80,6 +80,7 @@ from brdfcodec.errors import RateTargetError
 from brdfcodec.format.bvae import LatentRecord, record_overhead
 from brdfcodec.format.layered_record import MU_CODED, MU_INT8, MU_INT8_FIXED, LayeredRecord
 from brdfcodec.layers.basis import STEP_BYTES, BasisLayer, fits_fixed_mu_grid
+from brdfcodec.layers.coded_basis import MAX_MU_STEP_LOG2
 from brdfcodec.layers.detail import DetailLayer, decode_detail, encode_detail
 from brdfcodec.representation.metrics import RelaeAgainst
 from brdfcodec.representation.network_io import table_from_network_output
@@ -374,6 +375,9 @@ def encode_layers(
     """
     if sum(x is not None for x in (bytes_budget, max_relae, step)) != 1:
         raise ValueError("give exactly one of bytes_budget, max_relae or step")
+    if not all(1 <= g <= MAX_MU_STEP_LOG2 for g in coded_mu_steps) or len(set(coded_mu_steps)) != len(coded_mu_steps):
+        raise ValueError(f"coded_mu_steps must be distinct grid exponents from 1 to {MAX_MU_STEP_LOG2}, "
+                         f"got {tuple(coded_mu_steps)!r}")
     if metric not in ("mapped", "linear"):
         raise ValueError(f"metric must be 'mapped' or 'linear', got {metric!r}")
     full = basis_count if basis_fit is not None else 0

@@ -93,10 +93,10 @@ class Experiment:
         model's ``model.json`` does not list as trained on.
     latent : {"auto", "always"}
         Whether rate control may write records without a latent (format 2.1; ``bvae compress --latent``).
-    coded_mu_step : int, optional
-        The grid exponent of rate control's coded-μ candidates, 0 (none) to
-        :data:`~brdfcodec.layers.coded_basis.MAX_MU_STEP_LOG2` (``BrdfEncoder(coded_mu_step=)``);
-        the encoder's default when None.
+    coded_mu_step : int or tuple of int, optional
+        The grid exponents of rate control's coded-μ candidates: one, 0 (none) to
+        :data:`~brdfcodec.layers.coded_basis.MAX_MU_STEP_LOG2`, or several, each a pool of candidates
+        (``BrdfEncoder(coded_mu_step=)``); the encoder's default when None.
     short_references : bool, default True
         Whether the library names its decoder and basis by short references (format 2.6,
         ``brdfcodec.encode(short_references=)``), the encoder's default; False writes full hashes, 48 bytes more a
@@ -108,7 +108,7 @@ class Experiment:
     group: str = ""
     held_out: tuple[str, ...] | None = None
     latent: str = "auto"
-    coded_mu_step: int | None = None
+    coded_mu_step: int | tuple[int, ...] | None = None
     short_references: bool = True
 
 
@@ -131,7 +131,8 @@ def load_config(path: str | os.PathLike[str]) -> RdConfig:
     The file is a JSON object: ``dataset`` (path), ``experiments`` (list of
     objects with ``label``, ``model``, optional ``group``, ``held_out``,
     ``latent``: ``"auto"``, the default, or ``"always"``, as ``bvae compress --latent``, and
-    ``coded_mu_step``: 0 to 5, the coded-μ candidates' grid exponent, a study of the encoder's default, and
+    ``coded_mu_step``: 0 to 5, the coded-μ candidates' grid exponent, or a list of grids, a study of the
+    encoder's default, and
     ``short_references``: true, the default, or false, full hashes in the header as before format 2.6),
     optional ``budgets`` (list of int), ``effort`` (int), ``limit`` (int:
     only the first N held-out materials of each family, a quick look),
@@ -165,10 +166,20 @@ def load_config(path: str | os.PathLike[str]) -> RdConfig:
         if item.get("latent", "auto") not in ("auto", "always"):
             raise ValueError(f"{path}: an experiment's 'latent' is 'auto' or 'always', got {item['latent']!r}")
         step = item.get("coded_mu_step")
-        if step is not None and (isinstance(step, bool) or not isinstance(step, int) or
-                                 not 0 <= step <= MAX_MU_STEP_LOG2):
+        if isinstance(step, list):
+            from brdfcodec.codec.encoding import coded_mu_grids
+
+            try:
+                step = coded_mu_grids(step)
+            except ValueError:
+                step = None if step else False  # refused below, as an empty list
+            if not step:
+                raise ValueError(f"{path}: an experiment's 'coded_mu_step' list holds distinct integers from 1 to "
+                                 f"{MAX_MU_STEP_LOG2}, got {item['coded_mu_step']!r}")
+        elif step is not None and (isinstance(step, bool) or not isinstance(step, int) or
+                                   not 0 <= step <= MAX_MU_STEP_LOG2):
             raise ValueError(f"{path}: an experiment's 'coded_mu_step' is an integer from 0 to {MAX_MU_STEP_LOG2}, "
-                             f"got {step!r}")
+                             f"or a list of grids, got {step!r}")
         held = item.get("held_out")
         experiments.append(Experiment(str(item["label"]), base / item["model"], str(item.get("group", "")),
                                       None if held is None else tuple(str(n) for n in held),
@@ -362,7 +373,7 @@ def search_bytes_flag(
 def _bvae_rows(model: Path, names: Sequence[str], families: Sequence[str], inputs: np.ndarray, masks: np.ndarray,
                references: Sequence[Any], budgets: Sequence[int], effort: int,
                error: Callable[[Any, np.ndarray], tuple[float, float]], latent: str = "auto",
-               header_in_budget: bool = True, coded_mu_step: int | None = None,
+               header_in_budget: bool = True, coded_mu_step: int | tuple[int, ...] | None = None,
                short_references: bool = True) -> dict[str, list[dict[str, Any]]]:
     """brdfcodec's rows per family: every held-out material in one library at each budget, each family's bytes
     its records' (descriptor and payload, names aside) plus its materials' equal share of the header."""
@@ -408,7 +419,8 @@ def _bvae_rows(model: Path, names: Sequence[str], families: Sequence[str], input
                 "library_materials": len(names), "header_share_bytes": header_share,
                 "bytes_per_material": sum(record_bytes[names[i]] for i in chosen) / len(chosen) + header_share,
                 "latent": latent, "records_without_latent": without, "short_references": short_references,
-                **({} if coded_mu_step is None else {"coded_mu_step": coded_mu_step}), **_error_summary(errors),
+                **({} if coded_mu_step is None else {"coded_mu_step": coded_mu_step if isinstance(
+                    coded_mu_step, int) else list(coded_mu_step)}), **_error_summary(errors),
                 **_decode_time(seconds)})
     return rows
 
