@@ -10,7 +10,15 @@ from typing import TYPE_CHECKING, Any, Literal, Protocol, get_args
 import numpy as np
 
 from brdfcodec.codec.basis_operator import BasisOperator
-from brdfcodec.codec.rate import BasisFit, BasisOnlyFit, CompactAloneFit, Metric, MuStorage, encode_layers
+from brdfcodec.codec.rate import (
+    BasisFit,
+    BasisOnlyFit,
+    CompactAloneFit,
+    Metric,
+    MuStorage,
+    coded_mu_grids,
+    encode_layers,
+)
 from brdfcodec.codec.refine import (
     EFFORT_STEPS,
     LAYER_POLISH_PASSES,
@@ -37,7 +45,6 @@ from brdfcodec.layers.basis_layer import coded_coefficients
 from brdfcodec.layers.coded_basis import (
     CODED_HEADER_BYTES,
     MAX_MAGNITUDE,
-    MAX_MU_STEP_LOG2,
     choose_coding,
     encode_integers,
     mu_stream_lead,
@@ -128,17 +135,13 @@ CODED_MU_STEP_LOG2: int = 3
 #: The grids of the coded-μ candidates rate control offers by default under a size budget of at most
 #: :data:`CODED_MU_COARSER_BUDGET` bytes (:attr:`EncodeOptions.coded_mu_grids`): 2^−3 and the next coarser, 2^−2,
 #: each a pool of candidates of its own, the one of least kept-slice error kept per material (the grid is the
-#: form's ``mu step``, spec §3.2: nothing else changes in the file). On CV fold 1 (every held-out material in one
-#: library) both together were best on both families at 32 B. At 16 B they were worse than 2^−3 alone on the
-#: MERL-family materials (0.0496 against 0.0484) and equal on the RGL-family ones: the second grid's records add
-#: forms to the file's form table, and the header's larger share took a byte from every record; the coarser grid
-#: alone was best on the RGL family there (``reports/results/rd-cv3-fold1-b200-always-mu-grids.jsonl``). A file of
-#: one material has one form whatever its grid.
+#: form's ``mu step``, spec §3.2: nothing else changes in the file). Measured on CV fold 1 at 16 and 32 B, and what the
+#: second grid's forms cost a library at 16 B: ``reports/results/rd-cv3-fold1-b200-always-mu-grids.jsonl``
+#: (docs/results.md, "The coded μ on two grids").
 CODED_MU_STEPS_LOG2: tuple[int, ...] = (CODED_MU_STEP_LOG2, CODED_MU_STEP_LOG2 - 1)
 #: The largest size budget (bytes) under which the default offers the coarser grid too: where μ's bytes are a large
-#: share of the record (about 5 of a 16 B record's, under the unit prior at 2^−3), and where it was measured. Above
-#: it, and under an error target, 2^−3 alone: a second pool of candidates costs encode time (benchmark
-#: ``encode-64B-coded-mu``: 1.86 times the encode without coded μ at 64 B with both grids, against a target of 1.6).
+#: share of the record, and where it was measured. Above it, and under an error target, 2^−3 alone: a second pool
+#: of candidates costs encode time (benchmarks ``encode-64B-coded-mu`` and ``encode-32B-coded-mu-grids``).
 CODED_MU_COARSER_BUDGET: int = 32
 _BASIS_CODINGS: tuple[str, ...] = get_args(BasisCoding)
 
@@ -298,33 +301,6 @@ class EncodeOptions:
     def layered(self) -> bool:
         """Whether records get a detail layer (a target or a step is set)."""
         return any(x is not None for x in (self.bytes_budget, self.max_relae, self.detail_step))
-
-
-def coded_mu_grids(steps: object) -> tuple[int, ...]:
-    """The grid exponents of the coded-μ candidates (:attr:`EncodeOptions.coded_mu_step`) as a tuple: an integer g
-    is that grid alone, 0 none; a sequence lists them (distinct, each 1 to
-    :data:`~brdfcodec.layers.coded_basis.MAX_MU_STEP_LOG2`).
-
-    Raises
-    ------
-    ValueError
-        Anything else, naming ``coded_mu_step``.
-    """
-    def one(value: object) -> int:
-        if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or not (
-                1 <= value <= MAX_MU_STEP_LOG2):
-            raise ValueError(f"coded_mu_step must be an integer from 0 (none) to {MAX_MU_STEP_LOG2}, or a sequence "
-                             f"of distinct integers from 1 to {MAX_MU_STEP_LOG2}, got {steps!r}")
-        return int(value)
-
-    if isinstance(steps, (int, np.integer)) and not isinstance(steps, bool) and steps == 0:
-        return ()
-    if isinstance(steps, (tuple, list)):
-        grids = tuple(one(value) for value in steps)
-        if len(set(grids)) != len(grids):
-            one(None)  # a grid twice: refused with the same message
-        return grids
-    return (one(steps),)
 
 
 def layer_records(

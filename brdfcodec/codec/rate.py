@@ -296,6 +296,33 @@ class _Candidates:
         return mapped if s is None else mapped + decode_detail(self.detail(k, s)).reshape(mapped.shape)
 
 
+def coded_mu_grids(steps: object) -> tuple[int, ...]:
+    """The grid exponents of the coded-μ candidates (:attr:`EncodeOptions.coded_mu_step`) as a tuple: an integer g
+    is that grid alone, 0 none; a sequence lists them (distinct, each 1 to
+    :data:`~brdfcodec.layers.coded_basis.MAX_MU_STEP_LOG2`).
+
+    Raises
+    ------
+    ValueError
+        Anything else, naming ``coded_mu_step``.
+    """
+    def one(value: object) -> int:
+        if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or not (
+                1 <= value <= MAX_MU_STEP_LOG2):
+            raise ValueError(f"coded_mu_step must be an integer from 0 (none) to {MAX_MU_STEP_LOG2}, or a sequence "
+                             f"of distinct integers from 1 to {MAX_MU_STEP_LOG2}, got {steps!r}")
+        return int(value)
+
+    if isinstance(steps, (int, np.integer)) and not isinstance(steps, bool) and steps == 0:
+        return ()
+    if isinstance(steps, (tuple, list)):
+        grids = tuple(one(value) for value in steps)
+        if len(set(grids)) != len(grids):
+            one(None)  # a grid twice: refused with the same message
+        return grids
+    return (one(steps),)
+
+
 def encode_layers(
     base: LatentRecord,
     base_mapped: npt.NDArray[np.float32],
@@ -375,9 +402,7 @@ def encode_layers(
     """
     if sum(x is not None for x in (bytes_budget, max_relae, step)) != 1:
         raise ValueError("give exactly one of bytes_budget, max_relae or step")
-    if not all(1 <= g <= MAX_MU_STEP_LOG2 for g in coded_mu_steps) or len(set(coded_mu_steps)) != len(coded_mu_steps):
-        raise ValueError(f"coded_mu_steps must be distinct grid exponents from 1 to {MAX_MU_STEP_LOG2}, "
-                         f"got {tuple(coded_mu_steps)!r}")
+    coded_mu_steps = coded_mu_grids(tuple(coded_mu_steps))
     if metric not in ("mapped", "linear"):
         raise ValueError(f"metric must be 'mapped' or 'linear', got {metric!r}")
     full = basis_count if basis_fit is not None else 0

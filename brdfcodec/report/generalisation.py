@@ -167,13 +167,13 @@ def load_config(path: str | os.PathLike[str]) -> RdConfig:
             raise ValueError(f"{path}: an experiment's 'latent' is 'auto' or 'always', got {item['latent']!r}")
         step = item.get("coded_mu_step")
         if isinstance(step, list):
-            from brdfcodec.codec.encoding import coded_mu_grids
+            from brdfcodec.codec.rate import coded_mu_grids
 
             try:
-                step = coded_mu_grids(step)
+                step = coded_mu_grids(step) or None  # an empty list: refused below
             except ValueError:
-                step = None if step else False  # refused below, as an empty list
-            if not step:
+                step = None
+            if step is None:
                 raise ValueError(f"{path}: an experiment's 'coded_mu_step' list holds distinct integers from 1 to "
                                  f"{MAX_MU_STEP_LOG2}, got {item['coded_mu_step']!r}")
         elif step is not None and (isinstance(step, bool) or not isinstance(step, int) or
