@@ -56,17 +56,18 @@ def test_fields_cover_a_layered_file_and_crcs_are_recomputed(seed_folder: Path) 
 
 
 def test_fields_of_a_file_with_short_references_and_a_coded_mu() -> None:
-    """bvae compress writes short references (format 2.6) and coded-μ forms (2.5): the fields the mutators aim at
-    are where the reader reads them, up to the payload CRC-32 that fix_bvae mends."""
+    """bvae compress writes short references (format 2.6), coded-μ forms (2.5) and form variants (2.7): the fields
+    the mutators aim at are where the reader reads them, up to the payload CRC-32 that fix_bvae mends."""
     from brdfcodec.errors import BvaeChecksumError
     from brdfcodec.format.bvae import parse_bvae
 
     vectors = Path(__file__).resolve().parents[1] / "spec" / "vectors" / "valid"
-    for name, wanted in (("reference-decode-short", "basis"), ("coded-mu", "form0.mu_step")):
+    for name, wanted in (("reference-decode-short", "basis"), ("coded-mu", "form0.mu_step"),
+                         ("form-variants", "form3.changes")):
         data = (vectors / f"{name}.bvae").read_bytes()
         fields = {field.name: field for field in bvae_fields(data)}
         assert {wanted, "payload_crc32", "payload"} <= set(fields), name
-        assert fields["latent_dim"].start == 24 + (8 if name.endswith("short") else 32)
+        assert fields["latent_dim"].start == 24 + (8 if name.endswith(("short", "variants")) else 32)
         assert data[fields["payload_crc32"].start : fields["payload_crc32"].end] == struct.pack(
             "<I", zlib.crc32(data[fields["payload"].start :]))
         changed = bytearray(data)

@@ -55,12 +55,17 @@ def test_manifest_covers_what_the_spec_asks_for() -> None:
     # Short references (2.6): a file that names the shipped decoder and basis by 8 bytes decodes; misread fields fail.
     assert "reference-decode-short" in valid
     assert {"short-references-over-full-hashes", "short-references-truncated", "unknown-flag"} <= invalid
+    # Form variants (2.7): a valid table of variants (one of a variant); a base that is not an earlier layered form,
+    # a changes byte naming nothing, a reserved bit or a field the base lacks, the same form twice, a range.
+    assert "form-variants" in valid
+    assert {"variant-base-later", "variant-base-latent", "variant-no-change", "variant-reserved-bit",
+            "variant-absent-field", "variant-same-as-base", "variant-first-range"} <= invalid
     without = [r for v in MANIFEST["valid"] for r in v["records"] if r.get("layers", {}).get("mu") == "none"]
     assert len(without) == 6 and all(r["mu"] is None and r["layers"]["sigma"] == "none" for r in without)
     assert {"reference.basis-only", "reference.basis-only-detail"} <= set(MANIFEST["decode_layers"]["values"])
     projected = [r for v in MANIFEST["valid"] for r in v["records"]
                  if "project" in r.get("layers", {}).get("basis", {})]
-    assert len(projected) == 2 and all(r["layers"]["basis"]["project"] == 50 for r in projected)
+    assert len(projected) == 3 and all(r["layers"]["basis"]["project"] == 50 for r in projected)
     compact = [r for v in MANIFEST["valid"] for r in v["records"] if r.get("layers", {}).get("mu") == "int8"]
     assert len(compact) == 2 and all(r["layers"]["sigma"] == "log2-u8-shared" for r in compact)
     assert MANIFEST["decode"]["values"] and MANIFEST["decode"]["rtol"] == 1e-3
@@ -73,7 +78,7 @@ def test_manifest_covers_what_the_spec_asks_for() -> None:
 def test_valid_vector_reads_as_listed(vector: dict[str, Any]) -> None:
     parsed = parse_bvae((VECTORS / vector["file"]).read_bytes(), vector["file"])
     header = parsed.header
-    assert (FORMAT_MAJOR, FORMAT_MINOR) == (2, 6) and MANIFEST["format_version"] == "2.6"
+    assert (FORMAT_MAJOR, FORMAT_MINOR) == (2, 7) and MANIFEST["format_version"] == "2.7"
     assert f"{header.major}.{header.minor}" == vector["format_version"]  # the lowest version that holds the file
     assert header.decoder.sha256 == vector["decoder_sha256"]
     assert header.basis_sha256 == vector["basis_sha256"]

@@ -57,8 +57,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
                         help="store each material's provenance in the file: source SHA-256 and kind, measured RelAE, "
                         "encoder, effort and rate control (by default the file holds names and records only)")
     parser.add_argument("--full-references", action="store_true",
-                        help="name the decoder and the shared basis by their full SHA-256, for readers older than "
-                        "format 2.6 (by default the first 8 bytes of each: 48 bytes less a file with basis layers)")
+                        help="name the decoder and the shared basis by their full SHA-256 and write every record "
+                        "form in full, for readers older than format 2.6 (by default the first 8 bytes of each, 48 "
+                        "bytes less a file with basis layers, and forms that differ from an earlier one in a few "
+                        "numbers as those numbers, format 2.7)")
     parser.add_argument("--batch-size", type=int, default=8, help="materials encoded at once (default 8)")
     parser.add_argument("--force", action="store_true", help="replace an existing output file")
     # --- issue 14: refinement and rate control (brdfcodec.layers)

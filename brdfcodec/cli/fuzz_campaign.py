@@ -83,7 +83,7 @@ CLI_SEEDS: dict[str, list[str]] = {
 
 def _writer_seeds() -> dict[str, bytes]:
     """Seeds the library's writer makes: forms the command line chooses per material (μ int8 with a step,
-    projected bases, a basis with a detail layer), a graft beside a latent record."""
+    projected bases, a basis with a detail layer), a graft beside a latent record, a library of form variants."""
     import numpy as np
 
     from brdfcodec.codec import BrdfDecoder
@@ -115,6 +115,11 @@ def _writer_seeds() -> dict[str, bytes]:
     seeds = {name: encode_bvae([record], decoder.reference) for name, record in records.items()}
     seeds["w-graft-latent"] = encode_bvae([LatentRecord("p", code(), sigma, {"effort": 1}),
                                            GraftRecord("q", code(), sigma, (1, 4), [0.25, -1.0])], decoder.reference)
+    # A library whose forms differ in their first vector and projection: written as variants (format 2.7).
+    seeds["w-form-variants"] = encode_bvae(
+        [LayeredRecord(name, code(), sigma, basis=basis(6, first, project), compact_sigma=True)
+         for name, first, project in (("d", 8, 40), ("e", 0, 40), ("f", 8, 0), ("g", 0, 0))],
+        decoder.reference, short_references=True)
     return seeds
 
 

@@ -153,8 +153,9 @@ def encode(
         :class:`BrdfEncoder` (by default 2^−3 and 2^−2 under ``bytes`` of at most 32, else 2^−3).
     short_references : bool, default True
         Name the decoder and the shared basis by the first 8 bytes of their SHA-256 (format 2.6,
-        ``spec/bvae-format.md`` §3.1): 24 bytes less a file, 48 with basis layers. ``False`` writes their full
-        hashes, for readers older than 2.6.
+        ``spec/bvae-format.md`` §3.1): 24 bytes less a file, 48 with basis layers, and write a record form that
+        differs from an earlier one in a few numbers as those numbers (format 2.7, §3.2). ``False`` writes their
+        full hashes and every form in full, for readers older than 2.6.
 
     Returns
     -------

@@ -46,6 +46,14 @@ from brdfcodec.format.container import (
     RecordEntry,
     _Form,
 )
+from brdfcodec.format.form_variants import (
+    LAYERED_KIND,
+    RESERVED_CHANGE_BITS,
+    VARIANT_FIELDS,
+    VARIANT_KIND,
+    resolve_variant,
+    split_layered_form,
+)
 from brdfcodec.format.layered_record import (
     UnsupportedLayerError,
     latent_values_stored,
@@ -233,6 +241,56 @@ def _parse_form(path: str, cursor: _Cursor, i: int, latent_dim: int, basis_sha: 
     return _Form("layered", (), layers)
 
 
+def _parse_variant(path: str, cursor: _Cursor, i: int, written: list[bytes]) -> bytes:
+    """A variant (kind 3, since 2.7; spec §3.2) after its kind byte: its base, the fields it changes and their
+    values, returned as the form it makes written in full (which the caller then checks as any full form)."""
+    where = f"record form {i}"
+    base = cursor.varint(f"{where}'s base form")
+    if base >= i:
+        raise _fail(path, f"{where} is a variant of form {base}, which is not an earlier form")
+    if written[base][0] != LAYERED_KIND:
+        raise _fail(path, f"{where} is a variant of form {base}, which is not a layered form")
+    changes = cursor.u8(f"{where}'s changes")
+    if changes & RESERVED_CHANGE_BITS:
+        raise UnsupportedVersionError(path, f"{where} changes fields unknown to this reader (bits "
+                                      f"0x{changes & RESERVED_CHANGE_BITS:02x}); upgrade brdfcodec")
+    if not changes:
+        raise _fail(path, f"{where} is a variant of form {base} that changes nothing (the form twice)")
+    _, fields = split_layered_form(written[base])
+    named = [name for bit, name in enumerate(VARIANT_FIELDS) if changes >> bit & 1]
+    absent = [name for name in named if name not in fields]
+    if absent:
+        raise _fail(path, f"{where} changes the {absent[0].replace('_', ' ')} of form {base}, which has none")
+    values: dict[str, bytes] = {}
+    for name in named:
+        if name in ("first", "project"):
+            start = cursor.at
+            cursor.varint(f"{where}'s basis {name}")
+            values[name] = cursor.data[start : cursor.at]
+        else:
+            values[name] = cursor.take(2 if name == "prior" else 1, f"{where}'s {name.replace('_', ' ')}")
+    return resolve_variant(written[base], values)
+
+
+def _parse_form_table(path: str, cursor: _Cursor, count: int, latent_dim: int,
+                      basis_sha: str | None) -> tuple[list[_Form], list[bytes]]:
+    """The forms (§3.2) and each one's bytes written in full: a variant (since 2.7) is rebuilt from its base
+    and checked as the full form it makes, where a full form's fields are checked (§7 step 5)."""
+    forms: list[_Form] = []
+    written: list[bytes] = []
+    for i in range(count):
+        start = cursor.at
+        if cursor.u8(f"record form {i}'s kind") == VARIANT_KIND:
+            full = _parse_variant(path, cursor, i, written)
+            forms.append(_parse_form(path, _Cursor(path, full), i, latent_dim, basis_sha))
+        else:
+            cursor.at = start
+            forms.append(_parse_form(path, cursor, i, latent_dim, basis_sha))
+            full = cursor.data[start : cursor.at]
+        written.append(full)
+    return forms, written
+
+
 def _parse_header(path: str, stored: bytes, preamble_fields: tuple[int, ...], file_size: int) -> BvaeHeader:
     """The binary header (§3): file-level fields, the form table, the record index, the payload CRC, metadata."""
     major, minor, flags, header_length, _ = preamble_fields
@@ -252,8 +310,8 @@ def _parse_header(path: str, stored: bytes, preamble_fields: tuple[int, ...], fi
     form_count = cursor.u8("the form count")
     if not form_count:
         raise _fail(path, "the form table is empty")
-    forms = [_parse_form(path, cursor, i, latent_dim, basis_sha) for i in range(form_count)]
-    if len({repr(f) for f in forms}) != len(forms):
+    forms, written = _parse_form_table(path, cursor, form_count, latent_dim, basis_sha)
+    if len(set(written)) != len(written):
         raise _fail(path, "the form table states a form twice")
     if basis_sha is not None and not any(f.layers and "basis" in f.layers for f in forms):
         raise _fail(path, "the header names a shared basis, but no record form has a basis layer")

@@ -40,6 +40,7 @@ from brdfcodec.format.container import (
     LatentDtype,
     Record,
 )
+from brdfcodec.format.form_variants import VARIANT_KIND, best_variant
 from brdfcodec.format.layered_record import (
     layers_entry,
 )
@@ -177,10 +178,21 @@ def _form_bytes(form: tuple[Any, ...]) -> bytes:
     return out
 
 
-def _minor_needed(records: Sequence[Record], short_references: bool) -> int:
-    """The lowest minor version that holds these records (§2): 6 with short references, 5 once a record
-    entropy-codes μ, 4 once a basis layer is entropy-coded, 3 once one is packed, 2 once a record stores a latent
-    without σ, else 1."""
+def _form_table(forms: Sequence[tuple[Any, ...]], variants: bool) -> list[bytes]:
+    """The form table's entries (§3.2): each form in full, or, with ``variants`` (since 2.7), as the variant of
+    an earlier form where that is shorter (:func:`~brdfcodec.format.form_variants.best_variant`)."""
+    full = [_form_bytes(form) for form in forms]
+    if not variants:
+        return full
+    return [best_variant(entry, full[:i]) for i, entry in enumerate(full)]
+
+
+def _minor_needed(records: Sequence[Record], short_references: bool, variants: bool = False) -> int:
+    """The lowest minor version that holds these records (§2): 7 once a form is a variant, 6 with short
+    references, 5 once a record entropy-codes μ, 4 once a basis layer is entropy-coded, 3 once one is packed, 2
+    once a record stores a latent without σ, else 1."""
+    if variants:
+        return 7
     if short_references:
         return 6
     if any(getattr(r, "coded_mu", 0) for r in records):
@@ -200,6 +212,7 @@ def encode_bvae(
     latent_dtype: LatentDtype = "float32",
     compress_header: bool | None = None,
     short_references: bool | None = None,
+    form_variants: bool | None = None,
 ) -> bytes:
     """Serialise records to the bytes of a ``.bvae`` file (format 2; the preamble states the lowest minor version
     the file needs, §2).
@@ -225,6 +238,12 @@ def encode_bvae(
         less for a file with basis layers, 24 without, and a file that readers before 2.6 refuse. By default,
         only where ``decoder`` or a record's basis layer is itself a short reference (read from such a file):
         full hashes cannot be written then, and ``False`` is refused.
+    form_variants : bool, optional
+        Write a layered form that differs from an earlier one in a few numbers (a prior, a μ grid, a first
+        vector) as those numbers where that is shorter (format 2.7, §3.2: 4–5 bytes instead of 9; files that
+        readers before 2.7 refuse, and only files with several layered forms change). By default, where the
+        file has short references: ``short_references=False`` writes a file for readers before 2.6, and with it
+        every form in full.
 
     Returns
     -------
@@ -295,7 +314,9 @@ def encode_bvae(
                                                                            _DTYPE_CODES[latent_dtype]))
     if bases:
         header += bytes.fromhex(bases[0])
-    header += bytes([len(forms)]) + b"".join(_form_bytes(f) for f in forms)
+    table = _form_table(list(forms), short_references if form_variants is None else form_variants)
+    variants = any(entry[0] == VARIANT_KIND for entry in table)
+    header += bytes([len(forms)]) + b"".join(table)
     header += _varint(len(records)) + b"".join(descriptors) + struct.pack("<I", zlib.crc32(data))
     if metadata:
         block = {"created_by": f"brdfcodec {__version__}", "decoder_name": decoder.name, "records": metadata}
@@ -312,7 +333,7 @@ def encode_bvae(
         header += stored
     if len(header) > MAX_HEADER_BYTES:
         raise ValueError(f"stored header of {len(header)} bytes exceeds {MAX_HEADER_BYTES}; split the library")
-    minor = _minor_needed(records, short_references)
+    minor = _minor_needed(records, short_references, variants)
     head = _PREAMBLE.pack(MAGIC, FORMAT_MAJOR, minor, flags, len(header), 0)[:_CRC_COVERED_PREAMBLE]
     crc = zlib.crc32(header, zlib.crc32(head))
     return head + struct.pack("<I", crc) + bytes(header) + data

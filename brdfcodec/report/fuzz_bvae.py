@@ -113,6 +113,16 @@ def bvae_fields(data: bytes) -> list[Field]:
                     cur.take(f"form{f}.mu_step", 1, "u8")
                 if layers & 2:
                     cur.take(f"form{f}.detail_form", 1, "u8")
+            elif kind == 3:  # a variant of an earlier layered form (format 2.7, spec §3.2): its layers are the base's
+                layers = forms[cur.varint(f"form{f}.base")]
+                changes = cur.take(f"form{f}.changes", 1, "u8")[0]
+                for bit, (field, size) in enumerate((("first", 0), ("project", 0), ("top", 1), ("prior", 2),
+                                                     ("mu_step", 1), ("detail_form", 1))):
+                    if changes >> bit & 1:
+                        if size:
+                            cur.take(f"form{f}.{field}", size, "u8" if size == 1 else "bytes")
+                        else:
+                            cur.varint(f"form{f}.{field}")
             forms.append(layers)
         for r in range(cur.varint("record_count")):
             cur.take(f"record{r}.name", cur.varint(f"record{r}.name_length"), "bytes")

@@ -178,7 +178,7 @@ def invalid_vectors() -> dict[str, tuple[bytes, str, str]]:
     add("major-version-3", assemble(stored, good, major=3), "unsupported", "major version 3")
     add("major-version-1", assemble(stored, good, major=1, minor=6), "unsupported",
         "major version 1 (the development format): refused, whatever follows")
-    add("unknown-kind", one(form=b"\x03"), "unsupported", "record kind code 3")
+    add("unknown-kind", one(form=b"\x04"), "unsupported", "record kind code 4")
     add("unknown-dtype", assemble(header([latent_form()], [descriptor("a", 0)], good, dtype=2), good),
         "unsupported", "latent_dtype code 2")
     add("latent-dim-zero", assemble(header([latent_form()], [descriptor("a", 0)], b"", dim=0), b""), "malformed",
@@ -382,6 +382,28 @@ def invalid_vectors() -> dict[str, tuple[bytes, str, str]]:
     add("coded-mu-short", coded_file(coded_mu_form + bytes([4]), coded), "malformed",
         "a coded mu whose stream holds the 3 coefficients' integers only: the 8 mu integers read first, and the "
         "bytes are not the shortest coding of what they decode to")
+    # Form variants (2.7, §3.2): kind 3, the base form's index, the changes byte, the changed fields.
+
+    def variant_file(forms: list[bytes]) -> bytes:
+        entries = [descriptor(n, i, count=3) + varint(len(coded)) for i, n in zip(range(2), "bc", strict=True)]
+        return assemble(header(forms, entries, coded + coded, basis=basis_sha), coded + coded, flags=2, minor=7)
+
+    add("variant-base-later", variant_file([coded_form, bytes([3, 1, 8, 80, 32])]), "malformed",
+        "form 1 a variant of form 1 (a variant's base is an earlier form)")
+    add("variant-base-latent", assemble(header([latent_form(), bytes([3, 0, 8, 80, 32])],
+                                               [descriptor("a", 0), descriptor("c", 1, count=3) + varint(4)],
+                                               good + coded, basis=basis_sha), good + coded, flags=2, minor=7),
+        "malformed", "a variant of a latent form (a variant's base is a layered form)")
+    add("variant-no-change", variant_file([coded_form, bytes([3, 0, 0])]), "malformed",
+        "a variant whose changes byte is 0 (it would be its base again)")
+    add("variant-reserved-bit", variant_file([coded_form, bytes([3, 0, 0x40])]), "unsupported",
+        "a variant whose changes byte sets bit 6 (reserved)")
+    add("variant-absent-field", variant_file([coded_form, bytes([3, 0, 0x10, 2])]), "malformed",
+        "a variant that changes the mu step of a form without a coded mu")
+    add("variant-same-as-base", variant_file([coded_form, bytes([3, 0, 8, 64, 32])]), "malformed",
+        "a variant that sets its base's prior again: the same form twice")
+    add("variant-first-range", variant_file([coded_form, bytes([3, 0, 1]) + varint(4096)]), "malformed",
+        "a variant whose first is 4096 (0 to 4095, checked as in a form written in full)")
     for label, name, why in [
         ("name-parent", "../UP", "a name holding '/' and '..'"),
         ("name-absolute", "/tmp/ESCAPED", "an absolute path as a name"),
@@ -580,6 +602,34 @@ def short_reference_records() -> tuple[list, DecoderReference, str, bool | None]
             SHIPPED_DECODER.shortened(), "float16", False)
 
 
+def form_variant_records() -> tuple[list, DecoderReference, str, bool | None]:
+    """Records of a file whose form table holds variants (since 2.7): coded-μ records that differ in their grid,
+    their prior, their first vector and projection, one of them a variant of a variant, beside a form of
+    another layout (μ in float32), written in full."""
+    from brdfcodec.format.layered_record import LayeredRecord
+    from brdfcodec.layers.basis import BasisLayer
+    from brdfcodec.layers.packed import packed_step
+
+    rng = np.random.default_rng(2033)  # its own draws: the other vectors keep their values
+    mu = lambda: (np.round(rng.normal(size=8) * 4) / 4).astype(np.float32)  # noqa: E731 - on the grids 2^-2, 2^-3
+    sigma = (2.0 ** -rng.integers(1, 6, size=8)).astype(np.float32)
+    sha = "cd" * 8  # a short reference (2.6)
+
+    def layer(first: int, project: int, prior: tuple[int, int]) -> BasisLayer:
+        return BasisLayer(sha, packed_step(100), np.array([25, -17, 0, 9, -2, 1]), first, project, prior=prior)
+
+    return ([LayeredRecord("gold.variant-base", mu(), sigma, basis=layer(8, 0, (156, 28)), coded_mu=3,
+                           store_sigma=False),
+             LayeredRecord("gold.variant-grid", mu(), sigma, basis=layer(8, 0, (156, 28)), coded_mu=2,
+                           store_sigma=False),
+             LayeredRecord("gold.variant-prior", mu(), sigma, basis=layer(8, 0, (188, 28)), coded_mu=3,
+                           store_sigma=False),
+             LayeredRecord("gold.variant-of-variant", mu(), sigma, basis=layer(0, 50, (156, 28)), coded_mu=2,
+                           store_sigma=False),
+             LayeredRecord("gold.full-form", mu(), sigma, basis=layer(8, 0, (156, 28)), store_sigma=False)],
+            TEST_DECODER.shortened(), "float32", False)
+
+
 def valid_records() -> dict[str, tuple[list, DecoderReference, str, bool | None]]:
     """name -> (records, decoder, latent dtype, compress header)."""
     rng = np.random.default_rng(2026)
@@ -651,6 +701,7 @@ def valid_records() -> dict[str, tuple[list, DecoderReference, str, bool | None]
         "coded-basis": coded_records(),
         "coded-mu": coded_mu_records(),
         "reference-decode-short": short_reference_records(),
+        "form-variants": form_variant_records(),
     }
 
 
@@ -716,7 +767,7 @@ def generate(folder: Path, *, with_reference: bool = True) -> dict[str, Any]:
     (folder / "valid").mkdir(parents=True, exist_ok=True)
     (folder / "invalid").mkdir(parents=True, exist_ok=True)
     manifest: dict[str, Any] = {
-        "format_version": "2.6",
+        "format_version": "2.7",
         "error_classes": {
             "malformed": "BvaeFormatError",
             "checksum": "BvaeChecksumError",
