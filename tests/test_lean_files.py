@@ -66,7 +66,10 @@ def test_every_material_of_a_library_keeps_within_its_budget(
     assert main(["info", "--json", str(out)]) == 0
     summary = json.loads(capsys.readouterr().out)
     # 2.3: packed basis layers; 2.4 when rate control (--basis-coding auto) entropy-codes one (§4.8)
-    assert summary["format_version"] == "2.6" and summary["metadata"] is False  # short references (spec §3.1)
+    # 2.6: short references (spec §3.1); 2.7 where the materials' forms differ in a prior, a grid or a first vector,
+    # written as variants of the first (§3.2)
+    assert summary["format_version"] == "2.7" and summary["metadata"] is False
+    assert read_bvae(out).header.form_count > 1
     for item in summary["materials"]:
         # a compact base without σ (format 2.2), μ coded in the layer's stream (2.5), or (format 2.1) no latent at
         # all where that was better

@@ -47,6 +47,7 @@ FORMAT_MAJOR = 2
 #: 2.4: entropy-coded basis layers (form layer bit 3, a prior of two bytes, a length per record: spec §4.8).
 #: 2.5: μ entropy-coded in the basis layer (form ``mu`` 4 and a grid exponent: spec §4.9).
 #: 2.6: short references (flag bit 2: the decoder and the shared basis named by 8 bytes of their SHA-256, §3.1).
+#: 2.7: form variants (form kind 3: an earlier layered form's index and the fields that differ, §3.2).
 #: A writer states the lowest minor version a file needs (2.1 unless a record leaves σ out, packs or codes its basis).
 FORMAT_MINOR = 7
 #: Largest stored header (binary index and stored metadata block), in bytes.

@@ -241,6 +241,11 @@ def _parse_form(path: str, cursor: _Cursor, i: int, latent_dim: int, basis_sha: 
     return _Form("layered", (), layers)
 
 
+#: The variant fields' names in messages (spec §3.2).
+_FIELD_NAMES = {"first": "basis first", "project": "basis projection", "top": "packed top width", "prior": "prior",
+                "mu_step": "mu step", "detail": "detail form"}
+
+
 def _parse_variant(path: str, cursor: _Cursor, i: int, written: list[bytes]) -> bytes:
     """A variant (kind 3, since 2.7; spec §3.2) after its kind byte: its base, the fields it changes and their
     values, returned as the form it makes written in full (which the caller then checks as any full form)."""
@@ -260,7 +265,7 @@ def _parse_variant(path: str, cursor: _Cursor, i: int, written: list[bytes]) -> 
     named = [name for bit, name in enumerate(VARIANT_FIELDS) if changes >> bit & 1]
     absent = [name for name in named if name not in fields]
     if absent:
-        raise _fail(path, f"{where} changes the {absent[0].replace('_', ' ')} of form {base}, which has none")
+        raise _fail(path, f"{where} changes the {_FIELD_NAMES[absent[0]]} of form {base}, which has none")
     values: dict[str, bytes] = {}
     for name in named:
         if name in ("first", "project"):
@@ -268,7 +273,9 @@ def _parse_variant(path: str, cursor: _Cursor, i: int, written: list[bytes]) -> 
             cursor.varint(f"{where}'s basis {name}")
             values[name] = cursor.data[start : cursor.at]
         else:
-            values[name] = cursor.take(2 if name == "prior" else 1, f"{where}'s {name.replace('_', ' ')}")
+            values[name] = cursor.take(2 if name == "prior" else 1, f"{where}'s {_FIELD_NAMES[name]}")
+        if values[name] == fields[name]:  # a variant names only what differs: one variant of a form on a base
+            raise _fail(path, f"{where} sets the {_FIELD_NAMES[name]} of form {base} to the value it has")
     return resolve_variant(written[base], values)
 
 

@@ -401,7 +401,19 @@ def invalid_vectors() -> dict[str, tuple[bytes, str, str]]:
     add("variant-absent-field", variant_file([coded_form, bytes([3, 0, 0x10, 2])]), "malformed",
         "a variant that changes the mu step of a form without a coded mu")
     add("variant-same-as-base", variant_file([coded_form, bytes([3, 0, 8, 64, 32])]), "malformed",
-        "a variant that sets its base's prior again: the same form twice")
+        "a variant that sets its base's prior to the value it has (a variant names only the fields that differ)")
+    add("variant-twice-through-variant", variant_file([coded_form, bytes([3, 0, 8, 80, 32]), bytes([3, 1, 8, 64, 32])]),
+        "malformed", "form 2, a variant of form 1 that sets the prior back to form 0's: form 0 twice")
+    add("variant-two-rules", variant_file([coded_form, bytes([3, 0, 0x50, 2])]), "unsupported",
+        "a variant whose changes byte sets reserved bit 6 and bit 4 (a mu step its base lacks): the reserved bit first")
+    add("variant-base-graft", assemble(header([graft_form([1]), bytes([3, 0, 8, 80, 32])],
+                                              [descriptor("a", 0), descriptor("c", 1, count=3) + varint(4)],
+                                              good + coded, basis=basis_sha), good + coded, flags=2, minor=7),
+        "malformed", "a variant of a graft form (a variant's base is a layered form)")
+    add("variant-detail-unknown", assemble(header([layered_form(0, 1, detail=0), bytes([3, 0, 0x20, 7])],
+                                                  [descriptor("a", 0), descriptor("c", 1)], good, basis=None),
+                                           good, minor=7),
+        "unsupported", "a variant that sets its base's detail form to 7, a code this reader does not know")
     add("variant-first-range", variant_file([coded_form, bytes([3, 0, 1]) + varint(4096)]), "malformed",
         "a variant whose first is 4096 (0 to 4095, checked as in a form written in full)")
     for label, name, why in [
