@@ -209,11 +209,23 @@ def test_the_coded_mu_step_option_is_0_to_5_or_distinct_grids(bad: object) -> No
 
 
 def test_the_coded_mu_grids_are_offered_only_where_coded_layers_are() -> None:
-    from brdfcodec.codec.encoding import CODED_MU_COARSER_BUDGET, CODED_MU_STEP_LOG2, CODED_MU_STEPS_LOG2, EncodeOptions
+    from brdfcodec.codec.encoding import (
+        CODED_MU_COARSER_BUDGET,
+        CODED_MU_COARSER_REACH,
+        CODED_MU_STEP_LOG2,
+        CODED_MU_STEPS_LOG2,
+        EncodeOptions,
+    )
 
     assert EncodeOptions(bytes_budget=32).coded_mu_grids == CODED_MU_STEPS_LOG2 == (CODED_MU_STEP_LOG2, 2)
-    assert CODED_MU_COARSER_BUDGET == 32  # the default's second grid: up to 32 B, where it was measured
-    assert EncodeOptions(bytes_budget=33).coded_mu_grids == (CODED_MU_STEP_LOG2,)
+    assert CODED_MU_COARSER_BUDGET == 32  # the default's second grid: up to 32 B, where it was measured ...
+    assert EncodeOptions(bytes_budget=32).coded_mu_caps == {}
+    # ... and its records of at most 32 B up to 40 B, so that a byte more does not lose them
+    assert EncodeOptions(bytes_budget=33).coded_mu_grids == CODED_MU_STEPS_LOG2 == EncodeOptions(
+        bytes_budget=CODED_MU_COARSER_REACH).coded_mu_grids
+    assert EncodeOptions(bytes_budget=CODED_MU_COARSER_REACH).coded_mu_caps == {2: CODED_MU_COARSER_BUDGET}
+    assert EncodeOptions(bytes_budget=CODED_MU_COARSER_REACH + 1).coded_mu_grids == (CODED_MU_STEP_LOG2,)
+    assert EncodeOptions(bytes_budget=64, coded_mu_step=(3, 2)).coded_mu_caps == {}  # asked for: not capped
     assert EncodeOptions(max_relae=0.05).coded_mu_grids == (CODED_MU_STEP_LOG2,)
     assert EncodeOptions(bytes_budget=64, coded_mu_step=(3, 2)).coded_mu_grids == (3, 2)  # asked: offered
     assert EncodeOptions(max_relae=0.05, coded_mu_step=4).coded_mu_grids == (4,)
@@ -251,6 +263,38 @@ def test_a_budget_keeps_the_coded_mu_grid_of_lower_error(better: int) -> None:
     assert {p.label.split(" k=")[0] for p in result.points} >= {"coded-mu g=3", "coded-mu g=2"}
     assert result.record.coded_mu == better and result.record.basis.coded_mu[0] == better
     assert record_size(result.record) == result.payload_bytes <= 24
+
+
+def test_a_capped_grid_offers_above_its_cap_the_records_it_offers_at_its_cap() -> None:
+    """A grid whose records are capped (the default's coarser grid between 33 and 40 B) offers under a larger budget
+    the same candidates as under the cap, so that the budget a byte above never loses the record it gave."""
+    from brdfcodec.codec.rate import encode_layers
+    from brdfcodec.conventions import NETWORK_INPUT_SHAPE
+    from brdfcodec.format.bvae import LatentRecord
+
+    target = np.full(NETWORK_INPUT_SHAPE, 0.5, dtype=np.float32)
+    masks = np.ones(NETWORK_INPUT_SHAPE, dtype=np.float32)
+    base = LatentRecord("m", _mu(), np.ones(8))
+
+    def fit(k: int, mu_storage: str | None, under_detail: bool, variant: str | None = None, *,  # noqa: ARG001
+            grid: int = 0) -> tuple:
+        if mu_storage != "coded":
+            return base, quantise_coefficients(SHA, np.ones(k)), target * 0.5
+        q = np.rint(base.mu.astype(np.float64) * 2 ** grid).astype(np.int64)
+        layer = coded_coefficients(SHA, _coefficients(k=k), k - 1, (128, 40), first=8, coded_mu=(grid, q))
+        code = LatentRecord("m", (q / 2.0 ** grid).astype(np.float32), base.sigma)
+        return code, layer, target * (0.99 if grid == 2 else 0.9 + 0.001 * k)  # only grid 2 is close
+
+    def encode(budget: int, caps: dict[int, int] | None) -> object:
+        return encode_layers(base, target * 0.5, target, masks, bytes_budget=budget, basis_fit=fit, basis_count=75,
+                             basis_variants=("8",), coded_mu_steps=(3, 2), coded_mu_caps=caps).record
+
+    at_cap = encode(32, None)
+    assert at_cap.coded_mu == 2
+    capped = encode(36, {2: 32})
+    assert capped.coded_mu == 2 and record_size(capped) == record_size(at_cap) <= 32
+    assert capped.basis.q.tolist() == at_cap.basis.q.tolist()
+    assert record_size(encode(36, None)) > 32  # uncapped, the grid's records grow with the budget
 
 
 def test_an_error_target_keeps_the_smallest_coded_mu_record_over_the_grids() -> None:

@@ -133,7 +133,9 @@ class BrdfEncoder:
         μ = q·2^−g), offered beside the compact forms, each grid a pool of candidates of its own (the record
         of least kept-slice error kept); one integer: that grid alone; 0 offers none. By default 2^−3 and 2^−2
         (:data:`~brdfcodec.codec.encoding.CODED_MU_STEPS_LOG2`) under ``bytes`` of at most
-        :data:`~brdfcodec.codec.encoding.CODED_MU_COARSER_BUDGET`, else 2^−3 alone.
+        :data:`~brdfcodec.codec.encoding.CODED_MU_COARSER_BUDGET`, 2^−2's records of at most that size beside
+        2^−3's under ``bytes`` up to :data:`~brdfcodec.codec.encoding.CODED_MU_COARSER_REACH` (so that a byte
+        more never loses them), else 2^−3 alone.
     """
 
     manifest: ModelManifest | None

@@ -143,6 +143,12 @@ CODED_MU_STEPS_LOG2: tuple[int, ...] = (CODED_MU_STEP_LOG2, CODED_MU_STEP_LOG2 -
 #: share of the record, and where it was measured. Above it, and under an error target, 2^−3 alone: a second pool
 #: of candidates costs encode time (benchmarks ``encode-64B-coded-mu`` and ``encode-32B-coded-mu-grids``).
 CODED_MU_COARSER_BUDGET: int = 32
+#: The largest size budget (bytes) under which the default keeps the coarser grid's records of at most
+#: :data:`CODED_MU_COARSER_BUDGET` bytes among the candidates (:attr:`EncodeOptions.coded_mu_caps`), so that a budget
+#: a byte above it does not lose a record it gave: on CV fold 1, ``--bytes 33`` returned records of 1–3 % more
+#: kept-slice error than ``--bytes 32`` on 2 of 4 MERL-family materials, and from 36 bytes the finer grid's larger
+#: records were better on all four (docs/results.md, "The coded μ's grids past 32 B").
+CODED_MU_COARSER_REACH: int = 40
 _BASIS_CODINGS: tuple[str, ...] = get_args(BasisCoding)
 
 #: Most coefficients whose count takes one varint byte in a record's descriptor.
@@ -225,8 +231,9 @@ class EncodeOptions:
         records whose μ is entropy-coded in the coded basis layer (format 2.5, μ = q·2^−g; :attr:`coded_mu_grids`
         says when they are offered), each grid a pool of candidates of its own; one integer g: that grid alone;
         0 or (): none; None (the default): :data:`CODED_MU_STEPS_LOG2` under a size budget of at most
-        :data:`CODED_MU_COARSER_BUDGET` bytes, else :data:`CODED_MU_STEP_LOG2` alone. Stored as a tuple (None as
-        None).
+        :data:`CODED_MU_COARSER_BUDGET` bytes, and up to :data:`CODED_MU_COARSER_REACH` with the coarser grid's
+        records capped at :data:`CODED_MU_COARSER_BUDGET` bytes (:attr:`coded_mu_caps`), else
+        :data:`CODED_MU_STEP_LOG2` alone. Stored as a tuple (None as None).
     """
 
     effort: int = 1
@@ -278,11 +285,22 @@ class EncodeOptions:
         allowed."""
         if not (self.packed and self.basis_coding in ("auto", "coded")):
             return ()
-        if self.coded_mu_step is None:
-            small = self.bytes_budget is not None and self.bytes_budget <= CODED_MU_COARSER_BUDGET
+        if self.coded_mu_step is None:  # the coarser grid's small records stay candidates a little above its budgets
+            small = self.bytes_budget is not None and self.bytes_budget <= CODED_MU_COARSER_REACH
             return CODED_MU_STEPS_LOG2 if small else (CODED_MU_STEP_LOG2,)
         assert isinstance(self.coded_mu_step, tuple)  # __post_init__
         return self.coded_mu_step
+
+    @property
+    def coded_mu_caps(self) -> dict[int, int]:
+        """The largest record size (bytes) of a grid's coded-μ candidates where it is below the budget: by default,
+        under budgets from :data:`CODED_MU_COARSER_BUDGET` + 1 to :data:`CODED_MU_COARSER_REACH` bytes, the coarser
+        grid's records of at most :data:`CODED_MU_COARSER_BUDGET` bytes (the ones a budget of that size offers);
+        else none."""
+        grids = self.coded_mu_grids
+        if self.coded_mu_step is not None or self.bytes_budget is None or len(grids) < 2:
+            return {}
+        return {grid: CODED_MU_COARSER_BUDGET for grid in grids[1:]} if self.bytes_budget > CODED_MU_COARSER_BUDGET else {}
 
     @property
     def coded(self) -> bool:
@@ -345,6 +363,7 @@ def layer_records(
                 decoder.network.config.latent_dim if decoder.network.config.linear_basis else 0),
             compact_alone_fit=_compact_alone_fit(decoder, base),
             coded_mu_steps=options.coded_mu_grids,
+            coded_mu_caps=options.coded_mu_caps,
         )
         chosen = result.record
         # record_bytes: what the budget caps (payload and index descriptor); payload_bytes: the payload alone

@@ -150,7 +150,8 @@ def encode(
         Whether rate control may write records without a latent, as for :class:`BrdfEncoder`.
     coded_mu_step : int or tuple of int, optional
         The grid exponents of rate control's coded-μ candidates (one integer: that grid alone; 0: none), as for
-        :class:`BrdfEncoder` (by default 2^−3 and 2^−2 under ``bytes`` of at most 32, else 2^−3).
+        :class:`BrdfEncoder` (by default 2^−3 and 2^−2 under ``bytes`` of at most 32, 2^−2's records of at most
+        32 bytes beside 2^−3's up to 40, else 2^−3).
     short_references : bool, default True
         Name the decoder and the shared basis by the first 8 bytes of their SHA-256 (format 2.6,
         ``spec/bvae-format.md`` §3.1): 24 bytes less a file, 48 with basis layers, and write a record form that

@@ -343,6 +343,7 @@ def encode_layers(
     basis_variants: Sequence[str] = (),
     compact_alone_fit: CompactAloneFit | None = None,
     coded_mu_steps: Sequence[int] = (),
+    coded_mu_caps: Mapping[int, int] | None = None,
 ) -> RateResult:
     """A base record, layered to a size budget, an error target or a fixed step.
 
@@ -394,6 +395,9 @@ def encode_layers(
         layer's bytes bisected (the smallest over the grids kept, the grid listed first on a tie); ``basis_fit``
         then receives ``"coded"`` as the μ storage and the grid as the keyword ``grid``, and must make a coded
         layer that carries μ on that grid. Empty: none.
+    coded_mu_caps : mapping of int to int, optional
+        For a grid g of ``coded_mu_steps``, the largest size (bytes) of its records under a size budget, where
+        that is below the budget (the records a smaller budget offers, so that a larger one keeps them).
 
     Raises
     ------
@@ -448,7 +452,7 @@ def encode_layers(
                                 {} if not full else
                                 {g: functools.partial(candidates_of, base, base_mapped, target, weights,
                                                       latent_itemsize, basis_fit, compact=True, coded_mu_step=g)
-                                 for g in coded_mu_steps})
+                                 for g in coded_mu_steps}, coded_mu_caps)
         if alone is not None and alone.storage_for(bytes_budget) is not None:
             # a candidate at every budget it fits, so that a byte more never loses what a smaller budget gave
             points.append(alone.point(bytes_budget))
@@ -566,7 +570,8 @@ def _smallest_coded_mu_meeting(pool: _Candidates, smaller_than: int, full: int, 
 def _budget_points(cands: _Candidates, bytes_budget: int, full: int, compact: bool,
                    variants: tuple[str | None, ...], tried: list[tuple[float | None, int, float | None]],
                    compact_pool: Callable[[], _Candidates],
-                   coded_pools: Mapping[int, Callable[[], _Candidates]] | None = None) -> list[RatePoint]:
+                   coded_pools: Mapping[int, Callable[[], _Candidates]] | None = None,
+                   coded_caps: Mapping[int, int] | None = None) -> list[RatePoint]:
     """Every candidate record of a size budget that fits it, with its rate and kept-slice distortion.
 
     The candidates, each the largest of its kind that fits (within a kind, more bytes lower the error): the base
@@ -575,7 +580,8 @@ def _budget_points(cands: _Candidates, bytes_budget: int, full: int, compact: bo
     more never loses what the compact base gave, issue 39); and min(k, n) int8 coefficients, for each n of
     :data:`DETAIL_BASIS_COUNTS`, under a detail layer at each step of the ladder search that fits (where a detail
     layer has room); and, for each grid g of ``coded_pools`` (its pool's factory), the most coefficients that fit
-    beside a μ entropy-coded on the grid 2^−g in their layer (format 2.5), in each of ``variants``.
+    beside a μ entropy-coded on the grid 2^−g in their layer (format 2.5), in each of ``variants``, within
+    ``coded_caps[g]`` bytes where that is given and below the budget.
     """
     pools: dict[bool | str, _Candidates] = {compact: cands}
     options: list[tuple[bool | str, int, float | None, str | None]] = [(compact, 0, None, None)]
@@ -590,7 +596,7 @@ def _budget_points(cands: _Candidates, bytes_budget: int, full: int, compact: bo
     for g, coded_pool in (coded_pools or {}).items():
         key = f"{MU_CODED}-{g}"
         pools[key] = coded_pool()
-        most = pools[key].most_coefficients(bytes_budget, full)
+        most = pools[key].most_coefficients(min(bytes_budget, (coded_caps or {}).get(g, bytes_budget)), full)
         if most:
             options += [(key, most, None, variant) for variant in variants]
     # A detail layer only where it fits beside its coefficients (no room at 64 B: 48 coefficients, no detail).
