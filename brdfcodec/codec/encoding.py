@@ -140,8 +140,9 @@ CODED_MU_STEP_LOG2: int = 3
 #: (docs/results.md, "The coded μ on two grids").
 CODED_MU_STEPS_LOG2: tuple[int, ...] = (CODED_MU_STEP_LOG2, CODED_MU_STEP_LOG2 - 1)
 #: The largest size budget (bytes) under which the default offers the coarser grid too: where μ's bytes are a large
-#: share of the record, and where it was measured. Above it, and under an error target, 2^−3 alone: a second pool
-#: of candidates costs encode time (benchmarks ``encode-64B-coded-mu`` and ``encode-32B-coded-mu-grids``).
+#: share of the record, and where it was measured. Above it its records of at most this size only, up to
+#: :data:`CODED_MU_COARSER_REACH`; above that, and under an error target, 2^−3 alone: a second pool of candidates
+#: costs encode time (benchmarks ``encode-64B-coded-mu`` and ``encode-32B-coded-mu-grids``).
 CODED_MU_COARSER_BUDGET: int = 32
 #: The largest size budget (bytes) under which the default keeps the coarser grid's records of at most
 #: :data:`CODED_MU_COARSER_BUDGET` bytes among the candidates (:attr:`EncodeOptions.coded_mu_caps`), so that a budget
