@@ -301,7 +301,9 @@ class EncodeOptions:
         grids = self.coded_mu_grids
         if self.coded_mu_step is not None or self.bytes_budget is None or len(grids) < 2:
             return {}
-        return {grid: CODED_MU_COARSER_BUDGET for grid in grids[1:]} if self.bytes_budget > CODED_MU_COARSER_BUDGET else {}
+        if self.bytes_budget <= CODED_MU_COARSER_BUDGET:
+            return {}
+        return {grid: CODED_MU_COARSER_BUDGET for grid in grids[1:]}
 
     @property
     def coded(self) -> bool:
