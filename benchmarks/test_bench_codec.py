@@ -268,3 +268,16 @@ def test_encode_32b_with_two_coded_mu_grids(benchmark, merl_file: Path) -> None:
     """The same encode with the default candidates: at 32 B, coded-μ records on 2^−3 and 2^−2, a pool each."""
     record = _timed_encode(benchmark, merl_file, "encode-32B-coded-mu-grids", "candidate", bytes=32)
     assert record.has_latent and record.meta["rate"]["record_bytes"] <= 32
+
+
+def test_encode_36b_baseline_with_one_coded_mu_grid(benchmark, merl_file: Path) -> None:
+    """Read and encode at 36 B with the coded-μ candidates on 2^−3 alone (``coded_mu_step=3``): the default above
+    32 B before ``CODED_MU_COARSER_REACH``."""
+    record = _timed_encode(benchmark, merl_file, "encode-36B-coded-mu-cap", "baseline", bytes=36, coded_mu_step=3)
+    assert record.coded_mu in (0, 3)
+
+
+def test_encode_36b_with_the_capped_coarser_grid(benchmark, merl_file: Path) -> None:
+    """The same encode with the default candidates: at 36 B, 2^−2's records of at most 32 B beside 2^−3's."""
+    record = _timed_encode(benchmark, merl_file, "encode-36B-coded-mu-cap", "candidate", bytes=36)
+    assert record.has_latent and record.meta["rate"]["record_bytes"] <= 36
