@@ -27,6 +27,7 @@ __all__ = [
     "LAYERED_KIND",
     "RESERVED_CHANGE_BITS",
     "VARIANT_FIELDS",
+    "VARIANT_FIELD_SIZES",
     "VARIANT_KIND",
     "best_variant",
     "resolve_variant",
@@ -39,6 +40,8 @@ LAYERED_KIND = 2
 VARIANT_KIND = 3
 #: The fields a variant may change, bit i of its ``changes`` byte naming field i, in the order a form lists them.
 VARIANT_FIELDS = ("first", "project", "top", "prior", "mu_step", "detail")
+#: Each variant field's size in bytes (0: a varint), as a form written in full stores it (§3.2).
+VARIANT_FIELD_SIZES = {"first": 0, "project": 0, "top": 1, "prior": 2, "mu_step": 1, "detail": 1}
 #: Bits of the ``changes`` byte no field is named by (unsupported when set).
 RESERVED_CHANGE_BITS = 0xFF & ~((1 << len(VARIANT_FIELDS)) - 1)
 

@@ -49,6 +49,7 @@ from brdfcodec.format.container import (
 from brdfcodec.format.form_variants import (
     LAYERED_KIND,
     RESERVED_CHANGE_BITS,
+    VARIANT_FIELD_SIZES,
     VARIANT_FIELDS,
     VARIANT_KIND,
     resolve_variant,
@@ -268,12 +269,12 @@ def _parse_variant(path: str, cursor: _Cursor, i: int, written: list[bytes]) -> 
         raise _fail(path, f"{where} changes the {_FIELD_NAMES[absent[0]]} of form {base}, which has none")
     values: dict[str, bytes] = {}
     for name in named:
-        if name in ("first", "project"):
+        if not VARIANT_FIELD_SIZES[name]:  # a varint
             start = cursor.at
             cursor.varint(f"{where}'s basis {name}")
             values[name] = cursor.data[start : cursor.at]
         else:
-            values[name] = cursor.take(2 if name == "prior" else 1, f"{where}'s {_FIELD_NAMES[name]}")
+            values[name] = cursor.take(VARIANT_FIELD_SIZES[name], f"{where}'s {_FIELD_NAMES[name]}")
         if values[name] == fields[name]:  # a variant names only what differs: one variant of a form on a base
             raise _fail(path, f"{where} sets the {_FIELD_NAMES[name]} of form {base} to the value it has")
     return resolve_variant(written[base], values)
