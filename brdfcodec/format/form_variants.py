@@ -69,22 +69,23 @@ def split_layered_form(full: bytes) -> tuple[bytes, dict[str, bytes]]:
     head, mu, bits, at = full[:4], full[1], full[3], 4
     fields: dict[str, bytes] = {}
 
-    def take(name: str, size: int) -> None:
+    def take(name: str) -> None:
         nonlocal at
+        size = VARIANT_FIELD_SIZES[name] or _varint_length(full, at)
         fields[name] = full[at : at + size]
         at += size
 
     if bits & _LAYER_BASIS:
-        take("first", _varint_length(full, at))
-        take("project", _varint_length(full, at))
+        take("first")
+        take("project")
         if bits & _LAYER_PACKED:
-            take("top", 1)
+            take("top")
         if bits & _LAYER_CODED:
-            take("prior", 2)
+            take("prior")
             if mu == _MU_CODED:
-                take("mu_step", 1)
+                take("mu_step")
     if bits & _LAYER_DETAIL:
-        take("detail", 1)
+        take("detail")
     if at != len(full):
         raise ValueError("bytes after the layered form's last field")
     return head, fields
