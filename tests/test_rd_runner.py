@@ -34,10 +34,9 @@ def fold_model(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
 @pytest.mark.slow  # trains, exports and encodes: > 10 s on 2 cores
 def test_rows_compare_file_bytes_with_pca_of_the_same_training_materials(fold_model: tuple[Path, Path],
                                                                          tmp_path: Path, monkeypatch) -> None:
+    import brdfcodec
     from brdfcodec.cli.main import main
     from brdfcodec.report.rows import SCHEMA, read_rows
-
-    import brdfcodec
 
     dataset, model = fold_model
     asked: list[object] = []  # what the runner's encodes were asked for: the experiment's coded-μ grid
@@ -133,6 +132,41 @@ def test_config_errors_name_the_file(tmp_path: Path) -> None:
                                                                     "short_references": "no"}]}))
     with pytest.raises(ValueError, match="'short_references' is true or false"):
         load_config(path)
+    path.write_text(json.dumps({"dataset": "x.h5", "experiments": [{"label": "a", "model": "m",
+                                                                    "allocate": "library"},
+                                                                   {"label": "b", "model": "m"}]}))
+    assert [e.allocate for e in load_config(path).experiments] == ["library", "record"]
+    path.write_text(json.dumps({"dataset": "x.h5", "experiments": [{"label": "a", "model": "m",
+                                                                    "allocate": "files"}]}))
+    with pytest.raises(ValueError, match="bad.json: an experiment's 'allocate' is 'record' or 'library'"):
+        load_config(path)
+
+
+@pytest.mark.slow  # trains, exports and encodes at seven rungs: > 10 s on 2 cores
+def test_library_allocation_rows_keep_each_family_within_the_budget(fold_model: tuple[Path, Path],
+                                                                     tmp_path: Path, monkeypatch) -> None:
+    import brdfcodec
+    from brdfcodec.cli.main import main
+    from brdfcodec.report.rows import read_rows
+
+    dataset, model = fold_model
+    asked: list[dict[str, object]] = []
+    real_encode = brdfcodec.encode
+
+    def encode(*args: object, **options: object) -> bytes:
+        asked.append(options)
+        return real_encode(*args, **options)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(brdfcodec, "encode", encode)
+    config = tmp_path / "rd.json"
+    config.write_text(json.dumps({"dataset": str(dataset), "budgets": [32],
+                                  "experiments": [{"label": "fold0", "model": str(model), "allocate": "library"}]}))
+    assert main(["bench", "rd", "--config", str(config), "-o", str(tmp_path / "rows.jsonl"), "--quiet"]) == 0
+    ours = [row for row in read_rows(tmp_path / "rows.jsonl") if row["point"] == "bvae"]
+    assert ours and all(row["allocate"] == "library" and row["bytes_flag"] == 32 for row in ours)
+    assert all(row["bytes_per_material"] <= 32 for row in ours)  # each family's records and header share
+    assert len(asked) == 1 and asked[0]["allocate"] == "library" and asked[0]["bytes"] == 32  # one encode, no search
+    assert asked[0]["groups"] == ["analytic"] * len(ours[0]["materials"])
 
 
 def _row(group: str, point: str, budget: int, errors: list[float], size: float) -> dict:

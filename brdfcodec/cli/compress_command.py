@@ -87,6 +87,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
                         "a basis layer (format 1.6): auto (default: per material, where it lowers the error, in "
                         "records without a detail layer), always (the flag alone) or never; projecting usually lowers "
                         "the error on materials the model was not trained on, at some decode time")
+    parser.add_argument("--allocate", choices=("record", "library"), default=None,
+                        help="with --bytes N: record (default) makes each record the best it can be within N bytes "
+                        "of its own, the file's header on top; library keeps the whole file within N bytes per "
+                        "material besides the names, its header included, and gives each material the bytes where "
+                        "they lower the library's error most (records from about 0.6 to 2 N; about 7 times the "
+                        "encode time)")
     parser.add_argument("--latent", choices=("always", "auto"), default=None,
                         help="with --bytes/--max-relae: always (default) keeps an editable latent code in every "
                         "record; auto may write a record without a latent code where its error is lower (format "
@@ -216,6 +222,7 @@ def _latent_summary(records: list[Record], dtype: str) -> str:
 def run(args: argparse.Namespace) -> int:
     """Encode every input (:func:`brdfcodec.codec.encode_records`), write the file, print RelAE and sizes."""
     from brdfcodec.codec import BrdfEncoder, encode_records
+    from brdfcodec.codec.library_budget import allocate_library
 
     require_output_type(args.output, "compress", "compressed materials", (".bvae",))
     if args.batch_size < 1:
@@ -230,6 +237,8 @@ def run(args: argparse.Namespace) -> int:
     if args.project_base is not None and (args.no_basis or (args.bytes is None and args.max_relae is None)):
         raise UsageError("--project-base applies to records with a basis layer: give --bytes or --max-relae, "
                          "without --no-basis")
+    if args.allocate is not None and args.bytes is None:
+        raise UsageError("--allocate spreads a size budget: give --bytes")
     if args.latent is not None and args.bytes is None and args.max_relae is None:
         raise UsageError("--latent chooses between the records of rate control: give --bytes or --max-relae")
     latent = args.latent or "always"
@@ -245,13 +254,20 @@ def run(args: argparse.Namespace) -> int:
         latent_dtype=dtype, latent=latent, store_sigma=args.sigma, basis_coding=args.basis_coding,
     )
     with tqdm(total=len(items), desc="compress", unit="material", disable=len(items) < 2 or None) as bar:
-        records: list[Record] = encode_records(
-            (item.load() for item in items),
-            encoder=encoder,
-            measure_error=not args.no_measure,
-            batch_size=args.batch_size,
-            on_batch=lambda batch: bar.update(len(batch)),
-        )
+        if args.allocate == "library":
+            records: list[Record] = allocate_library(
+                (item.load() for item in items), encoder, count=len(items), latent_dtype=dtype,
+                short_references=not args.full_references, provenance=args.provenance, batch_size=args.batch_size,
+                decoder=None if args.no_measure else encoder.decoder, on_batch=bar.update,
+            )
+        else:
+            records = encode_records(
+                (item.load() for item in items),
+                encoder=encoder,
+                measure_error=not args.no_measure,
+                batch_size=args.batch_size,
+                on_batch=lambda batch: bar.update(len(batch)),
+            )
     lines = []
     for record in records:
         # a record without a latent (format 2.1) decodes like any other, but edits refuse it: say so

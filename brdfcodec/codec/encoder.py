@@ -24,6 +24,7 @@ from brdfcodec.format.bvae import (
     LatentDtype,
     LatentRecord,
     Record,
+    record_size,
 )
 from brdfcodec.format.layered_record import LayeredRecord
 from brdfcodec.io.merl import MerlBRDF, source_digest
@@ -37,7 +38,7 @@ from brdfcodec.representation.metrics import NEAR_BLACK_REFLECTANCE, relae_both
 from brdfcodec.runtime.threads import codec_threads
 
 if TYPE_CHECKING:
-    from brdfcodec.codec.encoding import BasisCoding, LatentChoice, ProjectBase
+    from brdfcodec.codec.encoding import BasisCoding, LatentChoice, ProjectBase, Rung
 
 from brdfcodec.codec.black import black_record, is_near_black_source
 from brdfcodec.codec.decoder import BrdfDecoder, _EvalMode
@@ -237,6 +238,51 @@ class BrdfEncoder:
             return records
         # σ left out (format 2.2): a plain record becomes μ alone (rate control already left σ out of its own).
         return [LayeredRecord.code_only(r) if type(r) is LatentRecord else r for r in records]
+
+    def encode_rungs(
+        self,
+        names: Sequence[str],
+        inputs: np.ndarray,
+        masks: np.ndarray,
+        sources: Sequence[MerlBRDF | None],
+        budgets: Sequence[int],
+    ) -> list[list[Rung]]:
+        """Per material, its records under each of ``budgets`` (record budgets in bytes, as ``bytes`` counts them):
+        the ladder library allocation chooses from (:func:`~brdfcodec.codec.allocation.allocate_bytes`).
+
+        The latent is refined once per material and rate control runs once per budget, with this encoder's options
+        but the budget (its ``bytes``, ``max_relae`` or step set aside). A budget that makes no larger record than
+        a smaller one adds no rung; a near-black source (issue 49) has one rung, its black record, where that fits
+        the smallest budget.
+
+        Returns
+        -------
+        list of list of Rung
+            Per material, in the order given, its rungs by rising size (at least one).
+
+        Raises
+        ------
+        RateTargetError
+            A material fits none of the budgets.
+        """
+        from brdfcodec.codec.encoding import Rung, layer_record_rungs
+
+        mu, sigma = self.posterior_from_inputs(inputs, batch_size=max(len(inputs), 1))
+        records = self.make_records(names, mu, sigma, sources)
+        latent_dtype: LatentDtype = "float16" if self.options.latent_itemsize == 2 else "float32"
+        out: dict[int, list[Rung]] = {}
+        for i, source in enumerate(sources):
+            made = black_record(records[i], store_sigma=self.options.store_sigma, bytes_budget=min(budgets),
+                                latent_dtype=latent_dtype) if is_near_black_source(source) else None
+            if made is not None:  # decodes exactly black: no error to trade
+                out[i] = [Rung(made, record_size(made, latent_dtype), 0.0)]
+        lit = [i for i in range(len(records)) if i not in out]
+        if lit:
+            with codec_threads():
+                ladders = layer_record_rungs([records[i] for i in lit], self.decoder, inputs[lit], masks[lit],
+                                             [sources[i] for i in lit], self.options, budgets)
+            out.update(zip(lit, ladders, strict=True))
+        return [out[i] for i in range(len(records))]
 
     def posterior_from_inputs(
         self, inputs: npt.ArrayLike, *, batch_size: int = 8, log_variance: bool = False

@@ -5,7 +5,7 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, Literal, Protocol, get_args
+from typing import TYPE_CHECKING, Literal, Protocol, get_args
 
 import numpy as np
 
@@ -338,48 +338,125 @@ def layer_records(
     encoder's; ``meta["effort"]`` says how it was made and, with a target,
     ``meta["rate"]`` what rate control chose.
     """
+    bases, base_mapped = _refined_bases(records, decoder, inputs, masks, options)
+    if base_mapped is None:
+        return bases
+    return [_rate_controlled(bases[i], base_mapped[i], decoder, inputs[i], masks[i], sources[i], options)[0]
+            for i in range(len(records))]
+
+
+@dataclass(frozen=True)
+class Rung:
+    """One material encoded under one record budget of library allocation's ladder.
+
+    Attributes
+    ----------
+    record : LatentRecord
+        What rate control chose under the budget.
+    record_bytes : int
+        Its bytes beyond its name (payload and index descriptor: what ``--bytes`` caps).
+    distortion : float
+        Its kept-slice error: the mapped L1 of its clamped decode against the material's kept slices, over their
+        sum (a relative error, comparable across materials).
+    """
+
+    record: LatentRecord
+    record_bytes: int
+    distortion: float
+
+
+def layer_record_rungs(
+    records: Sequence[LatentRecord],
+    decoder: LayerDecoder,
+    inputs: np.ndarray,
+    masks: np.ndarray,
+    sources: Sequence[MerlBRDF | None],
+    options: EncodeOptions,
+    budgets: Sequence[int],
+) -> list[list[Rung]]:
+    """Each record refined once, then rate-controlled under each of ``budgets`` (a size budget each, as
+    ``options`` with that ``bytes_budget``): per record, a :class:`Rung` per budget it fits, rising (library
+    allocation, :mod:`~brdfcodec.codec.allocation`).
+
+    Raises
+    ------
+    RateTargetError
+        A record fits none of the budgets.
+    """
+    from brdfcodec.errors import RateTargetError
+
+    if not budgets:
+        raise ValueError("give at least one budget")
+    first = dataclasses.replace(options, bytes_budget=min(budgets), max_relae=None, detail_step=None)
+    bases, base_mapped = _refined_bases(records, decoder, inputs, masks, first)
+    assert base_mapped is not None  # a size budget layers its records
+    out: list[list[Rung]] = []
+    for i in range(len(records)):
+        rungs: list[Rung] = []
+        failure: RateTargetError | None = None
+        for budget in sorted(set(budgets)):
+            try:
+                record, size, distortion = _rate_controlled(
+                    bases[i], base_mapped[i], decoder, inputs[i], masks[i], sources[i],
+                    dataclasses.replace(first, bytes_budget=budget))
+            except RateTargetError as error:  # below the smallest record: a larger rung may fit
+                failure = error
+                continue
+            if not rungs or size > rungs[-1].record_bytes:  # a larger budget that made a larger record
+                rungs.append(Rung(record, size, distortion))
+        if not rungs:
+            assert failure is not None
+            raise failure
+        out.append(rungs)
+    return out
+
+
+def _refined_bases(records: Sequence[LatentRecord], decoder: LayerDecoder, inputs: np.ndarray, masks: np.ndarray,
+                   options: EncodeOptions) -> tuple[list[LatentRecord], np.ndarray | None]:
+    """The records with their refined codes (``meta["effort"]`` set), and their clamped base decodes where the
+    options layer them (else None)."""
     mu = np.stack([r.mu for r in records])
     codes = _as_stored(refine_latent(decoder.network, mu, inputs, masks, options.effort), options.latent_itemsize)
-    out: list[LatentRecord] = []
-    base_mapped = decoder.decode_mapped(codes) if options.layered else None
-    basis = decoder.shared_basis if options.layered and options.basis else None
-    for i, record in enumerate(records):
-        meta: dict[str, Any] = {**record.meta, "effort": options.effort}
-        base = LatentRecord(record.name, codes[i], record.sigma, meta)
-        if base_mapped is None:
-            out.append(base)
-            continue
-        source = sources[i]
-        if options.max_relae is not None and source is None:
-            raise ValueError(f"{record.name}: --max-relae needs the source table to measure the error")
-        result = encode_layers(
-            base, base_mapped[i], inputs[i], masks[i],
-            values=None if source is None else source.values,
-            mask=None if source is None else source.mask,
-            bytes_budget=options.bytes_budget, max_relae=options.max_relae, metric=options.metric,
-            step=options.detail_step, latent_itemsize=options.latent_itemsize,
-            basis_fit=None if basis is None else _basis_fit(decoder, basis, base, inputs[i], masks[i], options),
-            basis_count=0 if basis is None else basis.count,
-            basis_only_fit=None if basis is None else _basis_only_fit(decoder, basis, inputs[i], masks[i], options),
-            store_sigma=options.store_sigma,
-            basis_variants=() if basis is None else options.variants(
-                decoder.network.config.latent_dim if decoder.network.config.linear_basis else 0),
-            compact_alone_fit=_compact_alone_fit(decoder, base),
-            coded_mu_steps=options.coded_mu_grids,
-            coded_mu_caps=options.coded_mu_caps,
-        )
-        chosen = result.record
-        # record_bytes: what the budget caps (payload and index descriptor); payload_bytes: the payload alone
-        rate = {"payload_bytes": result.payload_bytes - descriptor_size(chosen), "record_bytes": result.payload_bytes,
-                "candidates_tried": len(result.tried)}
-        if options.bytes_budget is not None:
-            rate["bytes_budget"] = options.bytes_budget
-        if options.max_relae is not None:
-            rate["max_relae"] = options.max_relae
-            rate["metric"] = options.metric
-        new_meta = {**chosen.meta, "rate": rate}
-        out.append(dataclasses.replace(chosen, meta=new_meta))
-    return out
+    bases = [LatentRecord(record.name, codes[i], record.sigma, {**record.meta, "effort": options.effort})
+             for i, record in enumerate(records)]
+    return bases, decoder.decode_mapped(codes) if options.layered else None
+
+
+def _rate_controlled(base: LatentRecord, base_mapped: np.ndarray, decoder: LayerDecoder, inputs: np.ndarray,
+                     masks: np.ndarray, source: MerlBRDF | None,
+                     options: EncodeOptions) -> tuple[LatentRecord, int, float]:
+    """One material's record under the options' target (``meta["rate"]`` saying what rate control chose), its
+    bytes beyond its name, and its kept-slice relative error (NaN where rate control measured none)."""
+    basis = decoder.shared_basis if options.basis else None
+    if options.max_relae is not None and source is None:
+        raise ValueError(f"{base.name}: --max-relae needs the source table to measure the error")
+    result = encode_layers(
+        base, base_mapped, inputs, masks,
+        values=None if source is None else source.values,
+        mask=None if source is None else source.mask,
+        bytes_budget=options.bytes_budget, max_relae=options.max_relae, metric=options.metric,
+        step=options.detail_step, latent_itemsize=options.latent_itemsize,
+        basis_fit=None if basis is None else _basis_fit(decoder, basis, base, inputs, masks, options),
+        basis_count=0 if basis is None else basis.count,
+        basis_only_fit=None if basis is None else _basis_only_fit(decoder, basis, inputs, masks, options),
+        store_sigma=options.store_sigma,
+        basis_variants=() if basis is None else options.variants(
+            decoder.network.config.latent_dim if decoder.network.config.linear_basis else 0),
+        compact_alone_fit=_compact_alone_fit(decoder, base),
+        coded_mu_steps=options.coded_mu_grids,
+        coded_mu_caps=options.coded_mu_caps,
+    )
+    chosen = result.record
+    # record_bytes: what the budget caps (payload and index descriptor); payload_bytes: the payload alone
+    rate = {"payload_bytes": result.payload_bytes - descriptor_size(chosen), "record_bytes": result.payload_bytes,
+            "candidates_tried": len(result.tried)}
+    if options.bytes_budget is not None:
+        rate["bytes_budget"] = options.bytes_budget
+    if options.max_relae is not None:
+        rate["max_relae"] = options.max_relae
+        rate["metric"] = options.metric
+    new_meta = {**chosen.meta, "rate": rate}
+    return dataclasses.replace(chosen, meta=new_meta), result.payload_bytes, result.distortion
 
 
 def _compact_alone_fit(decoder: LayerDecoder, base: LatentRecord) -> CompactAloneFit:

@@ -33,15 +33,20 @@ if TYPE_CHECKING:
 from brdfcodec.codec.decoder import BrdfDecoder
 from brdfcodec.codec.encoder import BrdfEncoder, MaterialInput, measure
 from brdfcodec.codec.library import MaterialLibrary
+from brdfcodec.codec.library_budget import ALLOCATIONS, allocate_library
 from brdfcodec.codec.prepare import MaskedEntries, ModelSpec, prepare_source
 
 __all__ = ["compress", "decode", "decompress", "encode", "encode_records"]
+
+#: How a size budget is spent: per record, or over the library (:data:`~brdfcodec.codec.library_budget.ALLOCATIONS`).
+Allocation = Literal["record", "library"]
 
 
 EncodeSource = MerlBRDF | MaterialInput | str | os.PathLike[str]
 
 
-def _as_input(source: EncodeSource, index: int, name: str | None) -> MaterialInput:
+def as_material_input(source: EncodeSource, index: int, name: str | None) -> MaterialInput:
+    """A source as a network input with its table (named ``name``, else by the source, else ``material-INDEX``)."""
     if isinstance(source, MaterialInput):
         return source if name is None else MaterialInput(name, source.inputs, source.source, source.mask)
     brdf = prepare_source(source if isinstance(source, MerlBRDF) else read_measured(source))
@@ -93,7 +98,7 @@ def encode_records(
     records: list[Record] = []
     numbered = enumerate(sources)
     while chunk := list(itertools.islice(numbered, batch_size)):
-        items = [_as_input(source, index, next(labels)) for index, source in chunk]
+        items = [as_material_input(source, index, next(labels)) for index, source in chunk]
         sources_of = [item.source for item in items]
         batch: list[Record] = list(encoder.encode_arrays(
             [item.name for item in items],
@@ -125,6 +130,8 @@ def encode(
     latent: LatentChoice = "always",
     coded_mu_step: int | tuple[int, ...] | None = None,
     short_references: bool = True,
+    allocate: Allocation = "record",
+    groups: Sequence[str] | None = None,
 ) -> bytes:
     """Encode MERL tables into the bytes of one ``.bvae`` file (one material, or a library of many).
 
@@ -174,11 +181,28 @@ def encode(
     (3, 90, 90, 1)
     """
     items = [sources] if isinstance(sources, MerlBRDF | MaterialInput | str | os.PathLike) else sources
+    if allocate not in ALLOCATIONS:
+        raise ValueError(f"allocate must be one of {list(ALLOCATIONS)}, got {allocate!r}")
+    if allocate == "library" and bytes is None:
+        raise ValueError("allocate='library' spreads a size budget over the library: give bytes")
+    if groups is not None and allocate != "library":
+        raise ValueError("groups apply to allocate='library'")
     encoder = BrdfEncoder(
         model, effort=effort, bytes=bytes, max_relae=max_relae, metric=metric, latent_dtype=latent_dtype,
         latent=latent, coded_mu_step=coded_mu_step,
     )
-    records = encode_records(items, names=names, encoder=encoder, measure_error=measure_error, batch_size=batch_size)
+    if allocate == "library":
+        labels = iter(names) if names is not None else itertools.repeat(None)
+        sources_list = list(items)  # the sources (paths or tables as given): their count centres the ladder
+        records = allocate_library((as_material_input(source, index, next(labels))
+                                    for index, source in enumerate(sources_list)), encoder,
+                                   count=len(sources_list), groups=groups,
+                                   latent_dtype=latent_dtype, short_references=short_references,
+                                   provenance=provenance, batch_size=batch_size,
+                                   decoder=encoder.decoder if measure_error else None)
+    else:
+        records = encode_records(items, names=names, encoder=encoder, measure_error=measure_error,
+                                 batch_size=batch_size)
     if encoder.reference is None:  # loaded from a model folder, so it has one
         raise RuntimeError("the encoder has no decoder reference")
     if not provenance:
@@ -225,6 +249,7 @@ def compress(
     latent: LatentChoice = "always",
     coded_mu_step: int | tuple[int, ...] | None = None,
     short_references: bool = True,
+    allocate: Allocation = "record",
 ) -> int:
     """Write :func:`encode` of the sources to a ``.bvae`` file, atomically (options as for :func:`encode`).
 
@@ -237,7 +262,7 @@ def compress(
     data = encode(
         sources, names=names, model=model, latent_dtype=latent_dtype, measure_error=measure_error,
         effort=effort, bytes=bytes, max_relae=max_relae, metric=metric, provenance=provenance, latent=latent,
-        coded_mu_step=coded_mu_step, short_references=short_references,
+        coded_mu_step=coded_mu_step, short_references=short_references, allocate=allocate,
     )
     with atomic_output(output, overwrite=overwrite) as tmp:
         Path(tmp).write_bytes(data)

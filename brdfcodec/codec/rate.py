@@ -115,12 +115,17 @@ class RateResult:
     points : list of RatePoint
         Under a size budget: every candidate record whose rate and distortion were measured (what
         :func:`lowest_distortion` chose from); empty otherwise.
+    distortion : float
+        Under a size budget: the chosen record's kept-slice distortion (what the budget ranked it by) over the sum
+        of the material's kept slices, a relative error that compares across materials (library allocation,
+        :mod:`~brdfcodec.codec.allocation`); NaN otherwise.
     """
 
     record: LatentRecord
     payload_bytes: int
     tried: list[tuple[float | None, int, float | None]]
     points: list[RatePoint] = field(default_factory=list)
+    distortion: float = float("nan")
 
 
 @dataclass(frozen=True)
@@ -440,9 +445,11 @@ def encode_layers(
         without = _WithoutLatent(base, basis_only_fit, basis_count, target, weights)
     if bytes_budget is not None:
         only = None if without is None else without.for_budget(bytes_budget)
+        scale = max(float((np.abs(target) * weights).sum()), np.finfo(np.float32).tiny)  # relative distortions
         if bytes_budget < base_bytes:
             if only is not None and without is not None:  # too small for a latent: the record without one
-                return RateResult(without.record(only), without.size(only), tried)
+                return RateResult(without.record(only), without.size(only), tried,
+                                  distortion=without.error(only) / scale)
             smallest = base_bytes if without is None else min(base_bytes, without.size(1))
             what = "base record's" if smallest == base_bytes else "smallest record's"
             raise RateTargetError(f"{base.name}: {bytes_budget} bytes is below the {what} {smallest} bytes")
@@ -459,8 +466,9 @@ def encode_layers(
         chosen = lowest_distortion(points, bytes_budget)
         pool, option = points[chosen].pool, points[chosen].option
         if only is not None and without is not None and without.error(only) < points[chosen].distortion:
-            return RateResult(without.record(only), without.size(only), tried, points)  # strictly lower: a latent
-        return RateResult(pool.record(*option), pool.size(*option), tried, points)
+            # strictly lower without a latent
+            return RateResult(without.record(only), without.size(only), tried, points, without.error(only) / scale)
+        return RateResult(pool.record(*option), pool.size(*option), tried, points, points[chosen].distortion / scale)
     assert max_relae is not None
     if values is None or mask is None:
         raise ValueError(f"{base.name}: max_relae needs the source table to measure the error")

@@ -101,6 +101,10 @@ class Experiment:
         Whether the library names its decoder and basis by short references (format 2.6,
         ``brdfcodec.encode(short_references=)``), the encoder's default; False writes full hashes, 48 bytes more a
         file, as files before 2.6 did.
+    allocate : {"record", "library"}, default "record"
+        How the budget is spent (``bvae compress --allocate``): ``"record"`` searches the largest ``--bytes`` whose
+        library fits N per material; ``"library"`` encodes once with ``--bytes N --allocate library``, each family
+        its own group, so that every family's records and share of the header fit N per material.
     """
 
     label: str
@@ -110,6 +114,7 @@ class Experiment:
     latent: str = "auto"
     coded_mu_step: int | tuple[int, ...] | None = None
     short_references: bool = True
+    allocate: str = "record"
 
 
 @dataclass(frozen=True)
@@ -133,7 +138,8 @@ def load_config(path: str | os.PathLike[str]) -> RdConfig:
     ``latent``: ``"auto"``, the default, or ``"always"``, as ``bvae compress --latent``, and
     ``coded_mu_step``: 0 to 5, the coded-μ candidates' grid exponent, or a list of grids, a study of the
     encoder's default, and
-    ``short_references``: true, the default, or false, full hashes in the header as before format 2.6),
+    ``short_references``: true, the default, or false, full hashes in the header as before format 2.6, and
+    ``allocate``: ``"record"``, the default, or ``"library"``, as ``bvae compress --allocate``),
     optional ``budgets`` (list of int), ``effort`` (int), ``limit`` (int:
     only the first N held-out materials of each family, a quick look),
     ``header_in_budget`` (bool, default true: brdfcodec's file bytes less
@@ -157,9 +163,12 @@ def load_config(path: str | os.PathLike[str]) -> RdConfig:
     experiments = []
     for item in data["experiments"]:
         if not isinstance(item, dict) or not {"label", "model"} <= set(item) or set(item) - {
-                "label", "model", "group", "held_out", "latent", "coded_mu_step", "short_references"}:
+                "label", "model", "group", "held_out", "latent", "coded_mu_step", "short_references", "allocate"}:
             raise ValueError(f"{path}: each experiment is an object with 'label', 'model' (and optionally "
-                             f"'group', 'held_out', 'latent', 'coded_mu_step', 'short_references'), got {item!r}")
+                             f"'group', 'held_out', 'latent', 'coded_mu_step', 'short_references', 'allocate'), "
+                             f"got {item!r}")
+        if item.get("allocate", "record") not in ("record", "library"):
+            raise ValueError(f"{path}: an experiment's 'allocate' is 'record' or 'library', got {item['allocate']!r}")
         if not isinstance(item.get("short_references", True), bool):
             raise ValueError(f"{path}: an experiment's 'short_references' is true or false, "
                              f"got {item['short_references']!r}")
@@ -183,7 +192,8 @@ def load_config(path: str | os.PathLike[str]) -> RdConfig:
         held = item.get("held_out")
         experiments.append(Experiment(str(item["label"]), base / item["model"], str(item.get("group", "")),
                                       None if held is None else tuple(str(n) for n in held),
-                                      str(item.get("latent", "auto")), step, item.get("short_references", True)))
+                                      str(item.get("latent", "auto")), step, item.get("short_references", True),
+                                      str(item.get("allocate", "record"))))
     budgets = tuple(int(n) for n in data.get("budgets", DEFAULT_BUDGETS))
     if not budgets or min(budgets) < 1:
         raise ValueError(f"{path}: budgets must be positive integers")
@@ -374,9 +384,11 @@ def _bvae_rows(model: Path, names: Sequence[str], families: Sequence[str], input
                references: Sequence[Any], budgets: Sequence[int], effort: int,
                error: Callable[[Any, np.ndarray], tuple[float, float]], latent: str = "auto",
                header_in_budget: bool = True, coded_mu_step: int | tuple[int, ...] | None = None,
-               short_references: bool = True) -> dict[str, list[dict[str, Any]]]:
+               short_references: bool = True, allocate: str = "record") -> dict[str, list[dict[str, Any]]]:
     """brdfcodec's rows per family: every held-out material in one library at each budget, each family's bytes
     its records' (descriptor and payload, names aside) plus its materials' equal share of the header."""
+    if allocate == "library" and not header_in_budget:
+        raise ValueError("library allocation keeps the file's header within the budget: header_in_budget is true")
     import brdfcodec as bc
 
     decoder = bc.BrdfDecoder(model)
@@ -399,8 +411,17 @@ def _bvae_rows(model: Path, names: Sequence[str], families: Sequence[str], input
             return (data, library), *_record_bytes(library, data, names, name_bytes)
 
         try:
-            flag, (data, library), record_bytes, header_share = search_bytes_flag(
-                encoded, flag, budget, families, tries=8 if header_in_budget else 1)
+            if allocate == "library":  # one encode: the library's records and header within N per material
+                data = bc.encode(items, model=model, latent_dtype="float16", measure_error=False, effort=effort,
+                                 bytes=budget, latent=latent,  # type: ignore[arg-type]
+                                 coded_mu_step=coded_mu_step, short_references=short_references,
+                                 allocate="library", groups=list(families))
+                library = bc.decode(data, decoder=decoder)
+                flag = budget
+                record_bytes, header_share = _record_bytes(library, data, names, name_bytes)
+            else:
+                flag, (data, library), record_bytes, header_share = search_bytes_flag(
+                    encoded, flag, budget, families, tries=8 if header_in_budget else 1)
         except RateTargetError:  # the header's share leaves less than the smallest record: no point
             continue
         library[names[0]].table(masked="unmeasured")  # warm-up (lazy imports, thread pools), not timed
@@ -419,6 +440,7 @@ def _bvae_rows(model: Path, names: Sequence[str], families: Sequence[str], input
                 "library_materials": len(names), "header_share_bytes": header_share,
                 "bytes_per_material": sum(record_bytes[names[i]] for i in chosen) / len(chosen) + header_share,
                 "latent": latent, "records_without_latent": without, "short_references": short_references,
+                **({} if allocate == "record" else {"allocate": allocate}),
                 **({} if coded_mu_step is None else {"coded_mu_step": coded_mu_step if isinstance(
                     coded_mu_step, int) else list(coded_mu_step)}), **_error_summary(errors),
                 **_decode_time(seconds)})
@@ -481,7 +503,8 @@ def run_experiment(config: RdConfig, experiment: Experiment,
         references = [dataset.table(i) for i in measured]
         ours = _bvae_rows(experiment.model, names, [dataset.families[i] for i in measured], inputs, masks,
                           references, config.budgets, config.effort, error, experiment.latent,
-                          config.header_in_budget, experiment.coded_mu_step, experiment.short_references)
+                          config.header_in_budget, experiment.coded_mu_step, experiment.short_references,
+                          experiment.allocate)
         for family in families:
             chosen = [k for k, i in enumerate(measured) if dataset.families[i] == family]
             family_rows = list(ours[family])
