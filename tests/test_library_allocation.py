@@ -91,8 +91,8 @@ def test_too_small_a_total_is_refused_naming_both_sizes() -> None:
 
 
 def test_the_ladder_spans_the_mean_and_respects_the_floor() -> None:
-    assert budget_ladder(16) == (10, 12, 14, 16, 20, 24, 32)
-    assert budget_ladder(16, smallest=13) == (13, 14, 16, 20, 24, 32)
+    assert budget_ladder(16) == (10, 12, 14, 16, 18, 20, 24, 32)
+    assert budget_ladder(16, smallest=13) == (13, 14, 16, 18, 20, 24, 32)
     assert 64 in budget_ladder(64) and max(budget_ladder(64)) == 128
     with pytest.raises(ValueError):
         budget_ladder(0)
@@ -109,7 +109,7 @@ def test_library_allocation_fits_the_file_and_errs_no_more_than_even_records(tmp
     from brdfcodec.io.merl import write_merl
     from brdfcodec.representation.metrics import relae_both
 
-    materials = [analytic_tables[name] for name in ("gold", "red-plastic", "white-fabric")]
+    materials = [analytic_tables[name] for name in ("gold", "red-plastic", "white-matte")]
     paths = []
     for material in materials:
         paths.append(tmp_path / f"{material.name}.binary")
@@ -147,3 +147,12 @@ def test_the_cli_refuses_allocate_without_bytes(tmp_path) -> None:
     assert "--allocate spreads a size budget: give --bytes" in result.stderr
     assert "Traceback" not in result.stderr
     assert not (tmp_path / "out.bvae").exists()
+
+
+def test_a_library_too_small_for_its_header_is_refused_before_encoding(tmp_path, red_plastic_file) -> None:
+    out = tmp_path / "out.bvae"
+    result = subprocess.run([sys.executable, "-m", "brdfcodec", "compress", str(red_plastic_file), "-o", str(out),
+                             "--bytes", "30", "--allocate", "library"], capture_output=True, text=True, timeout=300)
+    assert result.returncode == 1
+    assert "1 material cannot fit 30 bytes each: the file's header takes at least 40 bytes" in result.stderr
+    assert "Traceback" not in result.stderr and not out.exists()

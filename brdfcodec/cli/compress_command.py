@@ -91,7 +91,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
                         help="with --bytes N: record (default) makes each record the best it can be within N bytes "
                         "of its own, the file's header on top; library keeps the whole file within N bytes per "
                         "material besides the names, its header included, and gives each material the bytes where "
-                        "they lower the library's error most (records from about 0.6 to 2 N; about 7 times the "
+                        "they lower the library's error most (records from about 0.6 to 2 N; about 8 times the "
                         "encode time)")
     parser.add_argument("--latent", choices=("always", "auto"), default=None,
                         help="with --bytes/--max-relae: always (default) keeps an editable latent code in every "

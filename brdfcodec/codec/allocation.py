@@ -22,7 +22,7 @@ __all__ = ["LADDER_FACTORS", "allocate_bytes", "budget_ladder"]
 
 #: The record budgets of the ladder, as fractions of the mean budget N (rounded, at least the smallest record): a
 #: material may end up with about 0.6 to 2 times N (what it gains: documentation, Layers and rate control).
-LADDER_FACTORS: Final = (0.625, 0.75, 0.875, 1.0, 1.25, 1.5, 2.0)
+LADDER_FACTORS: Final = (0.625, 0.75, 0.875, 1.0, 1.125, 1.25, 1.5, 2.0)
 
 
 def budget_ladder(mean_bytes: int, smallest: int = 1) -> tuple[int, ...]:

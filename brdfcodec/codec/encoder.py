@@ -251,14 +251,14 @@ class BrdfEncoder:
         the ladder library allocation chooses from (:func:`~brdfcodec.codec.allocation.allocate_bytes`).
 
         The latent is refined once per material and rate control runs once per budget, with this encoder's options
-        but the budget (its ``bytes``, ``max_relae`` or step set aside). A budget that makes no larger record than
-        a smaller one adds no rung; a near-black source (issue 49) has one rung, its black record, where that fits
+        but the budget (its ``bytes``, ``max_relae`` or step set aside). A budget that makes the same record as a
+        smaller one adds no rung; a near-black source (issue 49) has one rung, its black record, where that fits
         the smallest budget.
 
         Returns
         -------
         list of list of Rung
-            Per material, in the order given, its rungs by rising size (at least one).
+            Per material, in the order given, its rungs in the order of the budgets (at least one).
 
         Raises
         ------

@@ -375,8 +375,9 @@ def layer_record_rungs(
     budgets: Sequence[int],
 ) -> list[list[Rung]]:
     """Each record refined once, then rate-controlled under each of ``budgets`` (a size budget each, as
-    ``options`` with that ``bytes_budget``): per record, a :class:`Rung` per budget it fits, rising (library
-    allocation, :mod:`~brdfcodec.codec.allocation`).
+    ``options`` with that ``bytes_budget``): per record, a :class:`Rung` per budget it fits, in the order of the
+    budgets, a budget that made the same record as a smaller one left out (library allocation,
+    :mod:`~brdfcodec.codec.allocation`).
 
     Raises
     ------
@@ -402,8 +403,8 @@ def layer_record_rungs(
             except RateTargetError as error:  # below the smallest record: a larger rung may fit
                 failure = error
                 continue
-            if not rungs or size > rungs[-1].record_bytes:  # a larger budget that made a larger record
-                rungs.append(Rung(record, size, distortion))
+            if all((size, distortion) != (rung.record_bytes, rung.distortion) for rung in rungs):
+                rungs.append(Rung(record, size, distortion))  # a budget that made no other record adds nothing
         if not rungs:
             assert failure is not None
             raise failure

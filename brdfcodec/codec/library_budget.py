@@ -30,9 +30,16 @@ __all__ = ["ALLOCATIONS", "allocate_library"]
 #: it can be within N bytes of its own; ``"library"`` keeps the whole file within n·N bytes besides the names, its
 #: header included, and gives each material the bytes where they lower the error most.
 ALLOCATIONS = ("record", "library")
-#: The header a library's file is expected to take (bytes; short references, a few layer forms): where the ladder's
-#: rungs are centred, the mean budget less its share (the choice itself is fitted to the header as written).
-HEADER_ESTIMATE = 90
+#: The header a library's file is expected to take, in bytes: its fixed fields with short references and a shared
+#: basis (preamble 24, decoder 8, latent size and dtype 3, basis 8, form and record counts 2, payload CRC 4) and
+#: about 4.5 bytes a layer form, a form for each material up to 9. It centres the ladder's rungs on the mean budget
+#: less its share; the choice itself is fitted to the header as written.
+HEADER_FIXED = 49
+HEADER_PER_FORM = 4.5
+HEADER_FORMS = 9
+#: The fewest bytes a library's header takes (preamble, short decoder reference, latent size and dtype, one form, the
+#: record count and the payload CRC): below it and the smallest records, no library fits.
+HEADER_FLOOR = 40
 #: Bytes more with full references (the decoder's and the basis' whole SHA-256).
 FULL_REFERENCES_EXTRA = 48
 #: Most rounds of allocating, writing and measuring the header before giving up (the header's size depends on the
@@ -57,11 +64,11 @@ def allocate_library(
     encoder's size budget (``BrdfEncoder(bytes=N)``), with the lowest summed error library allocation finds.
 
     Each material is encoded at the rungs of :func:`~brdfcodec.codec.allocation.budget_ladder` (0.625 to 2 times
-    N less the header's expected share, :data:`HEADER_ESTIMATE` over the materials), its latent refined once;
+    N less the header's expected share, :func:`header_estimate`), its latent refined once;
     then each gets the rung that :func:`~brdfcodec.codec.allocation.allocate_bytes` chooses for the records'
     total: n·N less the header, which is measured on the file the choice writes and the choice redone until the
     file fits. The error compared across materials is rate control's kept-slice error over the material's own
-    kept slices. Encoding takes about as many times longer than ``--bytes N`` alone as there are rungs (7).
+    kept slices. Encoding takes about as many times longer than ``--bytes N`` alone as there are rungs (8).
 
     Parameters
     ----------
@@ -103,8 +110,12 @@ def allocate_library(
         raise RuntimeError("the encoder has no decoder reference")
     if count is None:
         count = len(items) if isinstance(items, Sized) else None
-    header_estimate = HEADER_ESTIMATE + (0 if short_references else FULL_REFERENCES_EXTRA)
-    ladder = budget_ladder(max(1, mean - (0 if count is None else math.ceil(header_estimate / max(count, 1)))))
+    smallest = _smallest_record(encoder)
+    if count is not None and count * mean < HEADER_FLOOR + count * smallest:
+        raise RateTargetError(f"{count} material{'s' if count != 1 else ''} cannot fit {mean} bytes each: the file's "
+                              f"header takes at least {HEADER_FLOOR} bytes and each record at least {smallest}")
+    centre = mean if count is None else mean - math.ceil(header_estimate(count, short_references) / max(count, 1))
+    ladder = budget_ladder(max(centre, smallest), smallest=smallest)
     ladders: list[list[Rung]] = []
     iterator = iter(items)
     while chunk := list(itertools.islice(iterator, batch_size)):
@@ -134,7 +145,12 @@ def allocate_library(
         chosen = [0] * count
         for indices in members.values():
             total = math.floor(len(indices) * (mean - header))
-            picks = allocate_bytes([[(r.record_bytes, r.distortion) for r in ladders[i]] for i in indices], total)
+            try:
+                picks = allocate_bytes([[(r.record_bytes, r.distortion) for r in ladders[i]] for i in indices],
+                                       total)
+            except RateTargetError as error:
+                raise RateTargetError(f"{len(indices)} materials do not fit {mean} bytes each beside the file's "
+                                      f"header ({header:.1f} bytes a material): {error}") from None
             for i, pick in zip(indices, picks, strict=True):
                 chosen[i] = pick
         records = [ladders[i][chosen[i]].record for i in range(count)]
@@ -148,3 +164,22 @@ def allocate_library(
     raise RateTargetError(f"{count} materials do not fit {mean} bytes each with the file's header "
                           f"({header:.1f} bytes per material) beside their smallest records")
 
+
+def header_estimate(count: int, short_references: bool = True) -> float:
+    """The bytes a library of ``count`` materials is expected to spend on its header (:data:`HEADER_FIXED`)."""
+    fixed = HEADER_FIXED + (0 if short_references else FULL_REFERENCES_EXTRA)
+    return fixed + HEADER_PER_FORM * min(max(count, 1), HEADER_FORMS)
+
+
+def _smallest_record(encoder: BrdfEncoder) -> int:
+    """The smallest record (bytes beyond a one-byte name) the encoder's model and options can write."""
+    from brdfcodec.codec.rate import smallest_bytes_budget
+
+    manifest = encoder.manifest
+    if manifest is None:
+        return 1
+    options = encoder.options
+    basis = options.basis and manifest.basis_sha256 is not None
+    return smallest_bytes_budget(manifest.config.latent_dim, options.latent_itemsize, basis,
+                                 without_latent=basis and options.latent == "auto" and bool(
+                                     manifest.config.linear_basis), store_sigma=options.store_sigma)

@@ -164,6 +164,14 @@ def encode(
         ``spec/bvae-format.md`` §3.1): 24 bytes less a file, 48 with basis layers, and write a record form that
         differs from an earlier one in a few numbers as those numbers (format 2.7, §3.2). ``False`` writes their
         full hashes and every form in full, for readers older than 2.6.
+    allocate : {"record", "library"}, default "record"
+        With ``bytes`` N: ``"record"`` makes each record the best it can be within N bytes of its own (the header
+        on top); ``"library"`` keeps the whole file within N bytes per material besides the names, its header
+        included, and gives each material the bytes where they lower the library's error most
+        (:func:`~brdfcodec.codec.library_budget.allocate_library`: about 8 times the encode time).
+    groups : sequence of str, optional
+        With ``allocate="library"``: a label per material; each group's materials then stay within their own N
+        bytes each (their records and their share of the header), as a benchmark that scores them apart counts.
 
     Returns
     -------
