@@ -156,3 +156,58 @@ def test_a_library_too_small_for_its_header_is_refused_before_encoding(tmp_path,
     assert result.returncode == 1
     assert "1 material cannot fit 30 bytes each: the file's header takes at least 40 bytes" in result.stderr
     assert "Traceback" not in result.stderr and not out.exists()
+
+
+def _ladders() -> tuple[list[list], object]:
+    """Four materials, two groups; each material's rungs: μ alone (a small record, one form) and μ with σ (a larger
+    one, another form), the first material of each group gaining much from the larger one, the second little."""
+    from brdfcodec.codec.encoding import Rung
+    from brdfcodec.format.bvae import DecoderReference, LatentRecord, record_size
+    from brdfcodec.format.layered_record import LayeredRecord
+
+    def rung(name: str, full: bool, distortion: float) -> Rung:
+        record = LatentRecord(name, np.linspace(-1, 1, 8, dtype=np.float32), np.ones(8, dtype=np.float32))
+        record = record if full else LayeredRecord.code_only(record)
+        return Rung(record, record_size(record, "float32"), distortion)
+
+    gains = {"a0": 0.2, "a1": 0.95, "b0": 0.3, "b1": 0.9}
+    ladders = [[rung(name, False, 1.0), rung(name, True, low)] for name, low in gains.items()]
+    return ladders, DecoderReference("ab" * 32, "test")
+
+
+def test_the_chosen_file_fits_every_group_and_upgrades_the_steep_material_first() -> None:
+    from brdfcodec.codec.library_budget import choose_rungs
+    from brdfcodec.format.bvae import encode_bvae
+
+    ladders, reference = _ladders()
+    groups = ["a", "a", "b", "b"]
+    names = sum(len(r[0].record.name) for r in ladders)
+    small, large = ladders[0][0].record_bytes, ladders[0][1].record_bytes
+    floor = None
+    for mean in range(small, 2 * large + 60):
+        try:
+            records = choose_rungs(ladders, mean, reference, groups=groups)
+        except RateTargetError:
+            assert floor is None  # once a mean fits, every larger one does
+            continue
+        floor = mean if floor is None else floor
+        data = encode_bvae(records, reference, short_references=True)
+        sizes = [record_bytes for record_bytes in (
+            large if getattr(r, "store_sigma", True) else small for r in records)]
+        header = (len(data) - names - sum(sizes)) / len(records)
+        for indices in ([0, 1], [2, 3]):  # each group within its share, its header share included
+            assert sum(sizes[i] for i in indices) + len(indices) * header <= len(indices) * mean
+        upgraded = [size == large for size in sizes]
+        assert upgraded[1] <= upgraded[0] and upgraded[3] <= upgraded[2]  # the steep one first
+    assert floor is not None
+    # the smallest mean that holds the smallest records' file is accepted: the header of a larger choice's file
+    # (another form) is not held against it
+    smallest = encode_bvae([r[0].record for r in ladders], reference, short_references=True)
+    assert floor == -(-(len(smallest) - names) // len(ladders))
+
+
+def test_groups_of_the_wrong_length_are_refused_before_encoding() -> None:
+    import brdfcodec as bc
+
+    with pytest.raises(ValueError, match="groups gives 1 labels for 2 materials"):
+        bc.encode(["a.binary", "b.binary"], bytes=64, allocate="library", groups=["x"])

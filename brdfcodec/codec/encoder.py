@@ -253,7 +253,7 @@ class BrdfEncoder:
         The latent is refined once per material and rate control runs once per budget, with this encoder's options
         but the budget (its ``bytes``, ``max_relae`` or step set aside). A budget that makes the same record as a
         smaller one adds no rung; a near-black source (issue 49) has one rung, its black record, where that fits
-        the smallest budget.
+        one of the budgets.
 
         Returns
         -------
@@ -272,8 +272,10 @@ class BrdfEncoder:
         latent_dtype: LatentDtype = "float16" if self.options.latent_itemsize == 2 else "float32"
         out: dict[int, list[Rung]] = {}
         for i, source in enumerate(sources):
-            made = black_record(records[i], store_sigma=self.options.store_sigma, bytes_budget=min(budgets),
-                                latent_dtype=latent_dtype) if is_near_black_source(source) else None
+            made = next((black for budget in sorted(budgets)  # the smallest budget its black record fits
+                         if (black := black_record(records[i], store_sigma=self.options.store_sigma,
+                                                   bytes_budget=budget, latent_dtype=latent_dtype)) is not None),
+                        None) if is_near_black_source(source) else None
             if made is not None:  # decodes exactly black: no error to trade
                 out[i] = [Rung(made, record_size(made, latent_dtype), 0.0)]
         lit = [i for i in range(len(records)) if i not in out]

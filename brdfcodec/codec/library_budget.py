@@ -17,14 +17,14 @@ import numpy as np
 from brdfcodec.codec.allocation import allocate_bytes, budget_ladder
 from brdfcodec.codec.encoder import measure
 from brdfcodec.errors import RateTargetError
-from brdfcodec.format.bvae import LatentDtype, Record, encode_bvae, without_provenance
+from brdfcodec.format.bvae import DecoderReference, LatentDtype, Record, encode_bvae, without_provenance
 
 if TYPE_CHECKING:
     from brdfcodec.codec.decoder import BrdfDecoder
     from brdfcodec.codec.encoder import BrdfEncoder, MaterialInput
     from brdfcodec.codec.encoding import Rung
 
-__all__ = ["ALLOCATIONS", "allocate_library"]
+__all__ = ["ALLOCATIONS", "allocate_library", "choose_rungs"]
 
 #: How a size budget is spent (``bvae compress --allocate``): ``"record"``, the default, makes each record the best
 #: it can be within N bytes of its own; ``"library"`` keeps the whole file within n·N bytes besides the names, its
@@ -108,12 +108,17 @@ def allocate_library(
         raise ValueError("library allocation needs a size budget: BrdfEncoder(bytes=N)")
     if encoder.reference is None:
         raise RuntimeError("the encoder has no decoder reference")
+    if batch_size < 1:
+        raise ValueError(f"batch_size must be at least 1, got {batch_size}")
     if count is None:
         count = len(items) if isinstance(items, Sized) else None
+    if count is not None and groups is not None and len(groups) != count:  # before the slow part
+        raise ValueError(f"groups gives {len(groups)} labels for {count} materials")
     smallest = _smallest_record(encoder)
-    if count is not None and count * mean < HEADER_FLOOR + count * smallest:
+    floor = HEADER_FLOOR + (0 if short_references else FULL_REFERENCES_EXTRA)
+    if count is not None and count * mean < floor + count * smallest:
         raise RateTargetError(f"{count} material{'s' if count != 1 else ''} cannot fit {mean} bytes each: the file's "
-                              f"header takes at least {HEADER_FLOOR} bytes and each record at least {smallest}")
+                              f"header takes at least {floor} bytes and each record at least {smallest}")
     centre = mean if count is None else mean - math.ceil(header_estimate(count, short_references) / max(count, 1))
     ladder = budget_ladder(max(centre, smallest), smallest=smallest)
     ladders: list[list[Rung]] = []
@@ -128,42 +133,74 @@ def allocate_library(
         ladders += made
         if on_batch is not None:
             on_batch(len(chunk))
+    return choose_rungs(ladders, mean, encoder.reference, groups=groups, latent_dtype=latent_dtype,
+                        short_references=short_references, provenance=provenance)
+
+
+def choose_rungs(
+    ladders: Sequence[Sequence[Rung]],
+    mean: int,
+    reference: DecoderReference,
+    *,
+    groups: Sequence[str] | None = None,
+    latent_dtype: LatentDtype = "float32",
+    short_references: bool = True,
+    provenance: bool = False,
+) -> list[Record]:
+    """One rung's record per material such that the file they make holds within ``mean`` bytes per material
+    besides the names (each group within its materials' share), with the lowest summed distortion found.
+
+    The records' total is n·N less the header: first the header of the file of every material's smallest rung,
+    then the header of the last choice's file, until a choice's file fits; where no larger choice fits, the
+    smallest rungs are kept if their file does.
+
+    Raises
+    ------
+    RateTargetError
+        Not even the smallest rungs' file fits.
+    ValueError
+        ``groups`` does not give one label per material.
+    """
     count = len(ladders)
     labels = list(groups) if groups is not None else [""] * count
     if len(labels) != count:
         raise ValueError(f"groups gives {len(labels)} labels for {count} materials")
     members = {label: [i for i in range(count) if labels[i] == label] for label in dict.fromkeys(labels)}
     name_bytes = sum(len(rungs[0].record.name.encode("utf-8")) for rungs in ladders)
-    reference = encoder.reference
 
-    def written(records: list[Record]) -> int:
-        stored = records if provenance else without_provenance(records)
-        return len(encode_bvae(stored, reference, latent_dtype=latent_dtype, short_references=short_references))
-
-    header = 0.0  # the file's bytes less the names and the records, per material; measured after each round
-    for _ in range(_ROUNDS):
-        chosen = [0] * count
-        for indices in members.values():
-            total = math.floor(len(indices) * (mean - header))
-            try:
-                picks = allocate_bytes([[(r.record_bytes, r.distortion) for r in ladders[i]] for i in indices],
-                                       total)
-            except RateTargetError as error:
-                raise RateTargetError(f"{len(indices)} materials do not fit {mean} bytes each beside the file's "
-                                      f"header ({header:.1f} bytes a material): {error}") from None
-            for i, pick in zip(indices, picks, strict=True):
-                chosen[i] = pick
+    def measured(chosen: Sequence[int]) -> tuple[list[Record], bool, float]:
+        """The chosen records, whether their file fits, and its header's bytes per material."""
         records = [ladders[i][chosen[i]].record for i in range(count)]
         record_bytes = [ladders[i][chosen[i]].record_bytes for i in range(count)]
-        size = written(records)
-        measured = (size - name_bytes - sum(record_bytes)) / count
-        if all(sum(record_bytes[i] for i in indices) + len(indices) * measured <= len(indices) * mean
-               for indices in members.values()):
-            return records
-        header = max(measured, header + 1.0 / count)  # at least a byte less each round: the loop ends
-    raise RateTargetError(f"{count} materials do not fit {mean} bytes each with the file's header "
-                          f"({header:.1f} bytes per material) beside their smallest records")
+        stored = records if provenance else without_provenance(records)
+        size = len(encode_bvae(stored, reference, latent_dtype=latent_dtype, short_references=short_references))
+        header = (size - name_bytes - sum(record_bytes)) / count
+        fits = all(sum(record_bytes[i] for i in indices) + len(indices) * header <= len(indices) * mean
+                   for indices in members.values())
+        return records, fits, header
 
+    smallest = [min(range(len(rungs)), key=lambda j, rungs=rungs: (rungs[j].record_bytes, rungs[j].distortion))
+                for rungs in ladders]
+    fallback, smallest_fits, header = measured(smallest)
+    for _ in range(_ROUNDS):
+        chosen = list(smallest)
+        try:
+            for indices in members.values():
+                total = math.floor(len(indices) * (mean - header))
+                picks = allocate_bytes([[(r.record_bytes, r.distortion) for r in ladders[i]] for i in indices],
+                                       total)
+                for i, pick in zip(indices, picks, strict=True):
+                    chosen[i] = pick
+        except RateTargetError:
+            break  # no choice fits beside this header: the smallest rungs, if their file fits
+        records, fits, now = measured(chosen)
+        if fits:
+            return records
+        header = max(now, header + 1.0 / count)  # at least a byte less each round: the loop ends
+    if smallest_fits:
+        return fallback
+    raise RateTargetError(f"{count} materials do not fit {mean} bytes each: the file of their smallest records "
+                          f"takes {header:.1f} bytes a material of header beside them")
 
 def header_estimate(count: int, short_references: bool = True) -> float:
     """The bytes a library of ``count`` materials is expected to spend on its header (:data:`HEADER_FIXED`)."""

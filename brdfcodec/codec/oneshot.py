@@ -202,6 +202,8 @@ def encode(
     if allocate == "library":
         labels = iter(names) if names is not None else itertools.repeat(None)
         sources_list = list(items)  # the sources (paths or tables as given): their count centres the ladder
+        if groups is not None and len(groups) != len(sources_list):
+            raise ValueError(f"groups gives {len(groups)} labels for {len(sources_list)} materials")
         records = allocate_library((as_material_input(source, index, next(labels))
                                     for index, source in enumerate(sources_list)), encoder,
                                    count=len(sources_list), groups=groups,
