@@ -211,3 +211,40 @@ def test_groups_of_the_wrong_length_are_refused_before_encoding() -> None:
 
     with pytest.raises(ValueError, match="groups gives 1 labels for 2 materials"):
         bc.encode(["a.binary", "b.binary"], bytes=64, allocate="library", groups=["x"])
+
+
+def _two_form_ladders(count: int) -> list[list]:
+    """``count`` materials whose larger rung costs 2 bytes more in a record but another form: μ on the fixed
+    grid (8 bytes) or with its own step (10 bytes), no σ. A file mixing the two forms spends more on its header
+    than the upgrade costs in records."""
+    from brdfcodec.codec.encoding import Rung
+    from brdfcodec.format.bvae import record_size
+    from brdfcodec.format.layered_record import LayeredRecord
+
+    def rung(name: str, fixed: bool, distortion: float) -> Rung:
+        record = LayeredRecord(name, np.linspace(-1, 1, 8, dtype=np.float32), np.ones(8, dtype=np.float32), {},
+                               store_sigma=False, compact_mu=True, fixed_mu_grid=fixed)
+        return Rung(record, record_size(record, "float32"), distortion)
+
+    return [[rung(f"m{i}", True, 1.0), rung(f"m{i}", False, 0.5)] for i in range(count)]
+
+
+@pytest.mark.parametrize("count", [2, 3, 4])
+def test_where_no_larger_choice_fits_beside_its_header_the_smallest_records_are_kept(count: int) -> None:
+    from brdfcodec.codec.library_budget import choose_rungs
+    from brdfcodec.format.bvae import DecoderReference, encode_bvae
+
+    reference = DecoderReference("ab" * 32, "test")
+    ladders = _two_form_ladders(count)
+    names = sum(len(rungs[0].record.name) for rungs in ladders)
+    smallest = len(encode_bvae([rungs[0].record for rungs in ladders], reference, short_references=True)) - names
+    largest = len(encode_bvae([rungs[1].record for rungs in ladders], reference, short_references=True)) - names
+    kept_smallest = 0
+    for mean in range(-(-smallest // count), -(-largest // count) + 2):  # every mean whose smallest file fits
+        records = choose_rungs(ladders, mean, reference)
+        size = len(encode_bvae(records, reference, short_references=True)) - names
+        assert size <= count * mean
+        kept_smallest += all(record.fixed_mu_grid for record in records)
+    # at the smallest file's mean an upgrade's file (two forms) is larger than its record bytes suggest: only the
+    # smallest records fit there
+    assert kept_smallest >= 1

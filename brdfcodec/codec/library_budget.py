@@ -24,7 +24,7 @@ if TYPE_CHECKING:
     from brdfcodec.codec.encoder import BrdfEncoder, MaterialInput
     from brdfcodec.codec.encoding import Rung
 
-__all__ = ["ALLOCATIONS", "allocate_library", "choose_rungs"]
+__all__ = ["ALLOCATIONS", "allocate_library", "choose_rungs", "header_estimate"]
 
 #: How a size budget is spent (``bvae compress --allocate``): ``"record"``, the default, makes each record the best
 #: it can be within N bytes of its own; ``"library"`` keeps the whole file within n·N bytes besides the names, its
@@ -202,8 +202,23 @@ def choose_rungs(
     raise RateTargetError(f"{count} materials do not fit {mean} bytes each: the file of their smallest records "
                           f"takes {header:.1f} bytes a material of header beside them")
 
+
 def header_estimate(count: int, short_references: bool = True) -> float:
-    """The bytes a library of ``count`` materials is expected to spend on its header (:data:`HEADER_FIXED`)."""
+    """The bytes a library of ``count`` materials is expected to spend on its header (:data:`HEADER_FIXED`).
+
+    Parameters
+    ----------
+    count : int
+        Materials in the library (at least one is assumed).
+    short_references : bool, default True
+        Whether the file names its decoder and basis by short references (else their whole SHA-256,
+        :data:`FULL_REFERENCES_EXTRA` bytes more).
+
+    Returns
+    -------
+    float
+        Bytes: a first guess that rate control's header share starts from, before the file is written and measured.
+    """
     fixed = HEADER_FIXED + (0 if short_references else FULL_REFERENCES_EXTRA)
     return fixed + HEADER_PER_FORM * min(max(count, 1), HEADER_FORMS)
 

@@ -57,18 +57,13 @@ from typing import Any
 
 import numpy as np
 
+from brdfcodec.codec.library_budget import header_estimate
 from brdfcodec.errors import RateTargetError
 from brdfcodec.layers.coded_basis import MAX_MU_STEP_LOG2
 
 __all__ = ["DEFAULT_BUDGETS", "Experiment", "RdConfig", "decode_machine", "load_config", "run_config",
            "run_experiment"]
 
-#: Bytes of a file's header besides the records' descriptors (preamble, the decoder's and basis' short references,
-#: format 2.6, a few forms, the payload CRC): a first guess of what the materials share, corrected by measuring the
-#: file.
-_HEADER_ESTIMATE = 90
-#: Bytes more with full references (the decoder's and the basis' whole SHA-256, ``short_references`` false).
-_FULL_REFERENCES_EXTRA = 48
 #: The smallest record brdfcodec writes, its descriptor included (a record without a latent, one coefficient).
 _SMALLEST_RECORD = 6
 #: Size budgets of the comparison, bytes per material.
@@ -397,9 +392,9 @@ def _bvae_rows(model: Path, names: Sequence[str], families: Sequence[str], input
     items = [bc.MaterialInput(n, x, r, m) for n, x, r, m in zip(names, inputs, references, masks, strict=True)]
     for budget in budgets:
         # The file's fixed header is shared by the materials: --bytes starts below N by an estimate of its
-        # share, then moves to the largest value for which the file's bytes less the names, and each family's,
-        # stay within N per material.
-        header = _HEADER_ESTIMATE + (0 if short_references else _FULL_REFERENCES_EXTRA)
+        # share (library allocation's, which grows with the forms), then moves to the largest value for which
+        # the file's bytes less the names, and each family's, stay within N per material.
+        header = header_estimate(len(names), short_references)
         flag = budget - math.ceil(header / len(names)) if header_in_budget else budget
         if flag < _SMALLEST_RECORD:  # too few materials to share the header within this budget: no point
             continue
