@@ -190,7 +190,8 @@ def test_summary_pools_the_folds_of_a_group_and_takes_the_best_pca(tmp_path: Pat
     assert rd_plot(rows, tmp_path / "p.png").read_bytes()[:4] == b"\x89PNG"
     # A budget the header's share leaves no room in has PCA rows only: said so, and the plot still draws.
     rows += [_row("cv", "pca-int8", 128, [0.01], 128)]
-    assert "| 128 B | — | — |" in summary_markdown(rows)
+    assert ("| 128 B | — | — | | | | | no (no file fits: the header's share and the smallest records the model "
+            "writes exceed the budget) |") in summary_markdown(rows)
     assert rd_plot(rows, tmp_path / "q.png").read_bytes()[:4] == b"\x89PNG"
 
 

@@ -110,8 +110,8 @@ def summary_markdown(rows: Sequence[dict[str, Any]]) -> str:
         for budget in budgets:
             at = [row for row in chosen if row["budget_bytes"] == budget]
             if not any(row["point"] == "bvae" for row in at):
-                lines.append(f"| {budget} B | — | — | | | | | no (the header's share per material exceeds the "
-                             "budget) |")
+                lines.append(f"| {budget} B | — | — | | | | | no (no file fits: the header's share and the smallest "
+                             "records the model writes exceed the budget) |")
                 continue
             ours = _pooled([row for row in at if row["point"] == "bvae"])
             pca = min(((point, _pooled([row for row in at if row["point"] == point]))
