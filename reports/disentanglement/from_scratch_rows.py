@@ -235,9 +235,10 @@ CPU_FOLD2 = Study(
 # release recipe for 400 epochs without supervision (f2-w0), and with dimensions 1-8 tied to the analytic factors
 # (weight 10,000, the colour's saturation an eighth factor, GGX alpha of the factor pool from 0.01) beside 0, 4 and 8
 # free dimensions (f2-sharp-w10k-z8, -z12, -z16; benchmarks/device/training/fold2-codec-and-factors.configs holds
-# the first and the last as a device's runs).
-# Baseline: the v3 recipe's fold-2 model re-made here (bvae-cv3-fold2-v3, benchmarks/rd/README.md's recipe; the
-# shipped model, trained on all 120, is listed for the benchmark only: it saw every material of both families).
+# f2-w0, -z12 and -z16 as a device's runs).
+# Baseline: the v3 recipe's fold-2 model re-made here (bvae-cv3-fold2-v3: benchmarks/rd/README.md's recipe, its
+# stage-one export without a basis; the shipped model, trained on all 120, is listed for the benchmark and the
+# never-seen analytic materials only: it saw every material of both families).
 # NBRDF proxies (90 MERL, 30 RGL; neural fits, not measurements); analytic: 24 random materials none saw.
 # Commands: runs/cpu21/cmd-RUN.txt (in the training rows); export here: bvae model export runs/cpu21/RUN
 #   -o runs/models/cpu21-RUN --name bvae-cpu21-RUN --dataset runs/both.h5 --align-factors 300 --keep-axes, then
