@@ -55,6 +55,12 @@ class Study:
                 **{f"{self.prefix}{run}": f"runs/models/{self.session}-{run}" for run in self.runs}}
 
 
+def _run_files(run: Path) -> tuple[list[dict], dict, dict]:
+    """A `bvae train` run folder's epoch log, summary and run description."""
+    log = [json.loads(line) for line in (run / "log.jsonl").read_text().splitlines() if line.strip()]
+    return log, json.loads((run / "summary.json").read_text()), json.loads((run / "run.json").read_text())
+
+
 def training_rows(study: Study) -> list[dict]:
     if not (study.folder / "device-logs").exists():
         return _local_training_rows(study)
@@ -64,9 +70,8 @@ def training_rows(study: Study) -> list[dict]:
               for line in (runs / "device-logs/logs/eval.jsonl").read_text().splitlines() if line.strip()}
     plan = {line.split()[0]: line.split()[1:] for line in (runs / "device-logs/logs/plan.txt").read_text().splitlines()}
     for name, score in sorted(scored.items()):
-        log = [json.loads(line) for line in (runs / name / "log.jsonl").read_text().splitlines() if line.strip()]
-        summary = json.loads((runs / name / "summary.json").read_text())
-        config = json.loads((runs / name / "run.json").read_text())["train_config"]
+        log, summary, described = _run_files(runs / name)
+        config = described["train_config"]
         rows.append({
             "kind": "training", "model": f"{study.prefix}{name}", "device": study.device, "torch": "2.11.0+cu130",
             "command": (runs / f"cmd-{name}.txt").read_text().strip(), "factor_weight": config["factor_weight"],
@@ -84,10 +89,7 @@ def _local_training_rows(study: Study) -> list[dict]:
     """Training rows of runs made on this machine (no device logs): each run's own summary, log and settings."""
     rows = []
     for name in study.runs:
-        run = study.folder / name
-        log = [json.loads(line) for line in (run / "log.jsonl").read_text().splitlines() if line.strip()]
-        summary = json.loads((run / "summary.json").read_text())
-        described = json.loads((run / "run.json").read_text())
+        log, summary, described = _run_files(study.folder / name)
         config = described["train_config"]
         rows.append({
             "kind": "training", "model": f"{study.prefix}{name}", "device": study.device,
@@ -292,17 +294,16 @@ def _device_analytic(row: dict) -> float | None:
 
 def _fold_reconstruction_lines(study: Study, rows: list[dict]) -> list[str]:
     """Each fold model's mapped RelAE per family and split, and on the never-seen analytic materials."""
-    columns = {("merl", "held-out"): "MERL (held out)", ("rgl", "held-out"): "RGL (held out)",
-               ("analytic", "held-out"): "analytic (never)", ("merl", "train"): "MERL (train)",
-               ("rgl", "train"): "RGL (train)"}
+    columns = {("merl", "held-out"): ("MERL", "held out"), ("rgl", "held-out"): ("RGL", "held out"),
+               ("analytic", "held-out"): ("analytic", "never"), ("merl", "train"): ("MERL", "train"),
+               ("rgl", "train"): ("RGL", "train")}
     counts: dict[tuple[str, str], int] = {}
     cells: dict[str, dict[tuple[str, str], float]] = {}
     for row in rows:
         if row.get("kind") == "evaluation" and (row["family"], row["split"]) in columns:
             cells.setdefault(row["model"], {})[row["family"], row["split"]] = row["mapped"]
             counts[row["family"], row["split"]] = row["count"]
-    titles = {key: f"{title[:title.index(' ')]} {counts.get(key, '?')}{title[title.index(' '):]}"
-              for key, title in columns.items()}
+    titles = {key: f"{family} {counts.get(key, '?')} ({split})" for key, (family, split) in columns.items()}
     lines = ["Reconstruction, mapped RelAE of the encoder's μ decoded (effort 0), full tables, per family and split:",
              f"{'model':<33}" + "".join(f"{title:>20}" for title in titles.values())]
     for model in study.models:
