@@ -67,3 +67,26 @@ def test_cli_evaluate_stores_into_a_copy_of_the_model(analytic_dataset: Path, tm
     stored = json.loads((folder / "model.json").read_text())["info"]["by_family"]
     assert stored["effort"] == 0 and stored["rows"][0]["family"] == "analytic"
     assert "## Per measurement family" in (folder / "MODEL_CARD.md").read_text()
+
+
+@pytest.mark.slow
+def test_mu_on_a_grid_is_decoded_as_a_coded_mu_stores_it_and_its_bytes_are_counted(analytic_dataset: Path) -> None:
+    from brdfcodec.training.family_report import evaluate_by_family
+
+    exact, fine, coarse = (evaluate_by_family(None, analytic_dataset, limit=3, mu_grid=g)[0] for g in (None, 5, 1))
+    assert exact.mu_grid is None and exact.mu_bytes is None
+    assert (fine.mu_grid, coarse.mu_grid) == (5, 1)
+    # D = 8 dimensions of about unit spread: some 2.5 bits each on the grid 1/2, 6.5 or more on 1/32.
+    assert 1.5 < coarse.mu_bytes < fine.mu_bytes < 16
+    # A fine grid decodes as μ itself does; the coarse one moves the decode.
+    assert fine.mapped == pytest.approx(exact.mapped, abs=2e-3)
+    assert abs(coarse.mapped - exact.mapped) > abs(fine.mapped - exact.mapped)
+    with pytest.raises(ValueError, match="mu_grid"):
+        evaluate_by_family(None, analytic_dataset, limit=1, mu_grid=6)
+
+
+def test_cli_refuses_to_store_a_table_of_mu_on_a_grid(analytic_dataset: Path, capsys) -> None:
+    from brdfcodec.cli.main import main
+
+    assert main(["model", "evaluate", "--dataset", str(analytic_dataset), "--mu-grid", "2", "--store"]) != 0
+    assert "--mu-grid" in capsys.readouterr().err

@@ -89,6 +89,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     evaluate.add_argument("folder", type=Path, nargs="?", help="model folder (default: the shipped default model)")
     evaluate.add_argument("--dataset", type=Path, required=True, help="dataset (bvae dataset build), any families")
     evaluate.add_argument("--effort", type=int, choices=(0, 1, 2, 3), default=0, help="refinement effort (default 0)")
+    evaluate.add_argument("--mu-grid", type=int, choices=range(1, 6), metavar="G",
+                          help="decode mu rounded to the grid 2^-G (1 to 5), as a record's coded mu stores it, and "
+                          "add the bytes of that mu coded alone (default: mu as the encoder gives it)")
     evaluate.add_argument("--json", action="store_true", help="print the rows as JSON")
     evaluate.add_argument("--store", action="store_true",
                           help="also store the rows in model.json and the model card (weights untouched)")
@@ -230,8 +233,10 @@ def run_evaluate(args: argparse.Namespace) -> int:
     from brdfcodec.models.registry import default_model_folder
     from brdfcodec.training.family_report import evaluate_by_family, family_table
 
+    if args.store and args.mu_grid is not None:
+        raise UsageError("--store keeps the card's table of mu as the encoder gives it: leave out --mu-grid")
     folder = args.folder or default_model_folder()
-    rows = evaluate_by_family(folder, args.dataset, effort=args.effort)
+    rows = evaluate_by_family(folder, args.dataset, effort=args.effort, mu_grid=args.mu_grid)
     if args.json:
         print(json.dumps([row.as_dict() for row in rows], indent=1))
     else:

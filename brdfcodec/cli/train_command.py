@@ -72,6 +72,16 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     parser.add_argument("--factor-alpha-min", type=float, metavar="ALPHA",
                         help="that pool's sharpest GGX α: its roughness factor is log-uniform from ALPHA to 0.6 "
                         "(default 0.03, the disentanglement benchmark's; only with --factor-weight > 0)")
+    parser.add_argument("--latent-grid", type=int, metavar="G", choices=range(0, 6),
+                        help="quantisation-aware latent: add uniform noise of width 2^-G to z in training, the "
+                        "rounding of the coded mu on that grid (format 2.5, section 4.9; 1 to 5; 0: none, the "
+                        "default)")
+    parser.add_argument("--rate-weight", type=float, metavar="LAMBDA",
+                        help="weight of mu's code length on the grid 2^-G under the format's unit Laplace prior "
+                        "(nats, against the reconstruction error summed over a material's entries), so that training "
+                        "minimises D + LAMBDA*R; about 70 values a nat as the codec's basis layer does at 16-32 B "
+                        "(needs --latent-grid; "
+                        "0: none, the default)")
     parser.add_argument("--average-from-epoch", type=int,
                         help="average the weights of every step from this epoch on (stochastic weight averaging; "
                              "validation, best.pt and the export use the average; 0: never, the default)")

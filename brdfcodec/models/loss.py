@@ -20,7 +20,7 @@ import torch
 
 from brdfcodec.conventions import NETWORK_INPUT_SHAPE
 
-__all__ = ["LossTerms", "beta_norm", "beta_vae_loss", "kl_per_dimension"]
+__all__ = ["LossTerms", "beta_norm", "beta_vae_loss", "kl_per_dimension", "latent_rate"]
 
 ReconKind = Literal["l2", "l1"]
 _N_INPUT = NETWORK_INPUT_SHAPE[0] * NETWORK_INPUT_SHAPE[1] * NETWORK_INPUT_SHAPE[2]
@@ -43,6 +43,42 @@ def beta_norm(beta: float, latent_dim: int) -> float:
 def kl_per_dimension(mu: torch.Tensor, logvar: torch.Tensor) -> torch.Tensor:
     """KL(N(μ, σ²) ‖ N(0, 1)) per sample and dimension, shape (B, M), in nats."""
     return -0.5 * (1.0 + logvar - mu.pow(2) - logvar.exp())
+
+
+def latent_rate(noisy_mu: torch.Tensor, step: float) -> torch.Tensor:
+    """Code length of μ on a grid under the format's unit Laplace prior, in nats, per sample and dimension.
+
+    The coded μ of ``spec/bvae-format.md`` §4.9 is the integer ``round(μ/Δ)``
+    under a zero-mean Laplace prior of spread one latent unit (scale
+    b = 1/√2); its code length is −ln P, P the prior's mass on the cell
+    ``[qΔ − Δ/2, qΔ + Δ/2]``. In training the rounding is replaced by
+    additive uniform noise (``noisy_mu = μ + Δ·u``, u ~ U(−½, ½)), whose
+    mass on the cell of width Δ centred on it is a differentiable proxy of
+    that length (as in learned image compression).
+
+    Parameters
+    ----------
+    noisy_mu : Tensor, shape (B, M)
+        μ plus uniform noise of width ``step``, latent units.
+    step : float
+        Δ = 2^−g, the grid's step, latent units (> 0).
+
+    Returns
+    -------
+    Tensor, shape (B, M)
+        −ln P, nats, finite (P is floored at 1e-12).
+    """
+    if not step > 0:
+        raise ValueError(f"step must be > 0, got {step}")
+    scale = 0.5**0.5
+    # Mirror every value into the lower tail (the prior is symmetric): the cell's lower edge is then below 0,
+    # where the CDF is ½·exp(t/b) without cancellation.
+    centre = -noisy_mu.abs()
+    lower = 0.5 * torch.exp((centre - 0.5 * step) / scale)
+    upper_edge = centre + 0.5 * step
+    upper = torch.where(upper_edge <= 0, 0.5 * torch.exp(upper_edge.clamp_max(0.0) / scale),
+                        1.0 - 0.5 * torch.exp(-upper_edge.clamp_min(0.0) / scale))
+    return -torch.log((upper - lower).clamp_min(1e-12))
 
 
 def beta_vae_loss(

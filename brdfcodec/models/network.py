@@ -229,7 +229,7 @@ class BetaVAE(nn.Module):
         self.decoder = Decoder(config)
 
     def forward(
-        self, x: torch.Tensor, noise: torch.Tensor | None = None
+        self, x: torch.Tensor, noise: torch.Tensor | None = None, offset: torch.Tensor | None = None
     ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         """Return ``(reconstruction, μ, log σ²)``.
 
@@ -245,11 +245,17 @@ class BetaVAE(nn.Module):
             The ε of the reparameterisation in training mode (drawn here when
             not given; given by the trainer so that runs are reproducible
             across process counts).
+        offset : Tensor, shape (B, latent_dim), optional
+            Added to the sampled z in training mode (the uniform noise that
+            stands in for μ's rounding on the codec's grid,
+            ``TrainConfig.latent_grid``); ignored in evaluation mode.
         """
         mu, logvar = self.encoder(x)
         if self.training:
             eps = torch.randn_like(mu) if noise is None else noise
             z = mu + torch.exp(0.5 * logvar) * eps
+            if offset is not None:
+                z = z + offset
             return self.decoder.unbounded(z), mu, logvar
         return self.decoder(z=mu), mu, logvar
 

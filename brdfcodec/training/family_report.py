@@ -13,18 +13,25 @@ trained on 16 or fewer of its materials (another database altogether).
 
 A row's ``split`` is relative to the model: ``train`` for the materials it
 was trained on, ``held-out`` for every other material of the dataset.
+
+With ``mu_grid`` g, μ is rounded to the grid 2^−g before it is decoded — the
+latent as a record's coded μ stores it (``spec/bvae-format.md`` §4.9) — and
+each row also says how many bytes that μ takes coded alone under the
+format's unit prior (its termination included).
 """
 
 from __future__ import annotations
 
 import os
 from collections.abc import Sequence
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from typing import Any
 
 import numpy as np
 
 from brdfcodec.datasets.hdf5 import BrdfDataset
+from brdfcodec.format.records import LatentRecord
+from brdfcodec.layers.coded_basis import coded_mu_codes, encode_integers
 from brdfcodec.models.pca import fit_pca
 from brdfcodec.render.image_metrics import compare_images
 from brdfcodec.report.evaluate import comparison_render
@@ -52,6 +59,8 @@ class FamilyRow:
     pca8_delta_e_itp: float
     pca16_delta_e_itp: float
     worst: str
+    mu_grid: int | None = None
+    mu_bytes: float | None = None
 
     def as_dict(self) -> dict[str, Any]:
         """JSON-ready dictionary."""
@@ -60,7 +69,7 @@ class FamilyRow:
 
 def evaluate_by_family(
     model: str | os.PathLike[str] | None, dataset_path: str | os.PathLike[str], *, effort: int = 0,
-    limit: int | None = None,
+    limit: int | None = None, mu_grid: int | None = None,
 ) -> list[FamilyRow]:
     """Measure a model and its PCA baselines on every material of a dataset, grouped by family and split.
 
@@ -74,8 +83,15 @@ def evaluate_by_family(
         Refinement effort of the encoder (0–3).
     limit : int, optional
         Only the first ``limit`` materials of each family and split (for tests).
+    mu_grid : int, optional
+        Decode μ rounded to the grid 2^−``mu_grid`` (1 to 5), as a coded μ
+        stores it, and report its coded bytes; None (the default) decodes μ
+        as the encoder gives it.
     """
     from brdfcodec.codec import BrdfEncoder
+
+    if mu_grid is not None and not 1 <= mu_grid <= 5:
+        raise ValueError(f"mu_grid must be from 1 to 5, got {mu_grid}")
 
     encoder = BrdfEncoder(model, effort=effort)
     decoder = encoder.decoder
@@ -96,23 +112,26 @@ def evaluate_by_family(
             reference = dataset.table(i)
             inputs, masks = dataset.inputs([i]), dataset.input_masks([i])
             record = encoder.encode_arrays([names[i]], inputs, masks, [None])[0]
+            mu_bytes = None
+            if mu_grid is not None:
+                record, mu_bytes = _on_grid(record, mu_grid)
             estimates = {"model": decoder.decode(record, masked="keep").astype(np.float64)}
             for k, basis in bases.items():
                 mapped = basis.decode(basis.encode(inputs))[0]
                 estimates[f"pca{k}"] = table_from_network_output(mapped).astype(np.float64)
             image = comparison_render(reference.values, reference.mask)
             row: dict[str, Any] = {"name": names[i], "family": dataset.families[i],
-                                   "split": "train" if i in trained else "held-out"}
+                                   "split": "train" if i in trained else "held-out", "mu_bytes": mu_bytes}
             for label, table in estimates.items():
                 report = error_report(reference.values, table, reference.mask)
                 row[f"{label}_mapped"] = report.relae_mapped.overall
                 row[f"{label}_linear"] = report.relae_linear.overall
                 row[f"{label}_itp"] = compare_images(image, comparison_render(table, reference.mask)).delta_e_itp_mean
             per_material.append(row)
-    return _group(per_material)
+    return _group(per_material, mu_grid)
 
 
-def _group(rows: Sequence[dict[str, Any]]) -> list[FamilyRow]:
+def _group(rows: Sequence[dict[str, Any]], mu_grid: int | None = None) -> list[FamilyRow]:
     out = []
     for family in sorted({r["family"] for r in rows}):
         for split in ("train", "held-out"):
@@ -124,10 +143,20 @@ def _group(rows: Sequence[dict[str, Any]]) -> list[FamilyRow]:
                 return float(np.mean([r[key] for r in chosen]))
 
             worst = max(chosen, key=lambda r: r["model_mapped"])["name"]
+            coded = chosen[0]["mu_bytes"] is not None
             out.append(FamilyRow(family, split, len(chosen), mean("model_mapped"), mean("model_linear"),
                                  mean("model_itp"), mean("pca8_mapped"), mean("pca16_mapped"), mean("pca8_itp"),
-                                 mean("pca16_itp"), worst))
+                                 mean("pca16_itp"), worst, mu_grid if coded else None,
+                                 mean("mu_bytes") if coded else None))
     return out
+
+
+def _on_grid(record: LatentRecord, grid: int) -> tuple[LatentRecord, float]:
+    """The record with μ rounded to the grid 2^−grid, and the bytes of that μ coded alone (§4.9's prior)."""
+    step = 2.0**-grid
+    q = np.round(record.mu.astype(np.float64) / step).astype(np.int64)
+    size = len(encode_integers(q, coded_mu_codes(grid, q.size)))
+    return replace(record, mu=(q * step).astype(np.float32)), float(size)
 
 
 def family_table(rows: Sequence[FamilyRow | dict[str, Any]]) -> list[str]:

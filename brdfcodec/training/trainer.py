@@ -36,7 +36,7 @@ from brdfcodec.datasets.hdf5 import BrdfDataset
 from brdfcodec.datasets.split import VALIDATION, fold_by_family
 from brdfcodec.io.atomic import atomic_output
 from brdfcodec.models.config import ModelConfig
-from brdfcodec.models.loss import beta_vae_loss, kl_per_dimension
+from brdfcodec.models.loss import beta_vae_loss, kl_per_dimension, latent_rate
 from brdfcodec.models.network import BetaVAE, initialise_linear_basis, linear_path_trainable
 from brdfcodec.models.store import load_model
 from brdfcodec.training.augment import COLOUR_PERMUTATIONS, mix_physical, permute_colours
@@ -118,8 +118,10 @@ def _global_batches(
     ``config.traversal_weight`` > 0: runs without them keep their stream
     (with ``traversal_directions = "any"`` a unit direction per sample is drawn
     after them and replaces the dimension); the factor supervision's pool rows,
-    noise (and dropout mask) after everything else, and only when
-    ``config.factor_weight`` > 0.
+    noise (and dropout mask) after them, and only when
+    ``config.factor_weight`` > 0; the uniform noise of the latent's grid
+    (``config.latent_grid``, latent units, for the real batch and then the
+    factor batch) last, and only when ``config.latent_grid`` > 0.
     """
     generator = _epoch_generator(config.seed, epoch)
     order = torch.randperm(n_train, generator=generator)
@@ -148,6 +150,12 @@ def _global_batches(
             if config.decoder_dropout > 0:
                 draw["factor_keep"] = (torch.rand(config.factor_batch, dropout_width, generator=generator)
                                        >= config.decoder_dropout)
+        if config.latent_grid > 0:
+            step = 2.0 ** -config.latent_grid
+            draw["grid_noise"] = (torch.rand(size, latent_dim, generator=generator) - 0.5) * step
+            if config.factor_weight > 0:
+                draw["factor_grid_noise"] = (torch.rand(config.factor_batch, latent_dim, generator=generator)
+                                             - 0.5) * step
         yield draw
 
 
@@ -374,8 +382,8 @@ def _train_epoch(model: BetaVAE, forward: torch.nn.Module, optimizer: torch.opti
     n_train = len(data.inputs)
     local = train_config.batch_size // world.size
     steps_per_epoch = max(1, n_train // train_config.batch_size)
-    # loss, recon, kl, traversal penalty, factor supervision (sums over samples), and the KL of each dimension
-    sums = torch.zeros(5, dtype=torch.float64, device=world.device)
+    # loss, recon, kl, traversal penalty, factor supervision, latent rate (sums over samples), the KL of each dimension
+    sums = torch.zeros(6, dtype=torch.float64, device=world.device)
     kl_dims = torch.zeros(model_config.latent_dim, dtype=torch.float64, device=world.device)
     count = 0
     dropout = (DecoderHiddenDropout(model.decoder, train_config.decoder_dropout)
@@ -399,9 +407,10 @@ def _train_epoch(model: BetaVAE, forward: torch.nn.Module, optimizer: torch.opti
         for group in optimizer.param_groups:
             group["lr"] = rate * group.get("lr_scale", 1.0)
         noise = draw["noise"][part].to(world.device)
+        grid_noise = draw["grid_noise"][part].to(world.device) if "grid_noise" in draw else None
         factor = x.new_zeros(())
         if pool is None:
-            recon, mu, logvar = forward(x, noise)
+            recon, mu, logvar = forward(x, noise, grid_noise)
         else:
             # The analytic materials go through the same forward pass (one call: DistributedDataParallel allows
             # one forward per backward); GroupNorm is per sample, so they do not change the others' outputs.
@@ -409,8 +418,11 @@ def _train_epoch(model: BetaVAE, forward: torch.nn.Module, optimizer: torch.opti
             frows = draw["factor_rows"][fpart].to(world.device)
             if dropout is not None:
                 dropout.set_keep(torch.cat([draw["keep"][part], draw["factor_keep"][fpart]]))
+            all_grid_noise = (None if grid_noise is None else
+                              torch.cat([grid_noise, draw["factor_grid_noise"][fpart].to(world.device)]))
             recon_all, mu_all, logvar_all = forward(torch.cat([x, pool.inputs[frows]]),
-                                                    torch.cat([noise, draw["factor_noise"][fpart].to(world.device)]))
+                                                    torch.cat([noise, draw["factor_noise"][fpart].to(world.device)]),
+                                                    all_grid_noise)
             if dropout is not None:
                 dropout.set_keep(draw["keep"][part])  # the traversal's decode below has the real batch only
             n_real = len(x)
@@ -419,7 +431,12 @@ def _train_epoch(model: BetaVAE, forward: torch.nn.Module, optimizer: torch.opti
                                      logvar_all[n_real:], beta=train_config.beta, recon=train_config.recon)
             factor = factor_supervision_loss(mu_all[n_real:], pool.targets[frows], pool.weights[frows])
         terms = beta_vae_loss(recon, x, m, mu, logvar, beta=train_config.beta, recon=train_config.recon)
-        loss, traversal = terms.loss, terms.loss.new_zeros(())
+        loss, traversal, rate = terms.loss, terms.loss.new_zeros(()), terms.loss.new_zeros(())
+        if grid_noise is not None:
+            # The codec's R (nats per material) of the real batch's μ on the grid, rounding as uniform noise.
+            rate = latent_rate(mu + grid_noise, 2.0 ** -train_config.latent_grid).sum(dim=1).mean()
+            if train_config.rate_weight > 0:
+                loss = loss + train_config.rate_weight * rate
         if pool is not None:
             loss = loss + analytic.loss + train_config.factor_weight * factor
         if penalty is not None:
@@ -437,7 +454,7 @@ def _train_epoch(model: BetaVAE, forward: torch.nn.Module, optimizer: torch.opti
         progress.step += 1
         n = len(rows)
         # Summed on the training device: no synchronisation per step.
-        sums += torch.stack([loss, terms.recon, terms.kl, traversal, factor]).detach().double() * n
+        sums += torch.stack([loss, terms.recon, terms.kl, traversal, factor, rate]).detach().double() * n
         kl_dims += kl_per_dimension(mu.detach(), logvar.detach()).sum(0).double()
         count += n
     if dropout is not None:
@@ -454,7 +471,8 @@ def _train_epoch(model: BetaVAE, forward: torch.nn.Module, optimizer: torch.opti
         "kl": totals[2].item() / count_all,
         "traversal": totals[3].item() / count_all,
         "factor": totals[4].item() / count_all,
-        "kl_per_dim": [v / count_all for v in totals[5:-1].tolist()],
+        "rate_bits": totals[5].item() / count_all / math.log(2),
+        "kl_per_dim": [v / count_all for v in totals[6:-1].tolist()],
         "seconds": time.perf_counter() - epoch_start,
     }
 
