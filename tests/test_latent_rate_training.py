@@ -10,8 +10,6 @@ import numpy as np
 import pytest
 import torch
 
-from brdfcodec.datasets.hdf5 import build_dataset
-from brdfcodec.datasets.sources import analytic_sources
 from brdfcodec.layers.coded_basis import coded_mu_codes, encode_integers
 from brdfcodec.models.config import TINY_CONFIG
 from brdfcodec.models.loss import latent_rate
@@ -100,22 +98,15 @@ def test_the_grid_s_noise_is_drawn_last_and_leaves_the_plain_stream_alone() -> N
     assert float(torch.cat([d["factor_grid_noise"] for d in supervised]).abs().max()) <= 0.25
 
 
-@pytest.fixture(scope="module")
-def tiny_dataset(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    path = tmp_path_factory.mktemp("rate-data") / "analytic.h5"
-    build_dataset(path, analytic_sources(random_count=5), source_kind="analytic", description="analytic test set",
-                  validation_fraction=0.2, seed=0, progress=False)
-    return path
-
-
 @pytest.mark.slow  # > 10 s on 2 cores
-def test_a_run_with_a_rate_logs_it_and_a_heavier_weight_spends_fewer_bits(tiny_dataset: Path, tmp_path: Path) -> None:
+def test_a_run_with_a_rate_logs_it_and_a_heavier_weight_spends_fewer_bits(analytic_training_set: Path,
+                                                                           tmp_path: Path) -> None:
     base = dict(epochs=6, batch_size=4, learning_rate=3e-3, warmup_epochs=1, eval_every=3, checkpoint_every=3,
                 seed=7, keep="last")
     logs = {}
     for label, extra in {"plain": {}, "noisy": {"latent_grid": 2},
                          "rate": {"latent_grid": 2, "rate_weight": 3e4}}.items():
-        train(tiny_dataset, tmp_path / label, model_config=TINY_CONFIG, train_config=TrainConfig(**base, **extra),
+        train(analytic_training_set, tmp_path / label, model_config=TINY_CONFIG, train_config=TrainConfig(**base, **extra),
               progress=False)
         logs[label] = [json.loads(line) for line in (tmp_path / label / "log.jsonl").read_text().splitlines()]
     assert all(r["rate_bits"] == 0 for r in logs["plain"])
