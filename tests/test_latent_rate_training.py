@@ -115,3 +115,18 @@ def test_a_run_with_a_rate_logs_it_and_a_heavier_weight_spends_fewer_bits(analyt
     assert logs["rate"][-1]["rate_bits"] < 0.8 * logs["noisy"][-1]["rate_bits"]
     stored = json.loads((tmp_path / "rate" / "run.json").read_text())["train_config"]
     assert TrainConfig.from_dict(stored).rate_weight == 3e4
+
+
+def test_the_model_card_says_the_latent_was_trained_on_a_grid_and_at_what_rate_weight() -> None:
+    import copy
+
+    from brdfcodec.models.registry import default_model_folder
+    from brdfcodec.training.card import render_model_card
+
+    manifest = json.loads((default_model_folder() / "model.json").read_text())
+    assert "uniform noise" not in render_model_card(manifest)  # the shipped model was trained without
+    noisy = copy.deepcopy(manifest)
+    noisy["info"]["train_config"].update(latent_grid=2, rate_weight=0.0)
+    assert "z with uniform noise of width 2^−2 (the coded μ's rounding on that grid)." in render_model_card(noisy)
+    noisy["info"]["train_config"]["rate_weight"] = 70.0
+    assert "and μ's code length there weighted 70 (D + λR)." in render_model_card(noisy)

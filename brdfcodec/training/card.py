@@ -83,7 +83,11 @@ def render_model_card(manifest: dict[str, Any]) -> str:
            + (f", pits weighted {train['traversal_pit_weight']:g}" if train.get("traversal_pit_weight") else "")
            if train.get("traversal_weight") else "")
         + (f"; linear path trained at {train['linear_path_rate']:g} × the learning rate"
-           if train.get("linear_path_rate") else "") + ".",
+           if train.get("linear_path_rate") else "")
+        + (f"; z with uniform noise of width 2^−{train['latent_grid']} (the coded μ's rounding on that grid)"
+           + (f" and μ's code length there weighted {train['rate_weight']:g} (D + λR)" if train.get("rate_weight")
+              else "")
+           if train.get("latent_grid") else "") + ".",
         *([f"- Fine-tuned from `{info['initial_model']['name']}` ("
            + (info["initial_model"].get("note") or f"decoder `{info['initial_model']['decoder_sha256'][:12]}…`")
            + "): these epochs start from its weights and its latent frame."] if info.get("initial_model") else []),

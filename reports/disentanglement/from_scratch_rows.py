@@ -4,7 +4,7 @@ usage (repository root; the runs restored by benchmarks/device/training/restore_
 models exported into runs/models/SESSION-NAME, the measurements of the study's text header in runs/SESSION/eval):
 
     python reports/disentanglement/from_scratch_rows.py [--study from-scratch-supervision | free-dimensions |
-        saturation | cpu-fold2]
+        saturation | cpu-fold2 | rate-fold2]
 
 Studies: ``from-scratch-supervision`` (runs/dev1: four factor weights, one H100, time-limited),
 ``free-dimensions`` (runs/dev2: weights 5,000 and 10,000 and a 12-dimensional latent, one H200, full schedules) and
@@ -12,7 +12,8 @@ Studies: ``from-scratch-supervision`` (runs/dev1: four factor weights, one H100,
 half the analytic materials per step; one H200, full schedules; scored on the device on never-seen analytic
 materials too) and ``cpu-fold2`` (runs/cpu21: issues 48 and 50 with one training, on this machine's CPU, one run per
 core; fold 2 of 3, so that reconstruction is measured on materials the models never saw, beside the v3 recipe's
-fold-2 model re-made here).
+fold-2 model re-made here) and ``rate-fold2`` (runs/q22: issue 48 item 3, the v3 recipe's fold-2 model trained on
+the coded μ's grid, with and without the codec's rate in its loss; reconstruction with μ exact and on the grid).
 """
 
 from __future__ import annotations
@@ -44,6 +45,9 @@ class Study:
     fold: bool = False
     #: How a run's model is named (its exported name, as the benchmark's rows give it): prefix + run.
     prefix: str = "bvae-scratch-"
+    #: The folder (in runs/SESSION) of the training whose log a run's training row reads, ``{run}`` its name: a
+    #: two-stage recipe's second stage (``ft-{run}``), the run itself otherwise.
+    training_folder: str = "{run}"
 
     @property
     def folder(self) -> Path:
@@ -89,7 +93,7 @@ def _local_training_rows(study: Study) -> list[dict]:
     """Training rows of runs made on this machine (no device logs): each run's own summary, log and settings."""
     rows = []
     for name in study.runs:
-        log, summary, described = _run_files(study.folder / name)
+        log, summary, described = _run_files(study.folder / study.training_folder.format(run=name))
         config = described["train_config"]
         rows.append({
             "kind": "training", "model": f"{study.prefix}{name}", "device": study.device,
@@ -99,7 +103,8 @@ def _local_training_rows(study: Study) -> list[dict]:
             "weights_epoch": log[-1]["epoch"], "stop_reason": summary["stop_reason"],
             "seconds": summary["seconds_this_session"],
             "seconds_per_epoch": sum(r["seconds"] for r in log) / len(log),
-            "last_epoch": {k: log[-1][k] for k in ("lr", "recon", "kl", "traversal", "factor")},
+            "last_epoch": {k: log[-1][k] for k in ("lr", "recon", "kl", "traversal", "factor", "rate_bits")
+                           if k in log[-1]},
             "held_out_relae_mapped": log[-1].get("val_relae_mapped"),
             **{k: config[k] for k in study.train_keys},
         })
@@ -111,16 +116,21 @@ def _local_training_rows(study: Study) -> list[dict]:
 #: -o runs/random24.h5``, seed 0: the analytic ones of runs/v3-held-out.h5).
 FOLD_DATASETS = {"both": "runs/both.h5", "random": "runs/random24.h5"}
 
+#: μ rounded to a grid before it is decoded (``bvae model evaluate --mu-grid 2``, eval/evaluate-both-grid2-FOLDER.json):
+#: the latent as a record's coded μ stores it, on the grid of most 16 B records.
+GRID_EVALUATION = ("both-grid2", "runs/both.h5", 2)
+
 
 def _fold_rows(study: Study, name: str, folder: str) -> list[dict]:
     """A fold model's reconstruction per family and split, from ``bvae model evaluate`` (eval/evaluate-KEY-FOLDER.json
     for each dataset of :data:`FOLD_DATASETS`)."""
     rows = []
-    for key, dataset in FOLD_DATASETS.items():
+    for key, dataset, grid in [*((k, d, None) for k, d in FOLD_DATASETS.items()), GRID_EVALUATION]:
         path = study.folder / "eval" / f"evaluate-{key}-{Path(folder).name}.json"
         if path.exists() and path.stat().st_size:
+            option = "" if grid is None else f" --mu-grid {grid}"
             rows += [{"kind": "evaluation", "model": name, **row, "dataset": dataset, "effort": 0,
-                      "command": f"bvae model evaluate {folder} --dataset {dataset} --json"}
+                      "command": f"bvae model evaluate {folder} --dataset {dataset}{option} --json"}
                      for row in json.loads(path.read_text())]
     return rows
 
@@ -254,7 +264,31 @@ CPU_FOLD2 = Study(
 # Rows: python reports/disentanglement/from_scratch_rows.py --study cpu-fold2 -> cpu-fold2.jsonl
 """)
 
-STUDIES = {study.name: study for study in (FROM_SCRATCH_SUPERVISION, FREE_DIMENSIONS, SATURATION, CPU_FOLD2)}
+RATE_FOLD2 = Study(
+    name="rate-fold2", session="q22", runs=("g2", "g2r70", "g2r300", "g2r1000"),
+    device="cpu: 2 cores (x86_64, torch 2.13.0+cpu), one run per core (OMP_NUM_THREADS=1), two side by side",
+    training_title="Training (this machine's CPU, one run per core, two side by side; the second stage's log):",
+    train_keys=("latent_grid", "rate_weight"),
+    references=(("bvae-cv3-fold2-v3", "runs/models/cpu21-cv3-fold2-v3"),),
+    fold=True, prefix="bvae-q22-", training_folder="ft-{run}",
+    header="""\
+# Issue 48 item 3, a rate term in training, on fold 2 of 3 (the rd benchmark's 40 held-out materials: 30 MERL, 10
+# RGL): the v3 recipe's fold-2 model (benchmarks/rd/README.md; 150 epochs, export with --align-factors 300, then 60
+# epochs of the axis penalty and an export with --keep-axes) trained in both stages with z + uniform noise of width
+# 2^-2 (bvae train --latent-grid 2: the rounding of a record's coded μ on the grid 2^-2, the grid of most 16 B
+# records), without a rate (g2) and with lambda times μ's code length on that grid under the format's unit Laplace
+# prior added to the loss (--rate-weight lambda: g2r70, g2r300, g2r1000).
+# Baseline: the v3 recipe's fold-2 model re-made on this machine without the noise (bvae-cv3-fold2-v3, runs/cpu21).
+# NBRDF proxies (90 MERL, 30 RGL; neural fits, not measurements); analytic: 24 random materials none saw.
+# Commands: both stages, the exports and bvae model fit-basis --count 200 --extend in the training rows
+#   (runs/q22/cmd-RUN.txt)
+# Reconstruction: bvae model evaluate MODEL --dataset runs/both.h5 [--mu-grid 2] (and runs/random24.h5) --json
+# File bytes against the best PCA: reports/results/rd-q22-fold2-*.jsonl (benchmarks/rd/q22-fold2-*.json)
+# Rows: python reports/disentanglement/from_scratch_rows.py --study rate-fold2 -> rate-fold2.jsonl
+""")
+
+STUDIES = {study.name: study for study in (FROM_SCRATCH_SUPERVISION, FREE_DIMENSIONS, SATURATION, CPU_FOLD2,
+                                           RATE_FOLD2)}
 
 
 def text(study: Study, rows: list[dict]) -> str:
@@ -265,9 +299,12 @@ def text(study: Study, rows: list[dict]) -> str:
 
 
 def _disentanglement_lines(rows: list[dict]) -> list[str]:
-    """MIG and DCI per seed of the benchmark, then each dimension's dominant factor at seed 0."""
+    """MIG and DCI per seed of the benchmark, then each dimension's dominant factor at seed 0 (nothing for a study
+    that did not run the benchmark)."""
     lines = []
     scored = [row for row in rows if row.get("study") == "disentanglement"]
+    if not scored:
+        return []
     for seed in (0, 2):
         lines.append(f"MIG and DCI, 300 analytic materials of seed {seed} (base RelAE: the model's decode of them)")
         width = max([28, *(len(row["model"]) + 1 for row in scored)])
@@ -300,7 +337,7 @@ def _fold_reconstruction_lines(study: Study, rows: list[dict]) -> list[str]:
     counts: dict[tuple[str, str], int] = {}
     cells: dict[str, dict[tuple[str, str], float]] = {}
     for row in rows:
-        if row.get("kind") == "evaluation" and (row["family"], row["split"]) in columns:
+        if row.get("kind") == "evaluation" and (row["family"], row["split"]) in columns and not row.get("mu_grid"):
             cells.setdefault(row["model"], {})[row["family"], row["split"]] = row["mapped"]
             counts[row["family"], row["split"]] = row["count"]
     titles = {key: f"{family} {counts.get(key, '?')} ({split})" for key, (family, split) in columns.items()}
@@ -310,6 +347,23 @@ def _fold_reconstruction_lines(study: Study, rows: list[dict]) -> list[str]:
         cell = cells.get(model, {})
         lines.append(f"{model:<33}" + "".join(f"{'—' if cell.get(key) is None else f'{cell[key]:.4f}':>20}"
                                               for key in columns))
+    return [*lines, "", *_grid_lines(study, rows)]
+
+
+def _grid_lines(study: Study, rows: list[dict]) -> list[str]:
+    """Held-out mapped RelAE of μ rounded to the grid (as a coded μ stores it), and μ's coded bytes, where measured."""
+    on_grid = [row for row in rows if row.get("kind") == "evaluation" and row.get("mu_grid")
+               and row["split"] == "held-out"]
+    if not on_grid:
+        return []
+    grid = on_grid[0]["mu_grid"]
+    lines = [f"μ rounded to the grid 2^-{grid} (a record's coded μ), decoded: mapped RelAE, full tables, held out "
+             "(μ's bytes coded alone under the format's unit prior):",
+             f"{'model':<33}{'MERL held out':>24}{'RGL held out':>24}"]
+    for model in study.models:
+        cell = {row["family"]: row for row in on_grid if row["model"] == model}
+        texts = [f"{cell[f]['mapped']:.4f} ({cell[f]['mu_bytes']:.2f} B)" if f in cell else "—" for f in ("merl", "rgl")]
+        lines.append(f"{model:<33}" + "".join(f"{text:>24}" for text in texts))
     return [*lines, ""]
 
 
@@ -361,11 +415,12 @@ def _training_lines(study: Study, rows: list[dict]) -> list[str]:
             extra = "".join(f", {key.replace('_', ' ')} {row[key]}" for key in study.train_keys)
             if "latent_dim" in row:
                 extra += f", latent {row['latent_dim']}"
+            rate = f", μ's rate {last['rate_bits']:.1f} bits" if last.get("rate_bits") else ""
             lines.append(f"  {row['model']:<22} factor weight {row['factor_weight']:>7g}{extra}: "
                          f"{row['epochs_done']} of {row['epochs_planned']} epochs in {row['seconds']:.0f} s "
                          f"({row['stop_reason']}; weights of epoch {row['weights_epoch']}, learning rate "
                          f"{last['lr']:.1e} at the stop); last epoch: recon {last['recon']:.0f}, KL {last['kl']:.1f}, "
-                         f"factor {last['factor']:.3f}")
+                         f"factor {last['factor']:.3f}{rate}")
     return lines
 
 
