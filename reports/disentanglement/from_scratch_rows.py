@@ -265,7 +265,7 @@ CPU_FOLD2 = Study(
 """)
 
 RATE_FOLD2 = Study(
-    name="rate-fold2", session="q22", runs=("g2", "g2r70", "g2r300", "g2r1000"),
+    name="rate-fold2", session="q22", runs=("g2", "g2r70", "g2r300", "g2r1000", "g2r3000", "g2r10000"),
     device="cpu: 2 cores (x86_64, torch 2.13.0+cpu), one run per core (OMP_NUM_THREADS=1), two side by side",
     training_title="Training (this machine's CPU, one run per core, two side by side; the second stage's log):",
     train_keys=("latent_grid", "rate_weight"),
@@ -277,7 +277,7 @@ RATE_FOLD2 = Study(
 # epochs of the axis penalty and an export with --keep-axes) trained in both stages with z + uniform noise of width
 # 2^-2 (bvae train --latent-grid 2: the rounding of a record's coded μ on the grid 2^-2, the grid of most 16 B
 # records), without a rate (g2) and with lambda times μ's code length on that grid under the format's unit Laplace
-# prior added to the loss (--rate-weight lambda: g2r70, g2r300, g2r1000).
+# prior added to the loss (--rate-weight lambda: g2r70, g2r300, g2r1000, g2r3000, g2r10000).
 # Baseline: the v3 recipe's fold-2 model re-made on this machine without the noise (bvae-cv3-fold2-v3, runs/cpu21).
 # NBRDF proxies (90 MERL, 30 RGL; neural fits, not measurements); analytic: 24 random materials none saw.
 # Commands: both stages, the exports and bvae model fit-basis --count 200 --extend in the training rows
