@@ -80,8 +80,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
                         help="weight of mu's code length on the grid 2^-G under the format's unit Laplace prior "
                         "(nats, against the reconstruction error summed over a material's entries), so that training "
                         "minimises D + LAMBDA*R; about 70 values a nat as the codec's basis layer does at 16-32 B "
-                        "(needs --latent-grid; "
-                        "0: none, the default)")
+                        "(needs --latent-grid; 0: none, the default)")
     parser.add_argument("--average-from-epoch", type=int,
                         help="average the weights of every step from this epoch on (stochastic weight averaging; "
                              "validation, best.pt and the export use the average; 0: never, the default)")

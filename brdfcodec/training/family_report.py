@@ -143,11 +143,9 @@ def _group(rows: Sequence[dict[str, Any]], mu_grid: int | None = None) -> list[F
                 return float(np.mean([r[key] for r in chosen]))
 
             worst = max(chosen, key=lambda r: r["model_mapped"])["name"]
-            coded = chosen[0]["mu_bytes"] is not None
             out.append(FamilyRow(family, split, len(chosen), mean("model_mapped"), mean("model_linear"),
                                  mean("model_itp"), mean("pca8_mapped"), mean("pca16_mapped"), mean("pca8_itp"),
-                                 mean("pca16_itp"), worst, mu_grid if coded else None,
-                                 mean("mu_bytes") if coded else None))
+                                 mean("pca16_itp"), worst, mu_grid, None if mu_grid is None else mean("mu_bytes")))
     return out
 
 
