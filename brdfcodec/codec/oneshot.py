@@ -14,6 +14,7 @@ from typing import TYPE_CHECKING, Literal
 import numpy as np
 import numpy.typing as npt
 
+from brdfcodec.conventions import TABLE_SHAPE
 from brdfcodec.format.bvae import (
     LatentDtype,
     Record,
@@ -42,14 +43,50 @@ __all__ = ["compress", "decode", "decompress", "encode", "encode_records"]
 Allocation = Literal["record", "library"]
 
 
-EncodeSource = MerlBRDF | MaterialInput | str | os.PathLike[str]
+EncodeSource = MerlBRDF | MaterialInput | npt.NDArray[np.floating] | str | os.PathLike[str]
+
+
+def _is_one_source(sources: object) -> bool:
+    """Whether ``sources`` is one source (a table of shape (3, 90, 90, 180) included), not an iterable of them."""
+    if isinstance(sources, np.ndarray):
+        return sources.ndim == len(TABLE_SHAPE)
+    return isinstance(sources, MerlBRDF | MaterialInput | str | os.PathLike)
+
+
+def _as_brdf(source: object, index: int) -> MerlBRDF:
+    """A source that is not a :class:`MaterialInput` as a table: read from its file, or taken as it is."""
+    if isinstance(source, MerlBRDF):
+        return source
+    if isinstance(source, str | os.PathLike):
+        return read_measured(source)
+    if isinstance(source, np.ndarray):
+        if source.shape != TABLE_SHAPE or not (np.issubdtype(source.dtype, np.floating)
+                                                or np.issubdtype(source.dtype, np.integer)):
+            raise ValueError(f"source {index}: a table must be real numbers of shape {TABLE_SHAPE} ([channel, θh, "
+                             f"θd, φd], stored MERL units), got {source.dtype} {source.shape}")
+        values = np.asarray(source, dtype=np.float64)
+        if not np.isfinite(values).all():
+            raise ValueError(f"source {index}: the table holds {int(np.count_nonzero(~np.isfinite(values)))} "
+                             "entries that are not finite (NaN or infinite); MERL marks unmeasured entries with "
+                             "negative values")
+        return MerlBRDF(values)
+    raise TypeError(f"source {index}: expected a MERL .binary or RGL .bsdf path, a MerlBRDF, a MaterialInput or a "
+                    f"table of shape {TABLE_SHAPE}, got {type(source).__name__}")
 
 
 def as_material_input(source: EncodeSource, index: int, name: str | None) -> MaterialInput:
-    """A source as a network input with its table (named ``name``, else by the source, else ``material-INDEX``)."""
+    """A source as a network input with its table (named ``name``, else by the source, else ``material-INDEX``).
+
+    Raises
+    ------
+    TypeError
+        ``source`` is none of the kinds :data:`EncodeSource` names.
+    ValueError
+        A table of another shape, of values that are not real numbers, or with entries that are not finite.
+    """
     if isinstance(source, MaterialInput):
         return source if name is None else MaterialInput(name, source.inputs, source.source, source.mask)
-    brdf = prepare_source(source if isinstance(source, MerlBRDF) else read_measured(source))
+    brdf = prepare_source(_as_brdf(source, index))
     label = name or brdf.name or f"material-{index}"
     inputs, mask = network_input_from_table(brdf.values, brdf.mask)
     return MaterialInput(label, inputs, brdf, mask)
@@ -69,7 +106,7 @@ def encode_records(
 
     Parameters
     ----------
-    sources : iterable of MerlBRDF, MaterialInput or MERL file path
+    sources : iterable of MerlBRDF, MaterialInput, MERL or RGL file path, or table (as for :func:`encode`)
         Consumed lazily, so a generator that loads one table at a time keeps
         at most ``batch_size`` tables in memory.
     names : sequence of str, optional
@@ -140,7 +177,9 @@ def encode(
 
     Parameters
     ----------
-    sources : MerlBRDF, MaterialInput, MERL file path, or an iterable of them
+    sources : MerlBRDF, MaterialInput, MERL or RGL file path, table, or an iterable of them
+        A table is an array of shape (3, 90, 90, 180) in stored MERL units (``[channel, θh, θd, φd]``, negative
+        entries unmeasured, every entry finite); an array of shape (N, 3, 90, 90, 180) is N of them.
     names : sequence of str, optional
         Material names (by default the sources' names).
     model : model folder, decoder SHA-256, or None for the default
@@ -188,7 +227,7 @@ def encode(
     >>> bc.decode(data)["gold"].table(phi_d_bins=[0]).shape
     (3, 90, 90, 1)
     """
-    items = [sources] if isinstance(sources, MerlBRDF | MaterialInput | str | os.PathLike) else sources
+    items = [sources] if _is_one_source(sources) else sources
     if allocate not in ALLOCATIONS:
         raise ValueError(f"allocate must be one of {list(ALLOCATIONS)}, got {allocate!r}")
     if allocate == "library" and bytes is None:
