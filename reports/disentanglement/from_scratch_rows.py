@@ -4,7 +4,7 @@ usage (repository root; the runs restored by benchmarks/device/training/restore_
 models exported into runs/models/SESSION-NAME, the measurements of the study's text header in runs/SESSION/eval):
 
     python reports/disentanglement/from_scratch_rows.py [--study from-scratch-supervision | free-dimensions |
-        saturation | cpu-fold2 | rate-fold2]
+        saturation | cpu-fold2 | rate-fold2 | swa-fold2]
 
 Studies: ``from-scratch-supervision`` (runs/dev1: four factor weights, one H100, time-limited),
 ``free-dimensions`` (runs/dev2: weights 5,000 and 10,000 and a 12-dimensional latent, one H200, full schedules) and
@@ -13,7 +13,8 @@ half the analytic materials per step; one H200, full schedules; scored on the de
 materials too) and ``cpu-fold2`` (runs/cpu21: issues 48 and 50 with one training, on this machine's CPU, one run per
 core; fold 2 of 3, so that reconstruction is measured on materials the models never saw, beside the v3 recipe's
 fold-2 model re-made here) and ``rate-fold2`` (runs/q22: issue 48 item 3, the v3 recipe's fold-2 model trained on
-the coded μ's grid, with and without the codec's rate in its loss; reconstruction with μ exact and on the grid).
+the coded μ's grid, with and without the codec's rate in its loss; reconstruction with μ exact and on the grid)
+and ``swa-fold2`` (runs/s24: cpu-fold2's supervised 16-dimensional recipe with stochastic weight averaging).
 """
 
 from __future__ import annotations
@@ -287,8 +288,37 @@ RATE_FOLD2 = Study(
 # Rows: python reports/disentanglement/from_scratch_rows.py --study rate-fold2 -> rate-fold2.jsonl
 """)
 
+SWA_FOLD2 = Study(
+    name="swa-fold2", session="s24", runs=("z16-swa200", "z16-e250-swa125", "z16-w7k-swa200", "z16-w5k-swa200"),
+    device="cpu: 2 cores (x86_64, torch 2.13.0+cpu), one run per core (OMP_NUM_THREADS=1), two side by side",
+    training_title="Training (this machine's CPU, one run per core, two side by side):",
+    train_keys=("average_from_epoch",),
+    references=(("bvae-cv3-fold2-v3", "runs/models/cpu21-cv3-fold2-v3"),
+                ("bvae-cpu21-f2-sharp-w10k-z16", "runs/models/cpu21-f2-sharp-w10k-z16")),
+    fold=True, prefix="bvae-s24-",
+    header="""\
+# Issue 50 item 3 on fold 2 of 3 (the rd benchmark's 40 held-out materials: 30 MERL, 10 RGL): cpu-fold2's
+# supervised 16-dimensional recipe (f2-sharp-w10k-z16: the release recipe, 400 epochs, dimensions 1-8 tied to the
+# analytic factors, the colour's saturation an eighth factor, GGX alpha of the factor pool from 0.01, 8 free
+# dimensions) with the weights averaged over every step of the schedule's second half (bvae train
+# --average-from-epoch): at factor weight 10,000 over 400 epochs averaged from 200 (z16-swa200) and over 250 averaged
+# from 125 (z16-e250-swa125), and at weights 7,000 and 5,000 (z16-w7k-swa200, z16-w5k-swa200; 400 epochs, averaged
+# from 200). References: cpu-fold2's run of the recipe at 10,000 without the average (last weights), and the v3
+# recipe's fold-2 model (bvae-cv3-fold2-v3, the baseline of issue 50's "no worse on every family").
+# NBRDF proxies (90 MERL, 30 RGL; neural fits, not measurements); analytic: 24 random materials none saw.
+# Commands: runs/s24/cmd-RUN.txt (in the training rows; a later --factor-weight overrides the first); export here:
+#   bvae model export runs/s24/RUN -o runs/models/s24-RUN --name bvae-s24-RUN --dataset runs/both.h5
+#   --align-factors 300 --keep-axes
+# Benchmark: bvae model disentanglement MODEL --materials 300 --seed S --no-pca (S = 0 and 2); the references' rows
+#   are cpu-fold2's
+# Reconstruction: bvae model evaluate MODEL --dataset runs/both.h5 (and runs/random24.h5) --json
+# File bytes against the best PCA (weights 5,000 and 7,000, basis grown with bvae model fit-basis --count 200
+#   --extend): reports/results/rd-s24-fold2-*.jsonl (benchmarks/rd/s24-fold2-*.json)
+# Rows: python reports/disentanglement/from_scratch_rows.py --study swa-fold2 -> swa-fold2.jsonl
+""")
+
 STUDIES = {study.name: study for study in (FROM_SCRATCH_SUPERVISION, FREE_DIMENSIONS, SATURATION, CPU_FOLD2,
-                                           RATE_FOLD2)}
+                                           RATE_FOLD2, SWA_FOLD2)}
 
 
 def text(study: Study, rows: list[dict]) -> str:
