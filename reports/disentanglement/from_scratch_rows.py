@@ -121,16 +121,22 @@ FOLD_DATASETS = {"both": "runs/both.h5", "random": "runs/random24.h5"}
 #: the latent as a record's coded μ stores it, on the grid of most 16 B records.
 GRID_EVALUATION = ("both-grid2", "runs/both.h5", 2)
 
+#: The same datasets encoded at the codec's default effort (``bvae model evaluate --effort 1``: μ refined through the
+#: decoder, as ``bvae compress`` encodes; eval/evaluate-KEY-e1-FOLDER.json), where a study measured them.
+EFFORT_EVALUATIONS = tuple((f"{key}-e1", dataset, 1) for key, dataset in FOLD_DATASETS.items())
+
 
 def _fold_rows(study: Study, name: str, folder: str) -> list[dict]:
     """A fold model's reconstruction per family and split, from ``bvae model evaluate`` (eval/evaluate-KEY-FOLDER.json
     for each dataset of :data:`FOLD_DATASETS`)."""
     rows = []
-    for key, dataset, grid in [*((k, d, None) for k, d in FOLD_DATASETS.items()), GRID_EVALUATION]:
+    runs = [*((k, d, None, 0) for k, d in FOLD_DATASETS.items()), (*GRID_EVALUATION, 0),
+            *((k, d, None, effort) for k, d, effort in EFFORT_EVALUATIONS)]
+    for key, dataset, grid, effort in runs:
         path = study.folder / "eval" / f"evaluate-{key}-{Path(folder).name}.json"
         if path.exists() and path.stat().st_size:
-            option = "" if grid is None else f" --mu-grid {grid}"
-            rows += [{"kind": "evaluation", "model": name, **row, "dataset": dataset, "effort": 0,
+            option = ("" if grid is None else f" --mu-grid {grid}") + (f" --effort {effort}" if effort else "")
+            rows += [{"kind": "evaluation", "model": name, **row, "dataset": dataset, "effort": effort,
                       "command": f"bvae model evaluate {folder} --dataset {dataset}{option} --json"}
                      for row in json.loads(path.read_text())]
     return rows
@@ -294,6 +300,8 @@ SWA_FOLD2 = Study(
     training_title="Training (this machine's CPU, one run per core, two side by side):",
     train_keys=("average_from_epoch",),
     references=(("bvae-cv3-fold2-v3", "runs/models/cpu21-cv3-fold2-v3"),
+                ("bvae-cpu21-f2-sharp-w10k-z8", "runs/models/cpu21-f2-sharp-w10k-z8"),
+                ("bvae-cpu21-f2-sharp-w10k-z12", "runs/models/cpu21-f2-sharp-w10k-z12"),
                 ("bvae-cpu21-f2-sharp-w10k-z16", "runs/models/cpu21-f2-sharp-w10k-z16")),
     fold=True, prefix="bvae-s24-",
     header="""\
@@ -303,15 +311,17 @@ SWA_FOLD2 = Study(
 # dimensions) with the weights averaged over every step of the schedule's second half (bvae train
 # --average-from-epoch): at factor weight 10,000 over 400 epochs averaged from 200 (z16-swa200) and over 250 averaged
 # from 125 (z16-e250-swa125), and at weights 7,000 and 5,000 (z16-w7k-swa200, z16-w5k-swa200; 400 epochs, averaged
-# from 200). References: cpu-fold2's run of the recipe at 10,000 without the average (last weights), and the v3
-# recipe's fold-2 model (bvae-cv3-fold2-v3, the baseline of issue 50's "no worse on every family").
+# from 200). References: cpu-fold2's runs of the recipe at 10,000 without the average (last weights; 8, 12 and 16
+# dimensions), and the v3 recipe's fold-2 model (bvae-cv3-fold2-v3, the baseline of issue 50's "no worse on every
+# family"). Reconstruction is measured twice: μ of the encoder (effort 0, what training measures) and μ refined
+# through the decoder (effort 1, bvae compress's default: what a user's file holds).
 # NBRDF proxies (90 MERL, 30 RGL; neural fits, not measurements); analytic: 24 random materials none saw.
 # Commands: runs/s24/cmd-RUN.txt (in the training rows; a later --factor-weight overrides the first); export here:
 #   bvae model export runs/s24/RUN -o runs/models/s24-RUN --name bvae-s24-RUN --dataset runs/both.h5
 #   --align-factors 300 --keep-axes
 # Benchmark: bvae model disentanglement MODEL --materials 300 --seed S --no-pca (S = 0 and 2); the references' rows
 #   are cpu-fold2's
-# Reconstruction: bvae model evaluate MODEL --dataset runs/both.h5 (and runs/random24.h5) --json
+# Reconstruction: bvae model evaluate MODEL --dataset runs/both.h5 (and runs/random24.h5) [--effort 1] --json
 # File bytes against the best PCA (weights 5,000 and 7,000, basis grown with bvae model fit-basis --count 200
 #   --extend): reports/results/rd-s24-fold2-*.jsonl (benchmarks/rd/s24-fold2-*.json)
 # Rows: python reports/disentanglement/from_scratch_rows.py --study swa-fold2 -> swa-fold2.jsonl
@@ -360,24 +370,35 @@ def _device_analytic(row: dict) -> float | None:
 
 
 def _fold_reconstruction_lines(study: Study, rows: list[dict]) -> list[str]:
-    """Each fold model's mapped RelAE per family and split, and on the never-seen analytic materials."""
+    """Each fold model's mapped RelAE per family and split, and on the never-seen analytic materials: μ of the
+    encoder (effort 0), then, where measured, μ refined as ``bvae compress`` encodes (effort 1)."""
+    lines = _fold_effort_lines(study, rows, 0, "Reconstruction, mapped RelAE of the encoder's μ decoded (effort 0), "
+                                                "full tables, per family and split:")
+    if any(row.get("kind") == "evaluation" and row.get("effort") == 1 for row in rows):
+        lines += _fold_effort_lines(study, rows, 1, "The same with μ refined through the decoder as bvae compress "
+                                                    "encodes (bvae model evaluate --effort 1, the codec's default):")
+    return [*lines, *_grid_lines(study, rows)]
+
+
+def _fold_effort_lines(study: Study, rows: list[dict], effort: int, title: str) -> list[str]:
+    """One table of :func:`_fold_reconstruction_lines`: the evaluations at one encoder effort."""
     columns = {("merl", "held-out"): ("MERL", "held out"), ("rgl", "held-out"): ("RGL", "held out"),
                ("analytic", "held-out"): ("analytic", "never"), ("merl", "train"): ("MERL", "train"),
                ("rgl", "train"): ("RGL", "train")}
     counts: dict[tuple[str, str], int] = {}
     cells: dict[str, dict[tuple[str, str], float]] = {}
     for row in rows:
-        if row.get("kind") == "evaluation" and (row["family"], row["split"]) in columns and not row.get("mu_grid"):
+        if (row.get("kind") == "evaluation" and (row["family"], row["split"]) in columns and not row.get("mu_grid")
+                and row.get("effort", 0) == effort):
             cells.setdefault(row["model"], {})[row["family"], row["split"]] = row["mapped"]
             counts[row["family"], row["split"]] = row["count"]
     titles = {key: f"{family} {counts.get(key, '?')} ({split})" for key, (family, split) in columns.items()}
-    lines = ["Reconstruction, mapped RelAE of the encoder's μ decoded (effort 0), full tables, per family and split:",
-             f"{'model':<33}" + "".join(f"{title:>20}" for title in titles.values())]
+    lines = [title, f"{'model':<33}" + "".join(f"{heading:>20}" for heading in titles.values())]
     for model in study.models:
         cell = cells.get(model, {})
         lines.append(f"{model:<33}" + "".join(f"{'—' if cell.get(key) is None else f'{cell[key]:.4f}':>20}"
                                               for key in columns))
-    return [*lines, "", *_grid_lines(study, rows)]
+    return [*lines, ""]
 
 
 def _grid_lines(study: Study, rows: list[dict]) -> list[str]:
