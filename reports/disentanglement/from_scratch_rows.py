@@ -295,7 +295,8 @@ RATE_FOLD2 = Study(
 """)
 
 SWA_FOLD2 = Study(
-    name="swa-fold2", session="s24", runs=("z16-swa200", "z16-e250-swa125", "z16-w7k-swa200", "z16-w5k-swa200"),
+    name="swa-fold2", session="s24", runs=("z16-swa200", "z16-e250-swa125", "z16-w7k-swa200", "z16-w5k-swa200",
+          "z16-w5k-swa200-seed1"),
     device="cpu: 2 cores (x86_64, torch 2.13.0+cpu), one run per core (OMP_NUM_THREADS=1), two side by side",
     training_title="Training (this machine's CPU, one run per core, two side by side):",
     train_keys=("average_from_epoch",),
@@ -311,7 +312,7 @@ SWA_FOLD2 = Study(
 # dimensions) with the weights averaged over every step of the schedule's second half (bvae train
 # --average-from-epoch): at factor weight 10,000 over 400 epochs averaged from 200 (z16-swa200) and over 250 averaged
 # from 125 (z16-e250-swa125), and at weights 7,000 and 5,000 (z16-w7k-swa200, z16-w5k-swa200; 400 epochs, averaged
-# from 200). References: cpu-fold2's runs of the recipe at 10,000 without the average (last weights; 8, 12 and 16
+# from 200; the 5,000 run again with training seed 1, z16-w5k-swa200-seed1). References: cpu-fold2's runs of the recipe at 10,000 without the average (last weights; 8, 12 and 16
 # dimensions), and the v3 recipe's fold-2 model (bvae-cv3-fold2-v3, the baseline of issue 50's "no worse on every
 # family"). Reconstruction is measured twice: μ of the encoder (effort 0, what training measures) and μ refined
 # through the decoder (effort 1, bvae compress's default: what a user's file holds).
