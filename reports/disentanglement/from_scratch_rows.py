@@ -322,7 +322,9 @@ SWA_FOLD2 = Study(
 #   --align-factors 300 --keep-axes
 # Benchmark: bvae model disentanglement MODEL --materials 300 --seed S --no-pca (S = 0 and 2); the references' rows
 #   are cpu-fold2's
-# Reconstruction: bvae model evaluate MODEL --dataset runs/both.h5 (and runs/random24.h5) [--effort 1] --json
+# Reconstruction: bvae model evaluate MODEL --dataset runs/both.h5 (and runs/random24.h5) [--effort 1] --json;
+#   μ on the coded grid of most 16 B records and its bytes: bvae model evaluate MODEL --dataset runs/both.h5
+#   --mu-grid 2 --json (five of the models)
 # File bytes against the best PCA (weights 5,000 and 7,000, basis grown with bvae model fit-basis --count 200
 #   --extend): reports/results/rd-s24-fold2-*.jsonl (benchmarks/rd/s24-fold2-*.json)
 # Rows: python reports/disentanglement/from_scratch_rows.py --study swa-fold2 -> swa-fold2.jsonl
