@@ -14,7 +14,8 @@ materials too) and ``cpu-fold2`` (runs/cpu21: issues 48 and 50 with one training
 core; fold 2 of 3, so that reconstruction is measured on materials the models never saw, beside the v3 recipe's
 fold-2 model re-made here) and ``rate-fold2`` (runs/q22: issue 48 item 3, the v3 recipe's fold-2 model trained on
 the coded μ's grid, with and without the codec's rate in its loss; reconstruction with μ exact and on the grid)
-and ``swa-fold2`` (runs/s24: cpu-fold2's supervised 16-dimensional recipe with stochastic weight averaging).
+and ``swa-fold2`` (runs/s24: cpu-fold2's supervised 16-dimensional recipe with stochastic weight averaging at three
+factor weights; reconstruction also at the codec's encoder effort).
 """
 
 from __future__ import annotations
@@ -128,7 +129,8 @@ EFFORT_EVALUATIONS = tuple((f"{key}-e1", dataset, 1) for key, dataset in FOLD_DA
 
 def _fold_rows(study: Study, name: str, folder: str) -> list[dict]:
     """A fold model's reconstruction per family and split, from ``bvae model evaluate`` (eval/evaluate-KEY-FOLDER.json
-    for each dataset of :data:`FOLD_DATASETS`)."""
+    for each dataset of :data:`FOLD_DATASETS`, and of :data:`GRID_EVALUATION` and :data:`EFFORT_EVALUATIONS` where a
+    study measured them)."""
     rows = []
     runs = [*((k, d, None, 0) for k, d in FOLD_DATASETS.items()), (*GRID_EVALUATION, 0),
             *((k, d, None, effort) for k, d, effort in EFFORT_EVALUATIONS)]
@@ -312,8 +314,8 @@ SWA_FOLD2 = Study(
 # dimensions) with the weights averaged over every step of the schedule's second half (bvae train
 # --average-from-epoch): at factor weight 10,000 over 400 epochs averaged from 200 (z16-swa200) and over 250 averaged
 # from 125 (z16-e250-swa125), and at weights 7,000 and 5,000 (z16-w7k-swa200, z16-w5k-swa200; 400 epochs, averaged
-# from 200; the 5,000 run again with training seed 1, z16-w5k-swa200-seed1). References: cpu-fold2's runs of the recipe at 10,000 without the average (last weights; 8, 12 and 16
-# dimensions), and the v3 recipe's fold-2 model (bvae-cv3-fold2-v3, the baseline of issue 50's "no worse on every
+# from 200; the 5,000 run again with training seed 1, z16-w5k-swa200-seed1). References: cpu-fold2's runs of the
+# recipe at 10,000 without the average (last weights; 8, 12 and 16 dimensions), and the v3 recipe's fold-2 model (bvae-cv3-fold2-v3, the baseline of issue 50's "no worse on every
 # family"). Reconstruction is measured twice: μ of the encoder (effort 0, what training measures) and μ refined
 # through the decoder (effort 1, bvae compress's default: what a user's file holds).
 # NBRDF proxies (90 MERL, 30 RGL; neural fits, not measurements); analytic: 24 random materials none saw.
