@@ -22,6 +22,7 @@ import numpy as np
 import torch
 
 from brdfcodec.codec import BrdfDecoder
+from brdfcodec.codec.device_decode import table_from_mapped_host
 from brdfcodec.format.bvae import LatentRecord
 from brdfcodec.runtime.threads import codec_threads
 
@@ -94,6 +95,24 @@ def test_decode_many_tensor_into_a_reused_out_against_the_network_alone(benchmar
 
     _paired_against_the_network(benchmark, "decode-many-tensor-out-32", "decode_many_tensor(out=)",
                                 decode_many_tensor_into_out)
+
+
+def test_the_host_passes_alone_against_the_network_alone(benchmark) -> None:  # noqa: ANN001
+    """What ``decode_many`` adds to the network, alone: the host passes after it (float64 arguments and
+    exponentials at the kept slices, the stepping through each gap, the mask: ``table_from_mapped_host``,
+    compiled, as ``decode_many`` runs it) on the network's own outputs, computed once before, each table into a
+    reused buffer. "decode-many-32"'s 1.5 leaves them 0.5 of the network's time; this is how much they take."""
+    decoder = BrdfDecoder()
+    codes = np.random.default_rng(0).standard_normal((_COUNT, decoder.latent_dim)).astype(np.float32)
+    mapped = decoder.decode_mapped(codes, batch_size=_BATCH)
+    table = np.empty((3, 90, 90, 180), dtype=np.float32)
+
+    def host_passes(decoder: BrdfDecoder, codes: np.ndarray, records: list[LatentRecord]) -> None:
+        with codec_threads():
+            for slices in mapped:
+                assert table_from_mapped_host(slices, masked="unmeasured", out=table, compiled=True) is table
+
+    _paired_against_the_network(benchmark, "decode-host-passes-32", "host passes after the network", host_passes)
 
 
 def test_evaluate_tensor_at_directions_against_the_network_alone(benchmark) -> None:  # noqa: ANN001

@@ -4,7 +4,7 @@ usage (repository root; the runs restored by benchmarks/device/training/restore_
 models exported into runs/models/SESSION-NAME, the measurements of the study's text header in runs/SESSION/eval):
 
     python reports/disentanglement/from_scratch_rows.py [--study from-scratch-supervision | free-dimensions |
-        saturation | cpu-fold2 | rate-fold2 | swa-fold2]
+        saturation | cpu-fold2 | rate-fold2 | swa-fold2 | latent-size-fold2]
 
 Studies: ``from-scratch-supervision`` (runs/dev1: four factor weights, one H100, time-limited),
 ``free-dimensions`` (runs/dev2: weights 5,000 and 10,000 and a 12-dimensional latent, one H200, full schedules) and
@@ -15,7 +15,8 @@ core; fold 2 of 3, so that reconstruction is measured on materials the models ne
 fold-2 model re-made here) and ``rate-fold2`` (runs/q22: issue 48 item 3, the v3 recipe's fold-2 model trained on
 the coded μ's grid, with and without the codec's rate in its loss; reconstruction with μ exact and on the grid)
 and ``swa-fold2`` (runs/s24: cpu-fold2's supervised 16-dimensional recipe with stochastic weight averaging at three
-factor weights; reconstruction also at the codec's encoder effort).
+factor weights; reconstruction also at the codec's encoder effort) and ``latent-size-fold2`` (runs/s25: the
+supervised recipe with 1 and 2 free dimensions; μ on the coded grids 2^-1, 2^-2 and 2^-3 and its bytes).
 """
 
 from __future__ import annotations
@@ -118,9 +119,10 @@ def _local_training_rows(study: Study) -> list[dict]:
 #: -o runs/random24.h5``, seed 0: the analytic ones of runs/v3-held-out.h5).
 FOLD_DATASETS = {"both": "runs/both.h5", "random": "runs/random24.h5"}
 
-#: μ rounded to a grid before it is decoded (``bvae model evaluate --mu-grid 2``, eval/evaluate-both-grid2-FOLDER.json):
-#: the latent as a record's coded μ stores it, on the grid of most 16 B records.
-GRID_EVALUATION = ("both-grid2", "runs/both.h5", 2)
+#: μ rounded to a grid before it is decoded (``bvae model evaluate --mu-grid G``, eval/evaluate-both-gridG-FOLDER.json):
+#: the latent as a record's coded μ stores it, on the grids 2^-1, 2^-2 (that of most 16 B records) and 2^-3, where a
+#: study measured them.
+GRID_EVALUATIONS = tuple((f"both-grid{grid}", "runs/both.h5", grid) for grid in (1, 2, 3))
 
 #: The same datasets encoded at the codec's default effort (``bvae model evaluate --effort 1``: μ refined through the
 #: decoder, as ``bvae compress`` encodes; eval/evaluate-KEY-e1-FOLDER.json), where a study measured them.
@@ -129,10 +131,10 @@ EFFORT_EVALUATIONS = tuple((f"{key}-e1", dataset, 1) for key, dataset in FOLD_DA
 
 def _fold_rows(study: Study, name: str, folder: str) -> list[dict]:
     """A fold model's reconstruction per family and split, from ``bvae model evaluate`` (eval/evaluate-KEY-FOLDER.json
-    for each dataset of :data:`FOLD_DATASETS`, and of :data:`GRID_EVALUATION` and :data:`EFFORT_EVALUATIONS` where a
+    for each dataset of :data:`FOLD_DATASETS`, and of :data:`GRID_EVALUATIONS` and :data:`EFFORT_EVALUATIONS` where a
     study measured them)."""
     rows = []
-    runs = [*((k, d, None, 0) for k, d in FOLD_DATASETS.items()), (*GRID_EVALUATION, 0),
+    runs = [*((k, d, None, 0) for k, d in FOLD_DATASETS.items()), *((*grid, 0) for grid in GRID_EVALUATIONS),
             *((k, d, None, effort) for k, d, effort in EFFORT_EVALUATIONS)]
     for key, dataset, grid, effort in runs:
         path = study.folder / "eval" / f"evaluate-{key}-{Path(folder).name}.json"
@@ -332,8 +334,36 @@ SWA_FOLD2 = Study(
 # Rows: python reports/disentanglement/from_scratch_rows.py --study swa-fold2 -> swa-fold2.jsonl
 """)
 
+LATENT_SIZE_FOLD2 = Study(
+    name="latent-size-fold2", session="s25", runs=("z9", "z10"),
+    device="cpu: 2 cores (x86_64, torch 2.13.0+cpu), one run per core (OMP_NUM_THREADS=1), two side by side",
+    training_title="Training (this machine's CPU, one run per core, two side by side):",
+    references=(("bvae-cv3-fold2-v3", "runs/models/cpu21-cv3-fold2-v3"),
+                ("bvae-cpu21-f2-sharp-w10k-z8", "runs/models/cpu21-f2-sharp-w10k-z8"),
+                ("bvae-cpu21-f2-sharp-w10k-z12", "runs/models/cpu21-f2-sharp-w10k-z12"),
+                ("bvae-cpu21-f2-sharp-w10k-z16", "runs/models/cpu21-f2-sharp-w10k-z16")),
+    fold=True, prefix="bvae-s25-",
+    header="""\
+# Issues 48 and 50 on fold 2 of 3 (the rd benchmark's 40 held-out materials: 30 MERL, 10 RGL): how many free
+# dimensions the supervised recipe needs, and what each costs a record's coded μ. cpu-fold2's recipe (the release
+# recipe, 400 epochs, dimensions 1-8 tied to the analytic factors at weight 10,000, the colour's saturation an eighth
+# factor, GGX alpha of the factor pool from 0.01, last weights) with 1 and 2 free dimensions (z9, z10), beside
+# cpu-fold2's runs with 0, 4 and 8 (z8, z12, z16) and the v3 recipe's fold-2 model (bvae-cv3-fold2-v3, the baseline
+# of issue 50's "no worse on every family"). μ is measured as a record stores it too: rounded to the coded grids
+# 2^-1, 2^-2 and 2^-3 (bvae model evaluate --mu-grid G; the codec's records of at most 32 B take 2^-2 or 2^-3), with
+# its bytes coded alone under the format's unit prior.
+# NBRDF proxies (90 MERL, 30 RGL; neural fits, not measurements); analytic: 24 random materials none saw.
+# Commands: runs/s25/cmd-RUN.txt (in the training rows); export here: bvae model export runs/s25/RUN
+#   -o runs/models/s25-RUN --name bvae-s25-RUN --dataset runs/both.h5 --align-factors 300 --keep-axes
+# Benchmark: bvae model disentanglement MODEL --materials 300 --seed S --no-pca (S = 0 and 2); the references' rows
+#   are cpu-fold2's
+# Reconstruction: bvae model evaluate MODEL --dataset runs/both.h5 (and runs/random24.h5) [--effort 1] --json;
+#   bvae model evaluate MODEL --dataset runs/both.h5 --mu-grid G --json (G = 1, 2, 3)
+# Rows: python reports/disentanglement/from_scratch_rows.py --study latent-size-fold2 -> latent-size-fold2.jsonl
+""")
+
 STUDIES = {study.name: study for study in (FROM_SCRATCH_SUPERVISION, FREE_DIMENSIONS, SATURATION, CPU_FOLD2,
-                                           RATE_FOLD2, SWA_FOLD2)}
+                                           RATE_FOLD2, SWA_FOLD2, LATENT_SIZE_FOLD2)}
 
 
 def text(study: Study, rows: list[dict]) -> str:
@@ -407,20 +437,22 @@ def _fold_effort_lines(study: Study, rows: list[dict], effort: int, title: str) 
 
 
 def _grid_lines(study: Study, rows: list[dict]) -> list[str]:
-    """Held-out mapped RelAE of μ rounded to the grid (as a coded μ stores it), and μ's coded bytes, where measured."""
+    """Held-out mapped RelAE of μ rounded to each grid measured (as a coded μ stores it), and μ's coded bytes: one
+    table per grid, coarsest first."""
     on_grid = [row for row in rows if row.get("kind") == "evaluation" and row.get("mu_grid")
                and row["split"] == "held-out"]
-    if not on_grid:
-        return []
-    grid = on_grid[0]["mu_grid"]
-    lines = [f"μ rounded to the grid 2^-{grid} (a record's coded μ), decoded: mapped RelAE, full tables, held out "
-             "(μ's bytes coded alone under the format's unit prior):",
-             f"{'model':<33}{'MERL held out':>24}{'RGL held out':>24}"]
-    for model in study.models:
-        cell = {row["family"]: row for row in on_grid if row["model"] == model}
-        texts = [f"{cell[f]['mapped']:.4f} ({cell[f]['mu_bytes']:.2f} B)" if f in cell else "—" for f in ("merl", "rgl")]
-        lines.append(f"{model:<33}" + "".join(f"{text:>24}" for text in texts))
-    return [*lines, ""]
+    lines = []
+    for grid in sorted({row["mu_grid"] for row in on_grid}):
+        lines += [f"μ rounded to the grid 2^-{grid} (a record's coded μ), decoded: mapped RelAE, full tables, held out "
+                  "(μ's bytes coded alone under the format's unit prior):",
+                  f"{'model':<33}{'MERL held out':>24}{'RGL held out':>24}"]
+        for model in study.models:
+            cell = {row["family"]: row for row in on_grid if row["model"] == model and row["mu_grid"] == grid}
+            texts = [f"{cell[f]['mapped']:.4f} ({cell[f]['mu_bytes']:.2f} B)" if f in cell else "—"
+                     for f in ("merl", "rgl")]
+            lines.append(f"{model:<33}" + "".join(f"{text:>24}" for text in texts))
+        lines.append("")
+    return lines
 
 
 def _reconstruction_lines(study: Study, rows: list[dict]) -> list[str]:
