@@ -16,7 +16,8 @@ fold-2 model re-made here) and ``rate-fold2`` (runs/q22: issue 48 item 3, the v3
 the coded μ's grid, with and without the codec's rate in its loss; reconstruction with μ exact and on the grid)
 and ``swa-fold2`` (runs/s24: cpu-fold2's supervised 16-dimensional recipe with stochastic weight averaging at three
 factor weights; reconstruction also at the codec's encoder effort) and ``latent-size-fold2`` (runs/s25: the
-supervised recipe with 1 and 2 free dimensions; μ on the coded grids 2^-1, 2^-2 and 2^-3 and its bytes).
+supervised recipe with 1 and 2 free dimensions; μ on the coded grids 2^-1, 2^-2 and 2^-3 and its bytes; file
+bytes).
 """
 
 from __future__ import annotations
@@ -335,7 +336,7 @@ SWA_FOLD2 = Study(
 """)
 
 LATENT_SIZE_FOLD2 = Study(
-    name="latent-size-fold2", session="s25", runs=("z9", "z10"),
+    name="latent-size-fold2", session="s25", runs=("z9", "z10", "z10-seed1"),
     device="cpu: 2 cores (x86_64, torch 2.13.0+cpu), one run per core (OMP_NUM_THREADS=1), two side by side",
     training_title="Training (this machine's CPU, one run per core, two side by side):",
     references=(("bvae-cv3-fold2-v3", "runs/models/cpu21-cv3-fold2-v3"),
@@ -347,7 +348,8 @@ LATENT_SIZE_FOLD2 = Study(
 # Issues 48 and 50 on fold 2 of 3 (the rd benchmark's 40 held-out materials: 30 MERL, 10 RGL): how many free
 # dimensions the supervised recipe needs, and what each costs a record's coded μ. cpu-fold2's recipe (the release
 # recipe, 400 epochs, dimensions 1-8 tied to the analytic factors at weight 10,000, the colour's saturation an eighth
-# factor, GGX alpha of the factor pool from 0.01, last weights) with 1 and 2 free dimensions (z9, z10), beside
+# factor, GGX alpha of the factor pool from 0.01, last weights) with 1 and 2 free dimensions (z9, z10; z10 again
+# with training seed 1, z10-seed1), beside
 # cpu-fold2's runs with 0, 4 and 8 (z8, z12, z16) and the v3 recipe's fold-2 model (bvae-cv3-fold2-v3, the baseline
 # of issue 50's "no worse on every family"). μ is measured as a record stores it too: rounded to the coded grids
 # 2^-1, 2^-2 and 2^-3 (bvae model evaluate --mu-grid G; the codec's records of at most 32 B take 2^-2 or 2^-3), with
@@ -358,7 +360,9 @@ LATENT_SIZE_FOLD2 = Study(
 # Benchmark: bvae model disentanglement MODEL --materials 300 --seed S --no-pca (S = 0 and 2); the references' rows
 #   are cpu-fold2's
 # Reconstruction: bvae model evaluate MODEL --dataset runs/both.h5 (and runs/random24.h5) [--effort 1] --json;
-#   bvae model evaluate MODEL --dataset runs/both.h5 --mu-grid G --json (G = 1, 2, 3)
+#   bvae model evaluate MODEL --dataset runs/both.h5 --mu-grid G --json (G = 1, 2, 3; z10-seed1: 2)
+# File bytes against the best PCA (z9, z10; basis grown with bvae model fit-basis --count 200 --extend):
+#   reports/results/rd-s25-fold2-*.jsonl (benchmarks/rd/s25-fold2-*.json)
 # Rows: python reports/disentanglement/from_scratch_rows.py --study latent-size-fold2 -> latent-size-fold2.jsonl
 """)
 
