@@ -73,7 +73,7 @@ TARGETS = {
     "decode-many-32": 1.5,
     # the host passes of decode_many alone (float64 exponentials at the kept slices, the stepping, the mask; compiled)
     # on the network's outputs for the same 32 latents vs the network alone, paired: the share decode-many-32's 1.5
-    # leaves them (issue 51, 2); reported: 0.77-0.85 on a 2-core x86 beside other runs (2026-12-07)
+    # leaves them (issue 51, 2); reported, not reached on a 2-core x86: measured in the run's ratio report
     "decode-host-passes-32": 0.5,
     # the network on the same 32 latents in the decoder's CPU batches (BrdfDecoder.network_batch: 2) vs batches of
     # 16, paired: the batch the decodes take must not be slower than the larger one (a process whose allocator

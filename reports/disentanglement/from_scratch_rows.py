@@ -245,11 +245,20 @@ SATURATION = Study(
 # Rows: python reports/disentanglement/from_scratch_rows.py --study saturation -> saturation.jsonl
 """)
 
+#: The machine of the studies trained on this machine's CPU, and their training table's title.
+CPU_PAIR = "cpu: 2 cores (x86_64, torch 2.13.0+cpu), one run per core (OMP_NUM_THREADS=1), two side by side"
+CPU_PAIR_TITLE = "Training (this machine's CPU, one run per core, two side by side):"
+#: cpu-fold2's v3 baseline and its supervised runs with 8, 12 and 16 dimensions: the references of later fold-2 studies.
+CPU21_SUPERVISED_REFERENCES = (("bvae-cv3-fold2-v3", "runs/models/cpu21-cv3-fold2-v3"),
+                               ("bvae-cpu21-f2-sharp-w10k-z8", "runs/models/cpu21-f2-sharp-w10k-z8"),
+                               ("bvae-cpu21-f2-sharp-w10k-z12", "runs/models/cpu21-f2-sharp-w10k-z12"),
+                               ("bvae-cpu21-f2-sharp-w10k-z16", "runs/models/cpu21-f2-sharp-w10k-z16"))
+
 CPU_FOLD2 = Study(
     name="cpu-fold2", session="cpu21", runs=("f2-w0", "f2-sharp-w10k-z8", "f2-sharp-w10k-z12", "f2-sharp-w10k-z16",
                                          "f2-v3-sharp-w10k-z16"),
-    device="cpu: 2 cores (x86_64, torch 2.13.0+cpu), one run per core (OMP_NUM_THREADS=1), two side by side",
-    training_title="Training (this machine's CPU, one run per core, two side by side):",
+    device=CPU_PAIR,
+    training_title=CPU_PAIR_TITLE,
     train_keys=("factor_saturation", "factor_alpha_min"),
     references=(("bvae-nbrdf-proxy-small-v3", "brdfcodec/data/models/default"),
                 ("bvae-cv3-fold2-v3", "runs/models/cpu21-cv3-fold2-v3")),
@@ -278,7 +287,7 @@ CPU_FOLD2 = Study(
 
 RATE_FOLD2 = Study(
     name="rate-fold2", session="q22", runs=("g2", "g2r70", "g2r300", "g2r1000", "g2r3000", "g2r10000"),
-    device="cpu: 2 cores (x86_64, torch 2.13.0+cpu), one run per core (OMP_NUM_THREADS=1), two side by side",
+    device=CPU_PAIR,
     training_title="Training (this machine's CPU, one run per core, two side by side; the second stage's log):",
     train_keys=("latent_grid", "rate_weight"),
     references=(("bvae-cv3-fold2-v3", "runs/models/cpu21-cv3-fold2-v3"),),
@@ -302,25 +311,22 @@ RATE_FOLD2 = Study(
 SWA_FOLD2 = Study(
     name="swa-fold2", session="s24", runs=("z16-swa200", "z16-e250-swa125", "z16-w7k-swa200", "z16-w5k-swa200",
           "z16-w5k-swa200-seed1"),
-    device="cpu: 2 cores (x86_64, torch 2.13.0+cpu), one run per core (OMP_NUM_THREADS=1), two side by side",
-    training_title="Training (this machine's CPU, one run per core, two side by side):",
+    device=CPU_PAIR,
+    training_title=CPU_PAIR_TITLE,
     train_keys=("average_from_epoch",),
-    references=(("bvae-cv3-fold2-v3", "runs/models/cpu21-cv3-fold2-v3"),
-                ("bvae-cpu21-f2-sharp-w10k-z8", "runs/models/cpu21-f2-sharp-w10k-z8"),
-                ("bvae-cpu21-f2-sharp-w10k-z12", "runs/models/cpu21-f2-sharp-w10k-z12"),
-                ("bvae-cpu21-f2-sharp-w10k-z16", "runs/models/cpu21-f2-sharp-w10k-z16")),
+    references=CPU21_SUPERVISED_REFERENCES,
     fold=True, prefix="bvae-s24-",
     header="""\
-# Issue 50 item 3 on fold 2 of 3 (the rd benchmark's 40 held-out materials: 30 MERL, 10 RGL): cpu-fold2's
-# supervised 16-dimensional recipe (f2-sharp-w10k-z16: the release recipe, 400 epochs, dimensions 1-8 tied to the
-# analytic factors, the colour's saturation an eighth factor, GGX alpha of the factor pool from 0.01, 8 free
-# dimensions) with the weights averaged over every step of the schedule's second half (bvae train
-# --average-from-epoch): at factor weight 10,000 over 400 epochs averaged from 200 (z16-swa200) and over 250 averaged
-# from 125 (z16-e250-swa125), and at weights 7,000 and 5,000 (z16-w7k-swa200, z16-w5k-swa200; 400 epochs, averaged
-# from 200; the 5,000 run again with training seed 1, z16-w5k-swa200-seed1). References: cpu-fold2's runs of the
-# recipe at 10,000 without the average (last weights; 8, 12 and 16 dimensions), and the v3 recipe's fold-2 model (bvae-cv3-fold2-v3, the baseline of issue 50's "no worse on every
-# family"). Reconstruction is measured twice: μ of the encoder (effort 0, what training measures) and μ refined
-# through the decoder (effort 1, bvae compress's default: what a user's file holds).
+# Issue 50 item 3 on fold 2 of 3 (the rd benchmark's 40 held-out materials: 30 MERL, 10 RGL): cpu-fold2's supervised
+# 16-dimensional recipe (f2-sharp-w10k-z16: the release recipe, 400 epochs, dimensions 1-8 tied to the analytic factors,
+# the colour's saturation an eighth factor, GGX alpha of the factor pool from 0.01, 8 free dimensions) with the weights
+# averaged over every step of the schedule's second half (bvae train --average-from-epoch): at factor weight 10,000 over
+# 400 epochs averaged from 200 (z16-swa200) and over 250 averaged from 125 (z16-e250-swa125), and at weights 7,000 and
+# 5,000 (z16-w7k-swa200, z16-w5k-swa200; 400 epochs, averaged from 200; the 5,000 run again with training seed 1,
+# z16-w5k-swa200-seed1). References: cpu-fold2's runs of the recipe at 10,000 without the average (last weights; 8, 12
+# and 16 dimensions), and the v3 recipe's fold-2 model (bvae-cv3-fold2-v3, the baseline of issue 50's "no worse on every
+# family"). Reconstruction is measured twice: μ of the encoder (effort 0, what training measures) and μ refined through
+# the decoder (effort 1, bvae compress's default: what a user's file holds).
 # NBRDF proxies (90 MERL, 30 RGL; neural fits, not measurements); analytic: 24 random materials none saw.
 # Commands: runs/s24/cmd-RUN.txt (in the training rows; a later --factor-weight overrides the first); export here:
 #   bvae model export runs/s24/RUN -o runs/models/s24-RUN --name bvae-s24-RUN --dataset runs/both.h5
@@ -337,23 +343,19 @@ SWA_FOLD2 = Study(
 
 LATENT_SIZE_FOLD2 = Study(
     name="latent-size-fold2", session="s25", runs=("z9", "z10", "z10-seed1"),
-    device="cpu: 2 cores (x86_64, torch 2.13.0+cpu), one run per core (OMP_NUM_THREADS=1), two side by side",
-    training_title="Training (this machine's CPU, one run per core, two side by side):",
-    references=(("bvae-cv3-fold2-v3", "runs/models/cpu21-cv3-fold2-v3"),
-                ("bvae-cpu21-f2-sharp-w10k-z8", "runs/models/cpu21-f2-sharp-w10k-z8"),
-                ("bvae-cpu21-f2-sharp-w10k-z12", "runs/models/cpu21-f2-sharp-w10k-z12"),
-                ("bvae-cpu21-f2-sharp-w10k-z16", "runs/models/cpu21-f2-sharp-w10k-z16")),
+    device=CPU_PAIR,
+    training_title=CPU_PAIR_TITLE,
+    references=CPU21_SUPERVISED_REFERENCES,
     fold=True, prefix="bvae-s25-",
     header="""\
-# Issues 48 and 50 on fold 2 of 3 (the rd benchmark's 40 held-out materials: 30 MERL, 10 RGL): how many free
-# dimensions the supervised recipe needs, and what each costs a record's coded μ. cpu-fold2's recipe (the release
-# recipe, 400 epochs, dimensions 1-8 tied to the analytic factors at weight 10,000, the colour's saturation an eighth
-# factor, GGX alpha of the factor pool from 0.01, last weights) with 1 and 2 free dimensions (z9, z10; z10 again
-# with training seed 1, z10-seed1), beside
-# cpu-fold2's runs with 0, 4 and 8 (z8, z12, z16) and the v3 recipe's fold-2 model (bvae-cv3-fold2-v3, the baseline
-# of issue 50's "no worse on every family"). μ is measured as a record stores it too: rounded to the coded grids
-# 2^-1, 2^-2 and 2^-3 (bvae model evaluate --mu-grid G; the codec's records of at most 32 B take 2^-2 or 2^-3), with
-# its bytes coded alone under the format's unit prior.
+# Issues 48 and 50 on fold 2 of 3 (the rd benchmark's 40 held-out materials: 30 MERL, 10 RGL): how many free dimensions
+# the supervised recipe needs, and what each costs a record's coded μ. cpu-fold2's recipe (the release recipe, 400
+# epochs, dimensions 1-8 tied to the analytic factors at weight 10,000, the colour's saturation an eighth factor, GGX
+# alpha of the factor pool from 0.01, last weights) with 1 and 2 free dimensions (z9, z10; z10 again with training seed
+# 1, z10-seed1), beside cpu-fold2's runs with 0, 4 and 8 (z8, z12, z16) and the v3 recipe's fold-2 model
+# (bvae-cv3-fold2-v3, the baseline of issue 50's "no worse on every family"). μ is measured as a record stores it too:
+# rounded to the coded grids 2^-1, 2^-2 and 2^-3 (bvae model evaluate --mu-grid G; the codec's records of at most 32 B
+# take 2^-2 or 2^-3), with its bytes coded alone under the format's unit prior.
 # NBRDF proxies (90 MERL, 30 RGL; neural fits, not measurements); analytic: 24 random materials none saw.
 # Commands: runs/s25/cmd-RUN.txt (in the training rows); export here: bvae model export runs/s25/RUN
 #   -o runs/models/s25-RUN --name bvae-s25-RUN --dataset runs/both.h5 --align-factors 300 --keep-axes
