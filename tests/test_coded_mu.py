@@ -14,10 +14,13 @@ from brdfcodec.layers.basis import quantise_coefficients
 from brdfcodec.layers.basis_layer import BasisLayer, coded_coefficients
 from brdfcodec.layers.coded_basis import (
     MAX_MAGNITUDE,
+    PRIOR_CODE_LIMIT,
     choose_coding,
     coded_mu_codes,
     decode_integers,
     encode_integers,
+    fit_prior_codes,
+    ideal_code_bits,
     mu_stream_lead,
     prior_codes,
 )
@@ -420,3 +423,36 @@ def test_an_error_target_takes_a_smaller_coded_mu_record_that_meets_it(red_plast
     assert records[3].meta["rate"]["record_bytes"] < records[0].meta["rate"]["record_bytes"]
     table = BrdfDecoder().decode(records[3])
     assert relae_mapped(source.values, table, source.mask).overall <= 0.05
+
+
+def test_the_ideal_code_length_is_what_the_coder_writes_less_its_termination() -> None:
+    """``ideal_code_bits`` prices the binarised bits as the coder does: its bytes hold them and at most a few more
+    (the termination; a last byte can also end the stream early, never by a whole byte)."""
+    rng = np.random.default_rng(7)
+    differences = []
+    for _ in range(200):
+        q = np.round(rng.laplace(0.0, 3.0, size=12)).astype(np.int64)
+        codes = rng.integers(-20, 60, size=12)
+        differences.append(8 * len(encode_integers(q, codes)) - ideal_code_bits(q, codes))
+    assert 0.0 < float(np.mean(differences)) < 5.0
+    assert -8.0 < min(differences) and max(differences) < 16.0
+    with pytest.raises(ValueError, match="prior codes"):
+        ideal_code_bits([1, 2], [32])
+
+
+def test_fitted_prior_codes_follow_each_dimension_s_spread() -> None:
+    """A prior code per column, of least ideal length: a column that is always 0 gets the narrowest prior, a
+    Laplace column of scale b steps the code 16·log₂(√2·b) (the format's spread σ = √2·b), and the fit never codes
+    its own samples longer than the unit prior of the grid 2^−2 (code 32) does."""
+    rng = np.random.default_rng(3)
+    wide = np.round(rng.laplace(0.0, 8.0, size=400)).astype(np.int64)
+    narrow = np.round(rng.laplace(0.0, 0.5, size=400)).astype(np.int64)
+    q = np.stack([wide, narrow, np.zeros(400, dtype=np.int64)], axis=1)
+    codes = fit_prior_codes(q)
+    assert abs(int(codes[0]) - 16 * np.log2(np.sqrt(2.0) * 8.0)) <= 6
+    assert codes[0] > codes[1] > codes[2] == -PRIOR_CODE_LIMIT
+    for column, code in zip(q.T, codes, strict=True):
+        assert ideal_code_bits(column, np.full(400, code)) <= ideal_code_bits(column, np.full(400, 32))
+    for bad in (np.zeros((0, 3), dtype=np.int64), np.zeros(3, dtype=np.int64)):
+        with pytest.raises(ValueError, match="fit_prior_codes"):
+            fit_prior_codes(bad)

@@ -81,8 +81,36 @@ def test_mu_on_a_grid_is_decoded_as_a_coded_mu_stores_it_and_its_bytes_are_count
     # A fine grid decodes as μ itself does; the coarse one moves the decode.
     assert fine.mapped == pytest.approx(exact.mapped, abs=2e-3)
     assert abs(coarse.mapped - exact.mapped) > abs(fine.mapped - exact.mapped)
+    # The shipped model saw none of these materials: no prior for μ can be fitted to its training materials.
+    assert coarse.mu_bytes_fitted is None and coarse.mu_prior_codes is None
     with pytest.raises(ValueError, match="mu_grid"):
         evaluate_by_family(None, analytic_dataset, limit=1, mu_grid=6)
+
+
+def test_mu_s_bytes_under_priors_fitted_to_the_training_materials() -> None:
+    """Per-dimension prior codes are fitted to the μ of the rows the model trained on, and every row's μ is priced
+    under them: a dimension the training materials leave at 0 costs almost nothing, a wide one about what the unit
+    prior charges."""
+    import numpy as np
+
+    from brdfcodec.layers.coded_basis import coded_mu_codes, encode_integers
+    from brdfcodec.training.family_report import _with_fitted_prior
+
+    rng = np.random.default_rng(0)
+
+    def row(split: str) -> dict:
+        q = np.array([round(rng.normal() * 4), 0, 0, round(rng.normal() * 4)], dtype=np.int64)
+        return {"split": split, "mu_integers": q, "mu_bytes": float(len(encode_integers(q, coded_mu_codes(2, 4))))}
+
+    rows = _with_fitted_prior([row("train") for _ in range(40)] + [row("held-out") for _ in range(10)])
+    codes = rows[0]["mu_prior_codes"]
+    assert all(r["mu_prior_codes"] == codes for r in rows) and "mu_integers" not in rows[0]
+    assert codes[1] == codes[2] < 0 < codes[0] and codes[3] > 0
+    held_out = [r for r in rows if r["split"] == "held-out"]
+    assert np.mean([r["mu_bytes_fitted"] for r in held_out]) < np.mean([r["mu_bytes"] for r in held_out]) - 0.5
+    # No training material: nothing to fit, no fitted bytes.
+    alone = _with_fitted_prior([row("held-out")])
+    assert alone[0]["mu_prior_codes"] is None and alone[0]["mu_bytes_fitted"] is None
 
 
 def test_cli_refuses_to_store_a_table_of_mu_on_a_grid(analytic_dataset: Path, capsys) -> None:

@@ -56,6 +56,8 @@ __all__ = [
     "coded_prefix_sizes",
     "decode_integers",
     "encode_integers",
+    "fit_prior_codes",
+    "ideal_code_bits",
     "mu_stream_lead",
     "prior_codes",
 ]
@@ -233,6 +235,47 @@ def encode_integers(q: npt.ArrayLike, codes: npt.ArrayLike) -> bytes:
     if exponent < 0:
         return (low << -exponent).to_bytes(m, "big")
     return (-(-low >> exponent)).to_bytes(m, "big")
+
+
+def ideal_code_bits(q: npt.ArrayLike, codes: npt.ArrayLike) -> float:
+    """The ideal code length of integers under their prior codes, in bits: −log₂ of each binarised bit's
+    probability (1/256 units, as the coder uses them), summed; the coder's bytes (:func:`encode_integers`) add at
+    most its termination.
+
+    Raises
+    ------
+    ValueError
+        As :func:`encode_integers`.
+    """
+    bits, probabilities, _ = _binarise(*_checked(q, codes))
+    zero = np.asarray(probabilities, dtype=np.float64) / 256.0
+    return float(-np.log2(np.where(np.asarray(bits, dtype=bool), 1.0 - zero, zero)).sum())
+
+
+def fit_prior_codes(q: npt.ArrayLike) -> npt.NDArray[np.int64]:
+    """Per column of integers (rows: samples, e.g. the materials' coded μ), the prior code of least ideal code
+    length (:func:`ideal_code_bits`) within ±:data:`PRIOR_CODE_LIMIT`: a Laplace prior's spread fitted to each
+    dimension, in sixteenths of an octave of the grid's step.
+
+    Parameters
+    ----------
+    q : array_like of int, shape (n, D)
+        n ≥ 1 samples of D integers.
+
+    Raises
+    ------
+    ValueError
+        No sample, or a magnitude above :data:`MAX_MAGNITUDE`.
+    """
+    values = np.asarray(q, dtype=np.int64)
+    if values.ndim != 2 or values.shape[0] < 1:
+        raise ValueError(f"fit_prior_codes needs an (n ≥ 1, D) array of integers, got shape {values.shape}")
+    candidates = range(-PRIOR_CODE_LIMIT, PRIOR_CODE_LIMIT + 1)
+    fitted = []
+    for column in values.T:
+        lengths = [ideal_code_bits(column, np.full(len(column), c, dtype=np.int64)) for c in candidates]
+        fitted.append(candidates[int(np.argmin(lengths))])
+    return np.asarray(fitted, dtype=np.int64)
 
 
 def coded_prefix_sizes(q: npt.ArrayLike, codes: npt.ArrayLike) -> list[int]:

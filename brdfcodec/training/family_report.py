@@ -17,7 +17,12 @@ was trained on, ``held-out`` for every other material of the dataset.
 With ``mu_grid`` g, μ is rounded to the grid 2^−g before it is decoded — the
 latent as a record's coded μ stores it (``spec/bvae-format.md`` §4.9) — and
 each row also says how many bytes that μ takes coded alone under the
-format's unit prior (its termination included).
+format's unit prior (its termination included), and how many it would take
+under per-dimension priors fitted to the model's training materials
+(:func:`~brdfcodec.layers.coded_basis.fit_prior_codes` on their μ on the
+same grid; ``mu_prior_codes``, the fitted codes, where the format's unit
+prior is 16·g): what a model-level prior for μ would save, measured on
+materials the fit did not see.
 """
 
 from __future__ import annotations
@@ -31,7 +36,7 @@ import numpy as np
 
 from brdfcodec.datasets.hdf5 import BrdfDataset
 from brdfcodec.format.records import LatentRecord
-from brdfcodec.layers.coded_basis import coded_mu_codes, encode_integers
+from brdfcodec.layers.coded_basis import coded_mu_codes, encode_integers, fit_prior_codes
 from brdfcodec.models.pca import fit_pca
 from brdfcodec.render.image_metrics import compare_images
 from brdfcodec.report.evaluate import comparison_render
@@ -61,6 +66,11 @@ class FamilyRow:
     worst: str
     mu_grid: int | None = None
     mu_bytes: float | None = None
+    #: μ's bytes coded alone under the per-dimension prior codes fitted to the training materials' μ (None: no
+    #: grid, or no training material in the dataset to fit them to).
+    mu_bytes_fitted: float | None = None
+    #: Those fitted prior codes, one per latent dimension (the format's unit prior: 16·mu_grid each).
+    mu_prior_codes: tuple[int, ...] | None = None
 
     def as_dict(self) -> dict[str, Any]:
         """JSON-ready dictionary."""
@@ -85,8 +95,9 @@ def evaluate_by_family(
         Only the first ``limit`` materials of each family and split (for tests).
     mu_grid : int, optional
         Decode μ rounded to the grid 2^−``mu_grid`` (1 to 5), as a coded μ
-        stores it, and report its coded bytes; None (the default) decodes μ
-        as the encoder gives it.
+        stores it, and report its coded bytes (under the unit prior, and
+        under per-dimension priors fitted to the training materials' μ);
+        None (the default) decodes μ as the encoder gives it.
     """
     from brdfcodec.codec import BrdfEncoder
 
@@ -112,23 +123,37 @@ def evaluate_by_family(
             reference = dataset.table(i)
             inputs, masks = dataset.inputs([i]), dataset.input_masks([i])
             record = encoder.encode_arrays([names[i]], inputs, masks, [None])[0]
-            mu_bytes = None
+            mu_bytes, integers = None, None
             if mu_grid is not None:
-                record, mu_bytes = _on_grid(record, mu_grid)
+                record, mu_bytes, integers = _on_grid(record, mu_grid)
             estimates = {"model": decoder.decode(record, masked="keep").astype(np.float64)}
             for k, basis in bases.items():
                 mapped = basis.decode(basis.encode(inputs))[0]
                 estimates[f"pca{k}"] = table_from_network_output(mapped).astype(np.float64)
             image = comparison_render(reference.values, reference.mask)
             row: dict[str, Any] = {"name": names[i], "family": dataset.families[i],
-                                   "split": "train" if i in trained else "held-out", "mu_bytes": mu_bytes}
+                                   "split": "train" if i in trained else "held-out", "mu_bytes": mu_bytes,
+                                   "mu_integers": integers}
             for label, table in estimates.items():
                 report = error_report(reference.values, table, reference.mask)
                 row[f"{label}_mapped"] = report.relae_mapped.overall
                 row[f"{label}_linear"] = report.relae_linear.overall
                 row[f"{label}_itp"] = compare_images(image, comparison_render(table, reference.mask)).delta_e_itp_mean
             per_material.append(row)
-    return _group(per_material, mu_grid)
+    return _group(_with_fitted_prior(per_material), mu_grid)
+
+
+def _with_fitted_prior(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """The rows with ``mu_bytes_fitted`` and ``mu_prior_codes``: μ's bytes under per-dimension prior codes fitted
+    to the μ of the training materials (the rows of split ``train``), where μ was put on a grid and some were."""
+    fit_on = [r["mu_integers"] for r in rows if r["split"] == "train" and r["mu_integers"] is not None]
+    codes = fit_prior_codes(np.stack(fit_on)) if fit_on else None
+    for r in rows:
+        integers = r.pop("mu_integers")
+        r["mu_prior_codes"] = None if codes is None or integers is None else tuple(int(c) for c in codes)
+        r["mu_bytes_fitted"] = (None if r["mu_prior_codes"] is None
+                                else float(len(encode_integers(integers, codes))))
+    return rows
 
 
 def _group(rows: Sequence[dict[str, Any]], mu_grid: int | None = None) -> list[FamilyRow]:
@@ -143,18 +168,21 @@ def _group(rows: Sequence[dict[str, Any]], mu_grid: int | None = None) -> list[F
                 return float(np.mean([r[key] for r in chosen]))
 
             worst = max(chosen, key=lambda r: r["model_mapped"])["name"]
+            fitted = chosen[0]["mu_prior_codes"]
             out.append(FamilyRow(family, split, len(chosen), mean("model_mapped"), mean("model_linear"),
                                  mean("model_itp"), mean("pca8_mapped"), mean("pca16_mapped"), mean("pca8_itp"),
-                                 mean("pca16_itp"), worst, mu_grid, None if mu_grid is None else mean("mu_bytes")))
+                                 mean("pca16_itp"), worst, mu_grid, None if mu_grid is None else mean("mu_bytes"),
+                                 None if fitted is None else mean("mu_bytes_fitted"), fitted))
     return out
 
 
-def _on_grid(record: LatentRecord, grid: int) -> tuple[LatentRecord, float]:
-    """The record with μ rounded to the grid 2^−grid, and the bytes of that μ coded alone (§4.9's prior)."""
+def _on_grid(record: LatentRecord, grid: int) -> tuple[LatentRecord, float, np.ndarray]:
+    """The record with μ rounded to the grid 2^−grid, the bytes of that μ coded alone (§4.9's prior), and its
+    integers."""
     step = 2.0**-grid
     q = np.round(record.mu.astype(np.float64) / step).astype(np.int64)
     size = len(encode_integers(q, coded_mu_codes(grid, q.size)))
-    return replace(record, mu=(q * step).astype(np.float32)), float(size)
+    return replace(record, mu=(q * step).astype(np.float32)), float(size), q
 
 
 def family_table(rows: Sequence[FamilyRow | dict[str, Any]]) -> list[str]:

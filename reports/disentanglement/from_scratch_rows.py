@@ -4,7 +4,7 @@ usage (repository root; the runs restored by benchmarks/device/training/restore_
 models exported into runs/models/SESSION-NAME, the measurements of the study's text header in runs/SESSION/eval):
 
     python reports/disentanglement/from_scratch_rows.py [--study from-scratch-supervision | free-dimensions |
-        saturation | cpu-fold2 | rate-fold2 | swa-fold2 | latent-size-fold2]
+        saturation | cpu-fold2 | rate-fold2 | swa-fold2 | latent-size-fold2 | rate-prior-fold2]
 
 Studies: ``from-scratch-supervision`` (runs/dev1: four factor weights, one H100, time-limited),
 ``free-dimensions`` (runs/dev2: weights 5,000 and 10,000 and a 12-dimensional latent, one H200, full schedules) and
@@ -17,7 +17,8 @@ the coded μ's grid, with and without the codec's rate in its loss; reconstructi
 and ``swa-fold2`` (runs/s24: cpu-fold2's supervised 16-dimensional recipe with stochastic weight averaging at three
 factor weights; reconstruction also at the codec's encoder effort) and ``latent-size-fold2`` (runs/s25: the
 supervised recipe with 1 and 2 free dimensions; μ on the coded grids 2^-1, 2^-2 and 2^-3 and its bytes; file
-bytes).
+bytes) and ``rate-prior-fold2`` (runs/s26: μ's bytes under per-dimension priors fitted to the training materials,
+and the supervised 16-dimensional recipe trained with a rate term).
 """
 
 from __future__ import annotations
@@ -368,8 +369,38 @@ LATENT_SIZE_FOLD2 = Study(
 # Rows: python reports/disentanglement/from_scratch_rows.py --study latent-size-fold2 -> latent-size-fold2.jsonl
 """)
 
+RATE_PRIOR_FOLD2 = Study(
+    name="rate-prior-fold2", session="s26", runs=("z16r1000", "z16r3000"),
+    device=CPU_PAIR,
+    training_title=CPU_PAIR_TITLE,
+    train_keys=("latent_grid", "rate_weight"),
+    references=(*CPU21_SUPERVISED_REFERENCES, ("bvae-s25-z9", "runs/models/s25-z9"),
+                ("bvae-s25-z10", "runs/models/s25-z10")),
+    fold=True, prefix="bvae-s26-",
+    header="""\
+# Issues 48 and 50 on fold 2 of 3 (the rd benchmark's 40 held-out materials: 30 MERL, 10 RGL): would a prior for μ
+# per latent dimension, fitted to the model's training materials, let a supervised latent with free dimensions cost a
+# record no more than the v3 latent? Under the format's unit prior (§4.9) every dimension of a coded μ costs at least
+# about 3 bits on the grid 2^-2, however little it varies. Two measures: (1) each model's μ on the coded grids priced
+# under per-dimension Laplace priors fitted to its 80 training materials' μ on the same grid (bvae model evaluate
+# --mu-grid G: mu_bytes_fitted, mu_prior_codes; the held-out materials priced under the fit), the models of
+# latent-size-fold2 and cpu-fold2 as references; (2) cpu-fold2's supervised 16-dimensional recipe (400 epochs,
+# dimensions 1-8 tied to the analytic factors at weight 10,000, the colour's saturation an eighth factor, GGX alpha
+# of the factor pool from 0.01, last weights) trained with z + uniform noise of width 2^-2 and lambda times μ's code
+# length under the unit prior (bvae train --latent-grid 2 --rate-weight lambda, lambda = 1,000 and 3,000: an L1
+# pull that can leave the free dimensions at 0 for most materials, which a fitted prior then prices near 0 bits).
+# NBRDF proxies (90 MERL, 30 RGL; neural fits, not measurements); analytic: 24 random materials none saw.
+# Commands: runs/s26/cmd-RUN.txt (in the training rows); export here: bvae model export runs/s26/RUN
+#   -o runs/models/s26-RUN --name bvae-s26-RUN --dataset runs/both.h5 --align-factors 300 --keep-axes
+# Benchmark: bvae model disentanglement MODEL --materials 300 --seed S --no-pca (S = 0 and 2); the references' rows
+#   are cpu-fold2's and latent-size-fold2's
+# Reconstruction: bvae model evaluate MODEL --dataset runs/both.h5 (and runs/random24.h5) [--effort 1] --json;
+#   bvae model evaluate MODEL --dataset runs/both.h5 --mu-grid G --json (G = 2; 3 for some)
+# Rows: python reports/disentanglement/from_scratch_rows.py --study rate-prior-fold2 -> rate-prior-fold2.jsonl
+""")
+
 STUDIES = {study.name: study for study in (FROM_SCRATCH_SUPERVISION, FREE_DIMENSIONS, SATURATION, CPU_FOLD2,
-                                           RATE_FOLD2, SWA_FOLD2, LATENT_SIZE_FOLD2)}
+                                           RATE_FOLD2, SWA_FOLD2, LATENT_SIZE_FOLD2, RATE_PRIOR_FOLD2)}
 
 
 def text(study: Study, rows: list[dict]) -> str:
@@ -449,15 +480,30 @@ def _grid_lines(study: Study, rows: list[dict]) -> list[str]:
                and row["split"] == "held-out"]
     lines = []
     for grid in sorted({row["mu_grid"] for row in on_grid}):
+        fitted = [row for row in on_grid if row["mu_grid"] == grid and row.get("mu_bytes_fitted") is not None]
         lines += [f"μ rounded to the grid 2^-{grid} (a record's coded μ), decoded: mapped RelAE, full tables, held out "
-                  "(μ's bytes coded alone under the format's unit prior):",
-                  f"{'model':<33}{'MERL held out':>24}{'RGL held out':>24}"]
+                  "(μ's bytes coded alone under the format's unit prior" + (
+                      "; then under per-dimension priors fitted to the training materials' μ" if fitted else "") + "):",
+                  f"{'model':<33}{'MERL held out':>24}{'RGL held out':>24}" + (
+                      f"{'MERL, fitted prior':>20}{'RGL, fitted prior':>20}" if fitted else "")]
         for model in study.models:
             cell = {row["family"]: row for row in on_grid if row["model"] == model and row["mu_grid"] == grid}
             texts = [f"{cell[f]['mapped']:.4f} ({cell[f]['mu_bytes']:.2f} B)" if f in cell else "—"
                      for f in ("merl", "rgl")]
-            lines.append(f"{model:<33}" + "".join(f"{text:>24}" for text in texts))
+            if fitted:
+                texts += [f"{cell[f]['mu_bytes_fitted']:.2f} B" if cell.get(f, {}).get("mu_bytes_fitted") is not None
+                          else "—" for f in ("merl", "rgl")]
+            lines.append(f"{model:<33}" + "".join(f"{text:>24}" for text in texts[:2])
+                         + "".join(f"{text:>20}" for text in texts[2:]))
         lines.append("")
+        if fitted:
+            lines.append(f"the fitted prior codes on 2^-{grid} (the unit prior's: {16 * grid}; 16 a doubling of the "
+                         "spread):")
+            for model in study.models:
+                codes = next((row["mu_prior_codes"] for row in fitted if row["model"] == model), None)
+                if codes is not None:
+                    lines.append(f"  {model}: {' '.join(str(c) for c in codes)}")
+            lines.append("")
     return lines
 
 
