@@ -396,6 +396,8 @@ RATE_PRIOR_FOLD2 = Study(
 #   are cpu-fold2's and latent-size-fold2's
 # Reconstruction: bvae model evaluate MODEL --dataset runs/both.h5 (and runs/random24.h5) [--effort 1] --json;
 #   bvae model evaluate MODEL --dataset runs/both.h5 --mu-grid G --json (G = 2; 3 for some)
+# File bytes against the best PCA (z16r1000, z16r3000; basis grown with bvae model fit-basis --count 200 --extend):
+#   reports/results/rd-s26-fold2-*.jsonl (benchmarks/rd/s26-fold2-*.json)
 # Rows: python reports/disentanglement/from_scratch_rows.py --study rate-prior-fold2 -> rate-prior-fold2.jsonl
 """)
 
