@@ -88,29 +88,44 @@ def test_mu_on_a_grid_is_decoded_as_a_coded_mu_stores_it_and_its_bytes_are_count
 
 
 def test_mu_s_bytes_under_priors_fitted_to_the_training_materials() -> None:
-    """Per-dimension prior codes are fitted to the μ of the rows the model trained on, and every row's μ is priced
-    under them: a dimension the training materials leave at 0 costs almost nothing, a wide one about what the unit
-    prior charges."""
+    """Per-dimension prior codes are fitted to the μ of the rows the model trained on, and only to those; every
+    row's μ is priced under them: a dimension the training materials leave at 0 costs almost nothing, a wide one
+    about what the unit prior charges."""
+    import json
+
     import numpy as np
 
-    from brdfcodec.layers.coded_basis import coded_mu_codes, encode_integers
-    from brdfcodec.training.family_report import _with_fitted_prior
+    from brdfcodec.layers.coded_basis import coded_mu_codes, encode_integers, fit_prior_codes
+    from brdfcodec.training.family_report import _group, _with_fitted_prior
 
     rng = np.random.default_rng(0)
 
     def row(split: str) -> dict:
-        q = np.array([round(rng.normal() * 4), 0, 0, round(rng.normal() * 4)], dtype=np.int64)
-        return {"split": split, "mu_integers": q, "mu_bytes": float(len(encode_integers(q, coded_mu_codes(2, 4))))}
+        # held-out materials use dimension 2, which the training ones leave at 0: a fit that saw them would widen it
+        used = 0 if split == "train" else round(rng.normal() * 4)
+        q = np.array([round(rng.normal() * 4), 0, used, round(rng.normal() * 4)], dtype=np.int64)
+        return {"split": split, "family": "f", "mu_integers": q, "name": f"m{rng.integers(1 << 30)}",
+                "mu_bytes": float(len(encode_integers(q, coded_mu_codes(2, 4)))),
+                **{key: 0.1 for key in ("model_mapped", "model_linear", "model_itp", "pca8_mapped", "pca16_mapped",
+                                        "pca8_itp", "pca16_itp")}}
 
-    rows = _with_fitted_prior([row("train") for _ in range(40)] + [row("held-out") for _ in range(10)])
+    train = [row("train") for _ in range(40)]
+    expected = fit_prior_codes(np.stack([r["mu_integers"] for r in train]))
+    rows = _with_fitted_prior(train + [row("held-out") for _ in range(10)])
     codes = rows[0]["mu_prior_codes"]
-    assert all(r["mu_prior_codes"] == codes for r in rows) and "mu_integers" not in rows[0]
-    assert codes[1] == codes[2] < 0 < codes[0] and codes[3] > 0
-    held_out = [r for r in rows if r["split"] == "held-out"]
-    assert np.mean([r["mu_bytes_fitted"] for r in held_out]) < np.mean([r["mu_bytes"] for r in held_out]) - 0.5
+    assert codes == tuple(expected) and all(r["mu_prior_codes"] == codes for r in rows)
+    assert "mu_integers" not in rows[0]
+    assert codes[1] == codes[2] == -80 and codes[0] > 0 and codes[3] > 0
+    trained = [r for r in rows if r["split"] == "train"]
+    assert np.mean([r["mu_bytes_fitted"] for r in trained]) < np.mean([r["mu_bytes"] for r in trained]) - 0.5
+    # Grouped per family and split, as `bvae model evaluate --json` prints them.
+    grouped = {r.split: r for r in _group(rows, 2)}
+    assert grouped["train"].mu_prior_codes == codes and grouped["held-out"].mu_bytes_fitted > 0
+    assert json.loads(json.dumps(grouped["train"].as_dict()))["mu_prior_codes"] == list(codes)
     # No training material: nothing to fit, no fitted bytes.
     alone = _with_fitted_prior([row("held-out")])
     assert alone[0]["mu_prior_codes"] is None and alone[0]["mu_bytes_fitted"] is None
+    assert _group(alone, 2)[0].mu_bytes_fitted is None
 
 
 def test_cli_refuses_to_store_a_table_of_mu_on_a_grid(analytic_dataset: Path, capsys) -> None:

@@ -176,6 +176,8 @@ def _checked(q: npt.ArrayLike, codes: npt.ArrayLike) -> tuple[npt.NDArray[np.int
     prior = np.asarray(codes, dtype=np.int64).reshape(-1)
     if values.shape != prior.shape:
         raise ValueError(f"{len(values)} integers for {len(prior)} prior codes")
+    if len(prior) and int(np.abs(prior).max()) > PRIOR_CODE_LIMIT:
+        raise ValueError(f"a prior code lies outside ±{PRIOR_CODE_LIMIT}")
     if len(values) and int(np.abs(values).max()) > MAX_MAGNITUDE:
         raise ValueError(f"a coded integer exceeds ±{MAX_MAGNITUDE}")
     return values, prior
@@ -238,9 +240,25 @@ def encode_integers(q: npt.ArrayLike, codes: npt.ArrayLike) -> bytes:
 
 
 def ideal_code_bits(q: npt.ArrayLike, codes: npt.ArrayLike) -> float:
-    """The ideal code length of integers under their prior codes, in bits: −log₂ of each binarised bit's
-    probability (1/256 units, as the coder uses them), summed; the coder's bytes (:func:`encode_integers`) add at
-    most its termination.
+    """The ideal code length of integers under their prior codes: −log₂ of each binarised bit's probability under
+    the tables (:data:`ZERO_PROBABILITY`, :data:`STOP_PROBABILITY`, p/256 for a 0 and 1 − p/256 for a 1), summed.
+
+    The coder's bytes (:func:`encode_integers`) come close to it for streams of a few dozen integers, the
+    termination added; they can also be shorter, since the zero bits after a stream's last 1 bit cost nothing (a
+    decoder reads zeros past the end), and the coder's 8-bit split is not exactly p/256 (on thousands of
+    integers the two drift apart by tens of bits either way).
+
+    Parameters
+    ----------
+    q : array_like of int, shape (n,)
+        The integers.
+    codes : array_like of int, shape (n,)
+        Their prior codes, each within ±:data:`PRIOR_CODE_LIMIT`.
+
+    Returns
+    -------
+    float
+        Bits (≥ 0).
 
     Raises
     ------
@@ -253,19 +271,26 @@ def ideal_code_bits(q: npt.ArrayLike, codes: npt.ArrayLike) -> float:
 
 
 def fit_prior_codes(q: npt.ArrayLike) -> npt.NDArray[np.int64]:
-    """Per column of integers (rows: samples, e.g. the materials' coded μ), the prior code of least ideal code
-    length (:func:`ideal_code_bits`) within ±:data:`PRIOR_CODE_LIMIT`: a Laplace prior's spread fitted to each
-    dimension, in sixteenths of an octave of the grid's step.
+    """Per column of integers (rows: samples, e.g. materials' coded μ), the prior code of least ideal code length
+    (:func:`ideal_code_bits`, a proxy for the coder's bytes) within ±:data:`PRIOR_CODE_LIMIT`: the spread of a
+    Laplace prior fitted to each dimension, as 16·log₂(σ/s) for σ the spread and s the grid's step (the format's
+    unit prior on the grid 2^−g: 16·g). Of equally short codes the smallest (narrowest) is kept: a column of zeros
+    gets −:data:`PRIOR_CODE_LIMIT`.
 
     Parameters
     ----------
     q : array_like of int, shape (n, D)
         n ≥ 1 samples of D integers.
 
+    Returns
+    -------
+    numpy.ndarray of int64, shape (D,)
+        One prior code per column.
+
     Raises
     ------
     ValueError
-        No sample, or a magnitude above :data:`MAX_MAGNITUDE`.
+        Not a two-dimensional array, no sample, or a magnitude above :data:`MAX_MAGNITUDE`.
     """
     values = np.asarray(q, dtype=np.int64)
     if values.ndim != 2 or values.shape[0] < 1:
@@ -274,7 +299,7 @@ def fit_prior_codes(q: npt.ArrayLike) -> npt.NDArray[np.int64]:
     fitted = []
     for column in values.T:
         lengths = [ideal_code_bits(column, np.full(len(column), c, dtype=np.int64)) for c in candidates]
-        fitted.append(candidates[int(np.argmin(lengths))])
+        fitted.append(candidates[int(np.argmin(lengths))])  # argmin: the first of equal lengths, the narrowest
     return np.asarray(fitted, dtype=np.int64)
 
 

@@ -33,6 +33,7 @@ from dataclasses import asdict, dataclass, replace
 from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 
 from brdfcodec.datasets.hdf5 import BrdfDataset
 from brdfcodec.format.records import LatentRecord
@@ -66,8 +67,8 @@ class FamilyRow:
     worst: str
     mu_grid: int | None = None
     mu_bytes: float | None = None
-    #: μ's bytes coded alone under the per-dimension prior codes fitted to the training materials' μ (None: no
-    #: grid, or no training material in the dataset to fit them to).
+    #: μ's bytes coded alone under the per-dimension prior codes fitted to the training materials' μ, mean over
+    #: the group's materials, bytes (None: no grid, or no training material in the dataset to fit them to).
     mu_bytes_fitted: float | None = None
     #: Those fitted prior codes, one per latent dimension (the format's unit prior: 16·mu_grid each).
     mu_prior_codes: tuple[int, ...] | None = None
@@ -168,7 +169,9 @@ def _group(rows: Sequence[dict[str, Any]], mu_grid: int | None = None) -> list[F
                 return float(np.mean([r[key] for r in chosen]))
 
             worst = max(chosen, key=lambda r: r["model_mapped"])["name"]
-            fitted = chosen[0]["mu_prior_codes"]
+            fitted = chosen[0]["mu_prior_codes"]  # one fit per call: every row has it, or none
+            if any(r["mu_prior_codes"] != fitted for r in chosen):
+                raise ValueError("rows priced under different fitted priors cannot be grouped")
             out.append(FamilyRow(family, split, len(chosen), mean("model_mapped"), mean("model_linear"),
                                  mean("model_itp"), mean("pca8_mapped"), mean("pca16_mapped"), mean("pca8_itp"),
                                  mean("pca16_itp"), worst, mu_grid, None if mu_grid is None else mean("mu_bytes"),
@@ -176,7 +179,7 @@ def _group(rows: Sequence[dict[str, Any]], mu_grid: int | None = None) -> list[F
     return out
 
 
-def _on_grid(record: LatentRecord, grid: int) -> tuple[LatentRecord, float, np.ndarray]:
+def _on_grid(record: LatentRecord, grid: int) -> tuple[LatentRecord, float, npt.NDArray[np.int64]]:
     """The record with μ rounded to the grid 2^−grid, the bytes of that μ coded alone (§4.9's prior), and its
     integers."""
     step = 2.0**-grid

@@ -380,8 +380,8 @@ RATE_PRIOR_FOLD2 = Study(
     header="""\
 # Issues 48 and 50 on fold 2 of 3 (the rd benchmark's 40 held-out materials: 30 MERL, 10 RGL): would a prior for μ
 # per latent dimension, fitted to the model's training materials, let a supervised latent with free dimensions cost a
-# record no more than the v3 latent? Under the format's unit prior (§4.9) every dimension of a coded μ costs at least
-# about 3 bits on the grid 2^-2, however little it varies. Two measures: (1) each model's μ on the coded grids priced
+# record no more than the v3 latent? Under the format's unit prior (§4.9) a dimension of a coded μ at 0 still costs
+# about 2.6 bits (ideal) on the grid 2^-2, however little it varies. Two measures: (1) each model's μ on the coded grids priced
 # under per-dimension Laplace priors fitted to its 80 training materials' μ on the same grid (bvae model evaluate
 # --mu-grid G: mu_bytes_fitted, mu_prior_codes; the held-out materials priced under the fit), the models of
 # latent-size-fold2 and cpu-fold2 as references; (2) cpu-fold2's supervised 16-dimensional recipe (400 epochs,
