@@ -449,8 +449,9 @@ def test_the_ideal_code_length_prices_each_bit_as_the_tables_say_and_is_close_to
 
 def test_fitted_prior_codes_follow_each_dimension_s_spread() -> None:
     """A prior code per column, of least ideal length: a column that is always 0 gets the narrowest prior, a
-    Laplace column of scale b steps the code 16·log₂(√2·b) (the format's spread σ = √2·b), and each fit codes its
-    column shorter than the unit prior of the grid 2^−2 (code 32) does where the column is far from unit spread."""
+    Laplace column of scale b steps the code 16·log₂(√2·b) (the format's spread σ = √2·b), and each fit codes
+    its column shorter than the unit prior of the grid 2^−2 (code 32) does where the column is far from unit
+    spread."""
     rng = np.random.default_rng(3)
     wide = np.round(rng.laplace(0.0, 8.0, size=400)).astype(np.int64)
     narrow = np.round(rng.laplace(0.0, 0.5, size=400)).astype(np.int64)

@@ -96,7 +96,7 @@ def test_mu_s_bytes_under_priors_fitted_to_the_training_materials() -> None:
     import numpy as np
 
     from brdfcodec.layers.coded_basis import coded_mu_codes, encode_integers, fit_prior_codes
-    from brdfcodec.training.family_report import _group, _with_fitted_prior
+    from brdfcodec.training.family_report import _group, _price_under_fitted_prior
 
     rng = np.random.default_rng(0)
 
@@ -111,21 +111,21 @@ def test_mu_s_bytes_under_priors_fitted_to_the_training_materials() -> None:
 
     train = [row("train") for _ in range(40)]
     expected = fit_prior_codes(np.stack([r["mu_integers"] for r in train]))
-    rows = _with_fitted_prior(train + [row("held-out") for _ in range(10)])
-    codes = rows[0]["mu_prior_codes"]
-    assert codes == tuple(expected) and all(r["mu_prior_codes"] == codes for r in rows)
+    rows = train + [row("held-out") for _ in range(10)]
+    codes = _price_under_fitted_prior(rows)
+    assert codes == tuple(expected)
     assert "mu_integers" not in rows[0]
     assert codes[1] == codes[2] == -80 and codes[0] > 0 and codes[3] > 0
     trained = [r for r in rows if r["split"] == "train"]
     assert np.mean([r["mu_bytes_fitted"] for r in trained]) < np.mean([r["mu_bytes"] for r in trained]) - 0.5
     # Grouped per family and split, as `bvae model evaluate --json` prints them.
-    grouped = {r.split: r for r in _group(rows, 2)}
+    grouped = {r.split: r for r in _group(rows, 2, codes)}
     assert grouped["train"].mu_prior_codes == codes and grouped["held-out"].mu_bytes_fitted > 0
     assert json.loads(json.dumps(grouped["train"].as_dict()))["mu_prior_codes"] == list(codes)
     # No training material: nothing to fit, no fitted bytes.
-    alone = _with_fitted_prior([row("held-out")])
-    assert alone[0]["mu_prior_codes"] is None and alone[0]["mu_bytes_fitted"] is None
-    assert _group(alone, 2)[0].mu_bytes_fitted is None
+    alone = [row("held-out")]
+    assert _price_under_fitted_prior(alone) is None and alone[0]["mu_bytes_fitted"] is None
+    assert _group(alone, 2, None)[0].mu_bytes_fitted is None
 
 
 def test_cli_refuses_to_store_a_table_of_mu_on_a_grid(analytic_dataset: Path, capsys) -> None:

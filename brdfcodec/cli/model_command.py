@@ -91,9 +91,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     evaluate.add_argument("--effort", type=int, choices=(0, 1, 2, 3), default=0, help="refinement effort (default 0)")
     evaluate.add_argument("--mu-grid", type=int, choices=range(1, 6), metavar="G",
                           help="decode mu rounded to the grid 2^-G (1 to 5), as a record's coded mu stores it, and "
-                          "add the bytes of that mu coded alone, under the format's unit prior and under per-dimension priors "
-                          "fitted to the model's training materials in the dataset, columns of --json's rows (default: mu "
-                          "as the encoder gives it)")
+                          "add the bytes of that mu coded alone, under the format's unit prior and under "
+                          "per-dimension priors fitted to the model's training materials in the dataset, columns of "
+                          "--json's rows (default: mu as the encoder gives it)")
     evaluate.add_argument("--json", action="store_true", help="print the rows as JSON")
     evaluate.add_argument("--store", action="store_true",
                           help="also store the rows in model.json and the model card (weights untouched)")

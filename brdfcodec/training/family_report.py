@@ -141,23 +141,23 @@ def evaluate_by_family(
                 row[f"{label}_linear"] = report.relae_linear.overall
                 row[f"{label}_itp"] = compare_images(image, comparison_render(table, reference.mask)).delta_e_itp_mean
             per_material.append(row)
-    return _group(_with_fitted_prior(per_material), mu_grid)
+    return _group(per_material, mu_grid, _price_under_fitted_prior(per_material))
 
 
-def _with_fitted_prior(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
-    """The rows with ``mu_bytes_fitted`` and ``mu_prior_codes``: μ's bytes under per-dimension prior codes fitted
-    to the μ of the training materials (the rows of split ``train``), where μ was put on a grid and some were."""
+def _price_under_fitted_prior(rows: list[dict[str, Any]]) -> tuple[int, ...] | None:
+    """Prior codes fitted to the μ integers of the training materials (the rows of split ``train``), and each
+    row's ``mu_bytes_fitted``, its μ's bytes under them (the rows' ``mu_integers`` consumed); None, and no bytes,
+    where μ was not put on a grid or no row is a training material."""
     fit_on = [r["mu_integers"] for r in rows if r["split"] == "train" and r["mu_integers"] is not None]
     codes = fit_prior_codes(np.stack(fit_on)) if fit_on else None
     for r in rows:
         integers = r.pop("mu_integers")
-        r["mu_prior_codes"] = None if codes is None or integers is None else tuple(int(c) for c in codes)
-        r["mu_bytes_fitted"] = (None if r["mu_prior_codes"] is None
-                                else float(len(encode_integers(integers, codes))))
-    return rows
+        r["mu_bytes_fitted"] = None if codes is None else float(len(encode_integers(integers, codes)))
+    return None if codes is None else tuple(int(c) for c in codes)
 
 
-def _group(rows: Sequence[dict[str, Any]], mu_grid: int | None = None) -> list[FamilyRow]:
+def _group(rows: Sequence[dict[str, Any]], mu_grid: int | None = None,
+           prior_codes: tuple[int, ...] | None = None) -> list[FamilyRow]:
     out = []
     for family in sorted({r["family"] for r in rows}):
         for split in ("train", "held-out"):
@@ -169,13 +169,10 @@ def _group(rows: Sequence[dict[str, Any]], mu_grid: int | None = None) -> list[F
                 return float(np.mean([r[key] for r in chosen]))
 
             worst = max(chosen, key=lambda r: r["model_mapped"])["name"]
-            fitted = chosen[0]["mu_prior_codes"]  # one fit per call: every row has it, or none
-            if any(r["mu_prior_codes"] != fitted for r in chosen):
-                raise ValueError("rows priced under different fitted priors cannot be grouped")
             out.append(FamilyRow(family, split, len(chosen), mean("model_mapped"), mean("model_linear"),
                                  mean("model_itp"), mean("pca8_mapped"), mean("pca16_mapped"), mean("pca8_itp"),
                                  mean("pca16_itp"), worst, mu_grid, None if mu_grid is None else mean("mu_bytes"),
-                                 None if fitted is None else mean("mu_bytes_fitted"), fitted))
+                                 None if prior_codes is None else mean("mu_bytes_fitted"), prior_codes))
     return out
 
 

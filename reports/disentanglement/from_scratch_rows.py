@@ -325,9 +325,9 @@ SWA_FOLD2 = Study(
 # 400 epochs averaged from 200 (z16-swa200) and over 250 averaged from 125 (z16-e250-swa125), and at weights 7,000 and
 # 5,000 (z16-w7k-swa200, z16-w5k-swa200; 400 epochs, averaged from 200; the 5,000 run again with training seed 1,
 # z16-w5k-swa200-seed1). References: cpu-fold2's runs of the recipe at 10,000 without the average (last weights; 8, 12
-# and 16 dimensions), and the v3 recipe's fold-2 model (bvae-cv3-fold2-v3, the baseline of issue 50's "no worse on every
-# family"). Reconstruction is measured twice: μ of the encoder (effort 0, what training measures) and μ refined through
-# the decoder (effort 1, bvae compress's default: what a user's file holds).
+# and 16 dimensions), and the v3 recipe's fold-2 model (bvae-cv3-fold2-v3, the baseline of issue 50's "no worse on
+# every family"). Reconstruction is measured twice: μ of the encoder (effort 0, what training measures) and μ refined
+# through the decoder (effort 1, bvae compress's default: what a user's file holds).
 # NBRDF proxies (90 MERL, 30 RGL; neural fits, not measurements); analytic: 24 random materials none saw.
 # Commands: runs/s24/cmd-RUN.txt (in the training rows; a later --factor-weight overrides the first); export here:
 #   bvae model export runs/s24/RUN -o runs/models/s24-RUN --name bvae-s24-RUN --dataset runs/both.h5
@@ -381,9 +381,9 @@ RATE_PRIOR_FOLD2 = Study(
 # Issues 48 and 50 on fold 2 of 3 (the rd benchmark's 40 held-out materials: 30 MERL, 10 RGL): would a prior for μ
 # per latent dimension, fitted to the model's training materials, let a supervised latent with free dimensions cost a
 # record no more than the v3 latent? Under the format's unit prior (§4.9) a dimension of a coded μ at 0 still costs
-# about 2.6 bits (ideal) on the grid 2^-2, however little it varies. Two measures: (1) each model's μ on the coded grids priced
-# under per-dimension Laplace priors fitted to its 80 training materials' μ on the same grid (bvae model evaluate
-# --mu-grid G: mu_bytes_fitted, mu_prior_codes; the held-out materials priced under the fit), the models of
+# about 2.6 bits (ideal) on the grid 2^-2, however little it varies. Two measures: (1) each model's μ on the coded
+# grids priced under per-dimension Laplace priors fitted to its 80 training materials' μ on the same grid (bvae model
+# evaluate --mu-grid G: mu_bytes_fitted, mu_prior_codes; the held-out materials priced under the fit), the models of
 # latent-size-fold2 and cpu-fold2 as references; (2) cpu-fold2's supervised 16-dimensional recipe (400 epochs,
 # dimensions 1-8 tied to the analytic factors at weight 10,000, the colour's saturation an eighth factor, GGX alpha
 # of the factor pool from 0.01, last weights) trained with z + uniform noise of width 2^-2 and lambda times μ's code
@@ -476,33 +476,37 @@ def _fold_effort_lines(study: Study, rows: list[dict], effort: int, title: str) 
 
 
 def _grid_lines(study: Study, rows: list[dict]) -> list[str]:
-    """Held-out mapped RelAE of μ rounded to each grid measured (as a coded μ stores it), and μ's coded bytes: one
-    table per grid, coarsest first."""
+    """Held-out mapped RelAE of μ rounded to each grid measured (as a coded μ stores it), and μ's coded bytes under
+    the format's unit prior, and where measured under per-dimension priors fitted to the training materials (with
+    the fitted codes): one table per grid, coarsest first."""
     on_grid = [row for row in rows if row.get("kind") == "evaluation" and row.get("mu_grid")
                and row["split"] == "held-out"]
+    families = ("merl", "rgl")
     lines = []
     for grid in sorted({row["mu_grid"] for row in on_grid}):
-        fitted = [row for row in on_grid if row["mu_grid"] == grid and row.get("mu_bytes_fitted") is not None]
+        cells = {(row["model"], row["family"]): row for row in on_grid if row["mu_grid"] == grid}
+        fitted = any(row.get("mu_bytes_fitted") is not None for row in cells.values())
         lines += [f"μ rounded to the grid 2^-{grid} (a record's coded μ), decoded: mapped RelAE, full tables, held out "
-                  "(μ's bytes coded alone under the format's unit prior" + (
-                      "; then under per-dimension priors fitted to the training materials' μ" if fitted else "") + "):",
-                  f"{'model':<33}{'MERL held out':>24}{'RGL held out':>24}" + (
-                      f"{'MERL, fitted prior':>20}{'RGL, fitted prior':>20}" if fitted else "")]
+                  "(μ's bytes coded alone under the format's unit prior"
+                  + ("; then under per-dimension priors fitted to the training materials' μ" if fitted else "") + "):",
+                  f"{'model':<33}{'MERL held out':>24}{'RGL held out':>24}"
+                  + (f"{'MERL, fitted prior':>20}{'RGL, fitted prior':>20}" if fitted else "")]
         for model in study.models:
-            cell = {row["family"]: row for row in on_grid if row["model"] == model and row["mu_grid"] == grid}
-            texts = [f"{cell[f]['mapped']:.4f} ({cell[f]['mu_bytes']:.2f} B)" if f in cell else "—"
-                     for f in ("merl", "rgl")]
-            if fitted:
-                texts += [f"{cell[f]['mu_bytes_fitted']:.2f} B" if cell.get(f, {}).get("mu_bytes_fitted") is not None
-                          else "—" for f in ("merl", "rgl")]
-            lines.append(f"{model:<33}" + "".join(f"{text:>24}" for text in texts[:2])
-                         + "".join(f"{text:>20}" for text in texts[2:]))
+            line = f"{model:<33}"
+            for f in families:
+                cell = cells.get((model, f))
+                text = "—" if cell is None else f"{cell['mapped']:.4f} ({cell['mu_bytes']:.2f} B)"
+                line += f"{text:>24}"
+            for f in families if fitted else ():
+                value = cells.get((model, f), {}).get("mu_bytes_fitted")
+                line += f"{'—' if value is None else f'{value:.2f} B':>20}"
+            lines.append(line)
         lines.append("")
         if fitted:
             lines.append(f"the fitted prior codes on 2^-{grid} (the unit prior's: {16 * grid}; 16 a doubling of the "
                          "spread):")
             for model in study.models:
-                codes = next((row["mu_prior_codes"] for row in fitted if row["model"] == model), None)
+                codes = next((cells[model, f]["mu_prior_codes"] for f in families if (model, f) in cells), None)
                 if codes is not None:
                     lines.append(f"  {model}: {' '.join(str(c) for c in codes)}")
             lines.append("")
