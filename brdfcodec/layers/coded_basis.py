@@ -245,8 +245,8 @@ def ideal_code_bits(q: npt.ArrayLike, codes: npt.ArrayLike) -> float:
 
     The coder's bytes (:func:`encode_integers`) come close to it for streams of a few dozen integers, the
     termination added; they can also be shorter, since the zero bits after a stream's last 1 bit cost nothing (a
-    decoder reads zeros past the end), and the coder's 8-bit split is not exactly p/256 (on thousands of
-    integers the two drift apart by tens of bits either way).
+    decoder reads zeros past the end), and the coder's 8-bit split is not exactly p/256 (on long streams the two
+    drift apart, either way).
 
     Parameters
     ----------
