@@ -3,7 +3,7 @@
 - ``cli.md`` is generated from ``bvae``'s own argparse parser: the ``--help`` of
   every sub-command, so the command-line reference cannot drift from the code.
 - The normative ``spec/`` folder, the committed ``reports/``, ``benchmarks/README.md``
-  and the default model's card are added to the site under their repository paths.
+  and the two models' cards (the default's, the editing model's) are added to the site under their repository paths.
 - Pages under ``docs/`` link to those files as ``../spec/...`` (which also works when the
   Markdown is read on a forge); the links are rewritten to the site's layout at build time.
 
@@ -19,7 +19,8 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 #: Repository folders and files copied into the site under the same relative path.
 EXTRA_TREES = ("spec", "reports")
-EXTRA_FILES = ("benchmarks/README.md", "benchmarks/rd/README.md", "brdfcodec/data/models/default/MODEL_CARD.md")
+EXTRA_FILES = ("benchmarks/README.md", "benchmarks/rd/README.md", "brdfcodec/data/models/default/MODEL_CARD.md",
+               "packages/brdfcodec-editing-model/brdfcodec_editing_model/models/editing/MODEL_CARD.md")
 EXTRA_SUFFIXES = {".md", ".png", ".json", ".jsonl", ".txt", ".csv", ".svg", ".py", ".sh"}
 
 

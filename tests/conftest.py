@@ -15,12 +15,15 @@ REPO_ROOT = Path(__file__).resolve().parents[1]
 #: source tree. Registered for the whole test run, so that the tests that decode their files (the spec's
 #: vectors among them) run whether or not that package is installed.
 LEGACY_MODELS = REPO_ROOT / "packages" / "brdfcodec-legacy-models" / "brdfcodec_legacy_models" / "models"
+#: The opt-in editing model (issue 50), a package of its own too: registered the same way, so that
+#: ``--model editing`` and its files work in every test run.
+EDITING_MODELS = REPO_ROOT / "packages" / "brdfcodec-editing-model" / "brdfcodec_editing_model" / "models"
 
 
 def _register_legacy_models() -> None:
     from brdfcodec.models.registry import register_model_folder
 
-    for folder in sorted(LEGACY_MODELS.glob("*/model.json")):
+    for folder in sorted([*LEGACY_MODELS.glob("*/model.json"), *EDITING_MODELS.glob("*/model.json")]):
         register_model_folder(folder.parent)
 
 

@@ -286,6 +286,22 @@ def test_cli_plausibility_json(capsys: pytest.CaptureFixture[str]) -> None:
     summary = json.loads(captured.out)
     assert summary["dims"] == [1] and summary["materials"] == 1
     assert len(summary["fractions"]["inverted"]) == 1 and len(summary["fractions"]["inverted"][0]) == 6
+    assert summary["energy_bound"] is True and summary["highlight_guard"] is False
+
+
+@pytest.mark.slow
+def test_cli_plausibility_judges_edits_as_they_decode_with_the_guard(capsys: pytest.CaptureFixture[str]) -> None:
+    """``--highlight-guard``: the decodes `bvae edit` writes (guard, then energy bound); no pit survives it."""
+    argv = ["model", "plausibility", "--materials", "2", "--dims", "4", "--json"]
+    assert main(argv) == 0
+    without = json.loads(capsys.readouterr().out)
+    assert main([*argv, "--highlight-guard"]) == 0
+    guarded = json.loads(capsys.readouterr().out)
+    assert guarded["highlight_guard"] is True and guarded["energy_bound"] is True
+    assert max(max(row) for row in without["fractions"]["pits"]) > 0  # z4 pits the shipped model's highlights
+    assert max(max(row) for row in guarded["fractions"]["pits"]) == 0
+    assert main([*argv, "--highlight-guard", "--raw"]) == 0
+    assert json.loads(capsys.readouterr().out)["energy_bound"] is False
 
 
 def test_cli_plausibility_bad_dims(capsys: pytest.CaptureFixture[str]) -> None:

@@ -49,7 +49,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     parser.add_argument("inputs", nargs="+", type=Path, metavar="IN",
                         help="MERL .binary or RGL .bsdf files, folders of them, or a dataset file (.h5)")
     parser.add_argument("-o", "--output", type=Path, required=True, help="output .bvae file")
-    parser.add_argument("--model", help="model folder or decoder SHA-256 (default: the shipped model)")
+    parser.add_argument("--model", help="model folder, model name (editing: the opt-in editing model) or decoder "
+                        "SHA-256 (default: the shipped model)")
     parser.add_argument("--float16", action="store_true", help="store latents as float16 (half the payload)")
     parser.add_argument("--split", choices=("train", "validation"), help="with a dataset: only this split")
     parser.add_argument("--no-measure", action="store_true", help="skip decoding to measure RelAE")
@@ -176,17 +177,9 @@ def _check_bytes_floor(budget: int, model: str | None, latent_itemsize: int, bas
     """Refuse a ``--bytes`` below the smallest record the model can write (a usage error, exit 2); records
     without a latent (``without_latent``: ``--latent auto``) count where the model has a basis and a linear path."""
     from brdfcodec.codec.rate import smallest_bytes_budget
-    from brdfcodec.models.manifest import load_manifest
-    from brdfcodec.models.registry import default_model_folder, find_model
+    from brdfcodec.models.registry import resolve_manifest
 
-    # brdfcodec.codec.resolve_model without importing torch: a folder, a decoder SHA-256, or the shipped model
-    text = None if model is None else str(model)
-    if text is None:
-        manifest = load_manifest(default_model_folder())
-    elif len(text) == 64 and all(c in "0123456789abcdef" for c in text.lower()) and not Path(text).exists():
-        manifest = find_model(text)
-    else:
-        manifest = load_manifest(text)
+    manifest = resolve_manifest(model)  # brdfcodec.codec.resolve_model's lookup, without importing torch
     has_basis = basis and manifest.basis_sha256 is not None
     floor = smallest_bytes_budget(manifest.config.latent_dim, latent_itemsize, has_basis,
                                   without_latent=has_basis and without_latent and bool(manifest.config.linear_basis),

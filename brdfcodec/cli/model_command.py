@@ -116,7 +116,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
         "report, per dimension and step, the fraction of decodes with non-finite or negative values, a new "
         "inverted specular peak, energy above the library's, or new zeros at the peak (brdfcodec.edit.plausibility).",
     )
-    plaus.add_argument("model", nargs="?", help="model folder or decoder SHA-256 (default: the shipped default model)")
+    plaus.add_argument("model", nargs="?", help="model folder, model name (editing: the opt-in editing model) or "
+                       "decoder SHA-256 (default: the shipped default model)")
     plaus.add_argument("--library", type=Path,
                        help=".bvae library encoded with MODEL (default: the shipped example library, 90 materials "
                        "of the NBRDF proxy of MERL, encoded with the default model)")
@@ -128,6 +129,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
                        help="relative margin over the library's largest albedo (default 0.1)")
     plaus.add_argument("--raw", action="store_true",
                        help="judge the network's raw decodes, without the energy bound that edits decode with")
+    plaus.add_argument("--highlight-guard", action="store_true",
+                       help="also apply the highlight guard that edited records decode with since format 2.5 "
+                       "(spec/bvae-format.md §6 step 6), before the energy bound: the decodes exactly as "
+                       "`bvae edit` writes them (default: the network's decodes, what a training objective fixes)")
     plaus.add_argument("--json", action="store_true", help="print one JSON object")
     plaus.set_defaults(handler=run_plausibility)
     sig = actions.add_parser(
@@ -137,7 +142,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
         "correlation with a permutation p-value (brdfcodec.report.posterior).",
     )
     sig.add_argument("dataset", type=Path, help="HDF5 dataset (bvae dataset build)")
-    sig.add_argument("--model", help="model folder or decoder SHA-256 (default: the shipped default model)")
+    sig.add_argument("--model", help="model folder, model name (editing: the opt-in editing model) or decoder "
+                     "SHA-256 (default: the shipped default model)")
     sig.add_argument("-o", "--output", type=Path, metavar="ROWS.jsonl",
                      help="also write the rows (brdfcodec.report.rows, study 'posterior-width')")
     sig.add_argument("--force", action="store_true", help="replace an existing output file")
@@ -321,7 +327,8 @@ def run_plausibility(args: argparse.Namespace) -> int:
         everything = [library.record(name) for name in library.names]
     records = everything[: args.materials]
     report = measure_plausibility(decoder, records, dims=_parse_dims(args.dims, decoder.latent_dim),
-                                  criteria=criteria, reference=everything, energy_bound=not args.raw)
+                                  criteria=criteria, reference=everything, energy_bound=not args.raw,
+                                  highlight_guard=args.highlight_guard)
     if args.json:
         from brdfcodec.report.rows import current_commit
 
@@ -331,7 +338,9 @@ def run_plausibility(args: argparse.Namespace) -> int:
         print(json.dumps(summary, allow_nan=False))
         return 0
     name = decoder.manifest.name if decoder.manifest else "in-memory decoder"
-    print(f"{name}: {len(records)} materials of {library_label}")
+    judged = ("the network's raw decodes" if args.raw else "decodes with the energy bound") + (
+        ", after the highlight guard of edited records" if args.highlight_guard else "")
+    print(f"{name}: {len(records)} materials of {library_label}; {judged}")
     print(report.format_table())
     if report.worst:
         print("\nworst decodes:")

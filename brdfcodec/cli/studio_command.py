@@ -31,7 +31,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
                         help="a further Host header name to answer (a proxy's or an alias's; repeatable; "
                         "'*' answers any, which lets any web page the user visits drive the studio)")
     parser.add_argument("--port", type=int, default=8765, help="port (default 8765; 0 picks a free one)")
-    parser.add_argument("--model", help="model folder or decoder SHA-256 (default: the one the libraries name)")
+    parser.add_argument("--model", help="model folder, model name or decoder SHA-256 (default: the one the "
+                        "libraries name)")
     parser.add_argument("--env", type=Path, metavar="MAP.exr",
                         help="a lat-long EXR offered as environment lighting besides the built-in sky")
     parser.add_argument("--save-dir", type=Path, default=None,

@@ -10,7 +10,6 @@ import os
 import warnings
 from collections.abc import Sequence
 from dataclasses import replace
-from pathlib import Path
 from typing import TYPE_CHECKING, Literal
 
 import numpy as np
@@ -20,8 +19,8 @@ from brdfcodec.errors import (
     UnmeasuredMaterialError,
 )
 from brdfcodec.io.merl import MerlBRDF
-from brdfcodec.models.registry import default_model_folder, find_model
-from brdfcodec.models.store import ModelManifest, load_manifest
+from brdfcodec.models.registry import resolve_manifest
+from brdfcodec.models.store import ModelManifest
 from brdfcodec.representation import (
     unmap_values,
 )
@@ -40,21 +39,20 @@ ModelSpec = str | os.PathLike[str] | ModelManifest | None
 
 def resolve_model(model: ModelSpec) -> ModelManifest:
     """A model's manifest from a folder, a decoder SHA-256 (64 hex digits, or the first 16 that a file with short
-    references names, format 2.6), or ``None`` for the shipped default.
+    references names, format 2.6), the name of a findable model (its folder's name, such as ``"editing"`` for the
+    opt-in editing model, or the name its ``model.json`` gives: :func:`~brdfcodec.models.registry.find_model_named`;
+    a folder of that name in the working directory wins), or ``None`` for the shipped default.
 
     Raises
     ------
     DecoderNotFoundError
         A hash that no known model has (the message lists the available ones).
+    ModelNotFoundError
+        A name (no path separator, no such folder here) that no findable model has.
     """
     if isinstance(model, ModelManifest):
         return model
-    if model is None:
-        return load_manifest(default_model_folder())
-    text = os.fspath(model)
-    if len(text) in (16, 64) and all(c in "0123456789abcdef" for c in text.lower()) and not Path(text).exists():
-        return find_model(text)
-    return load_manifest(text)
+    return resolve_manifest(model)
 
 
 class ClampWarning(UserWarning):

@@ -37,6 +37,8 @@ __all__ = [
     "default_model_folder",
     "package_model_folder",
     "find_model",
+    "find_model_named",
+    "resolve_manifest",
     "config_file",
     "installed_model_folders",
     "register_model_folder",
@@ -51,6 +53,10 @@ MODEL_ENTRY_POINTS = "brdfcodec.models"
 #: The package that holds the models the wheel no longer ships, and where it lies in a source tree.
 LEGACY_PACKAGE = "brdfcodec-legacy-models"
 LEGACY_SOURCE = "packages/brdfcodec-legacy-models"
+#: Folder name of the opt-in editing model (issue 50), and where its package lies in a source tree.
+EDITING_MODEL_NAME = "editing"
+EDITING_MODEL_FULL_NAME = "bvae-nbrdf-proxy-edit-v1"
+EDITING_SOURCE = "packages/brdfcodec-editing-model"
 #: Earlier defaults, moved out of the wheel into :data:`LEGACY_PACKAGE`: decoder SHA-256 → model name.
 RETIRED_MODELS = {
     "e1e3ed1e24dc5a8746abbfb9194725e1a9d02808c2e81125c64f3d9e37b39491": "bvae-nbrdf-proxy-small-v1",
@@ -260,6 +266,65 @@ def _names_hash(folder: Path, wanted: str) -> bool:
     except BrdfcodecError:
         return False
     return f'"{wanted}'.encode() in text if len(wanted) < 64 else f'"{wanted}"'.encode() in text
+
+
+def resolve_manifest(model: str | os.PathLike[str] | None) -> ModelManifest:
+    """A model's manifest from what a user gives: ``None`` for the shipped default; a folder that exists; a
+    decoder SHA-256 (64 hex digits, or the first 16 that a file with short references names, format 2.6); else a
+    name without a path separator (:func:`find_model_named`); else a folder, refused if it is not one.
+
+    Needs no torch (the command line checks a model's limits before it loads one).
+
+    Raises
+    ------
+    ModelNotFoundError
+        A hash or a name that no findable model has (the message lists those there are).
+    ModelFolderError
+        A path that is not a valid model folder.
+    """
+    if model is None:
+        return load_manifest(default_model_folder())
+    text = os.fspath(model)
+    if Path(text).exists():
+        return load_manifest(text)
+    if len(text) in (16, 64) and all(c in "0123456789abcdef" for c in text.lower()):
+        return find_model(text)
+    if text and not any(sep in text for sep in ("/", os.sep)) and text not in (".", ".."):
+        return find_model_named(text)
+    return load_manifest(text)
+
+
+def find_model_named(name: str) -> ModelManifest:
+    """The first findable model, in search order, whose folder is named ``name`` (``"editing"``, ``"default"``)
+    or whose ``model.json`` names it so (``"bvae-nbrdf-proxy-edit-v1"``).
+
+    A folder whose ``model.json`` is invalid is skipped with a warning, as :func:`find_model` does.
+
+    Raises
+    ------
+    ModelNotFoundError
+        No findable model has that name (the message lists the names there are, and how the editing model and
+        the earlier defaults are installed).
+    """
+    names: list[str] = []
+    for found in _usable_models():
+        if not isinstance(found, ModelManifest):
+            _skip(*found)
+            continue
+        if name in (found.folder.name, found.name):
+            return found
+        names.append(f"{found.folder.name} ({found.name})")
+    hints = []
+    if name in (EDITING_MODEL_NAME, EDITING_MODEL_FULL_NAME):
+        hints.append(f"the opt-in editing model is a package of its own: pip install {EDITING_SOURCE} (from a "
+                     f"brdfcodec source tree), or set BRDFCODEC_MODEL_PATH to "
+                     f"{EDITING_SOURCE}/brdfcodec_editing_model/models")
+    if name in {retired.removeprefix("bvae-") for retired in RETIRED_MODELS.values()} | set(RETIRED_MODELS.values()):
+        hints.append(_legacy_remedy())
+    raise ModelNotFoundError(
+        f"no model named {name!r} is installed (models found: {', '.join(names) or 'none'})"
+        + ("; " + "; ".join(hints) if hints else "; give a model folder, a decoder SHA-256 or one of those names")
+    )
 
 
 def find_model(decoder_sha256: str) -> ModelManifest:

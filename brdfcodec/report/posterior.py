@@ -63,7 +63,7 @@ def posterior_width_rows(model: str | os.PathLike[str] | None, dataset: str | os
     Parameters
     ----------
     model : path-like or str, optional
-        Model folder or decoder SHA-256 (default: the shipped model).
+        Model folder, model name or decoder SHA-256 (default: the shipped model).
     dataset : path-like
         An HDF5 dataset (``bvae dataset build``) with inputs and masks.
 

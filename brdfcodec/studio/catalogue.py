@@ -64,7 +64,7 @@ class Catalogue:
         Libraries to open; the shipped example library
         (:func:`brdfcodec.examples.example_library`) by default.
     model : str or path-like, optional
-        Model folder or decoder SHA-256; by default the decoder the first
+        Model folder, model name or decoder SHA-256; by default the decoder the first
         library names.
 
     Raises

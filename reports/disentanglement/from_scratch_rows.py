@@ -148,6 +148,19 @@ def _fold_rows(study: Study, name: str, folder: str) -> list[dict]:
     return rows
 
 
+def training_error_rows(name: str, folder: str, family: dict[str, str]) -> list[dict]:
+    """A model's training error per family: the mean of its export's per-material errors (``info.errors``)."""
+    per: dict[str, list[dict]] = {}
+    for error in json.loads(Path(folder, "model.json").read_text())["info"]["errors"]:
+        per.setdefault(family[error["name"]], []).append(error)
+    return [{"kind": "reconstruction", "model": name, "family": fam, "split": "train", "count": len(errors),
+             "effort": 0, "relae_mapped": sum(e["relae_mapped"] for e in errors) / len(errors),
+             "relae_linear": sum(e["relae_linear"] for e in errors) / len(errors),
+             "command": "bvae model export (model.json info.errors: μ of the encoder decoded, mapped RelAE on the "
+                        "full table of each of the 120 materials of runs/both.h5)"}
+            for fam, errors in sorted(per.items())]
+
+
 def reconstruction_rows(study: Study) -> list[dict]:
     with BrdfDataset("runs/both.h5") as dataset:
         family = dict(zip(dataset.names, dataset.families, strict=True))
@@ -157,17 +170,7 @@ def reconstruction_rows(study: Study) -> list[dict]:
         if study.fold:
             rows += _fold_rows(study, name, folder)
             continue
-        info = json.loads(Path(folder, "model.json").read_text())["info"]
-        per: dict[str, list[dict]] = {}
-        for error in info["errors"]:
-            per.setdefault(family[error["name"]], []).append(error)
-        for fam, errors in sorted(per.items()):
-            rows.append({"kind": "reconstruction", "model": name, "family": fam, "split": "train",
-                         "count": len(errors), "effort": 0,
-                         "relae_mapped": sum(e["relae_mapped"] for e in errors) / len(errors),
-                         "relae_linear": sum(e["relae_linear"] for e in errors) / len(errors),
-                         "command": "bvae model export (model.json info.errors: μ of the encoder decoded, mapped "
-                                    "RelAE on the full table of each of the 120 materials of runs/both.h5)"})
+        rows += training_error_rows(name, folder, family)
         held_out = evaluations / f"evaluate-{Path(folder).name}.json"
         if held_out.exists() and held_out.stat().st_size:
             for row in json.loads(held_out.read_text()):
