@@ -4,8 +4,8 @@ The wheel keeps one model, the codec's default (issue 52); the editing model is 
 through the entry point group ``brdfcodec.models`` once installed (the tests' conftest registers the source
 tree's folder). These tests check that the package is what it says (entry point, one folder named ``editing``,
 a verified model with 16 dimensions), that a user reaches it by name from the command line and edits with it,
-and that the numbers its card shows are the committed rows' (the card's sections are made from them by
-``reports/editing-model/editing_model_rows.py``; nothing on the card is typed by hand).
+and that the numbers its card and report show are the committed rows' (both are made from them by
+``reports/editing-model/editing_model_rows.py``; no measured number on them is typed by hand).
 """
 
 from __future__ import annotations
@@ -35,7 +35,8 @@ ROWS = ROOT / "reports" / "editing-model" / "editing-model.jsonl"
 
 def test_the_package_names_its_entry_point_and_holds_one_verified_model() -> None:
     project = tomllib.loads((PACKAGE / "pyproject.toml").read_text())
-    assert project["project"]["entry-points"][MODEL_ENTRY_POINTS] == {"editing": "brdfcodec_editing_model:models_folder"}
+    entry_points = project["project"]["entry-points"][MODEL_ENTRY_POINTS]
+    assert entry_points == {"editing": "brdfcodec_editing_model:models_folder"}
     assert project["tool"]["setuptools"]["package-data"]["brdfcodec_editing_model"] == ["models/*/*"]
     folders = [p.name for p in FOLDER.parent.iterdir() if (p / "model.json").is_file()]
     assert folders == [EDITING_MODEL_NAME]
@@ -71,7 +72,8 @@ def test_the_editing_model_refuses_a_16_byte_budget_and_says_why(tmp_path: Path,
                                                                    capsys: pytest.CaptureFixture[str]) -> None:
     """What its card says it gives up: 16 numbers fit no 16 B record (the default's do)."""
     out = tmp_path / "red.bvae"
-    assert main(["compress", str(red_plastic_file), "-o", str(out), "--model", EDITING_MODEL_NAME, "--bytes", "16"]) == 2
+    argv = ["compress", str(red_plastic_file), "-o", str(out), "--model", EDITING_MODEL_NAME, "--bytes", "16"]
+    assert main(argv) == 2
     err = capsys.readouterr().err
     assert "--bytes 16 is below the smallest record model bvae-nbrdf-proxy-edit-v1 can write" in err
     assert not out.exists()
@@ -94,6 +96,8 @@ def test_the_card_shows_the_committed_rows(monkeypatch: pytest.MonkeyPatch) -> N
     assert stored == runner.card_sections(rows, runner.fold2_rows(), "../../../../../reports/traversals/")
     card = (FOLDER / "MODEL_CARD.md").read_text()
     assert all(section["markdown"].strip() in card for section in stored)
+    report = (ROOT / "reports" / "editing-model" / "editing-model.txt").read_text(encoding="utf-8")
+    assert report == runner.text(rows, runner.fold2_rows())
     for name in runner.SHEETS:
         assert (ROOT / "reports" / "traversals" / f"editing-model-{name}.png").is_file()
 
@@ -111,3 +115,4 @@ def test_the_committed_rows_meet_the_latent_goal_and_the_plausibility_goal() -> 
     assert all(r["mean_fraction"]["inverted_wide"] <= 0.01 for r in guarded)
     decoder_sha = load_manifest(FOLDER).decoder_sha256
     assert all(r["decoder_sha256"] == decoder_sha for r in scores)
+    assert all(r["decoder_sha256"] == decoder_sha for r in guarded if r["model"] == EDITING_MODEL_FULL_NAME)

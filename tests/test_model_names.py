@@ -14,7 +14,7 @@ import pytest
 
 from brdfcodec.cli.main import main
 from brdfcodec.codec.prepare import resolve_model
-from brdfcodec.errors import ModelNotFoundError
+from brdfcodec.errors import ModelFolderError, ModelNotFoundError
 from brdfcodec.models import registry
 from brdfcodec.models.registry import (
     EDITING_MODEL_NAME,
@@ -66,16 +66,38 @@ def test_the_editing_model_when_missing_says_how_to_install_it(only) -> None:
     assert f"pip install {EDITING_SOURCE}" in str(raised.value) and "BRDFCODEC_MODEL_PATH" in str(raised.value)
 
 
-def test_a_folder_in_the_working_directory_wins_over_a_name(only, tmp_path: Path, monkeypatch) -> None:
-    copy = _copy_of_default(tmp_path, "default")
+def test_a_model_folder_in_the_working_directory_wins_over_a_name(only, tmp_path: Path, monkeypatch) -> None:
+    copy = _copy_of_default(tmp_path, "velvet")
     monkeypatch.chdir(tmp_path)
-    assert Path(resolve_model("default").folder).resolve() == copy.resolve()
+    assert Path(resolve_model("velvet").folder).resolve() == copy.resolve()
 
 
-def test_a_missing_path_is_not_taken_for_a_name(only, tmp_path: Path) -> None:
-    with pytest.raises(Exception) as raised:
-        resolve_model(str(tmp_path / "editing"))
-    assert "no model named" not in str(raised.value)
+def test_something_on_disk_that_is_no_model_does_not_hide_a_name(only, tmp_path: Path, monkeypatch) -> None:
+    registered = _copy_of_default(tmp_path / "models", "editing")
+    only(registered)
+    work = tmp_path / "work"
+    (work / "editing").mkdir(parents=True)  # a user's folder of edits, say
+    monkeypatch.chdir(work)
+    assert resolve_model("editing").folder == registered.resolve()
+    (work / "velvet").mkdir()  # no model of that name: the folder is read, and its own error raised
+    with pytest.raises(ModelFolderError, match="model.json"):
+        resolve_model("velvet")
+
+
+def test_default_is_always_the_shipped_model(only, tmp_path: Path) -> None:
+    only(_copy_of_default(tmp_path / "models", "default"))  # registered first in the search order
+    assert resolve_model("default").folder == default_model_folder()
+
+
+def test_a_path_is_never_taken_for_a_name_and_a_bare_name_never_for_a_path(only, tmp_path: Path, monkeypatch) -> None:
+    monkeypatch.chdir(tmp_path)
+    for path in (str(tmp_path / "editing"), "sub/editing", "./editing"):
+        with pytest.raises(ModelFolderError):
+            resolve_model(path)
+    with pytest.raises(ModelNotFoundError, match="no model named 'mymodel'"):
+        resolve_model("mymodel")
+    with pytest.raises(ModelNotFoundError, match="empty model reference"):
+        resolve_model("")
 
 
 def test_the_cli_takes_a_name_and_refuses_an_unknown_one(only, tmp_path: Path, red_plastic_file: Path, capsys) -> None:

@@ -120,7 +120,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
                        "decoder SHA-256 (default: the shipped default model)")
     plaus.add_argument("--library", type=Path,
                        help=".bvae library encoded with MODEL (default: the shipped example library, 90 materials "
-                       "of the NBRDF proxy of MERL, encoded with the default model)")
+                       "of the NBRDF proxy of MERL, encoded with the default model: another model needs a library "
+                       "of its own, e.g. bvae compress ... --model MODEL)")
     plaus.add_argument("--dims", help="latent dimensions to traverse, 1-based, comma-separated (default: all)")
     plaus.add_argument("--materials", type=int, metavar="N", help="only the first N materials of the library")
     plaus.add_argument("--tolerance", type=float, default=0.1,
@@ -157,7 +158,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
         "latent dimension, the factor it moves most.",
     )
     dis.add_argument("models", nargs="*", metavar="MODEL",
-                     help="model folders or decoder SHA-256s (default: the shipped default model)")
+                     help="model folders, model names or decoder SHA-256s (default: the shipped default model)")
     dis.add_argument("--materials", type=int, default=300, metavar="N",
                      help="analytic materials to draw (default 300; at least 30)")
     dis.add_argument("--seed", type=int, default=0, help="seed of the factor sampler (default 0)")
@@ -238,12 +239,12 @@ def run_evaluate(args: argparse.Namespace) -> int:
     """Print (and optionally store) the per-family table."""
     import json
 
-    from brdfcodec.models.registry import default_model_folder
+    from brdfcodec.models.registry import resolve_manifest
     from brdfcodec.training.family_report import evaluate_by_family, family_table
 
     if args.store and args.mu_grid is not None:
         raise UsageError("--store keeps the card's table of mu as the encoder gives it: leave out --mu-grid")
-    folder = args.folder or default_model_folder()
+    folder = resolve_manifest(args.folder).folder  # a folder, a hash or a name: --store writes where the model is
     rows = evaluate_by_family(folder, args.dataset, effort=args.effort, mu_grid=args.mu_grid)
     if args.json:
         print(json.dumps([row.as_dict() for row in rows], indent=1))

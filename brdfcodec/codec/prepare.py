@@ -38,17 +38,19 @@ ModelSpec = str | os.PathLike[str] | ModelManifest | None
 
 
 def resolve_model(model: ModelSpec) -> ModelManifest:
-    """A model's manifest from a folder, a decoder SHA-256 (64 hex digits, or the first 16 that a file with short
-    references names, format 2.6), the name of a findable model (its folder's name, such as ``"editing"`` for the
-    opt-in editing model, or the name its ``model.json`` gives: :func:`~brdfcodec.models.registry.find_model_named`;
-    a folder of that name in the working directory wins), or ``None`` for the shipped default.
+    """A model's manifest from a manifest (returned as it is), or from what
+    :func:`~brdfcodec.models.registry.resolve_manifest` takes: a model folder, a decoder SHA-256 (64 hex digits,
+    or the first 16 that a file with short references names, format 2.6), the name of a findable model (its
+    folder's name, such as ``"editing"`` for the opt-in editing model, or the name its ``model.json`` gives;
+    ``"default"`` is the shipped default), or ``None`` for the shipped default.
 
     Raises
     ------
     DecoderNotFoundError
-        A hash that no known model has (the message lists the available ones).
-    ModelNotFoundError
-        A name (no path separator, no such folder here) that no findable model has.
+        A hash or a name that no findable model has (:class:`~brdfcodec.errors.ModelNotFoundError`; the message
+        lists the available ones).
+    ModelFolderError
+        A path that is not a valid model folder.
     """
     if isinstance(model, ModelManifest):
         return model

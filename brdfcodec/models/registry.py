@@ -269,36 +269,64 @@ def _names_hash(folder: Path, wanted: str) -> bool:
 
 
 def resolve_manifest(model: str | os.PathLike[str] | None) -> ModelManifest:
-    """A model's manifest from what a user gives: ``None`` for the shipped default; a folder that exists; a
-    decoder SHA-256 (64 hex digits, or the first 16 that a file with short references names, format 2.6); else a
-    name without a path separator (:func:`find_model_named`); else a folder, refused if it is not one.
+    """A model's manifest from what a user gives (``--model``); needs no torch (the command line checks a model's
+    limits before it loads one).
 
-    Needs no torch (the command line checks a model's limits before it loads one).
+    Parameters
+    ----------
+    model : str, path-like or None
+        In this order: ``None``, the shipped default; a folder holding a ``model.json``; a decoder SHA-256 (64 hex
+        digits, or the first 16 that a file with short references names, format 2.6); a name of one path part
+        (:func:`find_model_named`: ``"editing"``, ``"default"``, ``"bvae-nbrdf-proxy-edit-v1"``); else a folder,
+        refused if it is not a model folder. A name that no model has, but that is something on disk, is read as
+        that folder (whose error is then raised).
+
+    Returns
+    -------
+    ModelManifest
 
     Raises
     ------
     ModelNotFoundError
-        A hash or a name that no findable model has (the message lists those there are).
+        An empty string, or a hash or a name that no findable model has (the message lists those there are).
     ModelFolderError
         A path that is not a valid model folder.
     """
     if model is None:
         return load_manifest(default_model_folder())
     text = os.fspath(model)
-    if Path(text).exists():
-        return load_manifest(text)
-    if len(text) in (16, 64) and all(c in "0123456789abcdef" for c in text.lower()):
+    if not text:
+        raise ModelNotFoundError("an empty model reference: give a model folder, a decoder SHA-256 or a model name")
+    path = Path(text)
+    if (path / MANIFEST).is_file():
+        return load_manifest(path)
+    if len(text) in (16, 64) and all(c in "0123456789abcdef" for c in text.lower()) and not path.exists():
         return find_model(text)
-    if text and not any(sep in text for sep in ("/", os.sep)) and text not in (".", ".."):
-        return find_model_named(text)
-    return load_manifest(text)
+    separators = {"/", os.sep, os.altsep} - {None}
+    if len(path.parts) == 1 and not path.anchor and text != ".." and not any(sep in text for sep in separators):
+        try:
+            return find_model_named(text)
+        except ModelNotFoundError:
+            if not path.exists():
+                raise
+    return load_manifest(path)
 
 
 def find_model_named(name: str) -> ModelManifest:
-    """The first findable model, in search order, whose folder is named ``name`` (``"editing"``, ``"default"``)
-    or whose ``model.json`` names it so (``"bvae-nbrdf-proxy-edit-v1"``).
+    """A findable model by name: ``"default"`` is the model shipped in the package; any other name is the first
+    model, in search order, whose folder is named so (``"editing"``) or whose ``model.json`` names it so
+    (``"bvae-nbrdf-proxy-edit-v1"``).
 
     A folder whose ``model.json`` is invalid is skipped with a warning, as :func:`find_model` does.
+
+    Parameters
+    ----------
+    name : str
+        A folder name or a model name.
+
+    Returns
+    -------
+    ModelManifest
 
     Raises
     ------
@@ -306,6 +334,8 @@ def find_model_named(name: str) -> ModelManifest:
         No findable model has that name (the message lists the names there are, and how the editing model and
         the earlier defaults are installed).
     """
+    if name == DEFAULT_MODEL_NAME:
+        return load_manifest(default_model_folder())
     names: list[str] = []
     for found in _usable_models():
         if not isinstance(found, ModelManifest):

@@ -2,8 +2,8 @@
 
 The brdfcodec wheel ships one model, the codec's default (issue 52). This package holds a second one, made for
 editing rather than for the smallest files: a 16-dimensional latent whose dimensions 1–8 were tied in training to
-named factors of analytic materials (albedo, hue, specular, roughness, grazing, sheen, metallic, saturation), so
-that each slider moves one thing. brdfcodec finds its folder (``models/editing``, ``spec/model.md`` §3) through
+named factors of analytic materials (albedo, hue, specular, roughness, grazing, sheen, metallic, saturation); its
+card measures what each slider moves. brdfcodec finds its folder (``models/editing``, ``spec/model.md`` §3) through
 the entry point group ``brdfcodec.models``, which names :func:`models_folder`; ``--model editing`` picks it.
 Nothing here is imported otherwise.
 """
