@@ -13,6 +13,19 @@ from brdfcodec.cli.usage import UsageError
 __all__ = ["register"]
 
 
+class RefitDefaults:
+    """``bvae model refit-encoder``'s defaults, those of :class:`brdfcodec.training.encoder_refit.RefitConfig`
+    (kept here so that building the parser imports no torch; a test checks that they agree)."""
+
+    epochs = 60
+    analytic_materials = 256
+    learning_rate = 1e-4
+    logvar_weight = 1e-3
+    mix_probability = 0.25
+    analytic_batch = 2
+    seed = 0
+
+
 def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     """Add the ``model`` sub-command group."""
     parser = subparsers.add_parser("model", help="export, list and verify trained models",
@@ -80,6 +93,44 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     )
     compact.add_argument("folder", type=Path, help="model folder")
     compact.set_defaults(handler=run_compact_encoder)
+    refit = actions.add_parser(
+        "refit-encoder", help="train an exported model's encoder to its frozen decoder (better codes at effort 0)",
+        description="Train the encoder alone, the decoder frozen, so that the decoded code of each material "
+        "reconstructs it as well as the decoder allows (the masked mapped L1 error that refinement lowers at "
+        "effort 1 and above), on the materials the model trained on (model.json's info.data.train; colour-permuted "
+        "and blended) and on analytic materials drawn for the refit. The decoder, its hash and every file made "
+        "with the model are unchanged; the measurements that depend on the encoder are made again and stored with "
+        "the refit's settings in model.json (info.encoder_refit) and the card.",
+    )
+    refit.add_argument("folder", type=Path, help="model folder (rewritten in place unless -o is given)")
+    refit.add_argument("--dataset", type=Path, required=True,
+                       help="dataset holding every material the model trained on (bvae dataset build)")
+    refit.add_argument("-o", "--output", type=Path, help="write the refitted model to this new folder instead")
+    refit.add_argument("--name", help="a new name for the refitted model (default: its name)")
+    refit.add_argument("--epochs", type=int, default=RefitDefaults.epochs,
+                       help=f"passes over the training materials (default {RefitDefaults.epochs})")
+    refit.add_argument("--analytic-materials", type=int, default=RefitDefaults.analytic_materials, metavar="N",
+                       help=f"analytic materials drawn for the refit (default "
+                       f"{RefitDefaults.analytic_materials}; 0: the training materials alone)")
+    refit.add_argument("--analytic-batch", type=int, default=RefitDefaults.analytic_batch, metavar="N",
+                       help=f"analytic materials in each step's batch (default {RefitDefaults.analytic_batch})")
+    refit.add_argument("--mix-probability", type=float, default=RefitDefaults.mix_probability,
+                       help=f"chance that a training material is blended with another, in reflectance (default "
+                       f"{RefitDefaults.mix_probability:g})")
+    refit.add_argument("--colour-permutations", action=argparse.BooleanOptionalAction, default=True,
+                       help="permute each training material's colour channels at random (default)")
+    refit.add_argument("--learning-rate", type=float, default=RefitDefaults.learning_rate,
+                       help=f"Adam's step size (default {RefitDefaults.learning_rate:g})")
+    refit.add_argument("--logvar-weight", type=float, default=RefitDefaults.logvar_weight,
+                       help=f"weight of the squared change of the encoder's log σ² against the mean mapped L1 per "
+                       f"valid entry (default {RefitDefaults.logvar_weight:g}: σ kept, μ free)")
+    refit.add_argument("--factor-weight", type=float, metavar="W",
+                       help="weight of the factor supervision of the analytic materials' μ, in training's units "
+                       "(default: the model's own training weight, info.train_config.factor_weight, 0 for a model "
+                       "trained without; 0: the analytic materials are left to the reconstruction)")
+    refit.add_argument("--seed", type=int, default=RefitDefaults.seed, help="seed of the draws (default 0)")
+    refit.add_argument("--log", type=Path, help="append a JSON line per epoch to this file")
+    refit.set_defaults(handler=run_refit_encoder)
     evaluate = actions.add_parser(
         "evaluate", help="measure a model per measurement family against PCA-8/16 (RelAE, ΔE ITP)",
         description="Encode and decode every material of a dataset with a model and report, per family and "
@@ -232,6 +283,31 @@ def run_compact_encoder(args: argparse.Namespace) -> int:
     write_card(args.folder, json.loads((manifest.folder / "model.json").read_text(encoding="utf-8")))
     size = (manifest.folder / "encoder.safetensors").stat().st_size
     print(f"wrote {args.folder}/encoder.safetensors: {size:,} bytes, sha256 {manifest.encoder_sha256}")
+    return 0
+
+
+def run_refit_encoder(args: argparse.Namespace) -> int:
+    """Refit the encoder, then print where it went and its reconstruction loss before and after."""
+    from brdfcodec.training.encoder_refit import RefitConfig, refit_model_folder
+
+    factor_weight = args.factor_weight
+    if factor_weight is None:
+        from brdfcodec.models.store import load_manifest
+
+        trained_with = load_manifest(args.folder).info.get("train_config")
+        factor_weight = float(trained_with.get("factor_weight", 0.0)) if isinstance(trained_with, dict) else 0.0
+    config = RefitConfig(epochs=args.epochs, factor_weight=factor_weight, analytic_materials=args.analytic_materials,
+                         learning_rate=args.learning_rate, logvar_weight=args.logvar_weight, seed=args.seed,
+                         mix_probability=args.mix_probability, colour_permutations=args.colour_permutations,
+                         analytic_batch=args.analytic_batch)
+    command = " ".join(shlex.quote(a) for a in ["bvae", *sys.argv[1:]])
+    manifest = refit_model_folder(args.folder, args.dataset, config, output=args.output, name=args.name,
+                                  command=command,
+                                  log=args.log)
+    losses = manifest.info["encoder_refit"]["epoch_losses"]
+    print(f"wrote {manifest.folder}/encoder.safetensors: sha256 {manifest.encoder_sha256}; decoder unchanged "
+          f"({manifest.decoder_sha256}); training loss per valid entry {losses[0]:.5f} (first epoch) to "
+          f"{losses[-1]:.5f} (last)")
     return 0
 
 

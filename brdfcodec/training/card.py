@@ -28,6 +28,24 @@ def _summary_table(title: str, summary: dict[str, dict[str, Any]]) -> list[str]:
     return lines
 
 
+def _refit_lines(refit: Any) -> list[str]:
+    """The training section's account of an encoder refit (``info.encoder_refit``), if the model had one."""
+    if not isinstance(refit, dict):
+        return []
+    config, losses = refit["config"], refit["epoch_losses"]
+    return [f"- Encoder refitted after export (`bvae model refit-encoder`, `spec/model.md` §3), the decoder frozen: "
+            f"{config['epochs']} epochs at learning rate {config['learning_rate']:g} on the training materials"
+            + (", colour-permuted" if config["colour_permutations"] else "")
+            + (f", blended with probability {config['mix_probability']:g}" if config["mix_probability"] else "")
+            + (f", with {config['analytic_batch']} of {config['analytic_materials']} analytic materials a step"
+               + (f" held on their factors at weight {config['factor_weight']:g}" if config["factor_weight"] else "")
+               if config["analytic_materials"] else "")
+            + f"; mean mapped L1 per valid entry {losses[0]:.5f} in the first epoch, {losses[-1]:.5f} in the last, "
+            f"{refit['seconds'] / 60:.1f} min; it replaced encoder `{refit['original_encoder_sha256'][:12]}…`. "
+            "The errors and latent statistics on this card are the refitted encoder's.",
+            *([f"- Refit: `{refit['command']}`"] if refit.get("command") else [])]
+
+
 def render_model_card(manifest: dict[str, Any]) -> str:
     """The card of a model from its ``model.json`` content.
 
@@ -94,6 +112,7 @@ def render_model_card(manifest: dict[str, Any]) -> str:
         f"- Training time: {info['training_seconds'] / 60:.1f} min on {info['device']} "
         f"({info['world_size']} process(es)).",
         f"- Reproduce: `{info['command']}`",
+        *_refit_lines(info.get("encoder_refit")),
         "",
         "## Reconstruction error",
         "",
