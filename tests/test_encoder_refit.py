@@ -69,7 +69,8 @@ def test_the_cli_defaults_are_the_library_s() -> None:
     from brdfcodec.cli.model_command import RefitDefaults
 
     config = RefitConfig()
-    for field in ("epochs", "analytic_materials", "learning_rate", "logvar_weight", "mix_probability", "analytic_batch", "seed"):
+    for field in ("epochs", "analytic_materials", "learning_rate", "logvar_weight", "mix_probability",
+                  "analytic_batch", "seed"):
         assert getattr(RefitDefaults, field) == getattr(config, field), field
 
 
