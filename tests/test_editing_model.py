@@ -115,4 +115,9 @@ def test_the_committed_rows_meet_the_latent_goal_and_the_plausibility_goal() -> 
     assert all(r["mean_fraction"]["inverted_wide"] <= 0.01 for r in guarded)
     decoder_sha = load_manifest(FOLDER).decoder_sha256
     assert all(r["decoder_sha256"] == decoder_sha for r in scores)
+    # measured with the packaged encoder: the rows' refit is the one the packaged model.json records
+    refit = load_manifest(FOLDER).info["encoder_refit"]
+    (row,) = [r for r in rows if r.get("kind") == "refit"]
+    assert row["original_encoder_sha256"] == refit["original_encoder_sha256"]
+    assert row["epoch_losses"] == refit["epoch_losses"] and row["config"] == refit["config"]
     assert all(r["decoder_sha256"] == decoder_sha for r in guarded if r["model"] == EDITING_MODEL_FULL_NAME)

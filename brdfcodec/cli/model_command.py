@@ -22,7 +22,7 @@ class RefitDefaults:
     learning_rate = 1e-4
     logvar_weight = 1e-3
     mix_probability = 0.25
-    analytic_batch = 2
+    analytic_batch = 8
     seed = 0
 
 
@@ -295,7 +295,7 @@ def run_refit_encoder(args: argparse.Namespace) -> int:
         from brdfcodec.models.store import load_manifest
 
         trained_with = load_manifest(args.folder).info.get("train_config")
-        factor_weight = float(trained_with.get("factor_weight", 0.0)) if isinstance(trained_with, dict) else 0.0
+        factor_weight = float(trained_with.get("factor_weight") or 0.0) if isinstance(trained_with, dict) else 0.0
     config = RefitConfig(epochs=args.epochs, factor_weight=factor_weight, analytic_materials=args.analytic_materials,
                          learning_rate=args.learning_rate, logvar_weight=args.logvar_weight, seed=args.seed,
                          mix_probability=args.mix_probability, colour_permutations=args.colour_permutations,

@@ -35,7 +35,7 @@ from brdfcodec.models.store import (ENCODER_FILE, MANIFEST, ModelManifest, compa
                                     sha256_of_file, write_manifest)
 from brdfcodec.training.alignment import align_to_factors
 from brdfcodec.training.augment import COLOUR_PERMUTATIONS, mix_physical, permute_colours
-from brdfcodec.training.export import _comparison_row, _trained_rows, write_card
+from brdfcodec.training.export import comparison_row, trained_rows, write_card
 from brdfcodec.training.factor_supervision import FactorPool, build_factor_pool
 from brdfcodec.training.measurements import kl_per_dim, measure_model, summarise, traversal_changes
 
@@ -56,7 +56,9 @@ class RefitConfig:
         Analytic materials drawn for the refit (:func:`~brdfcodec.datasets.analytic.sample_factor_materials`);
         0 refits on the training materials alone.
     analytic_batch : int
-        Analytic materials added to each step's batch (when there are any), ≥ 1.
+        Analytic materials added to each step's batch (when there are any), ≥ 1; as many as the real ones, as the
+        release recipe trains with (``factor_batch``): with 2 a step the factor terms do not hold the benchmark's
+        MIG (``reports/disentanglement/encoder-refit-fold2.txt``).
     learning_rate : float
         Adam's step size, > 0.
     mix_probability : float
@@ -79,7 +81,7 @@ class RefitConfig:
     epochs: int = 60
     batch_size: int = 8
     analytic_materials: int = 256
-    analytic_batch: int = 2
+    analytic_batch: int = 8
     learning_rate: float = 1e-4
     mix_probability: float = 0.25
     colour_permutations: bool = True
@@ -235,7 +237,7 @@ def _remeasured(stored: dict[str, Any], encoder: Encoder, decoder: Decoder, data
         factors = list(zip(alignment.factor_names, alignment.correlation, strict=True))
     stored["parameters"] = describe_parameters(BrdfDecoder.from_network(decoder), factors=factors)
     if info.get("comparisons"):
-        info["comparisons"][0] = {**_comparison_row("this model", info, None),
+        info["comparisons"][0] = {**comparison_row("this model", info, None),
                                   "decoder_bytes": info["comparisons"][0].get("decoder_bytes")}
 
 
@@ -286,7 +288,7 @@ def refit_model_folder(folder: str | os.PathLike[str], dataset_path: str | os.Pa
     if not isinstance(trained, list) or not trained:
         raise ValueError(f"{source / MANIFEST}: info.data.train does not list the materials the model trained on")
     with BrdfDataset(dataset_path) as dataset:
-        rows = _trained_rows(dataset, info)
+        rows = trained_rows(dataset, info)
         if len(rows) != len(trained) or any(dataset.names[i] not in set(trained) for i in rows):
             missing = sorted(set(trained) - set(dataset.names))[:5]
             raise ValueError(f"{dataset_path}: the dataset lacks materials the model trained on, e.g. {missing}")

@@ -29,7 +29,8 @@ from brdfcodec.version import __version__
 if TYPE_CHECKING:
     from brdfcodec.layers.shared_basis import SharedBasis
 
-__all__ = ["CARD", "DEFAULT_BASIS_COUNT", "add_shared_basis", "copy_renamed", "export_run", "store_info"]
+__all__ = ["CARD", "DEFAULT_BASIS_COUNT", "add_shared_basis", "comparison_row", "copy_renamed", "export_run",
+           "store_info", "trained_rows", "write_card"]
 
 CARD = "MODEL_CARD.md"
 #: Vectors of the shared basis that ``bvae model export`` fits (at most the rank of the fitted data,
@@ -112,7 +113,7 @@ def export_run(
     summary_file = run / "summary.json"
     seconds = sum(record["seconds"] for record in log)
     with BrdfDataset(dataset_path or run_info["dataset"]) as dataset:
-        train_rows = _trained_rows(dataset, run_info)
+        train_rows = trained_rows(dataset, run_info)
         measured = measure_model(model.encoder, model.decoder, dataset, config.latent_dim, train_rows)
         errors, baseline = measured.errors, measured.pca_errors
         mu, logvar = measured.mu[train_rows], measured.logvar[train_rows]
@@ -153,10 +154,10 @@ def export_run(
         info["alignment"] = alignment.as_dict()
     if "initial_model" in run_info:
         info["initial_model"] = run_info["initial_model"]
-    info["comparisons"] = [_comparison_row("this model", info, None)]
+    info["comparisons"] = [comparison_row("this model", info, None)]
     for label, other in (comparisons or {}).items():
         other_manifest = json.loads((Path(other) / MANIFEST).read_text())
-        info["comparisons"].append(_comparison_row(label, other_manifest["info"], Path(other)))
+        info["comparisons"].append(comparison_row(label, other_manifest["info"], Path(other)))
     identity = write_weights(model, out, name=name, compact=config.linear_basis)
     info["decoder_bytes"] = identity["decoder_bytes"]
     info["encoder_bytes"] = identity["encoder_bytes"]
@@ -174,7 +175,7 @@ def export_run(
     return write_manifest(out, manifest)  # last: a folder with a model.json is a complete model
 
 
-def _trained_rows(dataset: BrdfDataset, run_info: dict[str, Any]) -> list[int]:
+def trained_rows(dataset: BrdfDataset, run_info: dict[str, Any]) -> list[int]:
     """Rows of the materials the run trained on (``run.json``: its folds or families, not only the stored
     split), or the dataset's training split when the run's materials are not all in this dataset."""
     data = run_info.get("data")  # free-form: a model made by hand may describe its data in words
@@ -276,7 +277,7 @@ def add_shared_basis(folder: str | os.PathLike[str], dataset_path: str | os.Path
     fitting = ".basis-fitting.safetensors"
     trained_on = manifest.get("info", {})  # its "data" names the materials
     with BrdfDataset(dataset_path) as dataset:
-        basis = _fit_basis(out, dataset, _trained_rows(dataset, trained_on), count, colour_permutations,
+        basis = _fit_basis(out, dataset, trained_rows(dataset, trained_on), count, colour_permutations,
                            name=fitting, extends=extends)
     os.replace(out / fitting, out / BASIS_FILE)
     prefixes = {**manifest.get("basis_prefixes", {}), existing: extends.count} if extends is not None else {}
@@ -389,7 +390,9 @@ GREEN_MATERIALS = ("green-acrylic", "green-fabric", "green-latex", "green-metall
                    "green-plastic", "specular-green-phenolic")
 
 
-def _comparison_row(label: str, info: dict[str, Any], folder: Path | None) -> dict[str, Any]:
+def comparison_row(label: str, info: dict[str, Any], folder: Path | None) -> dict[str, Any]:
+    """A model's row of the card's comparison table, from its manifest's ``info`` (``folder``: where its decoder
+    file is, for its size; None when not written yet)."""
     errors = {row["name"]: row for row in info["errors"]}
     greens = [errors[n]["relae_mapped"] for n in GREEN_MATERIALS if n in errors]
     return {

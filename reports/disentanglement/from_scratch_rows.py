@@ -57,6 +57,9 @@ class Study:
     training_folder: str = "{run}"
     #: Rows of models measured by an earlier study, copied from its committed rows: (rows file, model names).
     imported: tuple[tuple[str, tuple[str, ...]], ...] = ()
+    #: Models trained on every material whose encoder a study refitted, with the model refitted: label → folder,
+    #: reported by their training error (the export's) beside the refit.
+    refit_references: tuple[tuple[str, str], ...] = ()
 
     @property
     def folder(self) -> Path:
@@ -417,7 +420,10 @@ ENCODER_REFIT_FOLD2 = Study(
                 ("bvae-s26-z16r1000", "runs/models/s26-z16r1000"),
                 ("bvae-s28-z16r1000-refit", "runs/models/s28-z16r1000-refit"),
                 ("bvae-s28-z16r1000-refit-aug", "runs/models/s28-z16r1000-refit-aug"),
-                ("bvae-s28-z16r1000-refit-aug2", "runs/models/s28-z16r1000-refit-aug2")),
+                ("bvae-s28-z16r1000-refit-aug2", "runs/models/s28-z16r1000-refit-aug2"),
+                ("bvae-s28-z16r1000-refit-fw", "runs/models/s28-z16r1000-refit-fw")),
+    refit_references=(("bvae-nbrdf-proxy-small-v3", "brdfcodec/data/models/default"),
+                      ("bvae-nbrdf-proxy-small-v3-refit", "runs/models/s28-v3-refit")),
     imported=(("reports/disentanglement/rate-prior-fold2.jsonl", ("bvae-cv3-fold2-v3", "bvae-s26-z16r1000")),),
     fold=True, prefix="bvae-s28-",
     header="""\
@@ -427,11 +433,14 @@ ENCODER_REFIT_FOLD2 = Study(
 # gap is the encoder's: trained under β·KL, the rate term and the factor terms, its μ is not the code its decoder
 # reconstructs a material best from. bvae model refit-encoder trains the encoder alone, the decoder frozen (its hash
 # and every file unchanged), to minimise the masked mapped L1 of decoder(μ(x)) over the model's own 80 training
-# materials, with 2 of 256 analytic materials drawn for the refit in every step whose μ the model's own factor terms
-# (weight 10,000) keep on their factors, as in training (the benchmark scores that μ; without them the refit moves it
-# off the factors). Three ways: the training materials as they are (-refit: --mix-probability 0
-# --no-colour-permutations; 60 epochs at learning rate 1e-4), augmented (-refit-aug: colour-permuted, a quarter
-# blended; the same schedule) and more so (-refit-aug2: half blended, 120 epochs at 2e-4; the refit rows say each).
+# materials, with analytic materials drawn for the refit (256) in every step whose μ the model's own factor terms
+# (weight 10,000) hold on their factors, as in training (the benchmark scores that μ). Four ways (each refit's row
+# gives its settings): -refit, the training materials as they are (--mix-probability 0 --no-colour-permutations),
+# 2 analytic materials a step, 60 epochs at learning rate 1e-4; -refit-aug, colour-permuted and a quarter blended,
+# otherwise the same; -refit-aug2, half blended, 120 epochs at 2e-4; -refit-fw, as -refit-aug with 8 analytic
+# materials a step, as many as the real ones (--analytic-batch 8, the default since). And the shipped default model
+# (v3, trained on all 120, no factor terms) refitted with the defaults: bvae model refit-encoder
+# brdfcodec/data/models/default --dataset runs/both.h5 -o runs/models/s28-v3-refit (its training error below).
 # Fold 2 of 3 (the rd benchmark's 40 held-out materials: 30 MERL, 10 RGL). The editing recipe is trained again here
 # (bvae-s28-z16r1000, the command of rate-prior-fold2's bvae-s26-z16r1000, whose model was lost with its machine;
 # its rows and the v3 recipe's, bvae-cv3-fold2-v3, are copied from rate-prior-fold2.jsonl), then refitted.
@@ -598,9 +607,12 @@ def _refinement_lines(rows: list[dict]) -> list[str]:
 
 
 def refit_rows(study: Study) -> list[dict]:
-    """The refit of each refitted model of a study (``info.encoder_refit`` of its ``model.json``)."""
-    rows = []
-    for name, folder in study.models.items():
+    """The refit of each refitted model of a study (``info.encoder_refit`` of its ``model.json``), and the training
+    error of the models of :attr:`Study.refit_references`."""
+    with BrdfDataset("runs/both.h5") as dataset:
+        family = dict(zip(dataset.names, dataset.families, strict=True))
+    rows = [row for name, folder in study.refit_references for row in training_error_rows(name, folder, family)]
+    for name, folder in {**study.models, **dict(study.refit_references)}.items():
         manifest = Path(folder, "model.json")
         refit = json.loads(manifest.read_text())["info"].get("encoder_refit") if manifest.exists() else None
         if refit:
@@ -626,14 +638,23 @@ def _refit_lines(rows: list[dict]) -> list[str]:
                      f"in {row['seconds']:.0f} s; loss "
                      f"{losses[0]:.5f} (first epoch) to {losses[-1]:.5f} (last); from encoder "
                      f"{row['original_encoder_sha256'][:12]}")
+    trained = [row for row in rows if row.get("kind") == "reconstruction"]
+    if trained:
+        lines += ["", "Models trained on all 120 materials, the encoder's μ decoded (the export's error, mapped RelAE, "
+                  "trained materials):"]
+        for model in dict.fromkeys(row["model"] for row in trained):
+            cells = ", ".join(f"{row['family']} {row['relae_mapped']:.4f} ({row['count']})" for row in trained
+                              if row["model"] == model)
+            lines.append(f"  {model}: {cells}")
     return [*lines, ""]
 
 
 def imported_rows(study: Study) -> list[dict]:
-    """Rows of the models an earlier study measured (:attr:`Study.imported`), as that study committed them."""
+    """Rows of the models an earlier study measured (:attr:`Study.imported`), as that study committed them: the
+    benchmark's and the evaluations with μ as the encoder gives it or refined (not on a coded grid)."""
     return [row for path, models in study.imported for row in read_rows(path)
             if row.get("model") in models
-            and (row.get("kind") == "evaluation" or row.get("study") == "disentanglement")]
+            and ((row.get("kind") == "evaluation" and not row.get("mu_grid")) or row.get("study") == "disentanglement")]
 
 
 def _training_lines(study: Study, rows: list[dict]) -> list[str]:

@@ -1,14 +1,15 @@
 """The opt-in editing model ``bvae-nbrdf-proxy-edit-v1`` (issue 50): its measurements beside the shipped default.
 
-usage (repository root; the training in runs/s27/edit-release, its export in runs/models/s27-edit-v1 and the
-measurements of reports/editing-model/measure.sh in runs/s27/eval):
+usage (repository root; the training in runs/s27/edit-release, its export with its encoder refitted in
+runs/models/s28-edit-v1-refit, the measurements of reports/editing-model/measure.sh in runs/s28/release-eval):
 
     python reports/editing-model/editing_model_rows.py [--card FOLDER]
 
 Writes ``reports/editing-model/editing-model.jsonl`` (one rows schema, ``brdfcodec.report.rows``) and
 ``editing-model.txt`` (the tables). With ``--card FOLDER`` it also stores the model card's sections measured after
 export (``info.card_sections`` of FOLDER's ``model.json``, the card rewritten; weights untouched), from the same
-rows and from the fold-2 rows of the recipe (``reports/disentanglement/rate-prior-fold2.jsonl``): every measured
+rows and from the fold-2 rows of the recipe (``reports/disentanglement/rate-prior-fold2.jsonl`` and
+``encoder-refit-fold2.jsonl``): every measured
 number on the card comes from rows.
 """
 
@@ -29,26 +30,34 @@ from from_scratch_rows import training_error_rows  # noqa: E402 - the studies' o
 
 STUDY = "editing-model"
 RUNS = Path("runs/s27")
-EVALUATIONS = RUNS / "eval"
+#: The measurements of the model as shipped (its encoder refitted in session 28; the default model's measurements,
+#: which the refit does not touch, copied from runs/s27/eval, where reports/editing-model/measure.sh wrote them).
+EVALUATIONS = Path("runs/s28/release-eval")
 TRAINING = RUNS / "edit-release"
-#: label → folder: the editing model as exported here, and the shipped default it is compared with.
-MODELS = {"bvae-nbrdf-proxy-edit-v1": "runs/models/s27-edit-v1",
+#: label → folder: the editing model as shipped (exported, its encoder refitted), and the shipped default.
+MODELS = {"bvae-nbrdf-proxy-edit-v1": "runs/models/s28-edit-v1-refit",
           "bvae-nbrdf-proxy-small-v3": "brdfcodec/data/models/default"}
 #: The plausibility runs of reports/editing-model/measure.sh: file stem → (model label, library, highlight guard,
 #: materials (the first N of the library; None: all), what the materials are).
 TRAINED = "the first 40 NBRDF proxies of runs/both.h5 (both models trained on them)"
 NEVER_SEEN = "24 random analytic materials (runs/random24.h5), never seen"
-PLAUSIBILITY = {"plaus-edit-guard": ("bvae-nbrdf-proxy-edit-v1", "runs/s27/lib-edit.bvae", True, 40, TRAINED),
-                "plaus-edit-raw": ("bvae-nbrdf-proxy-edit-v1", "runs/s27/lib-edit.bvae", False, 40, TRAINED),
+PLAUSIBILITY = {"plaus-edit-guard": ("bvae-nbrdf-proxy-edit-v1", "runs/s28/lib-edit.bvae", True, 40, TRAINED),
+                "plaus-edit-raw": ("bvae-nbrdf-proxy-edit-v1", "runs/s28/lib-edit.bvae", False, 40, TRAINED),
                 "plaus-v3-guard": ("bvae-nbrdf-proxy-small-v3", "runs/s27/lib-v3.bvae", True, 40, TRAINED),
                 "plaus-v3-raw": ("bvae-nbrdf-proxy-small-v3", "runs/s27/lib-v3.bvae", False, 40, TRAINED),
-                "plaus-edit-guard-analytic": ("bvae-nbrdf-proxy-edit-v1", "runs/s27/lib-edit-analytic.bvae", True, None,
+                "plaus-edit-guard-analytic": ("bvae-nbrdf-proxy-edit-v1", "runs/s28/lib-edit-analytic.bvae", True, None,
                                               NEVER_SEEN),
                 "plaus-v3-guard-analytic": ("bvae-nbrdf-proxy-small-v3", "runs/s27/lib-v3-analytic.bvae", True, None,
                                             NEVER_SEEN)}
-#: The recipe's fold-2 models (the same options, 80 materials): the editing model's and the default's.
+#: The recipe's fold-2 models (the same options, 80 materials): the editing model's (its encoder refitted as the
+#: shipped model's is, then as trained), and the default's; the rows files they are in.
+REFIT_FOLD2_ROWS = Path("reports/disentanglement/encoder-refit-fold2.jsonl")
 FOLD2_ROWS = Path("reports/disentanglement/rate-prior-fold2.jsonl")
-FOLD2_MODELS = {"bvae-s26-z16r1000": "editing recipe", "bvae-cv3-fold2-v3": "default (v3) recipe"}
+FOLD2_MODELS = {"bvae-s28-z16r1000-refit-fw": "editing recipe, encoder refitted",
+                "bvae-s26-z16r1000": "editing recipe, as trained", "bvae-cv3-fold2-v3": "default (v3) recipe"}
+#: Which study's rows each fold-2 model's are (the refit study copies the other two's; they are read from theirs).
+FOLD2_SOURCES = {"bvae-s28-z16r1000-refit-fw": REFIT_FOLD2_ROWS, "bvae-s26-z16r1000": FOLD2_ROWS,
+                 "bvae-cv3-fold2-v3": FOLD2_ROWS}
 SHEETS = ("gold-metallic-paint", "blue-acrylic")
 FAMILY_WORDS = {"merl": "MERL", "rgl": "RGL", "analytic": "analytic materials"}
 #: Issue 50's goals.
@@ -59,13 +68,17 @@ HEADER = """\
 # reports/disentanglement/rate-prior-fold2.txt (dimensions 1-8 tied to the analytic factors at weight 10,000, the
 # colour's saturation an eighth factor, GGX alpha of the factor pool from 0.01, the codec's rate in the loss at
 # lambda 1,000 on the grid 2^-2, 400 epochs, last weights) trained on all 120 NBRDF proxies (90 MERL, 30 RGL; neural
-# fits, not measurements) on this machine's 2-core CPU, beside the shipped default bvae-nbrdf-proxy-small-v3.
-# Commands: runs/s27/cmd-edit-release.txt (in the training row, and the card's); export and measurements, every
-#   command: reports/editing-model/measure.sh (bvae model export ... --align-factors 300 --keep-axes; bvae model
-#   disentanglement on seeds 0 and 2; bvae model evaluate on runs/v3-held-out.h5 at effort 0 and 1; bvae model
+# fits, not measurements) on this machine's 2-core CPU, beside the shipped default bvae-nbrdf-proxy-small-v3; its
+# encoder refitted to its frozen decoder after export (bvae model refit-encoder, session 28: decoder and files
+# unchanged; reports/disentanglement/encoder-refit-fold2.txt measured the refit on the recipe's fold-2 model).
+# Commands: runs/s27/cmd-edit-release.txt (in the training row, and the card's); export, refit and measurements,
+#   every command: reports/editing-model/measure.sh (bvae model export ... --align-factors 300 --keep-axes; bvae model
+#   refit-encoder; bvae model disentanglement on seeds 0 and 2; bvae model evaluate on runs/v3-held-out.h5 at effort
+#   0 and 1; bvae model
 #   plausibility of libraries compressed with each model, with and without --highlight-guard; the traversal sheets)
 # Held-out materials: a release model trained on every material has none of MERL or RGL; the recipe's fold-2 models
-#   (80 materials, 40 held out) are in reports/disentanglement/rate-prior-fold2.txt and quoted below.
+#   (80 materials, 40 held out) are in reports/disentanglement/rate-prior-fold2.txt and encoder-refit-fold2.txt and
+#   quoted below.
 # Rows: python reports/editing-model/editing_model_rows.py [--card FOLDER] -> editing-model.jsonl
 """
 
@@ -139,7 +152,8 @@ def training_rows() -> list[dict[str, Any]]:
 
 def fold2_rows() -> list[dict[str, Any]]:
     """The recipe's fold-2 rows this report quotes (held-out reconstruction at effort 0 and 1, MIG and DCI)."""
-    return [row for row in read_rows(FOLD2_ROWS) if row.get("model") in FOLD2_MODELS
+    return [row for model, path in FOLD2_SOURCES.items() for row in read_rows(path)
+            if row.get("model") == model
             and (row.get("study") == "disentanglement"
                  or (row.get("kind") == "evaluation" and row.get("split") == "held-out"
                      and "--mu-grid" not in row["command"]))]
@@ -206,7 +220,7 @@ def reconstruction_lines(rows: list[dict], fold2: list[dict]) -> list[str]:
             errors = _family_errors(rows, label, effort)
             lines.append(f"| {label} | {effort} | {errors['analytic']:.4f} | {errors['rgl']:.4f} |")
     lines += ["", "The recipe on fold 2 (80 materials trained on, the 40 others held out; "
-              "`reports/disentanglement/rate-prior-fold2.txt`), held-out mapped RelAE:", "",
+              "`reports/disentanglement/rate-prior-fold2.txt`, `encoder-refit-fold2.txt`), held-out mapped RelAE:", "",
               "| recipe (fold-2 model) | effort | MERL (30) | RGL (10) | analytic (24, never seen) |",
               "|---|---:|---:|---:|---:|"]
     for effort in (0, 1):
@@ -217,15 +231,31 @@ def reconstruction_lines(rows: list[dict], fold2: list[dict]) -> list[str]:
     return lines
 
 
+def refit_rows() -> list[dict[str, Any]]:
+    """The shipped model's encoder refit (``info.encoder_refit`` of its ``model.json``)."""
+    folder = MODELS["bvae-nbrdf-proxy-edit-v1"]
+    refit = json.loads(Path(folder, "model.json").read_text())["info"]["encoder_refit"]
+    return [{"kind": "refit", "model": "bvae-nbrdf-proxy-edit-v1", "command": refit["command"],
+             "config": refit["config"], "seconds": refit["seconds"], "epoch_losses": refit["epoch_losses"],
+             "original_encoder_sha256": refit["original_encoder_sha256"]}]
+
+
 def training_lines(rows: list[dict]) -> list[str]:
-    """The training row in one line."""
+    """The training row in one line, then the encoder's refit."""
     row = next(r for r in rows if r.get("kind") == "training")
+    refit = next(r for r in rows if r.get("kind") == "refit")
+    config, losses = refit["config"], refit["epoch_losses"]
     last = row["last_epoch"]
     return [f"{row['model']}: latent {row['latent_dim']}, factor weight {row['factor_weight']:g}, rate weight "
             f"{row['rate_weight']:g} on the grid 2^-{row['latent_grid']}: {row['epochs_done']} of "
             f"{row['epochs_planned']} epochs in {row['seconds'] / 60:.0f} min ({row['stop_reason']}; {row['device']}); "
             f"last epoch: recon {last['recon']:.0f}, KL {last['kl']:.1f}, factor {last['factor']:.3f}, μ's rate "
-            f"{last.get('rate_bits', float('nan')):.1f} bits"]
+            f"{last.get('rate_bits', float('nan')):.1f} bits",
+            f"its encoder refitted to the frozen decoder ({refit['command']}): {config['epochs']} epochs at learning "
+            f"rate {config['learning_rate']:g}, {config['analytic_batch']} of {config['analytic_materials']} analytic "
+            f"materials a step held on their factors at weight {config['factor_weight']:g}, in "
+            f"{refit['seconds'] / 60:.1f} min; mean mapped L1 per valid entry {losses[0]:.5f} (first epoch) to "
+            f"{losses[-1]:.5f} (last); it replaced encoder {refit['original_encoder_sha256'][:12]}"]
 
 
 def text(rows: list[dict], fold2: list[dict]) -> str:
@@ -242,14 +272,14 @@ def text(rows: list[dict], fold2: list[dict]) -> str:
 
 def _comparison_sentence(fold2: list[dict]) -> str:
     """Where the editing recipe's fold-2 model is no worse than the default recipe's, at each effort (from rows)."""
-    edit, default = FOLD2_MODELS
+    edit, _, default = FOLD2_MODELS
     words = {0: "With the encoder's μ alone (effort 0)", 1: "At the codec's default effort (1: μ refined through the "
              "decoder, as `bvae compress` encodes)"}
     parts = []
     for effort in (1, 0):
         ours, theirs = _family_errors(fold2, edit, effort), _family_errors(fold2, default, effort)
         worse = [FAMILY_WORDS[f] for f in FAMILY_WORDS if ours[f] > theirs[f]]
-        parts.append(f"{words[effort]} the editing recipe is "
+        parts.append(f"{words[effort]} the editing recipe, its encoder refitted as this model's, is "
                      + ("no worse than the default's on every family" if not worse
                         else f"worse than the default's on {' and '.join(worse)}") + ".")
     return " ".join(parts)
@@ -258,8 +288,8 @@ def _comparison_sentence(fold2: list[dict]) -> str:
 def card_sections(rows: list[dict], fold2: list[dict], sheet_prefix: str) -> list[dict[str, str]]:
     """The sections of the editing model's card measured after export, from the rows (no measured number typed)."""
     edit, v3 = _scores(rows, "bvae-nbrdf-proxy-edit-v1"), _scores(rows, "bvae-nbrdf-proxy-small-v3")
-    mu_bytes = {row["model"]: row["mu_bytes"] for row in read_rows(FOLD2_ROWS)
-                if row.get("kind") == "evaluation" and row.get("model") in FOLD2_MODELS and row["family"] == "merl"
+    mu_bytes = {row["model"]: row["mu_bytes"] for model, path in FOLD2_SOURCES.items() for row in read_rows(path)
+                if row.get("kind") == "evaluation" and row.get("model") == model and row["family"] == "merl"
                 and row["split"] == "held-out" and row["command"].endswith("--mu-grid 2 --json")}
     purpose = (
         "An opt-in model for editing (`--model editing`; issue 50), beside the codec's default "
@@ -272,11 +302,12 @@ def card_sections(rows: list[dict], fold2: list[dict], sheet_prefix: str) -> lis
         "gives). On the materials of the traversal sheets a slider's largest effect is not always its factor's "
         "(*What each dimension controls* above measures each one): the names come from analytic materials, whose "
         "factors are known. What it gives up: 16 numbers instead of 8, so its records are larger (the coded μ of a "
-        f"held-out MERL material alone takes {mu_bytes['bvae-s26-z16r1000']:.1f} B on the grid 2^-2 where the "
+        f"held-out MERL material alone takes {mu_bytes['bvae-s28-z16r1000-refit-fw']:.1f} B on the grid 2^-2 where the "
         f"default's takes {mu_bytes['bvae-cv3-fold2-v3']:.1f} B, on the recipes' fold-2 models; "
-        "`reports/disentanglement/rate-prior-fold2.txt`), it fits no 16 B record (`bvae compress --bytes 16` refuses "
-        "it with a latent in every record, the default), and at 32 B its recipe's fold-2 model decodes worse than "
-        "the best PCA (`reports/results/rd-s26-fold2-z16r1000-table.md`), where the default's recipe does better "
+        "`reports/disentanglement/encoder-refit-fold2.txt`), it fits no 16 B record (`bvae compress --bytes 16` "
+        "refuses it with a latent in every record, the default), and at 32 B its recipe's fold-2 model (as trained, "
+        "before a refit) decodes worse than the best PCA (`reports/results/rd-s26-fold2-z16r1000-table.md`), where "
+        "the default's recipe does better "
         "(`docs/results.md`). Files made with it name its decoder, so they decode wherever this package is "
         "installed."
     )
@@ -317,7 +348,8 @@ def main() -> None:
     parser.add_argument("--sheet-prefix", default="../../../../../reports/traversals/",
                         help="where the traversal sheets are, relative to the card")
     args = parser.parse_args()
-    rows = disentanglement_rows() + stamp(plausibility_rows() + reconstruction_rows() + training_rows(), study=STUDY)
+    rows = disentanglement_rows() + stamp(plausibility_rows() + reconstruction_rows() + training_rows()
+                                          + refit_rows(), study=STUDY)
     fold2 = fold2_rows()
     path = write_rows(f"reports/editing-model/{STUDY}.jsonl", rows)
     Path(f"reports/editing-model/{STUDY}.txt").write_text(text(rows, fold2), encoding="utf-8")
