@@ -232,8 +232,7 @@ def _remeasured(stored: dict[str, Any], encoder: Encoder, decoder: Decoder, data
         before = info["alignment"]
         alignment = align_to_factors(model, materials=int(before["materials"]), seed=int(before["seed"]),
                                      rotate=False)
-        rotation = np.asarray(before["rotation"], dtype=np.float64)
-        info["alignment"] = {**alignment.as_dict(), "rotation": rotation.tolist()}
+        info["alignment"] = {**alignment.as_dict(), "rotation": before["rotation"]}  # the export's, kept
         factors = list(zip(alignment.factor_names, alignment.correlation, strict=True))
     stored["parameters"] = describe_parameters(BrdfDecoder.from_network(decoder), factors=factors)
     if info.get("comparisons"):
