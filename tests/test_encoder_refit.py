@@ -58,9 +58,40 @@ def test_a_refit_lowers_the_error_of_the_codes_and_leaves_the_decoder_alone() ->
     assert all(p.requires_grad for p in model.decoder.parameters())  # as it was given
 
 
+@pytest.mark.slow
+def test_the_free_dimension_weight_frees_the_dimensions_beyond_the_factors() -> None:
+    """Analytic materials whose best codes lie off 0 beyond their 2 factors: with the training's hold (weight 1)
+    their μ stays near 0 there, freed (0) it moves towards the codes that make them, the factor dimensions held
+    on their targets either way."""
+    from brdfcodec.training.factor_supervision import FactorPool
+
+    dim = TINY_CONFIG.latent_dim
+    codes = 2.0 * torch.randn(8, dim, generator=torch.Generator().manual_seed(5))
+    free: dict[float, torch.Tensor] = {}
+    for weight in (1.0, 0.0):
+        model = _tiny_model(3)
+        with torch.no_grad():
+            x = model.decoder(codes)
+        masks = torch.ones_like(x, dtype=torch.bool)
+        targets = torch.zeros_like(codes)
+        targets[:, :2] = codes[:, :2]
+        pool = FactorPool(x, masks, targets, torch.ones_like(codes), seed=0, factor_count=2)
+        valid = float(masks[0].sum())
+        refit_encoder(model.encoder, model.decoder, x, masks,
+                      RefitConfig(epochs=30, batch_size=4, analytic_materials=8, analytic_batch=4, learning_rate=3e-3,
+                                  mix_probability=0.0, colour_permutations=False, factor_weight=0.3 * valid,
+                                  free_dimension_weight=weight), analytic=pool)
+        with torch.no_grad():
+            mu, _ = model.encoder(x)
+        assert float((mu[:, :2] - codes[:, :2]).abs().mean()) < 0.5, weight  # the factors held either way
+        free[weight] = (mu[:, 2:] - codes[:, 2:]).abs().mean()
+    assert float(free[0.0]) < 0.7 * float(free[1.0]), free
+
+
 def test_refit_settings_are_checked() -> None:
     for bad in ({"epochs": 0}, {"learning_rate": 0.0}, {"mix_probability": 1.5}, {"analytic_materials": -1},
-                {"logvar_weight": -1.0}, {"analytic_batch": 0}):
+                {"logvar_weight": -1.0}, {"analytic_batch": 0}, {"free_dimension_weight": -0.1},
+                {"free_dimension_weight": 1.5}, {"free_dimension_weight": math.nan}):
         with pytest.raises(ValueError):
             RefitConfig(**bad)
 
@@ -70,7 +101,7 @@ def test_the_cli_defaults_are_the_library_s() -> None:
 
     config = RefitConfig()
     for field in ("epochs", "analytic_materials", "learning_rate", "logvar_weight", "mix_probability",
-                  "analytic_batch", "seed"):
+                  "analytic_batch", "free_dimension_weight", "seed"):
         assert getattr(RefitDefaults, field) == getattr(config, field), field
 
 

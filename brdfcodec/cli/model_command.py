@@ -23,6 +23,7 @@ class RefitDefaults:
     logvar_weight = 1e-3
     mix_probability = 0.25
     analytic_batch = 8
+    free_dimension_weight = 1.0
     seed = 0
 
 
@@ -128,6 +129,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
                        help="weight of the factor supervision of the analytic materials' μ, in training's units "
                        "(default: the model's own training weight, info.train_config.factor_weight, 0 for a model "
                        "trained without; 0: the analytic materials are left to the reconstruction)")
+    refit.add_argument("--free-dimension-weight", type=float, default=RefitDefaults.free_dimension_weight,
+                       metavar="F", help="factor in [0, 1] on the factor term's dimensions beyond the analytic "
+                       "factors, where training holds analytic materials at 0 (default "
+                       f"{RefitDefaults.free_dimension_weight:g}; 0 frees them for reconstruction)")
     refit.add_argument("--seed", type=int, default=RefitDefaults.seed, help="seed of the draws (default 0)")
     refit.add_argument("--log", type=Path, help="append a JSON line per epoch to this file")
     refit.set_defaults(handler=run_refit_encoder)
@@ -299,7 +304,7 @@ def run_refit_encoder(args: argparse.Namespace) -> int:
     config = RefitConfig(epochs=args.epochs, factor_weight=factor_weight, analytic_materials=args.analytic_materials,
                          learning_rate=args.learning_rate, logvar_weight=args.logvar_weight, seed=args.seed,
                          mix_probability=args.mix_probability, colour_permutations=args.colour_permutations,
-                         analytic_batch=args.analytic_batch)
+                         analytic_batch=args.analytic_batch, free_dimension_weight=args.free_dimension_weight)
     command = " ".join(shlex.quote(a) for a in ["bvae", *sys.argv[1:]])
     manifest = refit_model_folder(args.folder, args.dataset, config, output=args.output, name=args.name,
                                   command=command,

@@ -74,6 +74,10 @@ class RefitConfig:
         entries): a supervised model's own weight keeps its encoder's μ of analytic materials on their factors (the
         disentanglement benchmark scores that μ) while the reconstruction moves the other materials' codes; 0 leaves
         the analytic materials to the reconstruction alone.
+    free_dimension_weight : float
+        Factor on that term's dimensions beyond the analytic family's factors, in [0, 1]: training holds the
+        analytic materials' μ at 0 there (weight 1); 0 frees those dimensions for the analytic materials'
+        reconstruction at effort 0 while their factor dimensions stay held.
     seed : int
         Seed of the draws (batches, blends, permutations, analytic materials).
     """
@@ -87,6 +91,7 @@ class RefitConfig:
     colour_permutations: bool = True
     logvar_weight: float = 1e-3
     factor_weight: float = 0.0
+    free_dimension_weight: float = 1.0
     seed: int = 0
 
     def __post_init__(self) -> None:
@@ -94,9 +99,9 @@ class RefitConfig:
             raise ValueError(f"epochs, batch_size and analytic_batch must be ≥ 1 and analytic_materials ≥ 0, "
                              f"got {self}")
         if not self.learning_rate > 0 or not 0 <= self.mix_probability <= 1 or not self.logvar_weight >= 0 \
-                or not self.factor_weight >= 0:
-            raise ValueError(f"learning_rate must be > 0, mix_probability in [0, 1], logvar_weight and factor_weight "
-                             f"≥ 0, got {self}")
+                or not self.factor_weight >= 0 or not 0 <= self.free_dimension_weight <= 1:
+            raise ValueError(f"learning_rate must be > 0, mix_probability and free_dimension_weight in [0, 1], "
+                             f"logvar_weight and factor_weight ≥ 0, got {self}")
 
 
 @dataclass(frozen=True)
@@ -154,6 +159,9 @@ def refit_encoder(encoder: Encoder, decoder: Decoder, inputs: torch.Tensor, mask
     for parameter in trainable:
         parameter.requires_grad_(True)
     optimiser = torch.optim.Adam(trainable, lr=config.learning_rate)
+    if analytic is not None:  # the dimensions beyond the family's factors, held at 0 by training, weighted
+        factor_weights = analytic.weights.clone()
+        factor_weights[:, analytic.factor_count :] *= config.free_dimension_weight
     n = len(inputs)
     steps = max(1, n // config.batch_size)
     losses: list[float] = []
@@ -182,7 +190,7 @@ def refit_encoder(encoder: Encoder, decoder: Decoder, inputs: torch.Tensor, mask
             if analytic is not None and config.factor_weight > 0:
                 # training's balance: the factor term against the L1 summed over the material's valid entries
                 valid = m[len(rows):].flatten(1).sum(1).clamp_min(1).to(mu.dtype)
-                squared = ((mu[len(rows):] - analytic.targets[picks]).pow(2) * analytic.weights[picks]).sum(1)
+                squared = ((mu[len(rows):] - analytic.targets[picks]).pow(2) * factor_weights[picks]).sum(1)
                 loss = loss + config.factor_weight * (squared / valid).sum() / len(x)
             optimiser.zero_grad(set_to_none=True)
             loss.backward()

@@ -128,6 +128,9 @@ class FactorPool:
         :func:`factor_weights`.
     seed : int
         The seed the materials were drawn with.
+    factor_count : int
+        The family's factors K (7, or 8 with saturation): the first K columns of ``targets`` are factors, the
+        others 0.
     """
 
     inputs: torch.Tensor
@@ -135,6 +138,7 @@ class FactorPool:
     targets: torch.Tensor
     weights: torch.Tensor
     seed: int
+    factor_count: int = 7
 
     def __len__(self) -> int:
         return len(self.inputs)
@@ -180,4 +184,4 @@ def build_factor_pool(count: int, seed: int, latent_dim: int, *, saturation: boo
     for index, material in enumerate(drawn.materials):
         x, m = (first_input, first_mask) if index == 0 else material.kept_network_input()
         inputs[index], masks[index] = torch.from_numpy(x), torch.from_numpy(m)
-    return FactorPool(inputs, masks, targets, weights, seed)
+    return FactorPool(inputs, masks, targets, weights, seed, factor_count=int(drawn.factors.shape[1]))
