@@ -192,3 +192,34 @@ def test_the_cli_refuses_an_existing_output_and_a_dataset_without_the_training_m
     assert done.returncode != 0 and "Traceback" not in done.stderr
     assert "lacks materials the model trained on" in done.stderr and str(other) in done.stderr
     assert (copy / "model.json").read_bytes() == original  # nothing rewritten
+
+
+@pytest.mark.slow
+def test_a_refit_in_place_replaces_the_folder_whole_or_not_at_all(exported_fold_model, tmp_path: Path,
+                                                                   monkeypatch: pytest.MonkeyPatch) -> None:
+    """Without -o the folder is rewritten: a crash once the new encoder file is written and before model.json
+    names it leaves the old folder, whole and verified; a refit that finishes leaves the new one, nothing beside."""
+    from brdfcodec.models.store import load_model
+    from brdfcodec.training import encoder_refit
+
+    dataset, source = exported_fold_model
+    folder = tmp_path / "model"
+    shutil.copytree(source, folder)
+    before = {p.name: p.read_bytes() for p in folder.iterdir()}
+    config = RefitConfig(epochs=1, batch_size=2, analytic_materials=0, learning_rate=1e-2)
+    real_card = encoder_refit.write_card
+
+    def crash(target, stored):  # noqa: ANN001, ANN202
+        assert (target / "encoder.safetensors").read_bytes() != before["encoder.safetensors"]  # written already
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(encoder_refit, "write_card", crash)
+    with pytest.raises(KeyboardInterrupt):
+        encoder_refit.refit_model_folder(folder, dataset, config)
+    assert {p.name: p.read_bytes() for p in folder.iterdir()} == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["model"]
+    monkeypatch.setattr(encoder_refit, "write_card", real_card)
+    manifest = encoder_refit.refit_model_folder(folder, dataset, config)
+    assert manifest.folder == folder and manifest.encoder_sha256 != json.loads(before["model.json"])["encoder_sha256"]
+    load_model(folder)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["model"]

@@ -407,3 +407,49 @@ def test_unfinished_outputs_are_removed_when_the_block_is_never_left(tmp_path) -
     with atomic_output(tmp_path / "y.bin") as done:  # a finished block leaves nothing to remove
         done.write_bytes(b"whole")
     assert remove_unfinished_outputs() == [] and (tmp_path / "y.bin").read_bytes() == b"whole"
+
+
+@pytest.mark.parametrize("exchange", [True, False], ids=["one-step-swap", "two-renames"])
+def test_a_folder_is_replaced_whole_or_not_at_all(tmp_path, monkeypatch, exchange: bool) -> None:
+    """atomic_folder(replace=True): the block works on a copy; success swaps it in whole (Linux's one-step swap,
+    or two renames where the system has none), failure leaves the folder as it was; nothing stays beside it."""
+    from brdfcodec.io import atomic
+
+    if not exchange:
+        monkeypatch.setattr(atomic, "_exchange", lambda first, second: False)
+    folder = tmp_path / "model"
+    folder.mkdir()
+    (folder / "weights").write_bytes(b"old weights")
+    (folder / "manifest").write_bytes(b"names old weights")
+    with pytest.raises(RuntimeError), atomic.atomic_folder(folder, replace=True) as staging:
+        assert (staging / "weights").read_bytes() == b"old weights"  # a copy of the folder
+        (staging / "weights").write_bytes(b"new weights")
+        raise RuntimeError("crash before the manifest")
+    assert (folder / "weights").read_bytes() == b"old weights" and sorted(os.listdir(tmp_path)) == ["model"]
+    with atomic.atomic_folder(folder, replace=True) as staging:
+        (staging / "weights").write_bytes(b"new weights")
+        (staging / "manifest").write_bytes(b"names new weights")
+        assert (folder / "weights").read_bytes() == b"old weights"  # untouched until the block ends
+    assert {p.name: p.read_bytes() for p in folder.iterdir()} == {"weights": b"new weights",
+                                                                  "manifest": b"names new weights"}
+    assert sorted(os.listdir(tmp_path)) == ["model"]
+
+
+def test_a_new_folder_appears_whole_and_never_over_an_existing_one(tmp_path) -> None:
+    from brdfcodec.io.atomic import atomic_folder, remove_unfinished_outputs
+
+    with pytest.raises(FileExistsError):
+        with atomic_folder(tmp_path / "new") as staging:
+            (staging / "a").write_bytes(b"a")
+            assert not (tmp_path / "new").exists()
+            (tmp_path / "new").mkdir()  # another writer took the name meanwhile: an empty folder is not replaced
+    assert os.listdir(tmp_path / "new") == [] and sorted(os.listdir(tmp_path)) == ["new"]
+    with pytest.raises(FileExistsError):
+        atomic_folder(tmp_path / "new").__enter__()
+    with pytest.raises(NotADirectoryError):
+        atomic_folder(tmp_path / "absent", replace=True).__enter__()
+    block = atomic_folder(tmp_path / "later")
+    staging = block.__enter__()
+    (staging / "half").write_bytes(b"half")
+    assert remove_unfinished_outputs() == [str(staging)]  # the CLI's cleanup on SIGTERM removes the folder too
+    assert sorted(os.listdir(tmp_path)) == ["new"]

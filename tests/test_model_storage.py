@@ -100,3 +100,25 @@ def test_a_renamed_copy_decodes_as_the_original_under_a_new_hash(tmp_path) -> No
                                   BrdfDecoder(default_model_folder()).mapped_record(record))
     with pytest.raises(FileExistsError):
         copy_renamed(default_model_folder(), tmp_path / "renamed", "again")
+
+
+def test_an_interrupted_compaction_leaves_the_folder_as_it_was(compacted, tmp_path: Path,
+                                                                monkeypatch: pytest.MonkeyPatch) -> None:
+    """A crash after the new encoder file is written and before model.json names its hash: the folder is the old
+    one, whole (its hashes verify), with nothing left beside it."""
+    from brdfcodec.models import store
+
+    full, _ = compacted
+    folder = tmp_path / "model"
+    shutil.copytree(full, folder)
+    before = {p.name: p.read_bytes() for p in folder.iterdir()}
+
+    def crash(out, stored):  # noqa: ANN001, ANN202
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(store, "write_manifest", crash)
+    with pytest.raises(KeyboardInterrupt):
+        store.compact_encoder(folder)
+    assert {p.name: p.read_bytes() for p in folder.iterdir()} == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["model"]
+    load_model(folder)

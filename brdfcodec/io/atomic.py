@@ -1,24 +1,30 @@
-"""Atomic creation of output files: a temporary file beside the target, then a rename."""
+"""Atomic creation of output files and folders: a temporary file or folder beside the target, then a rename."""
 
 from __future__ import annotations
 
 import contextlib
 import errno
+import ctypes
 import os
+import secrets
+import shutil
+import sys
 import tempfile
 from collections.abc import Iterator
 from pathlib import Path
 
-__all__ = ["TEMPORARY_PREFIX", "atomic_output", "check_output_path", "remove_unfinished_outputs"]
+__all__ = ["TEMPORARY_PREFIX", "atomic_folder", "atomic_output", "check_output_path", "remove_unfinished_outputs"]
 
 #: Start of the name of every temporary file :func:`atomic_output` makes (``.bvae-XXXXXXXX.part``, beside the target).
 TEMPORARY_PREFIX = ".bvae-"
-#: Temporary files of :func:`atomic_output` blocks not yet published or removed (paths as given by mkstemp).
+#: Temporary files of :func:`atomic_output` and folders of :func:`atomic_folder` blocks not yet published or
+#: removed (paths as given by mkstemp and mkdtemp).
 _UNFINISHED: set[str] = set()
 
 
 def remove_unfinished_outputs() -> list[str]:
-    """Remove the temporary files of every :func:`atomic_output` still open; return their paths.
+    """Remove the temporary files and folders of every :func:`atomic_output` and :func:`atomic_folder` still open;
+    return their paths.
 
     For a process that is being interrupted or terminated: an exception normally removes a block's temporary
     file itself, but one raised between two steps of the context manager's own machinery (entering or leaving
@@ -28,7 +34,10 @@ def remove_unfinished_outputs() -> list[str]:
     removed = []
     for name in sorted(_UNFINISHED):
         with contextlib.suppress(FileNotFoundError):
-            os.unlink(name)
+            if os.path.isdir(name) and not os.path.islink(name):
+                shutil.rmtree(name)
+            else:
+                os.unlink(name)
             removed.append(name)
         _UNFINISHED.discard(name)
     return removed
@@ -161,3 +170,97 @@ def atomic_output(path: str | os.PathLike[str], *, overwrite: bool = False) -> I
         raise
     finally:
         _UNFINISHED.discard(tmp_name)
+
+
+_RENAME_EXCHANGE = 2  # renameat2's flag (Linux ≥ 3.15): swap two existing paths in one step
+_AT_FDCWD = -100
+
+
+def _exchange(first: Path, second: Path) -> bool:
+    """Swap two existing folders in one atomic step where the system can (Linux's ``renameat2``); False where it
+    cannot (another system, an old kernel or C library, a file system without the flag)."""
+    if not sys.platform.startswith("linux"):
+        return False
+    try:
+        renameat2 = ctypes.CDLL(None, use_errno=True).renameat2
+    except (OSError, AttributeError):
+        return False
+    renameat2.argtypes = [ctypes.c_int, ctypes.c_char_p, ctypes.c_int, ctypes.c_char_p, ctypes.c_uint]
+    renameat2.restype = ctypes.c_int
+    if renameat2(_AT_FDCWD, os.fsencode(first), _AT_FDCWD, os.fsencode(second), _RENAME_EXCHANGE) == 0:
+        return True
+    code = ctypes.get_errno()
+    if code in (errno.EINVAL, errno.ENOSYS, errno.ENOTSUP):
+        return False
+    raise OSError(code, os.strerror(code), os.fspath(second))
+
+
+@contextlib.contextmanager
+def atomic_folder(path: str | os.PathLike[str], *, replace: bool = False) -> Iterator[Path]:
+    """Yield a temporary folder that becomes the folder ``path`` only if the block succeeds.
+
+    The temporary folder (``.bvae-XXXXXXXX.part``) lives beside the target. Without ``replace`` it starts empty
+    and is renamed to ``path``, which must not exist. With ``replace`` it starts as a copy of the existing folder
+    ``path`` (a shallow tree of regular files, as a model folder is) and takes its place in one step where the
+    system can swap two folders (Linux); elsewhere by two renames, the old folder kept beside under a temporary
+    name in between. Either way a reader sees the old folder or the new one whole, never a mix of the two (a
+    manifest naming the hash of a file that is not yet there, say). On any exception (``KeyboardInterrupt`` and
+    the ``bvae`` CLI's SIGTERM included) the temporary folder is removed and ``path`` is left untouched.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The folder to create (``replace=False``) or to replace (``replace=True``).
+    replace : bool, default False
+        Replace an existing folder's contents as a whole.
+
+    Yields
+    ------
+    pathlib.Path
+        Where the caller writes the folder's files.
+
+    Raises
+    ------
+    FileExistsError
+        ``path`` exists (before or after the block) and ``replace`` is false.
+    NotADirectoryError
+        ``replace`` is true and ``path`` is not a folder.
+    FileNotFoundError
+        The target's parent folder does not exist.
+    """
+    target = Path(path)
+    if replace and not target.is_dir():
+        raise NotADirectoryError(errno.ENOTDIR, "is not a folder to replace", os.fspath(target))
+    if not replace and (target.exists() or target.is_symlink()):
+        raise FileExistsError(errno.EEXIST, "already exists", os.fspath(target))
+    parent = target.parent if str(target.parent) else Path(".")
+    if not parent.is_dir():
+        raise FileNotFoundError(f"{target}: folder {parent} does not exist")
+    staging = Path(tempfile.mkdtemp(prefix=TEMPORARY_PREFIX, suffix=".part", dir=parent))
+    _UNFINISHED.add(os.fspath(staging))
+    try:
+        if replace:
+            shutil.copytree(target, staging, dirs_exist_ok=True)  # the folder's mode too (copystat)
+        else:
+            os.chmod(staging, 0o777 & ~_current_umask())
+        yield staging
+        if not replace:
+            if target.exists() or target.is_symlink():  # renaming onto an empty folder would succeed silently
+                raise FileExistsError(errno.EEXIST, "already exists", os.fspath(target))
+            os.rename(staging, target)
+        elif _exchange(staging, target):
+            shutil.rmtree(staging, ignore_errors=True)  # now the old folder
+        else:
+            retired = parent / f"{TEMPORARY_PREFIX}{secrets.token_hex(4)}.old"
+            os.rename(target, retired)
+            try:
+                os.rename(staging, target)
+            except BaseException:
+                os.rename(retired, target)
+                raise
+            shutil.rmtree(retired, ignore_errors=True)
+    except BaseException:
+        shutil.rmtree(staging, ignore_errors=True)
+        raise
+    finally:
+        _UNFINISHED.discard(os.fspath(staging))

@@ -26,7 +26,7 @@ from safetensors import SafetensorError
 from safetensors.torch import load, save_file
 
 from brdfcodec.errors import ModelChecksumError, ModelFolderError
-from brdfcodec.io.atomic import atomic_output
+from brdfcodec.io.atomic import atomic_folder, atomic_output
 from brdfcodec.io.folder_files import read_folder_file
 from brdfcodec.io.hashing import sha256_of_file
 from brdfcodec.models.config import ModelConfig
@@ -267,17 +267,19 @@ def compact_encoder(folder: str | os.PathLike[str]) -> ModelManifest:
         return manifest
     encoder, _, _ = load_model(folder, parts=("encoder",))
     assert encoder is not None
-    out = Path(folder)
     metadata = {"brdfcodec_model": manifest.name, "config": manifest.config.to_json(), "part": "encoder",
                 "storage": "compact"}
-    with atomic_output(out / ENCODER_FILE, overwrite=True) as tmp:
-        save_file(compact_encoder_tensors(encoder.state_dict()), str(tmp), metadata=metadata)
-    os.chmod(out / ENCODER_FILE, 0o644)
-    stored = json.loads((out / MANIFEST).read_text(encoding="utf-8"))
-    stored["encoder_sha256"] = sha256_of_file(out / ENCODER_FILE)
-    stored["encoder_storage"] = "compact"
-    stored.setdefault("info", {})["encoder_bytes"] = (out / ENCODER_FILE).stat().st_size
-    return write_manifest(out, stored)
+    # The folder replaced as a whole: never an encoder file whose hash model.json does not name yet.
+    with atomic_folder(folder, replace=True) as out:
+        with atomic_output(out / ENCODER_FILE, overwrite=True) as tmp:
+            save_file(compact_encoder_tensors(encoder.state_dict()), str(tmp), metadata=metadata)
+        os.chmod(out / ENCODER_FILE, 0o644)
+        stored = json.loads((out / MANIFEST).read_text(encoding="utf-8"))
+        stored["encoder_sha256"] = sha256_of_file(out / ENCODER_FILE)
+        stored["encoder_storage"] = "compact"
+        stored.setdefault("info", {})["encoder_bytes"] = (out / ENCODER_FILE).stat().st_size
+        write_manifest(out, stored)
+    return load_manifest(folder)
 
 
 def load_model(

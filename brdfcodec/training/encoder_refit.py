@@ -28,11 +28,11 @@ from safetensors.torch import save_file
 from brdfcodec.codec import BrdfDecoder
 from brdfcodec.datasets.analytic import FACTOR_ALPHA_RANGE
 from brdfcodec.datasets.hdf5 import BrdfDataset
-from brdfcodec.io.atomic import atomic_output
+from brdfcodec.io.atomic import atomic_folder, atomic_output
 from brdfcodec.models.network import BetaVAE, Decoder, Encoder
 from brdfcodec.models.parameters import describe_parameters
-from brdfcodec.models.store import (ENCODER_FILE, MANIFEST, ModelManifest, compact_encoder_tensors, load_model,
-                                    sha256_of_file, write_manifest)
+from brdfcodec.models.store import (ENCODER_FILE, MANIFEST, ModelManifest, compact_encoder_tensors,
+                                    load_manifest, load_model, sha256_of_file, write_manifest)
 from brdfcodec.training.alignment import align_to_factors
 from brdfcodec.training.augment import COLOUR_PERMUTATIONS, mix_physical, permute_colours
 from brdfcodec.training.export import comparison_row, trained_rows, write_card
@@ -263,7 +263,8 @@ def refit_model_folder(folder: str | os.PathLike[str], dataset_path: str | os.Pa
     config : RefitConfig
     output : str or os.PathLike, optional
         A new folder for the refitted model (a copy of ``folder`` with the new encoder; it must not exist). By
-        default ``folder`` itself is rewritten: its encoder file, then ``model.json`` and the card.
+        default ``folder`` itself is replaced, as a whole, by the refitted folder (:func:`~brdfcodec.io.atomic.
+        atomic_folder`: a reader sees the old model or the new one).
     name : str, optional
         A new name for the refitted model (``model.json``'s ``name``; the decoder file keeps the name it was
         written with, which its hash covers). By default the model keeps its name.
@@ -319,16 +320,16 @@ def refit_model_folder(folder: str | os.PathLike[str], dataset_path: str | os.Pa
                              "original_encoder_sha256": manifest.encoder_sha256, "original_name": manifest.name}
     if name is not None:
         stored["name"] = name
-    target = source
-    if output is not None:
-        target = Path(output)
-        staging = target.with_name(f".{target.name}.partial")
-        shutil.rmtree(staging, ignore_errors=True)
-        shutil.copytree(source, staging, ignore=shutil.ignore_patterns(MANIFEST))
-        staging.rename(target)  # a folder without model.json is not a model; it becomes one last
-    _write_encoder(encoder, stored["name"], manifest, target)
-    stored["encoder_sha256"] = sha256_of_file(target / ENCODER_FILE)
-    info["encoder_bytes"] = (target / ENCODER_FILE).stat().st_size
-    write_card(target, stored)
-    return write_manifest(target, stored)
+    target = source if output is None else Path(output)
+    # The whole folder at once: a new one appears complete, an old one is replaced as a whole (never an encoder
+    # file whose hash model.json does not name yet).
+    with atomic_folder(target, replace=output is None) as staging:
+        if output is not None:
+            shutil.copytree(source, staging, dirs_exist_ok=True, ignore=shutil.ignore_patterns(MANIFEST))
+        _write_encoder(encoder, stored["name"], manifest, staging)
+        stored["encoder_sha256"] = sha256_of_file(staging / ENCODER_FILE)
+        info["encoder_bytes"] = (staging / ENCODER_FILE).stat().st_size
+        write_card(staging, stored)
+        write_manifest(staging, stored)
+    return load_manifest(target)
 
