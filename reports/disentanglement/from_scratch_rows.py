@@ -421,7 +421,9 @@ ENCODER_REFIT_FOLD2 = Study(
                 ("bvae-s28-z16r1000-refit", "runs/models/s28-z16r1000-refit"),
                 ("bvae-s28-z16r1000-refit-aug", "runs/models/s28-z16r1000-refit-aug"),
                 ("bvae-s28-z16r1000-refit-aug2", "runs/models/s28-z16r1000-refit-aug2"),
-                ("bvae-s28-z16r1000-refit-fw", "runs/models/s28-z16r1000-refit-fw")),
+                ("bvae-s28-z16r1000-refit-fw", "runs/models/s28-z16r1000-refit-fw"),
+                ("bvae-s28-z16r1000-refit-free", "runs/models/s28-z16r1000-refit-free"),
+                ("bvae-s28-z16r1000-refit-fw3k", "runs/models/s28-z16r1000-refit-fw3k")),
     refit_references=(("bvae-nbrdf-proxy-small-v3", "brdfcodec/data/models/default"),
                       ("bvae-nbrdf-proxy-small-v3-refit", "runs/models/s28-v3-refit")),
     imported=(("reports/disentanglement/rate-prior-fold2.jsonl", ("bvae-cv3-fold2-v3", "bvae-s26-z16r1000")),),
@@ -438,8 +440,11 @@ ENCODER_REFIT_FOLD2 = Study(
 # gives its settings): -refit, the training materials as they are (--mix-probability 0 --no-colour-permutations),
 # 2 analytic materials a step, 60 epochs at learning rate 1e-4; -refit-aug, colour-permuted and a quarter blended,
 # otherwise the same; -refit-aug2, half blended, 120 epochs at 2e-4; -refit-fw, as -refit-aug with 8 analytic
-# materials a step, as many as the real ones (--analytic-batch 8, the default since). And the shipped default model
-# (v3, trained on all 120, no factor terms) refitted with the defaults: bvae model refit-encoder
+# materials a step, as many as the real ones (--analytic-batch 8, the default since). Then two levers on -refit-fw's
+# analytic materials at effort 0 (session 29): -refit-free, the dimensions beyond the 8 factors no longer held at 0
+# for them (--free-dimension-weight 0), and -refit-fw3k, the factor terms at 3,000 (--factor-weight 3000), each
+# otherwise -refit-fw's settings (its row gives them; refit and measurements: the commands below). And the shipped
+# default model (v3, trained on all 120, no factor terms) refitted with the defaults: bvae model refit-encoder
 # brdfcodec/data/models/default --dataset runs/both.h5 -o runs/models/s28-v3-refit (its training error below).
 # Fold 2 of 3 (the rd benchmark's 40 held-out materials: 30 MERL, 10 RGL). The editing recipe is trained again here
 # (bvae-s28-z16r1000, the command of rate-prior-fold2's bvae-s26-z16r1000, whose model was lost with its machine;
