@@ -39,6 +39,9 @@ def _refit_lines(refit: Any) -> list[str]:
             + (f", blended with probability {config['mix_probability']:g}" if config["mix_probability"] else "")
             + (f", with {config['analytic_batch']} of {config['analytic_materials']} analytic materials a step"
                + (f" held on their factors at weight {config['factor_weight']:g}" if config["factor_weight"] else "")
+               + (" (the dimensions beyond the factors at "
+                  f"{config['free_dimension_weight']:g} of it)" if config["factor_weight"]
+                  and config.get("free_dimension_weight", 1.0) != 1.0 else "")
                if config["analytic_materials"] else "")
             + f"; mean mapped L1 per valid entry {losses[0]:.5f} in the first epoch, {losses[-1]:.5f} in the last, "
             f"{refit['seconds'] / 60:.1f} min; it replaced encoder `{refit['original_encoder_sha256'][:12]}…`. "

@@ -638,7 +638,10 @@ def _refit_lines(rows: list[dict]) -> list[str]:
         config, losses = row["config"], row["epoch_losses"]
         lines.append(f"  {row['model']}: {config['epochs']} epochs, learning rate {config['learning_rate']:g}, "
                      f"{config['analytic_materials']} analytic materials ({config['analytic_batch']} a step, factor "
-                     f"weight {config['factor_weight']:g}), colour permutations "
+                     f"weight {config['factor_weight']:g}"
+                     + (f", dimensions beyond the factors at {config['free_dimension_weight']:g} of it"
+                        if config.get("free_dimension_weight", 1.0) != 1.0 else "")
+                     + "), colour permutations "
                      f"{'on' if config['colour_permutations'] else 'off'}, blend chance {config['mix_probability']:g}, "
                      f"in {row['seconds']:.0f} s; loss "
                      f"{losses[0]:.5f} (first epoch) to {losses[-1]:.5f} (last); from encoder "
