@@ -453,3 +453,17 @@ def test_a_new_folder_appears_whole_and_never_over_an_existing_one(tmp_path) -> 
     (staging / "half").write_bytes(b"half")
     assert remove_unfinished_outputs() == [str(staging)]  # the CLI's cleanup on SIGTERM removes the folder too
     assert sorted(os.listdir(tmp_path)) == ["new"]
+
+
+def test_a_folder_replaced_through_a_link_keeps_the_link(tmp_path) -> None:
+    from brdfcodec.io.atomic import atomic_folder
+
+    real = tmp_path / "store" / "model-1"
+    real.mkdir(parents=True)
+    (real / "weights").write_bytes(b"old")
+    link = tmp_path / "model"
+    link.symlink_to(real, target_is_directory=True)
+    with atomic_folder(link, replace=True) as staging:
+        (staging / "weights").write_bytes(b"new")
+    assert link.is_symlink() and (real / "weights").read_bytes() == b"new"
+    assert sorted(os.listdir(tmp_path)) == ["model", "store"] and os.listdir(tmp_path / "store") == ["model-1"]

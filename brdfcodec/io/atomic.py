@@ -210,7 +210,8 @@ def atomic_folder(path: str | os.PathLike[str], *, replace: bool = False) -> Ite
     Parameters
     ----------
     path : str or os.PathLike
-        The folder to create (``replace=False``) or to replace (``replace=True``).
+        The folder to create (``replace=False``) or to replace (``replace=True``; through a symbolic link, the
+        folder it names).
     replace : bool, default False
         Replace an existing folder's contents as a whole.
 
@@ -231,6 +232,8 @@ def atomic_folder(path: str | os.PathLike[str], *, replace: bool = False) -> Ite
     target = Path(path)
     if replace and not target.is_dir():
         raise NotADirectoryError(errno.ENOTDIR, "is not a folder to replace", os.fspath(target))
+    if replace:  # a link to a folder: the folder it names is replaced, the link kept
+        target = target.resolve()
     if not replace and (target.exists() or target.is_symlink()):
         raise FileExistsError(errno.EEXIST, "already exists", os.fspath(target))
     parent = target.parent if str(target.parent) else Path(".")
