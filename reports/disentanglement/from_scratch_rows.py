@@ -423,7 +423,9 @@ ENCODER_REFIT_FOLD2 = Study(
                 ("bvae-s28-z16r1000-refit-aug2", "runs/models/s28-z16r1000-refit-aug2"),
                 ("bvae-s28-z16r1000-refit-fw", "runs/models/s28-z16r1000-refit-fw"),
                 ("bvae-s28-z16r1000-refit-free", "runs/models/s28-z16r1000-refit-free"),
-                ("bvae-s28-z16r1000-refit-fw3k", "runs/models/s28-z16r1000-refit-fw3k")),
+                ("bvae-s28-z16r1000-refit-fw3k", "runs/models/s28-z16r1000-refit-fw3k"),
+                ("bvae-s28-z16r1000-refit-blend", "runs/models/s28-z16r1000-refit-blend"),
+                ("bvae-s28-z16r1000-refit-wide", "runs/models/s28-z16r1000-refit-wide")),
     refit_references=(("bvae-nbrdf-proxy-small-v3", "brdfcodec/data/models/default"),
                       ("bvae-nbrdf-proxy-small-v3-refit", "runs/models/s28-v3-refit")),
     imported=(("reports/disentanglement/rate-prior-fold2.jsonl", ("bvae-cv3-fold2-v3", "bvae-s26-z16r1000")),),
@@ -442,8 +444,10 @@ ENCODER_REFIT_FOLD2 = Study(
 # otherwise the same; -refit-aug2, half blended, 120 epochs at 2e-4; -refit-fw, as -refit-aug with 8 analytic
 # materials a step, as many as the real ones (--analytic-batch 8, the default since). Then two levers on -refit-fw's
 # analytic materials at effort 0 (session 29): -refit-free, the dimensions beyond the 8 factors no longer held at 0
-# for them (--free-dimension-weight 0), and -refit-fw3k, the factor terms at 3,000 (--factor-weight 3000), each
-# otherwise -refit-fw's settings (its row gives them; refit and measurements: the commands below). And the shipped
+# for them (--free-dimension-weight 0), and -refit-fw3k, the factor terms at 3,000 (--factor-weight 3000); and two
+# with more varied inputs: -refit-blend, three quarters of the training materials blended (--mix-probability 0.75),
+# and -refit-wide, 1,024 analytic materials drawn for the refit (--analytic-materials 1024); each otherwise
+# -refit-fw's settings (its row gives them; refit and measurements: the commands below). And the shipped
 # default model (v3, trained on all 120, no factor terms) refitted with the defaults: bvae model refit-encoder
 # brdfcodec/data/models/default --dataset runs/both.h5 -o runs/models/s28-v3-refit (its training error below).
 # Fold 2 of 3 (the rd benchmark's 40 held-out materials: 30 MERL, 10 RGL). The editing recipe is trained again here
