@@ -413,10 +413,18 @@ def test_unfinished_outputs_are_removed_when_the_block_is_never_left(tmp_path) -
 def test_a_folder_is_replaced_whole_or_not_at_all(tmp_path, monkeypatch, exchange: bool) -> None:
     """atomic_folder(replace=True): the block works on a copy; success swaps it in whole (Linux's one-step swap,
     or two renames where the system has none), failure leaves the folder as it was; nothing stays beside it."""
+    import sys
+
     from brdfcodec.io import atomic
 
-    if not exchange:
-        monkeypatch.setattr(atomic, "_exchange", lambda first, second: False)
+    swaps: list[bool] = []
+    real = atomic._exchange
+
+    def exchange_or_not(first, second):  # noqa: ANN001, ANN202
+        swaps.append(exchange and real(first, second))
+        return swaps[-1]
+
+    monkeypatch.setattr(atomic, "_exchange", exchange_or_not)
     folder = tmp_path / "model"
     folder.mkdir()
     (folder / "weights").write_bytes(b"old weights")
@@ -433,6 +441,54 @@ def test_a_folder_is_replaced_whole_or_not_at_all(tmp_path, monkeypatch, exchang
     assert {p.name: p.read_bytes() for p in folder.iterdir()} == {"weights": b"new weights",
                                                                   "manifest": b"names new weights"}
     assert sorted(os.listdir(tmp_path)) == ["model"]
+    assert swaps == [exchange and sys.platform.startswith("linux")]  # the one-step swap where the system has it
+
+
+def test_a_failed_second_rename_puts_the_old_folder_back(tmp_path, monkeypatch) -> None:
+    from brdfcodec.io import atomic
+
+    monkeypatch.setattr(atomic, "_exchange", lambda first, second: False)
+    folder = tmp_path / "model"
+    folder.mkdir()
+    (folder / "weights").write_bytes(b"old")
+    real_rename = os.rename
+    calls: list[str] = []
+
+    def rename(source, destination):  # noqa: ANN001, ANN202
+        calls.append(os.path.basename(destination))
+        if len(calls) == 2:  # the new folder onto the target's name: interrupted
+            raise KeyboardInterrupt
+        real_rename(source, destination)
+
+    monkeypatch.setattr(atomic.os, "rename", rename)
+    with pytest.raises(KeyboardInterrupt), atomic.atomic_folder(folder, replace=True) as staging:
+        (staging / "weights").write_bytes(b"new")
+    assert calls[1] == "model" and (folder / "weights").read_bytes() == b"old"
+    assert sorted(os.listdir(tmp_path)) == ["model"]
+
+
+def test_a_replaced_folder_keeps_its_mode_and_read_only_copies_are_removed(tmp_path) -> None:
+    from brdfcodec.io.atomic import atomic_folder
+
+    folder = tmp_path / "model"
+    folder.mkdir()
+    (folder / "sub").mkdir()
+    (folder / "sub" / "weights").write_bytes(b"old")
+    os.chmod(folder / "sub", 0o555)
+    os.chmod(folder, 0o550)
+    try:
+        with atomic_folder(folder, replace=True) as staging:
+            assert os.stat(staging).st_mode & 0o700 == 0o700  # writable by its owner while the block runs
+            (staging / "manifest").write_bytes(b"new")
+        assert oct(os.stat(folder).st_mode & 0o777) == oct(0o550)
+        assert (folder / "manifest").read_bytes() == b"new" and (folder / "sub" / "weights").read_bytes() == b"old"
+        assert sorted(os.listdir(tmp_path)) == ["model"]  # the old folder, read-only inside, removed
+        with pytest.raises(RuntimeError), atomic_folder(folder, replace=True):
+            raise RuntimeError("crash")
+        assert sorted(os.listdir(tmp_path)) == ["model"]  # the read-only copy removed
+    finally:
+        os.chmod(folder, 0o750)
+        os.chmod(folder / "sub", 0o750)
 
 
 def test_a_new_folder_appears_whole_and_never_over_an_existing_one(tmp_path) -> None:

@@ -3,11 +3,12 @@
 from __future__ import annotations
 
 import contextlib
-import errno
 import ctypes
+import errno
 import os
 import secrets
 import shutil
+import stat
 import sys
 import tempfile
 from collections.abc import Iterator
@@ -192,20 +193,23 @@ def _exchange(first: Path, second: Path) -> bool:
     code = ctypes.get_errno()
     if code in (errno.EINVAL, errno.ENOSYS, errno.ENOTSUP):
         return False
-    raise OSError(code, os.strerror(code), os.fspath(second))
+    raise OSError(code, f"cannot swap the rewritten folder in ({os.strerror(code)})", os.fspath(second))
 
 
 @contextlib.contextmanager
 def atomic_folder(path: str | os.PathLike[str], *, replace: bool = False) -> Iterator[Path]:
     """Yield a temporary folder that becomes the folder ``path`` only if the block succeeds.
 
-    The temporary folder (``.bvae-XXXXXXXX.part``) lives beside the target. Without ``replace`` it starts empty
-    and is renamed to ``path``, which must not exist. With ``replace`` it starts as a copy of the existing folder
-    ``path`` (a shallow tree of regular files, as a model folder is) and takes its place in one step where the
-    system can swap two folders (Linux); elsewhere by two renames, the old folder kept beside under a temporary
-    name in between. Either way a reader sees the old folder or the new one whole, never a mix of the two (a
-    manifest naming the hash of a file that is not yet there, say). On any exception (``KeyboardInterrupt`` and
-    the ``bvae`` CLI's SIGTERM included) the temporary folder is removed and ``path`` is left untouched.
+    The temporary folder (``.bvae-XXXXXXXX.part``) lives beside the target, so its parent must be writable. Without
+    ``replace`` it starts empty and is renamed to ``path``, which must not exist. With ``replace`` it starts as a
+    copy of the existing folder ``path`` (links inside it copied as links; the folder's mode kept, the copy
+    writable by its owner while the block runs) and takes its place: in one step where the system can swap two
+    folders (Linux's ``renameat2``), so that a reader that opens the folder sees the old folder or the new one, never
+    a mix of the two (a manifest naming the hash of a weight file not yet there, say); elsewhere by two renames,
+    between which ``path`` is briefly absent (the old folder is put back if the second fails). An exception in the
+    block or before the swap (``KeyboardInterrupt`` and the ``bvae`` CLI's SIGTERM included) removes the temporary
+    folder and leaves ``path`` as it was; one during the removal of the old folder after the swap leaves the new
+    folder in place.
 
     Parameters
     ----------
@@ -228,6 +232,9 @@ def atomic_folder(path: str | os.PathLike[str], *, replace: bool = False) -> Ite
         ``replace`` is true and ``path`` is not a folder.
     FileNotFoundError
         The target's parent folder does not exist.
+    OSError
+        The temporary folder cannot be made beside ``path`` (a read-only parent), or the two folders cannot be
+        swapped (``path`` a mount point, say); the error names ``path``.
     """
     target = Path(path)
     if replace and not target.is_dir():
@@ -239,31 +246,53 @@ def atomic_folder(path: str | os.PathLike[str], *, replace: bool = False) -> Ite
     parent = target.parent if str(target.parent) else Path(".")
     if not parent.is_dir():
         raise FileNotFoundError(f"{target}: folder {parent} does not exist")
-    staging = Path(tempfile.mkdtemp(prefix=TEMPORARY_PREFIX, suffix=".part", dir=parent))
+    try:
+        staging = Path(tempfile.mkdtemp(prefix=TEMPORARY_PREFIX, suffix=".part", dir=parent))
+    except OSError as error:
+        raise type(error)(error.errno, f"cannot make a folder beside it ({error.strerror})",
+                          os.fspath(target)) from None
     _UNFINISHED.add(os.fspath(staging))
     try:
+        mode = 0o777 & ~_current_umask()
         if replace:
-            shutil.copytree(target, staging, dirs_exist_ok=True)  # the folder's mode too (copystat)
-        else:
-            os.chmod(staging, 0o777 & ~_current_umask())
+            mode = stat.S_IMODE(target.stat().st_mode)
+            shutil.copytree(target, staging, symlinks=True, dirs_exist_ok=True)
+        os.chmod(staging, mode | stat.S_IRWXU)  # the block may write whatever the folder's own mode
         yield staging
+        os.chmod(staging, mode)
         if not replace:
             if target.exists() or target.is_symlink():  # renaming onto an empty folder would succeed silently
                 raise FileExistsError(errno.EEXIST, "already exists", os.fspath(target))
             os.rename(staging, target)
-        elif _exchange(staging, target):
-            shutil.rmtree(staging, ignore_errors=True)  # now the old folder
-        else:
-            retired = parent / f"{TEMPORARY_PREFIX}{secrets.token_hex(4)}.old"
-            os.rename(target, retired)
-            try:
-                os.rename(staging, target)
-            except BaseException:
-                os.rename(retired, target)
-                raise
-            shutil.rmtree(retired, ignore_errors=True)
+        elif not _exchange(staging, target):
+            _replace_by_two_renames(staging, target)
     except BaseException:
-        shutil.rmtree(staging, ignore_errors=True)
+        _remove_folder(staging)
         raise
     finally:
         _UNFINISHED.discard(os.fspath(staging))
+    _remove_folder(staging)  # after a swap: the old folder
+
+
+def _replace_by_two_renames(staging: Path, target: Path) -> None:
+    """``target`` moved aside, ``staging`` renamed to it, the old folder put back if that fails or is interrupted;
+    the old folder is left at ``staging``'s name, for the caller to remove."""
+    retired = target.parent / f"{TEMPORARY_PREFIX}{secrets.token_hex(4)}.old"
+    try:
+        os.rename(target, retired)
+        os.rename(staging, target)
+    except BaseException:
+        if retired.exists() and not target.exists():
+            os.rename(retired, target)
+        raise
+    os.rename(retired, staging)
+
+
+def _remove_folder(folder: Path) -> None:
+    """Remove a temporary folder, read-only ones included (a copy keeps its folders' modes)."""
+    if not folder.is_dir() or folder.is_symlink():
+        return
+    for root, _, _ in os.walk(folder):
+        with contextlib.suppress(OSError):
+            os.chmod(root, stat.S_IRWXU)
+    shutil.rmtree(folder, ignore_errors=True)

@@ -325,7 +325,8 @@ def refit_model_folder(folder: str | os.PathLike[str], dataset_path: str | os.Pa
     # file whose hash model.json does not name yet).
     with atomic_folder(target, replace=output is None) as staging:
         if output is not None:
-            shutil.copytree(source, staging, dirs_exist_ok=True, ignore=shutil.ignore_patterns(MANIFEST))
+            shutil.copytree(source, staging, symlinks=True, dirs_exist_ok=True,
+                            ignore=shutil.ignore_patterns(MANIFEST))
         _write_encoder(encoder, stored["name"], manifest, staging)
         stored["encoder_sha256"] = sha256_of_file(staging / ENCODER_FILE)
         info["encoder_bytes"] = (staging / ENCODER_FILE).stat().st_size
