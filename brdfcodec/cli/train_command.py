@@ -76,6 +76,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
                         help="quantisation-aware latent: add uniform noise of width 2^-G to z in training, the "
                         "rounding of the coded mu on that grid (format 2.5, section 4.9; 1 to 5; 0: none, the "
                         "default)")
+    parser.add_argument("--mean-recon-weight", type=float, metavar="W",
+                        help="weight of a second reconstruction term, the decoder at mu itself (no noise), so that "
+                        "the encoder's codes are ones the decoder is trained on (0: none; see TrainConfig)")
     parser.add_argument("--rate-weight", type=float, metavar="LAMBDA",
                         help="weight of mu's code length on the grid 2^-G under the format's unit Laplace prior "
                         "(nats, against the reconstruction error summed over a material's entries), so that training "

@@ -20,7 +20,7 @@ import torch
 
 from brdfcodec.conventions import NETWORK_INPUT_SHAPE
 
-__all__ = ["LossTerms", "beta_norm", "beta_vae_loss", "kl_per_dimension", "latent_rate"]
+__all__ = ["LossTerms", "beta_norm", "beta_vae_loss", "kl_per_dimension", "latent_rate", "masked_recon_per_sample"]
 
 ReconKind = Literal["l2", "l1"]
 _N_INPUT = NETWORK_INPUT_SHAPE[0] * NETWORK_INPUT_SHAPE[1] * NETWORK_INPUT_SHAPE[2]
@@ -81,6 +81,34 @@ def latent_rate(noisy_mu: torch.Tensor, step: float) -> torch.Tensor:
     return -torch.log((upper - lower).clamp_min(1e-12))
 
 
+def masked_recon_per_sample(reconstruction: torch.Tensor, target: torch.Tensor, mask: torch.Tensor,
+                            recon: ReconKind = "l2") -> torch.Tensor:
+    """Each material's reconstruction error, summed over its valid entries.
+
+    Parameters
+    ----------
+    reconstruction, target : Tensor, shape (B, 63, 90, 90)
+        Decoder output and input, mapped.
+    mask : Tensor of bool, shape (B, 63, 90, 90)
+        Valid entries; the others never contribute.
+    recon : {"l2", "l1"}
+        Squared error or absolute error.
+
+    Returns
+    -------
+    Tensor, shape (B,)
+        ≥ 0, mapped units (squared for ``"l2"``).
+    """
+    difference = (reconstruction - target) * mask
+    if recon == "l2":
+        per_entry = difference.pow(2)
+    elif recon == "l1":
+        per_entry = difference.abs()
+    else:
+        raise ValueError(f"recon must be 'l2' or 'l1', got {recon!r}")
+    return per_entry.flatten(1).sum(dim=1)
+
+
 def beta_vae_loss(
     reconstruction: torch.Tensor,
     target: torch.Tensor,
@@ -110,14 +138,7 @@ def beta_vae_loss(
     -------
     LossTerms
     """
-    difference = (reconstruction - target) * mask
-    if recon == "l2":
-        per_entry = difference.pow(2)
-    elif recon == "l1":
-        per_entry = difference.abs()
-    else:
-        raise ValueError(f"recon must be 'l2' or 'l1', got {recon!r}")
-    recon_per_sample = per_entry.flatten(1).sum(dim=1)
+    recon_per_sample = masked_recon_per_sample(reconstruction, target, mask, recon)
     kl_per_sample = kl_per_dimension(mu, logvar).sum(dim=1)
     weight = beta_norm(beta, mu.shape[1])
     loss = (recon_per_sample + weight * kl_per_sample).mean()

@@ -102,6 +102,14 @@ class TrainConfig:
         (``spec/bvae-format.md`` §4.9), so that the decoder learns to decode
         μ so rounded. 0 (the default) adds nothing and draws nothing, so runs
         without it keep their random stream.
+    mean_recon_weight : float
+        Weight of a second reconstruction term, the decoder's output at μ
+        itself (no sampled noise) against the input, masked and summed over
+        a material's entries as the β-VAE's own, for the real batch and the
+        analytic one: the codes an encoder gives (what ``bvae model
+        evaluate`` decodes at effort 0, and where the codec's refinement
+        starts) are then codes the decoder is trained on. 0 (the default)
+        decodes nothing more, so runs without it keep their steps.
     rate_weight : float
         Weight of the latent's rate: the code length of μ on the grid
         2^−``latent_grid`` under the format's unit Laplace prior
@@ -183,6 +191,7 @@ class TrainConfig:
     factor_saturation: bool = False
     factor_alpha_min: float = 0.03
     latent_grid: int = 0
+    mean_recon_weight: float = 0.0
     rate_weight: float = 0.0
     average_from_epoch: int = 0
     warmup_epochs: int = 2
@@ -223,6 +232,11 @@ class TrainConfig:
             raise ValueError(f"traversal_directions must be 'axes' or 'any', got {self.traversal_directions!r}")
         if not 0 <= self.linear_path_rate < float("inf"):
             raise ValueError(f"linear_path_rate must be finite and ≥ 0, got {self.linear_path_rate}")
+        if not 0 <= self.mean_recon_weight < float("inf"):
+            raise ValueError(f"mean_recon_weight must be finite and ≥ 0, got {self.mean_recon_weight}")
+        if self.mean_recon_weight > 0 and self.decoder_dropout > 0:
+            raise ValueError("mean_recon_weight > 0 needs decoder_dropout 0 (its decode of μ would take the "
+                             "sampled codes' dropout mask)")
         if not 0 <= self.factor_weight < float("inf"):
             raise ValueError(f"factor_weight must be finite and ≥ 0, got {self.factor_weight}")
         if not 0 < self.factor_alpha_min < 0.6:

@@ -36,7 +36,7 @@ from brdfcodec.datasets.hdf5 import BrdfDataset
 from brdfcodec.datasets.split import VALIDATION, fold_by_family
 from brdfcodec.io.atomic import atomic_output
 from brdfcodec.models.config import ModelConfig
-from brdfcodec.models.loss import beta_vae_loss, kl_per_dimension, latent_rate
+from brdfcodec.models.loss import beta_vae_loss, kl_per_dimension, latent_rate, masked_recon_per_sample
 from brdfcodec.models.network import BetaVAE, initialise_linear_basis, linear_path_trainable
 from brdfcodec.models.store import load_model
 from brdfcodec.training.augment import COLOUR_PERMUTATIONS, mix_physical, permute_colours
@@ -439,6 +439,14 @@ def _train_epoch(model: BetaVAE, forward: torch.nn.Module, optimizer: torch.opti
                 loss = loss + train_config.rate_weight * rate
         if pool is not None:
             loss = loss + analytic.loss + train_config.factor_weight * factor
+        if train_config.mean_recon_weight > 0:
+            # The decode of μ itself, through the module (as the traversal's below), for the real batch and the
+            # analytic one, each term a batch mean of per-material sums, as the β-VAE's reconstruction.
+            mus, targets, valid = (mu, x, m) if pool is None else (
+                mu_all, torch.cat([x, pool.inputs[frows]]), torch.cat([m, pool.masks[frows]]))
+            at_mean = masked_recon_per_sample(model.decoder.unbounded(mus), targets, valid, train_config.recon)
+            mean_recon = at_mean[: len(x)].mean() + (at_mean[len(x):].mean() if pool is not None else 0.0)
+            loss = loss + train_config.mean_recon_weight * mean_recon
         if penalty is not None:
             # Through the module, not the DDP wrapper: autograd adds this use of a weight to the wrapper's before
             # DDP reduces the gradient (reasoned, not yet tested under torchrun with the penalty).
