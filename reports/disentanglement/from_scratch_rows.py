@@ -472,7 +472,8 @@ MEAN_RECON_FOLD2 = Study(
     train_keys=("mean_recon_weight", "learning_rate"),
     references=(("bvae-cv3-fold2-v3", "runs/models/cpu21-cv3-fold2-v3"),
                 ("bvae-s28-z16r1000", "runs/models/s28-z16r1000"),
-                ("bvae-s28-z16r1000-refit-fw", "runs/models/s28-z16r1000-refit-fw")),
+                ("bvae-s28-z16r1000-refit-fw", "runs/models/s28-z16r1000-refit-fw"),
+                ("bvae-s29-ft-mr1-refit", "runs/models/s29-ft-mr1-refit")),
     imported=(("reports/disentanglement/encoder-refit-fold2.jsonl",
                ("bvae-cv3-fold2-v3", "bvae-s28-z16r1000", "bvae-s28-z16r1000-refit-fw")),),
     fold=True, prefix="bvae-s29-",
@@ -484,8 +485,10 @@ MEAN_RECON_FOLD2 = Study(
 # materials of each step, so that the codes the encoder gives are codes the decoder is trained on. Both runs
 # fine-tune the recipe's fold-2 model (bvae-s28-z16r1000, --init) for 60 epochs at learning rate 1e-4 with the
 # recipe's every other setting: -ft-mr1 with W = 1, -ft-mr0 with W = 0 (the control: the same fine-tuning without
-# the term). Fold 2 of 3 (30 MERL, 10 RGL held out; NBRDF proxies, neural fits, not measurements); analytic: 24
-# random materials none saw. The references' rows are copied from encoder-refit-fold2.jsonl.
+# the term). Then -ft-mr1's encoder refitted to its decoder with the defaults (bvae model refit-encoder
+# runs/models/s29-ft-mr1 --dataset runs/both.h5 -o runs/models/s29-ft-mr1-refit --name bvae-s29-ft-mr1-refit).
+# Fold 2 of 3 (30 MERL, 10 RGL held out; NBRDF proxies, neural fits, not measurements); analytic: 24 random
+# materials none saw. The other references' rows are copied from encoder-refit-fold2.jsonl.
 # Commands: runs/s29/cmd-RUN.txt (in the training rows); export: bvae model export runs/s29/RUN
 #   -o runs/models/s29-RUN --name bvae-s29-RUN --dataset runs/both.h5 --basis-count 0 --align-factors 300 --keep-axes
 # Benchmark: bvae model disentanglement MODEL --materials 300 --seed 0 --no-pca
