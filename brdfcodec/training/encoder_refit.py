@@ -327,6 +327,7 @@ def refit_model_folder(folder: str | os.PathLike[str], dataset_path: str | os.Pa
         if output is not None:
             shutil.copytree(source, staging, symlinks=True, dirs_exist_ok=True,
                             ignore=shutil.ignore_patterns(MANIFEST))
+            os.chmod(staging, 0o700)  # copytree gave it the source's mode; the new folder's is set when it appears
         _write_encoder(encoder, stored["name"], manifest, staging)
         stored["encoder_sha256"] = sha256_of_file(staging / ENCODER_FILE)
         info["encoder_bytes"] = (staging / ENCODER_FILE).stat().st_size
