@@ -91,9 +91,12 @@ def test_the_free_dimension_weight_frees_the_dimensions_beyond_the_factors() -> 
 def test_refit_settings_are_checked() -> None:
     for bad in ({"epochs": 0}, {"learning_rate": 0.0}, {"mix_probability": 1.5}, {"analytic_materials": -1},
                 {"logvar_weight": -1.0}, {"analytic_batch": 0}, {"free_dimension_weight": -0.1},
-                {"free_dimension_weight": 1.5}, {"free_dimension_weight": math.nan}):
+                {"free_dimension_weight": 1.5}, {"free_dimension_weight": math.nan},
+                {"free_dimension_weight": 0.0},  # the factor supervision it scales is off (factor_weight 0)
+                {"free_dimension_weight": 0.5, "factor_weight": 1.0, "analytic_materials": 0}):
         with pytest.raises(ValueError):
             RefitConfig(**bad)
+    assert RefitConfig(free_dimension_weight=0.0, factor_weight=1.0).free_dimension_weight == 0.0
 
 
 def test_the_cli_defaults_are_the_library_s() -> None:
@@ -192,6 +195,11 @@ def test_the_cli_refuses_an_existing_output_and_a_dataset_without_the_training_m
     assert done.returncode != 0 and "Traceback" not in done.stderr
     assert "lacks materials the model trained on" in done.stderr and str(other) in done.stderr
     assert (copy / "model.json").read_bytes() == original  # nothing rewritten
+    fresh = tmp_path / "fresh"  # a model trained without factor terms: the weight on them cannot act
+    done = subprocess.run(command[:8] + ["-o", str(fresh), "--epochs", "1", "--free-dimension-weight", "0"],
+                          capture_output=True, text=True, timeout=600)
+    assert done.returncode != 0 and "Traceback" not in done.stderr
+    assert "free_dimension_weight 0" in done.stderr and "no effect" in done.stderr and not fresh.exists()
 
 
 @pytest.mark.slow

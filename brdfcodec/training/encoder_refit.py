@@ -77,7 +77,8 @@ class RefitConfig:
     free_dimension_weight : float
         Factor on that term's dimensions beyond the analytic family's factors, in [0, 1]: training holds the
         analytic materials' μ at 0 there (weight 1); 0 frees those dimensions for the analytic materials'
-        reconstruction at effort 0 while their factor dimensions stay held.
+        reconstruction at effort 0 while their factor dimensions stay held. A value other than 1 needs the
+        factor supervision on (``factor_weight`` > 0 and ``analytic_materials`` > 0).
     seed : int
         Seed of the draws (batches, blends, permutations, analytic materials).
     """
@@ -102,6 +103,10 @@ class RefitConfig:
                 or not self.factor_weight >= 0 or not 0 <= self.free_dimension_weight <= 1:
             raise ValueError(f"learning_rate must be > 0, mix_probability and free_dimension_weight in [0, 1], "
                              f"logvar_weight and factor_weight ≥ 0, got {self}")
+        if self.free_dimension_weight != 1.0 and (self.factor_weight == 0 or self.analytic_materials == 0):
+            raise ValueError(f"free_dimension_weight {self.free_dimension_weight:g} scales the factor supervision, "
+                             f"which is off (factor_weight {self.factor_weight:g}, analytic_materials "
+                             f"{self.analytic_materials}): it would have no effect")
 
 
 @dataclass(frozen=True)
