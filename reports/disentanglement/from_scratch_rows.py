@@ -5,7 +5,7 @@ models exported into runs/models/SESSION-NAME, the measurements of the study's t
 
     python reports/disentanglement/from_scratch_rows.py [--study from-scratch-supervision | free-dimensions |
         saturation | cpu-fold2 | rate-fold2 | swa-fold2 | latent-size-fold2 | rate-prior-fold2 |
-        encoder-refit-fold2 | mean-recon-fold2]
+        encoder-refit-fold2 | mean-recon-fold2 | mean-recon-scratch-fold2]
 
 Studies: ``from-scratch-supervision`` (runs/dev1: four factor weights, one H100, time-limited),
 ``free-dimensions`` (runs/dev2: weights 5,000 and 10,000 and a 12-dimensional latent, one H200, full schedules) and
@@ -22,7 +22,8 @@ bytes) and ``rate-prior-fold2`` (runs/s26: μ's bytes under per-dimension priors
 and the supervised 16-dimensional recipe trained with a rate term) and ``encoder-refit-fold2`` (runs/s28: that
 recipe's encoder refitted to its frozen decoder, ``bvae model refit-encoder``, for its codes at effort 0) and
 ``mean-recon-fold2`` (runs/s29: that recipe's fold-2 model fine-tuned with a reconstruction term at μ itself,
-``bvae train --mean-recon-weight``, against the same fine-tuning without it).
+``bvae train --mean-recon-weight``, against the same fine-tuning without it) and ``mean-recon-scratch-fold2``
+(runs/s30: that recipe trained from scratch with the term, at two weights and with doubled factor terms).
 """
 
 from __future__ import annotations
@@ -496,9 +497,46 @@ MEAN_RECON_FOLD2 = Study(
 # Rows: python reports/disentanglement/from_scratch_rows.py --study mean-recon-fold2 -> mean-recon-fold2.jsonl
 """)
 
+MEAN_RECON_SCRATCH_FOLD2 = Study(
+    name="mean-recon-scratch-fold2", session="s30", runs=("mr03", "mr1", "mr1f20k"),
+    device="cpu: 2 cores (x86_64, torch 2.13.0+cpu), OMP_NUM_THREADS=1, beside each other",
+    training_title="Training from scratch (this machine's CPU, one core each):",
+    train_keys=("mean_recon_weight",),
+    references=(("bvae-cv3-fold2-v3", "runs/models/cpu21-cv3-fold2-v3"),
+                ("bvae-s28-z16r1000", "runs/models/s28-z16r1000"),
+                ("bvae-s28-z16r1000-refit-fw", "runs/models/s28-z16r1000-refit-fw"),
+                ("bvae-s29-ft-mr1-refit", "runs/models/s29-ft-mr1-refit"),
+                ("bvae-s30-mr03-refit", "runs/models/s30-mr03-refit"),
+                ("bvae-s30-mr1-refit", "runs/models/s30-mr1-refit"),
+                ("bvae-s30-mr1-refit-wide", "runs/models/s30-mr1-refit-wide"),
+                ("bvae-s30-mr1f20k-refit", "runs/models/s30-mr1f20k-refit")),
+    imported=(("reports/disentanglement/mean-recon-fold2.jsonl",
+               ("bvae-cv3-fold2-v3", "bvae-s28-z16r1000", "bvae-s28-z16r1000-refit-fw", "bvae-s29-ft-mr1-refit")),),
+    fold=True, prefix="bvae-s30-",
+    header="""\
+# Issue 50, "held-out reconstruction no worse than today's model's, as in bvae model evaluate" (effort 0): a
+# reconstruction term at μ (bvae train --mean-recon-weight W) narrowed the editing recipe's gap to the v3 recipe when
+# its fold-2 model was fine-tuned with it (mean-recon-fold2.txt). Here the recipe is trained from scratch with the
+# term, exactly as bvae-s28-z16r1000 was (400 epochs, every setting the same, same seed) but for W: -mr03 with
+# W = 0.3, -mr1 with W = 1; bvae-s28-z16r1000 is the control (W = 0). -mr1f20k: W = 1 with the factor terms' weight
+# doubled (--factor-weight 20000), to win back the disentanglement W = 1 costs. Then each encoder refitted to its
+# decoder with the defaults (bvae model refit-encoder runs/models/s30-RUN --dataset runs/both.h5 -o
+# runs/models/s30-RUN-refit --name bvae-s30-RUN-refit), and -mr1's also with 1,024 analytic materials
+# (--analytic-materials 1024: -mr1-refit-wide; runs/s30/refit.sh mr1 wide --analytic-materials 1024).
+# Fold 2 of 3 (30 MERL, 10 RGL held out; NBRDF proxies, neural fits, not measurements); analytic: 24 random
+# materials none saw. The other references' rows are copied from mean-recon-fold2.jsonl.
+# Commands: runs/s30/cmd-RUN.txt (in the training rows), all of it in runs/s30/scratch.sh RUN W [FACTOR_WEIGHT];
+#   export: bvae model export runs/s30/RUN -o runs/models/s30-RUN --name bvae-s30-RUN --dataset runs/both.h5
+#   --basis-count 0 --align-factors 300 --keep-axes
+# Benchmark: bvae model disentanglement MODEL --materials 300 --seed 0 --no-pca
+# Reconstruction: bvae model evaluate MODEL --dataset runs/both.h5 (and runs/random24.h5) [--effort 1] --json
+# Rows: python reports/disentanglement/from_scratch_rows.py --study mean-recon-scratch-fold2
+#   -> mean-recon-scratch-fold2.jsonl
+""")
+
 STUDIES = {study.name: study for study in (FROM_SCRATCH_SUPERVISION, FREE_DIMENSIONS, SATURATION, CPU_FOLD2,
                                            RATE_FOLD2, SWA_FOLD2, LATENT_SIZE_FOLD2, RATE_PRIOR_FOLD2,
-                                           ENCODER_REFIT_FOLD2, MEAN_RECON_FOLD2)}
+                                           ENCODER_REFIT_FOLD2, MEAN_RECON_FOLD2, MEAN_RECON_SCRATCH_FOLD2)}
 
 
 def text(study: Study, rows: list[dict]) -> str:
