@@ -132,7 +132,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     refit.add_argument("--free-dimension-weight", type=float, default=RefitDefaults.free_dimension_weight,
                        metavar="F", help="factor in [0, 1] on the factor term's dimensions beyond the analytic "
                        "factors, where training holds analytic materials at 0 (default "
-                       f"{RefitDefaults.free_dimension_weight:g}; 0 frees them for reconstruction; needs a factor weight > 0)")
+                       f"{RefitDefaults.free_dimension_weight:g}; 0 frees them for reconstruction; needs a factor "
+                       "weight > 0)")
     refit.add_argument("--seed", type=int, default=RefitDefaults.seed, help="seed of the draws (default 0)")
     refit.add_argument("--log", type=Path, help="append a JSON line per epoch to this file")
     refit.set_defaults(handler=run_refit_encoder)
