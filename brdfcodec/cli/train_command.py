@@ -79,6 +79,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     parser.add_argument("--mean-recon-weight", type=float, metavar="W",
                         help="weight of a second reconstruction term, the decoder at mu itself (no noise), so that "
                         "the encoder's codes are ones the decoder is trained on (0: none; see TrainConfig)")
+    parser.add_argument("--edge-slots", action="store_true", default=None,
+                        help="train the kept slots below the horizon that the interpolation carries into valid "
+                        "bins towards the values that fit those bins best (the input mask leaves them out; see "
+                        "TrainConfig.edge_slots; needs full tables)")
     parser.add_argument("--rate-weight", type=float, metavar="LAMBDA",
                         help="weight of mu's code length on the grid 2^-G under the format's unit Laplace prior "
                         "(nats, against the reconstruction error summed over a material's entries), so that training "

@@ -110,6 +110,15 @@ class TrainConfig:
         evaluate`` decodes at effort 0, and where the codec's refinement
         starts) are then codes the decoder is trained on. 0 (the default)
         decodes nothing more, so runs without it keep their steps.
+    edge_slots : bool
+        Train the decoder's kept slots below the horizon that the interpolation carries into valid bins (edge
+        slots, :func:`~brdfcodec.representation.edge_slots.edge_slot_targets`) towards the values that fit
+        those bins best, each with its fractional weight, in both reconstruction terms: the input mask leaves
+        them out, and the decoded table then runs towards an unfitted value on the horizon band (a floor of
+        0.004–0.009 mapped RelAE on the shared stand-ins). The encoder's input is unchanged (0 there); the
+        targets follow the blend and colour permutation of their materials (a blend's at the slots that are
+        edge slots of both). Needs a dataset with full tables. The analytic factor pool keeps its masks.
+        False (the default) leaves the slots out, as before.
     rate_weight : float
         Weight of the latent's rate: the code length of μ on the grid
         2^−``latent_grid`` under the format's unit Laplace prior
@@ -192,6 +201,7 @@ class TrainConfig:
     factor_alpha_min: float = 0.03
     latent_grid: int = 0
     mean_recon_weight: float = 0.0
+    edge_slots: bool = False
     rate_weight: float = 0.0
     average_from_epoch: int = 0
     warmup_epochs: int = 2

@@ -26,19 +26,23 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import torch
 import torch.distributed as dist
 from torch.nn.parallel import DistributedDataParallel
 from torch.optim.swa_utils import AveragedModel
 from tqdm.auto import tqdm
 
+from brdfcodec.conventions import NETWORK_INPUT_SHAPE
 from brdfcodec.datasets.hdf5 import BrdfDataset
 from brdfcodec.datasets.split import VALIDATION, fold_by_family
+from brdfcodec.errors import DatasetError
 from brdfcodec.io.atomic import atomic_output
 from brdfcodec.models.config import ModelConfig
 from brdfcodec.models.loss import beta_vae_loss, kl_per_dimension, latent_rate, masked_recon_per_sample
 from brdfcodec.models.network import BetaVAE, initialise_linear_basis, linear_path_trainable
 from brdfcodec.models.store import load_model
+from brdfcodec.representation.edge_slots import edge_slot_targets
 from brdfcodec.training.augment import COLOUR_PERMUTATIONS, mix_physical, permute_colours
 from brdfcodec.training.checkpoint import load_checkpoint
 from brdfcodec.training.config import TrainConfig
@@ -195,6 +199,9 @@ class _TrainingData:
     info: dict[str, Any]
     traversal_penalty: TraversalPenalty | None = None
     factor_pool: FactorPool | None = None
+    #: With ``TrainConfig.edge_slots``: the training materials' edge-slot targets and weights (as ``inputs``).
+    edge_targets: torch.Tensor | None = None
+    edge_weights: torch.Tensor | None = None
 
 
 def _resident(data: _TrainingData, device: torch.device) -> None:
@@ -206,6 +213,9 @@ def _resident(data: _TrainingData, device: torch.device) -> None:
     """
     data.inputs = data.inputs.to(device)
     data.masks = data.masks.to(device)
+    if data.edge_targets is not None and data.edge_weights is not None:
+        data.edge_targets = data.edge_targets.to(device)
+        data.edge_weights = data.edge_weights.to(device)
     if data.factor_pool is not None:
         data.factor_pool.to(device)
 
@@ -283,6 +293,34 @@ def _held_out(dataset: BrdfDataset, config: TrainConfig) -> list[bool]:
     return held
 
 
+def _edge_slots(dataset: BrdfDataset, rows: list[int]) -> tuple[torch.Tensor, torch.Tensor]:
+    """Edge-slot targets and weights of the materials ``rows`` (:func:`edge_slot_targets`), (N, 63, 90, 90) each."""
+    if not dataset.has_tables:
+        raise DatasetError(dataset.path, "--edge-slots needs full tables; rebuild the dataset without --no-tables")
+    targets = np.zeros((len(rows), *NETWORK_INPUT_SHAPE), dtype=np.float32)
+    weights = np.zeros_like(targets)
+    for n, index in enumerate(rows):
+        table = dataset.table(index)
+        targets[n], weights[n] = edge_slot_targets(table.values, table.mask)
+    return torch.from_numpy(targets), torch.from_numpy(weights)
+
+
+def _with_edge_slots(data: _TrainingData, x: torch.Tensor, m: torch.Tensor, rows: torch.Tensor,
+                     partner: torch.Tensor, blend: torch.Tensor, permutation: torch.Tensor,
+                     recon: str) -> tuple[torch.Tensor, torch.Tensor]:
+    """The reconstruction target and weights of a batch with its edge slots: the blended, permuted input ``x``
+    and mask ``m``, and at the slots that are edge slots of both blended materials their targets, blended and
+    permuted the same way, with the smaller of the two weights (its square root for the squared error, so that
+    the slot's squared error weighs as its weight)."""
+    assert data.edge_targets is not None and data.edge_weights is not None
+    edge = permute_colours(mix_physical(data.edge_targets[rows], data.edge_targets[partner], blend), permutation)
+    weight = permute_colours(torch.minimum(data.edge_weights[rows], data.edge_weights[partner]), permutation)
+    weight = torch.where(m, torch.zeros_like(weight), weight)  # a valid entry keeps its own target and weight 1
+    if recon == "l2":
+        weight = weight.sqrt()
+    return torch.where(weight > 0, edge, x), m.to(x.dtype) + weight
+
+
 def _load_training_data(dataset_path: str | os.PathLike[str], world: _World,
                         config: TrainConfig) -> _TrainingData:
     """Inputs of the training materials, and (on rank 0) the mapped references that RelAE is measured against."""
@@ -293,9 +331,11 @@ def _load_training_data(dataset_path: str | os.PathLike[str], world: _World,
         if not train_rows:
             raise ValueError(f"{dataset_path}: no training materials")
         inputs = torch.from_numpy(dataset.inputs(train_rows))
+        edges = _edge_slots(dataset, train_rows) if config.edge_slots else (None, None)
         # Training RelAE is monitored on a fixed subset (every 4th material), without augmentation.
         monitored = train_rows[::4]
         return _TrainingData(
+            edge_targets=edges[0], edge_weights=edges[1],
             inputs=inputs,
             masks=torch.from_numpy(dataset.input_masks(train_rows)),
             val_inputs=dataset.inputs(val_rows),
@@ -430,7 +470,11 @@ def _train_epoch(model: BetaVAE, forward: torch.nn.Module, optimizer: torch.opti
             analytic = beta_vae_loss(recon_all[n_real:], pool.inputs[frows], pool.masks[frows], mu_all[n_real:],
                                      logvar_all[n_real:], beta=train_config.beta, recon=train_config.recon)
             factor = factor_supervision_loss(mu_all[n_real:], pool.targets[frows], pool.weights[frows])
-        terms = beta_vae_loss(recon, x, m, mu, logvar, beta=train_config.beta, recon=train_config.recon)
+        target, weights = x, m
+        if data.edge_targets is not None and data.edge_weights is not None:
+            target, weights = _with_edge_slots(data, x, m, rows, partner, draw["weight"][part].to(world.device),
+                                               permutation, train_config.recon)
+        terms = beta_vae_loss(recon, target, weights, mu, logvar, beta=train_config.beta, recon=train_config.recon)
         loss, traversal, rate = terms.loss, terms.loss.new_zeros(()), terms.loss.new_zeros(())
         if grid_noise is not None:
             # The codec's R (nats per material) of the real batch's μ on the grid, rounding as uniform noise.
@@ -442,8 +486,9 @@ def _train_epoch(model: BetaVAE, forward: torch.nn.Module, optimizer: torch.opti
         if train_config.mean_recon_weight > 0:
             # The decode of μ itself, through the module (as the traversal's below), for the real batch and the
             # analytic one, each term a batch mean of per-material sums, as the β-VAE's reconstruction.
-            mus, targets, valid = (mu, x, m) if pool is None else (
-                mu_all, torch.cat([x, pool.inputs[frows]]), torch.cat([m, pool.masks[frows]]))
+            mus, targets, valid = (mu, target, weights) if pool is None else (
+                mu_all, torch.cat([target, pool.inputs[frows]]),
+                torch.cat([weights, pool.masks[frows].to(weights.dtype)]))
             at_mean = masked_recon_per_sample(model.decoder.unbounded(mus), targets, valid, train_config.recon)
             mean_recon = at_mean[: len(x)].mean() + (at_mean[len(x):].mean() if pool is not None else 0.0)
             loss = loss + train_config.mean_recon_weight * mean_recon

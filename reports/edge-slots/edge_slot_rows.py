@@ -1,0 +1,149 @@
+"""Measure the edge-slot floor: what the kept slots below the horizon cost a decoded table on the horizon band.
+
+usage (repository root; the dataset built as docs/results.md says, "The shipped model on materials it never saw"):
+
+    python reports/edge-slots/edge_slot_rows.py [--dataset runs/v3-held-out.h5] [--budgets 64,1024,16384]
+
+Two studies, one rows file (``reports/edge-slots/edge-slots.jsonl``) and its report (``edge-slots.txt``):
+
+- ``edge-slot-floor``, every material of the dataset: a material's own kept slices interpolated back to 180 φd
+  bins, with 0 at the kept slots that are not valid (the network input) and with the edge slots' fitted values
+  (:func:`brdfcodec.representation.edge_slots.edge_slot_targets`), in mapped RelAE over the valid bins; and the
+  share of the valid bins on the horizon band (a valid bin whose two kept neighbours are not both valid).
+- ``edge-slot-share``, the seven materials of the shipped model's held-out rows (six random analytic materials and
+  the real RGL measurement): each compressed with ``bvae compress``'s defaults at each budget (the library's
+  ``BrdfEncoder(bytes=N)``), decoded, and its mapped RelAE split into the horizon band's part and the rest's
+  (both over the sum of all valid bins' reference values, so that they add up).
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from brdfcodec.codec import BrdfDecoder, BrdfEncoder
+from brdfcodec.datasets.hdf5 import BrdfDataset
+from brdfcodec.io.merl import MerlBRDF
+from brdfcodec.report.rows import read_rows, stamp, write_rows
+from brdfcodec.representation.edge_slots import edge_slot_targets
+from brdfcodec.representation.layout import (
+    from_network_layout,
+    interpolate_slices,
+    interpolation_plan,
+    select_kept_slices,
+)
+from brdfcodec.representation.mapping import map_values
+from brdfcodec.representation.network_io import network_input_from_table
+
+FOLDER = Path("reports/edge-slots")
+#: The shipped model's held-out rows' materials (docs/results.md): the first six random analytic ones and the
+#: real RGL measurement.
+SHARE_MATERIALS = ("analytic-000", "analytic-001", "analytic-002", "analytic-003", "analytic-004", "analytic-005",
+                   "paper_white")
+
+
+def _mapped(table: MerlBRDF) -> np.ndarray:
+    return map_values(np.where(table.mask, table.values, 0.0))
+
+
+def _horizon_band(table: MerlBRDF) -> np.ndarray:
+    """Valid bins whose two kept neighbours (the interpolation's) are not both valid."""
+    left, right, _ = interpolation_plan()
+    kept_valid = select_kept_slices(table.mask)
+    return table.mask & ~(kept_valid[..., left] & kept_valid[..., right])
+
+
+def floor_row(name: str, family: str, table: MerlBRDF) -> dict[str, Any]:
+    """One material's interpolation floors, zero and fitted edge slots."""
+    mapped = _mapped(table)
+    inputs, _ = network_input_from_table(table.values, table.mask)
+    targets, weights = edge_slot_targets(table.values, table.mask)
+    magnitude = float(np.abs(mapped)[table.mask].sum())
+
+    def relae(kept: np.ndarray) -> float:
+        estimate = interpolate_slices(from_network_layout(kept).astype(np.float64))
+        return float(np.abs(estimate - mapped)[table.mask].sum()) / magnitude
+
+    band = _horizon_band(table)
+    return {"material": name, "family": family, "valid_bins": int(table.mask.sum()),
+            "horizon_band_share": float(band.sum() / table.mask.sum()), "edge_slots": int((weights > 0).sum()),
+            "floor_zero": relae(inputs), "floor_edge_slots": relae(np.where(weights > 0, targets, inputs))}
+
+
+def share_rows(dataset: BrdfDataset, budgets: Sequence[int]) -> list[dict[str, Any]]:
+    """The shipped model's decoded error at each budget, split into the horizon band's part and the rest's."""
+    decoder = BrdfDecoder()
+    rows = []
+    for name in SHARE_MATERIALS:
+        index = dataset.names.index(name)
+        table = dataset.table(index)
+        mapped = _mapped(table)
+        band = _horizon_band(table)
+        magnitude = float(np.abs(mapped)[table.mask].sum())
+        for budget in budgets:
+            record = BrdfEncoder(bytes=budget).encode(table, name=name)
+            decoded = decoder.decode(record)
+            error = np.abs(_mapped(MerlBRDF(np.maximum(decoded.astype(np.float64), 0.0), name=name)) - mapped)
+            rows.append({"material": name, "family": dataset.families[index], "budget": budget,
+                         "model": decoder.manifest.name, "record_bytes": int(record.meta["rate"]["record_bytes"]),
+                         "relae_mapped": float(error[table.mask].sum()) / magnitude,
+                         "horizon_band_part": float(error[band].sum()) / magnitude,
+                         "rest_part": float(error[table.mask & ~band].sum()) / magnitude})
+    return rows
+
+
+def text(rows: Sequence[dict[str, Any]]) -> str:
+    """The report: floors per family (median, range), then the decoded errors' split per budget and material."""
+    lines = [__doc__.split("\n\n")[0], "",
+             f"# commit {rows[0]['commit']}, dataset {rows[0]['dataset']}; rows: edge-slots.jsonl", "",
+             "## edge-slot-floor: a material's own kept slices interpolated (mapped RelAE over valid bins)", "",
+             "| family | materials | horizon band share of valid bins | 0 at the slots below the horizon | "
+             "edge slots fitted |", "|---|---:|---:|---:|---:|"]
+    floors = [row for row in rows if row["study"] == "edge-slot-floor"]
+    for family in sorted({row["family"] for row in floors}):
+        part = [row for row in floors if row["family"] == family]
+
+        def spread(key: str, part: list[dict[str, Any]] = part) -> str:
+            values = [row[key] for row in part]
+            return f"{statistics.median(values):.4f} ({min(values):.4f}–{max(values):.4f})"
+
+        lines.append(f"| {family} | {len(part)} | {spread('horizon_band_share')} | {spread('floor_zero')} | "
+                     f"{spread('floor_edge_slots')} |")
+    lines += ["", "Median (range) over the family's materials.", "",
+              "## edge-slot-share: the shipped model's records decoded, mapped RelAE and the horizon band's part", "",
+              "| material | family | budget | record bytes | mapped RelAE | horizon band's part | rest |",
+              "|---|---|---:|---:|---:|---:|---:|"]
+    for row in (row for row in rows if row["study"] == "edge-slot-share"):
+        lines.append(f"| {row['material']} | {row['family']} | {row['budget']} | {row['record_bytes']} | "
+                     f"{row['relae_mapped']:.4f} | {row['horizon_band_part']:.4f} | {row['rest_part']:.4f} |")
+    return "\n".join(lines) + "\n"
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--dataset", default="runs/v3-held-out.h5", help="dataset with full tables")
+    parser.add_argument("--budgets", default="64,1024,16384", help="budgets of the decoded split (bytes)")
+    parser.add_argument("--report-only", action="store_true", help="write the report from the committed rows")
+    args = parser.parse_args()
+    out = FOLDER / "edge-slots.jsonl"
+    if args.report_only:
+        rows = read_rows(out)
+    else:
+        budgets = [int(b) for b in args.budgets.split(",")]
+        with BrdfDataset(args.dataset) as dataset:
+            floors = [floor_row(name, dataset.families[i], dataset.table(i)) for i, name in enumerate(dataset.names)]
+            shares = share_rows(dataset, budgets)
+        rows = (stamp(floors, study="edge-slot-floor", dataset=args.dataset)
+                + stamp(shares, study="edge-slot-share", dataset=args.dataset))
+        write_rows(out, rows)
+    (FOLDER / "edge-slots.txt").write_text(text(rows), encoding="utf-8")
+    print(f"wrote {out} ({len(rows)} rows) and edge-slots.txt")
+
+
+if __name__ == "__main__":
+    main()
