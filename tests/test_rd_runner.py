@@ -94,6 +94,27 @@ def test_rows_compare_file_bytes_with_pca_of_the_same_training_materials(fold_mo
     assert "**cv, held-out analytic**" in table and "| 64 B |" in table
 
 
+@pytest.mark.slow  # trains, exports and encodes: > 10 s on 2 cores
+def test_pca_with_edge_slots_codes_the_filled_slices(fold_model: tuple[Path, Path], tmp_path: Path) -> None:
+    """``"pca_edge_slots": true`` adds every PCA point again, fitted and coded with the edge slots filled: the
+    same kinds, finite errors, other errors than the plain bases' (the filled slices reach the coder)."""
+    from brdfcodec.report.generalisation import load_config, run_config
+
+    dataset, model = fold_model
+    config = tmp_path / "rd.json"
+    config.write_text(json.dumps({"dataset": str(dataset), "budgets": [64], "pca_edge_slots": True,
+                                  "experiments": [{"label": "fold0", "model": str(model)}]}))
+    rows = run_config(load_config(config))
+    points = {row["point"]: row for row in rows}
+    kinds = ("int8", "float16", "tc", "ec-laplace", "ec-gaussian")
+    assert {f"{base}-edge-{kind}" for base in ("pca", "pca-perm") for kind in kinds} <= set(points)
+    for base in ("pca", "pca-perm"):
+        for kind in kinds:
+            plain, edge = points[f"{base}-{kind}"], points[f"{base}-edge-{kind}"]
+            assert all(0 <= e < float("inf") for e in edge["per_material_mapped"])
+            assert edge["per_material_mapped"] != plain["per_material_mapped"], (base, kind)
+
+
 def test_config_errors_name_the_file(tmp_path: Path) -> None:
     from brdfcodec.report.generalisation import load_config
 
@@ -109,6 +130,12 @@ def test_config_errors_name_the_file(tmp_path: Path) -> None:
         load_config(path)
     path.write_text(json.dumps({"dataset": "x.h5", "experiments": [], "header_in_budget": False}))
     assert load_config(path).header_in_budget is False and load_config(path).dataset == tmp_path / "x.h5"
+    assert load_config(path).pca_edge_slots is False
+    path.write_text(json.dumps({"dataset": "x.h5", "experiments": [], "pca_edge_slots": 1}))
+    with pytest.raises(ValueError, match="bad.json: 'pca_edge_slots' is true or false"):
+        load_config(path)
+    path.write_text(json.dumps({"dataset": "x.h5", "experiments": [], "pca_edge_slots": True}))
+    assert load_config(path).pca_edge_slots is True
     for step in (6, -1, True, "3"):
         path.write_text(json.dumps({"dataset": "x.h5", "experiments": [
             {"label": "a", "model": "m", "coded_mu_step": step}]}))

@@ -33,7 +33,13 @@ materials, :func:`run_experiment` measures
   ``pca-ec-gaussian`` (and ``pca-perm-…``): **entropy-coded**, one step per
   material (a byte) and the coefficients range-coded under priors of the
   training spread, at most N bytes counted from the coder's output
-  (:mod:`brdfcodec.report.pca_coding`, issue 48).
+  (:mod:`brdfcodec.report.pca_coding`, issue 48);
+- with ``"pca_edge_slots": true``, each of those also as ``pca-edge``, ``pca-perm-edge`` (and their coded
+  variants): the bases fitted on the training materials' kept slices with their edge slots filled
+  (:func:`~brdfcodec.representation.edge_slots.edge_slot_targets`: the slots below the horizon that the
+  interpolation carries into valid bins, at the values that fit those bins best), each held-out material's
+  filled the same way before it is coded: the PCA baselines given what ``bvae train --edge-slots`` gives a
+  model.
 
 Errors are the mean mapped and linear RelAE on the full table over valid
 entries (``spec/conventions.md``). Every point's row also carries its decode
@@ -123,6 +129,7 @@ class RdConfig:
     limit: int | None = None
     extra: dict[str, Any] = field(default_factory=dict)
     header_in_budget: bool = True
+    pca_edge_slots: bool = False
 
 
 def load_config(path: str | os.PathLike[str]) -> RdConfig:
@@ -140,7 +147,9 @@ def load_config(path: str | os.PathLike[str]) -> RdConfig:
     ``header_in_budget`` (bool, default true: brdfcodec's file bytes less
     the names stay within N per material, its share of the header
     included; false: ``--bytes N`` as given, the header on top — the curve
-    of a single-material file, whose header alone exceeds the small budgets).
+    of a single-material file, whose header alone exceeds the small budgets),
+    ``pca_edge_slots`` (bool, default false: also the PCA baselines with edge
+    slots, the module's ``pca-edge`` points).
 
     Raises
     ------
@@ -149,7 +158,8 @@ def load_config(path: str | os.PathLike[str]) -> RdConfig:
     """
     base = Path(path).parent
     data = json.loads(Path(path).read_text(encoding="utf-8"))
-    known = {"dataset", "experiments", "budgets", "effort", "limit", "description", "header_in_budget"}
+    known = {"dataset", "experiments", "budgets", "effort", "limit", "description", "header_in_budget",
+             "pca_edge_slots"}
     if not isinstance(data, dict) or "dataset" not in data or "experiments" not in data:
         raise ValueError(f"{path}: a runner configuration is an object with 'dataset' and 'experiments'")
     unknown = sorted(set(data) - known)
@@ -196,9 +206,12 @@ def load_config(path: str | os.PathLike[str]) -> RdConfig:
     header_in_budget = data.get("header_in_budget", True)
     if not isinstance(header_in_budget, bool):
         raise ValueError(f"{path}: 'header_in_budget' is true or false, got {header_in_budget!r}")
+    pca_edge_slots = data.get("pca_edge_slots", False)
+    if not isinstance(pca_edge_slots, bool):
+        raise ValueError(f"{path}: 'pca_edge_slots' is true or false, got {pca_edge_slots!r}")
     return RdConfig(base / data["dataset"], tuple(experiments), budgets, int(data.get("effort", 1)),
                     None if limit is None else int(limit), {"description": data.get("description", "")},
-                    header_in_budget)
+                    header_in_budget, pca_edge_slots)
 
 
 def _pca_payload_counts(budget: int, rank: int) -> dict[str, int]:
@@ -481,6 +494,10 @@ def run_experiment(config: RdConfig, experiment: Experiment,
         # as water-filling asks for; the int8/float16 points take the first k that fill the budget.
         bases = {"pca": fit_pca(train_inputs, max(1, len(train_rows) - 1)),
                  "pca-perm": fit_pca_colour_orders(train_inputs, 5 * len(train_rows) - 1)}
+        if config.pca_edge_slots:
+            train_inputs = _with_edge_slots(dataset, train_rows, train_inputs)
+            bases.update({"pca-edge": fit_pca(train_inputs, max(1, len(train_rows) - 1)),
+                          "pca-perm-edge": fit_pca_colour_orders(train_inputs, 5 * len(train_rows) - 1)})
         del train_inputs
         common = {"experiment": experiment.label, "group": experiment.group or experiment.label,
                   "decode_machine": decode_machine(),
@@ -500,17 +517,32 @@ def run_experiment(config: RdConfig, experiment: Experiment,
                           references, config.budgets, config.effort, error, experiment.latent,
                           config.header_in_budget, experiment.coded_mu_step, experiment.short_references,
                           experiment.allocate)
+        filled = _with_edge_slots(dataset, measured, inputs) if config.pca_edge_slots else inputs
         for family in families:
             chosen = [k for k, i in enumerate(measured) if dataset.families[i] == family]
             family_rows = list(ours[family])
             for label, basis in bases.items():
-                family_rows += _pca_rows(label, basis, inputs[chosen], [references[k] for k in chosen],
+                coded = filled if label.endswith("-edge") else inputs
+                family_rows += _pca_rows(label, basis, coded[chosen], [references[k] for k in chosen],
                                          config.budgets, error)
-                family_rows += coded_pca_rows(label, basis, inputs[chosen], [references[k] for k in chosen],
+                family_rows += coded_pca_rows(label, basis, coded[chosen], [references[k] for k in chosen],
                                               config.budgets, error)
             rows += [{**common, "family": family, "materials": [names[k] for k in chosen], **row}
                      for row in family_rows]
     return rows
+
+
+def _with_edge_slots(dataset: Any, rows: Sequence[int], inputs: np.ndarray) -> np.ndarray:
+    """``inputs`` (the network inputs of the materials ``rows``) with each material's edge slots set to their
+    fitted values (:func:`~brdfcodec.representation.edge_slots.edge_slot_targets`)."""
+    from brdfcodec.representation.edge_slots import edge_slot_targets
+
+    filled = np.array(inputs, dtype=np.float32, copy=True)
+    for n, index in enumerate(rows):
+        table = dataset.table(index)
+        targets, weights = edge_slot_targets(table.values, table.mask)
+        filled[n] = np.where(weights > 0, targets, filled[n])
+    return filled
 
 
 def run_config(config: RdConfig, progress: Callable[[str], None] | None = None) -> list[dict[str, Any]]:
