@@ -3,6 +3,7 @@
 usage (repository root; the dataset built as docs/results.md says, "The shipped model on materials it never saw"):
 
     python reports/edge-slots/edge_slot_rows.py [--dataset runs/v3-held-out.h5] [--budgets 64,1024,16384]
+    python reports/edge-slots/edge_slot_rows.py --models MODEL ... [--models-dataset runs/both.h5]
 
 Two studies, one rows file (``reports/edge-slots/edge-slots.jsonl``) and its report (``edge-slots.txt``):
 
@@ -14,6 +15,9 @@ Two studies, one rows file (``reports/edge-slots/edge-slots.jsonl``) and its rep
   the real RGL measurement): each compressed with ``bvae compress``'s defaults at each budget (the library's
   ``BrdfEncoder(bytes=N)``), decoded, and its mapped RelAE split into the horizon band's part and the rest's
   (both over the sum of all valid bins' reference values, so that they add up).
+- ``edge-slot-models`` (with ``--models``, into ``edge-slot-models.jsonl``): for each model folder, the materials
+  its manifest holds out, encoded at effort 0 (the encoder's μ, no layer) and decoded, the same split per
+  material: what a model trained with ``bvae train --edge-slots`` removes of the horizon band's part.
 """
 
 from __future__ import annotations
@@ -97,6 +101,46 @@ def share_rows(dataset: BrdfDataset, budgets: Sequence[int]) -> list[dict[str, A
     return rows
 
 
+def model_rows(models: Sequence[str], dataset_path: str) -> list[dict[str, Any]]:
+    """Each model's held-out materials at effort 0, the decoded mapped RelAE split as :func:`share_rows`'s."""
+    from brdfcodec.models.store import load_manifest
+
+    rows = []
+    with BrdfDataset(dataset_path) as dataset:
+        for folder in models:
+            manifest = load_manifest(folder)
+            held = set(manifest.info.get("data", {}).get("validation", []))
+            encoder, decoder = BrdfEncoder(folder, effort=0), BrdfDecoder(folder)
+            for index in [i for i, name in enumerate(dataset.names) if name in held]:
+                table = dataset.table(index)
+                mapped = _mapped(table)
+                band = _horizon_band(table)
+                magnitude = float(np.abs(mapped)[table.mask].sum())
+                decoded = decoder.decode(encoder.encode(table, name=dataset.names[index]))
+                error = np.abs(_mapped(MerlBRDF(np.maximum(decoded.astype(np.float64), 0.0))) - mapped)
+                rows.append({"model": manifest.name, "model_folder": str(folder), "material": dataset.names[index],
+                             "family": dataset.families[index], "effort": 0,
+                             "relae_mapped": float(error[table.mask].sum()) / magnitude,
+                             "horizon_band_part": float(error[band].sum()) / magnitude,
+                             "rest_part": float(error[table.mask & ~band].sum()) / magnitude})
+    return rows
+
+
+def models_text(rows: Sequence[dict[str, Any]]) -> str:
+    """Per model and family: mean mapped RelAE at effort 0 and the horizon band's part of it."""
+    lines = ["# edge-slot-models: held-out materials at effort 0, mapped RelAE and the horizon band's part",
+             f"# commit {rows[0]['commit']}, dataset {rows[0]['dataset']}; rows: edge-slot-models.jsonl", "",
+             "| model | family | materials | mapped RelAE | horizon band's part | rest |", "|---|---|---:|---:|---:|---:|"]
+    for model in dict.fromkeys(row["model"] for row in rows):
+        for family in sorted({row["family"] for row in rows if row["model"] == model}):
+            part = [row for row in rows if row["model"] == model and row["family"] == family]
+            mean = {key: statistics.fmean(row[key] for row in part)
+                    for key in ("relae_mapped", "horizon_band_part", "rest_part")}
+            lines.append(f"| {model} | {family} | {len(part)} | {mean['relae_mapped']:.4f} | "
+                         f"{mean['horizon_band_part']:.4f} | {mean['rest_part']:.4f} |")
+    return "\n".join(lines) + "\n"
+
+
 def text(rows: Sequence[dict[str, Any]]) -> str:
     """The report: floors per family (median, range), then the decoded errors' split per budget and material."""
     lines = [__doc__.split("\n\n")[0], "",
@@ -129,7 +173,19 @@ def main() -> None:
     parser.add_argument("--dataset", default="runs/v3-held-out.h5", help="dataset with full tables")
     parser.add_argument("--budgets", default="64,1024,16384", help="budgets of the decoded split (bytes)")
     parser.add_argument("--report-only", action="store_true", help="write the report from the committed rows")
+    parser.add_argument("--models", nargs="+", help="model folders: the edge-slot-models study instead")
+    parser.add_argument("--models-dataset", default="runs/both.h5", help="the models' dataset (their held-out)")
     args = parser.parse_args()
+    if args.models:
+        out = FOLDER / "edge-slot-models.jsonl"
+        rows = (read_rows(out) if args.report_only else
+                stamp(model_rows(args.models, args.models_dataset), study="edge-slot-models",
+                      dataset=args.models_dataset))
+        if not args.report_only:
+            write_rows(out, rows)
+        (FOLDER / "edge-slot-models.txt").write_text(models_text(rows), encoding="utf-8")
+        print(f"wrote {out} ({len(rows)} rows) and edge-slot-models.txt")
+        return
     out = FOLDER / "edge-slots.jsonl"
     if args.report_only:
         rows = read_rows(out)
