@@ -9,8 +9,10 @@ Two studies, one rows file (``reports/edge-slots/edge-slots.jsonl``) and its rep
 
 - ``edge-slot-floor``, every material of the dataset: a material's own kept slices interpolated back to 180 φd
   bins, with 0 at the kept slots that are not valid (the network input) and with the edge slots' fitted values
-  (:func:`brdfcodec.representation.edge_slots.edge_slot_targets`), in mapped RelAE over the valid bins; and the
-  share of the valid bins on the horizon band (a valid bin whose two kept neighbours are not both valid).
+  (:func:`brdfcodec.representation.edge_slots.edge_slot_targets`), and with every slot that is not valid filled
+  from its cell's nearest valid slot (:func:`nearest_valid_fill`: what a decode-time rule could do), in mapped
+  RelAE over the valid bins; and the share of the valid bins on the horizon band (a valid bin whose two kept
+  neighbours are not both valid).
 - ``edge-slot-share``, the seven materials of the shipped model's held-out rows (six random analytic materials and
   the real RGL measurement): each compressed with ``bvae compress``'s defaults at each budget (the library's
   ``BrdfEncoder(bytes=N)``), decoded, and its mapped RelAE split into the horizon band's part and the rest's
@@ -62,6 +64,25 @@ def _horizon_band(table: MerlBRDF) -> np.ndarray:
     return table.mask & ~(kept_valid[..., left] & kept_valid[..., right])
 
 
+def nearest_valid_fill(kept: np.ndarray, kept_valid: np.ndarray) -> np.ndarray:
+    """Kept slices (..., 21) with each slot that is not valid set to its cell's nearest valid slot's value (the
+    mean of the two where valid slots lie at equal distance on both sides; unchanged in a cell with none): what
+    a decode-time fill could do, measured here, not part of the format."""
+    slots = np.arange(kept.shape[-1])
+    left = np.maximum.accumulate(np.where(kept_valid, slots, -1), axis=-1)
+    right = np.flip(np.minimum.accumulate(np.flip(np.where(kept_valid, slots, kept.shape[-1]), -1), axis=-1), -1)
+    has_left, has_right = left >= 0, right < kept.shape[-1]
+    value_left = np.take_along_axis(kept, np.clip(left, 0, kept.shape[-1] - 1), axis=-1)
+    value_right = np.take_along_axis(kept, np.clip(right, 0, kept.shape[-1] - 1), axis=-1)
+    distance_left, distance_right = slots - left, right - slots
+    both = has_left & has_right
+    fill = np.where(both & (distance_left < distance_right), value_left,
+                    np.where(both & (distance_right < distance_left), value_right,
+                             np.where(both, 0.5 * (value_left + value_right),
+                                      np.where(has_left, value_left, np.where(has_right, value_right, kept)))))
+    return np.where(kept_valid, kept, fill)
+
+
 def floor_row(name: str, family: str, table: MerlBRDF) -> dict[str, Any]:
     """One material's interpolation floors, zero and fitted edge slots."""
     mapped = _mapped(table)
@@ -76,7 +97,10 @@ def floor_row(name: str, family: str, table: MerlBRDF) -> dict[str, Any]:
     band = _horizon_band(table)
     return {"material": name, "family": family, "valid_bins": int(table.mask.sum()),
             "horizon_band_share": float(band.sum() / table.mask.sum()), "edge_slots": int((weights > 0).sum()),
-            "floor_zero": relae(inputs), "floor_edge_slots": relae(np.where(weights > 0, targets, inputs))}
+            "floor_zero": relae(inputs), "floor_edge_slots": relae(np.where(weights > 0, targets, inputs)),
+            "floor_nearest_valid": relae(nearest_valid_fill(inputs.reshape(3, 21, 90, 90).transpose(0, 2, 3, 1),
+                                                            select_kept_slices(table.mask))
+                                         .transpose(0, 3, 1, 2).reshape(inputs.shape))}
 
 
 def share_rows(dataset: BrdfDataset, budgets: Sequence[int]) -> list[dict[str, Any]]:
@@ -147,7 +171,8 @@ def text(rows: Sequence[dict[str, Any]]) -> str:
              f"# commit {rows[0]['commit']}, dataset {rows[0]['dataset']}; rows: edge-slots.jsonl", "",
              "## edge-slot-floor: a material's own kept slices interpolated (mapped RelAE over valid bins)", "",
              "| family | materials | horizon band share of valid bins | 0 at the slots below the horizon | "
-             "edge slots fitted |", "|---|---:|---:|---:|---:|"]
+             "edge slots fitted | slots below the horizon filled from the nearest valid one |",
+             "|---|---:|---:|---:|---:|---:|"]
     floors = [row for row in rows if row["study"] == "edge-slot-floor"]
     for family in sorted({row["family"] for row in floors}):
         part = [row for row in floors if row["family"] == family]
@@ -157,7 +182,7 @@ def text(rows: Sequence[dict[str, Any]]) -> str:
             return f"{statistics.median(values):.4f} ({min(values):.4f}–{max(values):.4f})"
 
         lines.append(f"| {family} | {len(part)} | {spread('horizon_band_share')} | {spread('floor_zero')} | "
-                     f"{spread('floor_edge_slots')} |")
+                     f"{spread('floor_edge_slots')} | {spread('floor_nearest_valid')} |")
     lines += ["", "Median (range) over the family's materials.", "",
               "## edge-slot-share: the shipped model's records decoded, mapped RelAE and the horizon band's part", "",
               "| material | family | budget | record bytes | mapped RelAE | horizon band's part | rest |",
