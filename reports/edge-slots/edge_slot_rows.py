@@ -154,7 +154,8 @@ def models_text(rows: Sequence[dict[str, Any]]) -> str:
     """Per model and family: mean mapped RelAE at effort 0 and the horizon band's part of it."""
     lines = ["# edge-slot-models: held-out materials at effort 0, mapped RelAE and the horizon band's part",
              f"# commit {rows[0]['commit']}, dataset {rows[0]['dataset']}; rows: edge-slot-models.jsonl", "",
-             "| model | family | materials | mapped RelAE | horizon band's part | rest |", "|---|---|---:|---:|---:|---:|"]
+             "| model | family | materials | mapped RelAE | horizon band's part | rest |",
+             "|---|---|---:|---:|---:|---:|"]
     for model in dict.fromkeys(row["model"] for row in rows):
         for family in sorted({row["family"] for row in rows if row["model"] == model}):
             part = [row for row in rows if row["model"] == model and row["family"] == family]
