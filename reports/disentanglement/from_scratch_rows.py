@@ -5,7 +5,7 @@ models exported into runs/models/SESSION-NAME, the measurements of the study's t
 
     python reports/disentanglement/from_scratch_rows.py [--study from-scratch-supervision | free-dimensions |
         saturation | cpu-fold2 | rate-fold2 | swa-fold2 | latent-size-fold2 | rate-prior-fold2 |
-        encoder-refit-fold2 | mean-recon-fold2 | mean-recon-scratch-fold2]
+        encoder-refit-fold2 | mean-recon-fold2 | mean-recon-scratch-fold2 | factor-weight-scratch-fold2]
 
 Studies: ``from-scratch-supervision`` (runs/dev1: four factor weights, one H100, time-limited),
 ``free-dimensions`` (runs/dev2: weights 5,000 and 10,000 and a 12-dimensional latent, one H200, full schedules) and
@@ -23,7 +23,8 @@ and the supervised 16-dimensional recipe trained with a rate term) and ``encoder
 recipe's encoder refitted to its frozen decoder, ``bvae model refit-encoder``, for its codes at effort 0) and
 ``mean-recon-fold2`` (runs/s29: that recipe's fold-2 model fine-tuned with a reconstruction term at μ itself,
 ``bvae train --mean-recon-weight``, against the same fine-tuning without it) and ``mean-recon-scratch-fold2``
-(runs/s30: that recipe trained from scratch with the term, at two weights and with doubled factor terms).
+(runs/s30: that recipe trained from scratch with the term, at two weights and with doubled factor terms) and
+``factor-weight-scratch-fold2`` (runs/s31: the term at weight 1 with a factor weight between, 14,000).
 """
 
 from __future__ import annotations
@@ -534,9 +535,41 @@ MEAN_RECON_SCRATCH_FOLD2 = Study(
 #   -> mean-recon-scratch-fold2.jsonl
 """)
 
+FACTOR_WEIGHT_SCRATCH_FOLD2 = Study(
+    name="factor-weight-scratch-fold2", session="s31", runs=("mr1f14k",),
+    device="cpu: 2 cores (x86_64, torch 2.13.0+cpu), OMP_NUM_THREADS=1, beside other jobs",
+    training_title="Training from scratch (this machine's CPU, one core):",
+    train_keys=("mean_recon_weight",),
+    references=(("bvae-cv3-fold2-v3", "runs/models/cpu21-cv3-fold2-v3"),
+                ("bvae-s28-z16r1000-refit-fw", "runs/models/s28-z16r1000-refit-fw"),
+                ("bvae-s30-mr1-refit", "runs/models/s30-mr1-refit"),
+                ("bvae-s30-mr1f20k-refit", "runs/models/s30-mr1f20k-refit"),
+                ("bvae-s31-mr1f14k-refit", "runs/models/s31-mr1f14k-refit")),
+    imported=(("reports/disentanglement/mean-recon-scratch-fold2.jsonl",
+               ("bvae-cv3-fold2-v3", "bvae-s28-z16r1000-refit-fw", "bvae-s30-mr1-refit", "bvae-s30-mr1f20k-refit")),),
+    fold=True, prefix="bvae-s31-",
+    header="""\
+# Issue 50, the next step of mean-recon-scratch-fold2: the editing recipe trained from scratch with the term at μ
+# weighed 1 (bvae train --mean-recon-weight 1) kept the v3 recipe's held-out errors at effort 0 but lost MIG (0.245);
+# doubling the factor terms' weight (20,000) won MIG back (0.356) and lost the errors. Here the weight between:
+# -mr1f14k, W = 1 and --factor-weight 14000, every other setting and the seed those runs' (400 epochs), then the
+# encoder refitted with the defaults (bvae model refit-encoder runs/models/s31-mr1f14k --dataset runs/both.h5 -o
+# runs/models/s31-mr1f14k-refit --name bvae-s31-mr1f14k-refit). One seed.
+# Fold 2 of 3 (30 MERL, 10 RGL held out; NBRDF proxies, neural fits, not measurements); analytic: 24 random
+# materials none saw. The other references' rows are copied from mean-recon-scratch-fold2.jsonl.
+# Commands: runs/s31/cmd-mr1f14k.txt (in the training rows), all of it in runs/s31/scratch.sh mr1f14k 1 14000 0;
+#   export: bvae model export runs/s31/mr1f14k -o runs/models/s31-mr1f14k --name bvae-s31-mr1f14k
+#   --dataset runs/both.h5 --basis-count 0 --align-factors 300 --keep-axes
+# Benchmark: bvae model disentanglement MODEL --materials 300 --seed 0 --no-pca
+# Reconstruction: bvae model evaluate MODEL --dataset runs/both.h5 (and runs/random24.h5) [--effort 1] --json
+# Rows: python reports/disentanglement/from_scratch_rows.py --study factor-weight-scratch-fold2
+#   -> factor-weight-scratch-fold2.jsonl
+""")
+
 STUDIES = {study.name: study for study in (FROM_SCRATCH_SUPERVISION, FREE_DIMENSIONS, SATURATION, CPU_FOLD2,
                                            RATE_FOLD2, SWA_FOLD2, LATENT_SIZE_FOLD2, RATE_PRIOR_FOLD2,
-                                           ENCODER_REFIT_FOLD2, MEAN_RECON_FOLD2, MEAN_RECON_SCRATCH_FOLD2)}
+                                           ENCODER_REFIT_FOLD2, MEAN_RECON_FOLD2, MEAN_RECON_SCRATCH_FOLD2,
+                                           FACTOR_WEIGHT_SCRATCH_FOLD2)}
 
 
 def text(study: Study, rows: list[dict]) -> str:
