@@ -56,7 +56,7 @@ import json
 import math
 import os
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -495,7 +495,7 @@ def run_experiment(config: RdConfig, experiment: Experiment,
         bases = {"pca": fit_pca(train_inputs, max(1, len(train_rows) - 1)),
                  "pca-perm": fit_pca_colour_orders(train_inputs, 5 * len(train_rows) - 1)}
         if config.pca_edge_slots:
-            train_inputs = _with_edge_slots(dataset, train_rows, train_inputs)
+            train_inputs = _with_edge_slots((dataset.table(i) for i in train_rows), train_inputs)
             bases.update({"pca-edge": fit_pca(train_inputs, max(1, len(train_rows) - 1)),
                           "pca-perm-edge": fit_pca_colour_orders(train_inputs, 5 * len(train_rows) - 1)})
         del train_inputs
@@ -517,7 +517,7 @@ def run_experiment(config: RdConfig, experiment: Experiment,
                           references, config.budgets, config.effort, error, experiment.latent,
                           config.header_in_budget, experiment.coded_mu_step, experiment.short_references,
                           experiment.allocate)
-        filled = _with_edge_slots(dataset, measured, inputs) if config.pca_edge_slots else inputs
+        filled = _with_edge_slots(references, inputs) if config.pca_edge_slots else inputs
         for family in families:
             chosen = [k for k, i in enumerate(measured) if dataset.families[i] == family]
             family_rows = list(ours[family])
@@ -532,14 +532,14 @@ def run_experiment(config: RdConfig, experiment: Experiment,
     return rows
 
 
-def _with_edge_slots(dataset: Any, rows: Sequence[int], inputs: np.ndarray) -> np.ndarray:
-    """``inputs`` (the network inputs of the materials ``rows``) with each material's edge slots set to their
-    fitted values (:func:`~brdfcodec.representation.edge_slots.edge_slot_targets`)."""
+def _with_edge_slots(tables: Iterable[Any], inputs: np.ndarray) -> np.ndarray:
+    """``inputs`` (the network inputs of the materials whose full tables ``tables`` are, in order) with each
+    material's edge slots set to their fitted values
+    (:func:`~brdfcodec.representation.edge_slots.edge_slot_targets`)."""
     from brdfcodec.representation.edge_slots import edge_slot_targets
 
     filled = np.array(inputs, dtype=np.float32, copy=True)
-    for n, index in enumerate(rows):
-        table = dataset.table(index)
+    for n, table in enumerate(tables):
         targets, weights = edge_slot_targets(table.values, table.mask)
         filled[n] = np.where(weights > 0, targets, filled[n])
     return filled

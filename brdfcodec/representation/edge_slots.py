@@ -4,14 +4,13 @@ A decoded table is the linear interpolation of its 21 kept φd slices (``spec/bv
 slot of a (colour, θh, θd) cell lies below the horizon (or is unmeasured) and a valid bin lies between it and the
 next kept slot, the value decoded at that slot enters the valid bin: ``(1 − t)·v_a + t·v_b``. The network input
 (:func:`~brdfcodec.representation.network_io.network_input_from_table`) holds 0 there and its mask leaves the slot
-out, so nothing fits it: on the grid's horizon band (about 1.8 % of the valid bins) the interpolation runs towards
-an unfitted value, which costs a table a floor of error at every size (0.004–0.009 mapped RelAE on the shared
-stand-ins, `reports/edge-slots/`).
+out, so nothing fits it: on the grid's horizon band the interpolation runs towards an unfitted value, a floor of
+error under every record's size (measured: ``reports/edge-slots/``, documentation: Results).
 
 :func:`edge_slot_targets` gives each such slot the value that fits its valid bins best (least squares in mapped
 units, the valid neighbour slot held at the source's value) and a weight: the share of a fully valid slot's
-influence that the slot has on valid bins. Encoders aim their layers there (``codec/encoding.py``: the detail layer
-and the rate control's distortion); the decode is unchanged.
+influence that the slot has on valid bins. Training uses them (``bvae train --edge-slots``), and so can the PCA
+baselines of the rate–distortion runner; the decode is unchanged.
 """
 
 from __future__ import annotations
@@ -19,14 +18,14 @@ from __future__ import annotations
 import numpy as np
 import numpy.typing as npt
 
-from brdfcodec.conventions import KEPT_PHI_D_SLICES, MAPPED_MAX, N_KEPT_SLICES, N_PHI_D, TABLE_SHAPE
+from brdfcodec.conventions import KEPT_PHI_D_SLICES, MAPPED_MAX, N_KEPT_SLICES, TABLE_SHAPE
 from brdfcodec.representation.layout import select_kept_slices, to_network_layout
 from brdfcodec.representation.mapping import map_values
 
 __all__ = ["edge_slot_targets"]
 
 #: The summed interpolation weight of an interior kept slot over its two gaps (9 bins each way: 1 + 2·(8/9 + … +
-#: 1/9) = 9): the weight of a fully valid slot in the rate control's kept-slice distortion is 1 for this much.
+#: 1/9) = 9): a fully valid slot weighs 1 in the reconstruction loss for this much.
 _INTERIOR_WEIGHT = float(KEPT_PHI_D_SLICES[1] - KEPT_PHI_D_SLICES[0])
 
 
@@ -59,9 +58,8 @@ def edge_slot_targets(
     """
     table = np.asarray(values, dtype=np.float64)
     ok = np.asarray(valid, dtype=bool)
-    shape = (TABLE_SHAPE[0], *TABLE_SHAPE[1:3], N_PHI_D)
-    if table.shape != shape or ok.shape != shape:
-        raise ValueError(f"values and valid must have shape {shape}, got {table.shape} and {ok.shape}")
+    if table.shape != TABLE_SHAPE or ok.shape != TABLE_SHAPE:
+        raise ValueError(f"values and valid must have shape {TABLE_SHAPE}, got {table.shape} and {ok.shape}")
     kept_valid = select_kept_slices(ok)
     # only the (θh, θd) cells with valid and invalid kept slots can have an edge slot (the horizon's band)
     rows, columns = np.nonzero((kept_valid.any(axis=-1) & ~kept_valid.all(axis=-1)).any(axis=0))

@@ -114,8 +114,8 @@ class TrainConfig:
         Train the decoder's kept slots below the horizon that the interpolation carries into valid bins (edge
         slots, :func:`~brdfcodec.representation.edge_slots.edge_slot_targets`) towards the values that fit
         those bins best, each with its fractional weight, in both reconstruction terms: the input mask leaves
-        them out, and the decoded table then runs towards an unfitted value on the horizon band (a floor of
-        0.004–0.009 mapped RelAE on the shared stand-ins). The encoder's input is unchanged (0 there); the
+        them out, and the decoded table then runs towards an unfitted value on the horizon band (measured:
+        ``reports/edge-slots/``). The encoder's input is unchanged (0 there); the
         targets follow the blend and colour permutation of their materials (a blend's at the slots that are
         edge slots of both). Needs a dataset with full tables. The analytic factor pool keeps its masks.
         False (the default) leaves the slots out, as before.
